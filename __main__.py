@@ -1,0 +1,3 @@
+from lobeview.app.cli import main
+
+raise SystemExit(main())

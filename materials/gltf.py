@@ -1,0 +1,92 @@
+"""The glTF 2.0 metallic-roughness BRDF exactly as the specification's Appendix B defines it:
+
+    material        = mix(dielectric_brdf, metal_brdf, metallic)
+    metal_brdf      = specular_brdf(alpha) * (baseColor + (1 - baseColor) (1 - |V.H|)^5)
+    dielectric_brdf = mix(diffuse_brdf(baseColor), specular_brdf(alpha), 0.04 + 0.96 (1 - |V.H|)^5)
+    specular_brdf   = V_GGX * D_GGX,  alpha = roughness^2
+    diffuse_brdf    = baseColor / pi
+
+with D_GGX = alpha^2 chi(N.H) / (pi ((N.H)^2 (alpha^2 - 1) + 1)^2) and V the height-correlated
+Smith visibility G2 / (4 |N.L| |N.V|). Expanded, that is a diffuse term
+(1 - metallic)(1 - F_d) baseColor / pi (cosine-sampled) plus a specular term
+((1 - metallic) F_d + metallic F_m) V D (GGX visible-normal sampled).
+
+The roughness -> alpha mapping (alpha = roughness^2) is defined here and nowhere else; alpha is
+clamped to ALPHA_MIN (roughness 0.01) because a perfect mirror has no density to sample.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .bsdf import BSDF, Component, _valid_pair
+from .conductor import MicrofacetReflection
+from .fresnel import Fresnel, schlick
+from .microfacet import ALPHA_MIN, MicrofacetDistribution
+from .vec import broadcast_rgb, cosine_hemisphere, dot, normalize
+
+DIELECTRIC_F0 = 0.04
+
+
+def roughness_to_alpha(roughness: float) -> float:
+    """glTF perceptual roughness -> GGX alpha (spec Appendix B: alpha = roughness^2)."""
+    return max(float(roughness) ** 2, ALPHA_MIN)
+
+
+def _dielectric_fresnel(wo_h: np.ndarray) -> np.ndarray:
+    return schlick(np.abs(wo_h), np.full(3, DIELECTRIC_F0))
+
+
+class GltfDiffuse(Component):
+    name = "glTF diffuse"
+
+    def __init__(self, base_color: np.ndarray, metallic: float):
+        self.base_color = base_color
+        self.metallic = metallic
+
+    @property
+    def selection_weight(self) -> float:
+        return float(np.mean(self.base_color)) * (1.0 - self.metallic)
+
+    def eval(self, wi, wo):
+        valid = _valid_pair(wi, wo, False)
+        h = normalize(wi + wo)
+        f = (1.0 - self.metallic) * (1.0 - _dielectric_fresnel(dot(wo, h))) * self.base_color / np.pi
+        return np.where(valid[..., None], f, 0.0)
+
+    def pdf(self, wi, wo):
+        valid = _valid_pair(wi, wo, False)
+        return np.where(valid, wi[..., 2] / np.pi, 0.0)
+
+    def sample_wi(self, u1, u2, wo):
+        return cosine_hemisphere(u1, u2)
+
+
+class GltfSpecular(MicrofacetReflection):
+    name = "glTF specular"
+
+    def __init__(self, base_color: np.ndarray, metallic: float, alpha: float):
+        super().__init__(MicrofacetDistribution("ggx", alpha, alpha), Fresnel("none"))
+        self.base_color = base_color
+        self.metallic = metallic
+
+    @property
+    def selection_weight(self) -> float:
+        # Specular energy is roughly F0 at normal incidence plus the grazing rise; weight it so
+        # glossy dielectrics still send a fair share of samples into the highlight.
+        f0 = (1.0 - self.metallic) * DIELECTRIC_F0 + self.metallic * float(np.mean(self.base_color))
+        return max(f0, 0.25)
+
+    def fresnel_term(self, wo_h):
+        f_dielectric = _dielectric_fresnel(wo_h)
+        f_metal = schlick(np.abs(wo_h), self.base_color)
+        return (1.0 - self.metallic) * f_dielectric + self.metallic * f_metal
+
+
+def gltf_bsdf(base_color, metallic: float, roughness: float) -> BSDF:
+    base = broadcast_rgb(base_color, "base_color")
+    alpha = roughness_to_alpha(roughness)
+    return BSDF(
+        [GltfDiffuse(base, float(metallic)), GltfSpecular(base, float(metallic), alpha)],
+        name="glTF metallic-roughness",
+    )

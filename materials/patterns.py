@@ -1,0 +1,231 @@
+"""Deterministic in-lobe sample patterns and their quadrature (thesis section 4.4.3, 4.5.3).
+
+The method ``lobe-N`` (DESIGN.md) shades each specular lobe with N samples placed regularly in
+the lobe, each looked up with a MIP level that makes the samples cover the lobe, and combines
+them with the weighting of Eq. 4.25. Everything here is the numpy reference the GLSL version is
+tested against.
+
+Steps, with the thesis equations:
+  1. Lobe extent: theta_thresh(phi) = arctan(sqrt(T(xi_border) / A(phi))) (Eq. 4.10) with
+     xi_border = 0.01, T(xi) = -ln(xi) for Beckmann ((1 - xi)/xi for GGX) and
+     A(phi) = cos^2(phi)/mx^2 + sin^2(phi)/my^2.
+  2. Uniformity-preserving map of pattern coordinates (xi1, xi2) to half vectors:
+     phi_h = arctan(my/mx tan(2 pi xi2)) (Eq. 4.12), theta_h = (1 - xi1) theta_thresh (Eq. 4.13),
+     h by Eq. 4.7 and wi = 2 (wo.h) h - wo (Eq. 4.8).
+  3. Patterns in (xi1, xi2) (section 4.4.3): ``ring`` = centre + a ring at xi1 = 0.6;
+     ``line_x`` / ``line_y`` = equally spaced samples along the major axis for strongly
+     anisotropic lobes; ``multi_ring`` = centre + concentric rings of about three samples
+     (section 4.5.3, for planar mirror buffers). :func:`choose_pattern` picks one from the
+     anisotropy ratio max(mx, my) / min(mx, my): >= 3 gives a line along the longer axis.
+  4. MIP level per sample (Eq. 4.14-4.17): the lobe cross-section is an ellipse with semi-axes
+     tan(angle(w_C, w_U)), tan(angle(w_C, w_V)); its area divided by N is one sample's area at
+     unit distance, projected to the cube (x d^2 / cos(beta) = 1 / max|w|^3 for a unit cube of
+     half-size 1) and converted to texels (face area 4 holds face_size^2 texels);
+     lod = log4(texels).
+  5. Quadrature (Eq. 4.25):  L = sum L_i cos_i^2 f_i^2 / p_i  /  sum f_i cos_i , with f the lobe
+     BSDF, p its importance pdf (Eq. 4.9), samples below the horizon discarded. Eq. 4.24
+     (sum L_i cos_i^2 f_i / sum p_i cos_i) is available for comparison.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bsdf import BSDF, HalfVectorLobe
+from .conductor import MicrofacetReflection
+from .microfacet import MicrofacetDistribution
+from .vec import dot, mirror_z, reflect, spherical_direction
+
+XI_BORDER = 0.01  # Eq. 4.10: empirical lobe border of the thesis
+RING_XI1 = 0.6  # single ring at 40 % of the lobe radius (thesis 4.4.3)
+ANISOTROPY_LINE_RATIO = 3.0  # max/min roughness at which the line pattern replaces the ring
+MULTI_RING_SAMPLES_PER_RING = 3  # thesis 4.5.3 / Fig. 4.34: rings of three samples
+MAX_ELLIPSE_ANGLE = np.radians(80.0)  # Eq. 4.15 blows up at 90 deg; wider lobes are clamped
+PATTERN_KINDS = ("ring", "multi_ring", "line_x", "line_y")
+
+
+def choose_pattern(alpha_x: float, alpha_y: float, planar: bool = False) -> str:
+    """The thesis' rule: line pattern along the longer axis for strongly anisotropic lobes,
+    otherwise the ring (cube maps) or the multi-ring (planar mirror buffers)."""
+    ratio = max(alpha_x, alpha_y) / min(alpha_x, alpha_y)
+    if ratio >= ANISOTROPY_LINE_RATIO:
+        return "line_y" if alpha_y > alpha_x else "line_x"
+    return "multi_ring" if planar else "ring"
+
+
+def pattern_xi(n: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
+    """Pattern coordinates (xi1, xi2) of ``n`` samples; xi1 = 1 is the lobe centre, 0 the
+    border; xi2 in [0, 1) is the azimuth parameter of Eq. 4.12."""
+    if n < 1:
+        raise ValueError(f"a lobe pattern needs at least one sample, got n = {n}")
+    if kind not in PATTERN_KINDS:
+        raise ValueError(f"unknown pattern {kind!r}; use one of {PATTERN_KINDS}")
+    if kind in ("line_x", "line_y"):
+        # Equally spaced along the major axis: signed positions s_k = (2k+1)/n - 1 in (-1, 1),
+        # xi1 = 1 - |s_k|; the two half-lines are xi2 = 0.25 / 0.75 (phi = 90 / 270 deg) for
+        # line_y and xi2 = 0 / 0.5 for line_x (thesis 4.4.3; also valid for even n).
+        s = (2.0 * np.arange(n) + 1.0) / n - 1.0
+        xi1 = 1.0 - np.abs(s)
+        first, second = (0.25, 0.75) if kind == "line_y" else (0.0, 0.5)
+        xi2 = np.where(s < 0.0, first, second)
+        return xi1, xi2
+    xi1 = [1.0]
+    xi2 = [0.0]
+    ring_samples = n - 1
+    if ring_samples == 0:
+        return np.array(xi1), np.array(xi2)
+    if kind == "ring":
+        xi1 += [RING_XI1] * ring_samples
+        xi2 += list(np.arange(ring_samples) / ring_samples)
+        return np.array(xi1), np.array(xi2)
+    # multi_ring: R rings of about three samples, radii (j + 0.5) / R * 0.8 of the lobe
+    # radius (R = 1 reproduces the single ring at 0.4), inner rings get the remainder last,
+    # alternate rings rotated by half a step so the samples interleave.
+    rings = max(1, round(ring_samples / MULTI_RING_SAMPLES_PER_RING))
+    counts = [ring_samples // rings] * rings
+    for j in range(ring_samples - sum(counts)):
+        counts[rings - 1 - j] += 1
+    for j, count in enumerate(counts):
+        radius = 0.8 * (j + 0.5) / rings
+        xi1 += [1.0 - radius] * count
+        xi2 += list((np.arange(count) + 0.5 * (j % 2)) / count)
+    return np.array(xi1), np.array(xi2)
+
+
+def theta_thresh(distribution: MicrofacetDistribution, phi: np.ndarray, xi_border: float = XI_BORDER):
+    """Eq. 4.10: the half-vector angle that bounds the sampled part of the lobe at azimuth phi."""
+    return np.arctan(np.sqrt(distribution.tan2_theta_from_xi(np.asarray(xi_border, float), phi)))
+
+
+def pattern_half_vectors(
+    distribution: MicrofacetDistribution, xi1: np.ndarray, xi2: np.ndarray, xi_border: float = XI_BORDER
+) -> np.ndarray:
+    """Eq. 4.12, 4.13 and 4.7: pattern coordinates -> half vectors in the local frame."""
+    phi = distribution.phi_from_xi(xi2)
+    theta = (1.0 - np.asarray(xi1, dtype=np.float64)) * theta_thresh(distribution, phi, xi_border)
+    return spherical_direction(theta, phi)
+
+
+def lobe_sample_area(
+    distribution: MicrofacetDistribution, wo: np.ndarray, n: int, xi_border: float = XI_BORDER
+) -> float:
+    """Eq. 4.14-4.15 divided by n: area at unit distance of one of n samples covering the
+    elliptical lobe cross-section around the mirror direction of ``wo`` (a single direction)."""
+    phis = np.array([0.0, np.pi / 2.0])
+    h_border = spherical_direction(theta_thresh(distribution, phis, xi_border), phis)
+    w_centre = reflect(wo, np.array([0.0, 0.0, 1.0]))
+    w_border = reflect(np.broadcast_to(wo, h_border.shape), h_border)
+    angles = np.arccos(np.clip(dot(w_border, w_centre), -1.0, 1.0))
+    u, v = np.tan(np.minimum(angles, MAX_ELLIPSE_ANGLE))
+    return float(np.pi * u * v / n)
+
+
+def cube_map_lod(world_dirs: np.ndarray, sample_area: float | np.ndarray, face_size: int) -> np.ndarray:
+    """Eq. 4.16-4.17: MIP level of a cube-map lookup covering ``sample_area`` (at unit distance)
+    in direction ``world_dirs``. May be negative (the texture unit clamps at level 0)."""
+    max_component = np.max(np.abs(world_dirs), axis=-1)
+    area_on_cube = sample_area / np.maximum(max_component, 1e-6) ** 3
+    texels = area_on_cube * face_size * face_size / 4.0
+    return 0.5 * np.log2(np.maximum(texels, 1e-30))
+
+
+@dataclass(frozen=True)
+class LobeSamples:
+    """The n deterministic directions of one lobe for one viewer direction."""
+
+    wi: np.ndarray  # (n, 3) local-frame incident directions (below the surface for transmission)
+    valid: np.ndarray  # (n,) False for samples on the wrong side of the surface (discarded)
+    lod: np.ndarray  # (n,) cube-map MIP level per sample (Eq. 4.14-4.17)
+    kind: str
+
+
+def lobe_samples(
+    lobe: HalfVectorLobe | MicrofacetReflection,
+    wo: np.ndarray,
+    n: int,
+    face_size: int = 256,
+    frame: np.ndarray | None = None,
+    kind: str | None = None,
+    xi_border: float = XI_BORDER,
+) -> LobeSamples:
+    dist = lobe.distribution
+    kind = kind or choose_pattern(dist.alpha_x, dist.alpha_y)
+    xi1, xi2 = pattern_xi(n, kind)
+    h = pattern_half_vectors(dist, xi1, xi2, xi_border)
+    wo = np.asarray(wo, dtype=np.float64).reshape(3)
+    wi = reflect(np.broadcast_to(wo, h.shape), h)
+    transmission = getattr(lobe, "transmission", False)
+    valid = wi[:, 2] > 0.0
+    if transmission:
+        wi = mirror_z(wi)
+    area = lobe_sample_area(dist, wo, n, xi_border)
+    world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
+    return LobeSamples(wi=wi, valid=valid, lod=cube_map_lod(world, area, face_size), kind=kind)
+
+
+RadianceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+
+def integrate_lobe(
+    lobe: HalfVectorLobe | MicrofacetReflection,
+    wo: np.ndarray,
+    radiance: RadianceFn,
+    n: int,
+    face_size: int = 256,
+    frame: np.ndarray | None = None,
+    kind: str | None = None,
+    weighting: str = "eq4.25",
+) -> np.ndarray:
+    """Outgoing radiance of one lobe by the deterministic pattern quadrature.
+
+    ``radiance(world_dirs (n, 3), lod (n,)) -> (n, 3)`` gives incident radiance, typically a
+    MIP-filtered environment lookup; ``frame`` (3x3, columns = tangent, bitangent, normal in
+    world space) maps local directions to world space (identity if None).
+    """
+    samples = lobe_samples(lobe, wo, n, face_size, frame, kind)
+    valid = samples.valid
+    if not np.any(valid):
+        return np.zeros(3)
+    wi = samples.wi[valid]
+    wo_b = np.broadcast_to(np.asarray(wo, dtype=np.float64).reshape(3), wi.shape)
+    world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
+    li = np.asarray(radiance(world, samples.lod[valid]), dtype=np.float64)
+    f = lobe.eval(wi, wo_b)
+    p = lobe.lobe_pdf(wi, wo_b)
+    cos_i = np.abs(wi[:, 2])
+    if weighting == "eq4.25":
+        ok = p > 0.0
+        num = np.sum(np.where(ok[:, None], li * (cos_i**2)[:, None] * f * f / np.where(ok, p, 1.0)[:, None], 0.0), axis=0)
+        den = np.sum(f * cos_i[:, None], axis=0)
+    elif weighting == "eq4.24":
+        num = np.sum(li * (cos_i**2)[:, None] * f, axis=0)
+        den = np.full(3, np.sum(p * cos_i))
+    else:
+        raise ValueError(f"unknown weighting {weighting!r}; use 'eq4.25' or 'eq4.24'")
+    return np.where(den > 0.0, num / np.where(den > 0.0, den, 1.0), 0.0)
+
+
+def specular_lobes(bsdf: BSDF) -> list:
+    """The view-dependent lobes of a BSDF (everything but the diffuse term, which the
+    lightmap provides)."""
+    return [c for c in bsdf.components if isinstance(c, HalfVectorLobe | MicrofacetReflection)]
+
+
+def integrate_specular(
+    bsdf: BSDF,
+    wo: np.ndarray,
+    radiance: RadianceFn,
+    n: int,
+    face_size: int = 256,
+    frame: np.ndarray | None = None,
+    weighting: str = "eq4.25",
+) -> np.ndarray:
+    """``lobe-N`` for a whole BSDF: the sum over its specular and transmission lobes, each with
+    its own N-sample pattern (the thesis' "n = 5 + 5" for frosted glass)."""
+    total = np.zeros(3)
+    for lobe in specular_lobes(bsdf):
+        total += integrate_lobe(lobe, wo, radiance, n, face_size, frame, None, weighting)
+    return total

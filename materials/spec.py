@@ -1,0 +1,232 @@
+"""Material descriptions as plain JSON-able data, validated, and turned into BSDFs.
+
+Three models share one format (a JSON object with a ``model`` key); see README "Material JSON".
+
+thesis      {"model": "thesis", "kd": 0.1 | [r, g, b],
+             "lobes": [{"ks", "mx", "my", "r0", "alpha"}, ...],
+             "transmission_lobes": [{"kt", "mx", "my", "r0", "alpha"}, ...]}
+microfacet  {"model": "microfacet", "distribution": "ggx" | "beckmann",
+             "alpha": a  |  "alpha_u": au, "alpha_v": av,
+             "fresnel": "none" | {"type": "schlick", "r0": ...}
+                               | {"type": "conductor", "eta": [...], "k": [...]},
+             "scale": 1.0 | [r, g, b]}
+gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness": r}
+
+Every parameter has a documented range (:data:`RANGES`). Out-of-range or non-finite values are
+rejected with a :class:`MaterialError` that names the parameter, the value and the range; no
+value is silently clamped.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .bsdf import BSDF
+from .conductor import microfacet_bsdf
+from .fresnel import Fresnel
+from .gltf import gltf_bsdf
+from .microfacet import ALPHA_MAX, ALPHA_MIN
+from .thesis import thesis_bsdf
+
+MODELS = ("thesis", "microfacet", "gltf")
+
+#: (low, high) inclusive range of every parameter, by name.
+RANGES: dict[str, tuple[float, float]] = {
+    "kd": (0.0, 1.0),
+    "ks": (0.0, 1.0),
+    "kt": (0.0, 1.0),
+    "mx": (ALPHA_MIN, ALPHA_MAX),
+    "my": (ALPHA_MIN, ALPHA_MAX),
+    "r0": (0.0, 1.0),
+    "alpha": (0.0, 1.0),  # thesis shadowing exponent; the microfacet alpha uses "alpha_u/v"
+    "alpha_u": (ALPHA_MIN, ALPHA_MAX),
+    "alpha_v": (ALPHA_MIN, ALPHA_MAX),
+    "eta": (0.01, 10.0),
+    "k": (0.0, 20.0),
+    "scale": (0.0, 1.0),
+    "base_color": (0.0, 1.0),
+    "metallic": (0.0, 1.0),
+    "roughness": (0.0, 1.0),
+}
+
+MAX_LOBES = 8
+
+
+class MaterialError(ValueError):
+    """A material description that cannot be used, with a message naming the parameter."""
+
+
+def _number(value: Any, where: str, key: str) -> float:
+    low, high = RANGES[key]
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise MaterialError(f"{where}: expected a number in [{low}, {high}], got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise MaterialError(f"{where} = {value!r} is not finite; expected a number in [{low}, {high}]")
+    if not (low <= v <= high):
+        raise MaterialError(f"{where} = {value!r} is outside its range [{low}, {high}]")
+    return v
+
+
+def _scalar_or_rgb(value: Any, where: str, key: str) -> float | list[float]:
+    if isinstance(value, list | tuple):
+        if len(value) != 3:
+            raise MaterialError(f"{where}: expected a number or an RGB triple, got {value!r}")
+        return [_number(v, f"{where}[{i}]", key) for i, v in enumerate(value)]
+    return _number(value, where, key)
+
+
+def _check_keys(obj: dict, allowed: set[str], required: set[str], where: str) -> None:
+    if not isinstance(obj, dict):
+        raise MaterialError(f"{where}: expected a JSON object, got {type(obj).__name__}")
+    unknown = set(obj) - allowed
+    if unknown:
+        raise MaterialError(f"{where}: unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+    missing = required - set(obj)
+    if missing:
+        raise MaterialError(f"{where}: missing parameter(s) {sorted(missing)}")
+
+
+def _validate_lobe(lobe: Any, where: str, key: str) -> dict:
+    _check_keys(lobe, {key, "mx", "my", "r0", "alpha"}, {key, "mx", "my", "r0", "alpha"}, where)
+    return {
+        key: _scalar_or_rgb(lobe[key], f"{where}.{key}", key),
+        "mx": _number(lobe["mx"], f"{where}.mx", "mx"),
+        "my": _number(lobe["my"], f"{where}.my", "my"),
+        "r0": _scalar_or_rgb(lobe["r0"], f"{where}.r0", "r0"),
+        "alpha": _number(lobe["alpha"], f"{where}.alpha", "alpha"),
+    }
+
+
+def _validate_lobe_list(obj: dict, name: str, key: str) -> list[dict]:
+    lobes = obj.get(name, [])
+    if not isinstance(lobes, list):
+        raise MaterialError(f"{name}: expected a list of lobes, got {lobes!r}")
+    if len(lobes) > MAX_LOBES:
+        raise MaterialError(f"{name}: at most {MAX_LOBES} lobes are supported, got {len(lobes)}")
+    return [_validate_lobe(lobe, f"{name}[{i}]", key) for i, lobe in enumerate(lobes)]
+
+
+def validate(desc: Any) -> dict:
+    """Check a material description and return a normalised copy (floats, defaults filled)."""
+    if not isinstance(desc, dict):
+        raise MaterialError(f"a material must be a JSON object, got {type(desc).__name__}")
+    model = desc.get("model")
+    if model not in MODELS:
+        raise MaterialError(f"model: expected one of {list(MODELS)}, got {model!r}")
+    common = {"model", "name", "description"}
+    out: dict[str, Any] = {"model": model}
+    for key in ("name", "description"):
+        if key in desc:
+            if not isinstance(desc[key], str):
+                raise MaterialError(f"{key}: expected a string, got {desc[key]!r}")
+            out[key] = desc[key]
+
+    if model == "thesis":
+        _check_keys(desc, common | {"kd", "lobes", "transmission_lobes"}, set(), "thesis material")
+        out["kd"] = _scalar_or_rgb(desc.get("kd", 0.0), "kd", "kd")
+        out["lobes"] = _validate_lobe_list(desc, "lobes", "ks")
+        out["transmission_lobes"] = _validate_lobe_list(desc, "transmission_lobes", "kt")
+    elif model == "microfacet":
+        allowed = common | {"distribution", "alpha", "alpha_u", "alpha_v", "fresnel", "scale"}
+        _check_keys(desc, allowed, {"distribution"}, "microfacet material")
+        if desc["distribution"] not in ("ggx", "beckmann"):
+            raise MaterialError(
+                f"distribution: expected 'ggx' or 'beckmann', got {desc['distribution']!r}"
+            )
+        out["distribution"] = desc["distribution"]
+        if "alpha" in desc:
+            if "alpha_u" in desc or "alpha_v" in desc:
+                raise MaterialError("give either alpha or alpha_u/alpha_v, not both")
+            a = _number(desc["alpha"], "alpha", "alpha_u")
+            out["alpha_u"] = out["alpha_v"] = a
+        elif "alpha_u" in desc and "alpha_v" in desc:
+            out["alpha_u"] = _number(desc["alpha_u"], "alpha_u", "alpha_u")
+            out["alpha_v"] = _number(desc["alpha_v"], "alpha_v", "alpha_v")
+        else:
+            raise MaterialError("microfacet material: missing alpha (or both alpha_u and alpha_v)")
+        out["fresnel"] = _validate_fresnel(desc.get("fresnel", "none"))
+        out["scale"] = _scalar_or_rgb(desc.get("scale", 1.0), "scale", "scale")
+    else:
+        _check_keys(desc, common | {"base_color", "metallic", "roughness"}, set(), "glTF material")
+        out["base_color"] = _scalar_or_rgb(desc.get("base_color", [1.0, 1.0, 1.0]), "base_color", "base_color")
+        out["metallic"] = _number(desc.get("metallic", 1.0), "metallic", "metallic")
+        out["roughness"] = _number(desc.get("roughness", 1.0), "roughness", "roughness")
+    return out
+
+
+def _validate_fresnel(fresnel: Any) -> dict:
+    if fresnel == "none" or fresnel == {"type": "none"}:
+        return {"type": "none"}
+    if not isinstance(fresnel, dict) or fresnel.get("type") not in ("schlick", "conductor"):
+        raise MaterialError(
+            "fresnel: expected 'none', {'type': 'schlick', 'r0': ...} or "
+            f"{{'type': 'conductor', 'eta': [...], 'k': [...]}}, got {fresnel!r}"
+        )
+    if fresnel["type"] == "schlick":
+        _check_keys(fresnel, {"type", "r0"}, {"type", "r0"}, "fresnel")
+        return {"type": "schlick", "r0": _scalar_or_rgb(fresnel["r0"], "fresnel.r0", "r0")}
+    _check_keys(fresnel, {"type", "eta", "k"}, {"type", "eta", "k"}, "fresnel")
+    return {
+        "type": "conductor",
+        "eta": _scalar_or_rgb(fresnel["eta"], "fresnel.eta", "eta"),
+        "k": _scalar_or_rgb(fresnel["k"], "fresnel.k", "k"),
+    }
+
+
+def build_bsdf(desc: dict) -> BSDF:
+    """Validate ``desc`` and build its numpy reference BSDF."""
+    d = validate(desc)
+    name = d.get("name", d["model"])
+    if d["model"] == "thesis":
+        return thesis_bsdf(d["kd"], d["lobes"], d["transmission_lobes"], name=name)
+    if d["model"] == "microfacet":
+        fr = d["fresnel"]
+        fresnel = Fresnel(
+            fr["type"],
+            r0=fr.get("r0", 1.0),
+            eta=fr.get("eta", 1.0),
+            k=fr.get("k", 0.0),
+        )
+        return microfacet_bsdf(d["distribution"], d["alpha_u"], d["alpha_v"], fresnel, d["scale"])
+    bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"])
+    bsdf.name = name
+    return bsdf
+
+
+def load_material(source: str) -> dict:
+    """A preset name, a path to a JSON file, or an inline JSON object -> validated description."""
+    from .presets import PRESETS  # local import: presets import this module
+
+    if source in PRESETS:
+        return validate(PRESETS[source])
+    text = source.strip()
+    if text.startswith("{"):
+        try:
+            return validate(json.loads(text))
+        except json.JSONDecodeError as exc:
+            raise MaterialError(f"inline material JSON is malformed: {exc}") from None
+    path = Path(source)
+    if not path.exists():
+        raise MaterialError(
+            f"{source!r} is neither a preset name ({', '.join(sorted(PRESETS))}) nor an existing file"
+        )
+    try:
+        desc = json.loads(path.read_text())
+    except json.JSONDecodeError as exc:
+        raise MaterialError(f"{path}: not valid JSON: {exc}") from None
+    except OSError as exc:
+        raise MaterialError(f"{path}: cannot read: {exc}") from None
+    try:
+        return validate(desc)
+    except MaterialError as exc:
+        raise MaterialError(f"{path}: {exc}") from None
+
+
+def as_rgb(value) -> np.ndarray:
+    return np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)).copy()
