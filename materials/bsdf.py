@@ -172,7 +172,9 @@ class BSDF:
             chosen = index == c
             if not np.any(chosen) or self.selection_probabilities[c] == 0:
                 continue
-            u1_c = np.clip((u1[chosen] - lower[c]) / self.selection_probabilities[c], 0.0, 1.0 - 1e-16)
+            u1_c = np.clip(
+                (u1[chosen] - lower[c]) / self.selection_probabilities[c], 0.0, 1.0 - 1e-16
+            )
             wi_c = comp.sample_wi(u1_c, u2[chosen], wo[chosen])
             wi[chosen] = wi_c
             # A sample that failed for its own component (e.g. a reflection below the horizon)

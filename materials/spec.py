@@ -67,7 +67,9 @@ def _number(value: Any, where: str, key: str) -> float:
         raise MaterialError(f"{where}: expected a number in [{low}, {high}], got {value!r}")
     v = float(value)
     if not math.isfinite(v):
-        raise MaterialError(f"{where} = {value!r} is not finite; expected a number in [{low}, {high}]")
+        raise MaterialError(
+            f"{where} = {value!r} is not finite; expected a number in [{low}, {high}]"
+        )
     if not (low <= v <= high):
         raise MaterialError(f"{where} = {value!r} is outside its range [{low}, {high}]")
     return v
@@ -86,7 +88,9 @@ def _check_keys(obj: dict, allowed: set[str], required: set[str], where: str) ->
         raise MaterialError(f"{where}: expected a JSON object, got {type(obj).__name__}")
     unknown = set(obj) - allowed
     if unknown:
-        raise MaterialError(f"{where}: unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+        raise MaterialError(
+            f"{where}: unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}"
+        )
     missing = required - set(obj)
     if missing:
         raise MaterialError(f"{where}: missing parameter(s) {sorted(missing)}")
@@ -154,7 +158,9 @@ def validate(desc: Any) -> dict:
         out["scale"] = _scalar_or_rgb(desc.get("scale", 1.0), "scale", "scale")
     else:
         _check_keys(desc, common | {"base_color", "metallic", "roughness"}, set(), "glTF material")
-        out["base_color"] = _scalar_or_rgb(desc.get("base_color", [1.0, 1.0, 1.0]), "base_color", "base_color")
+        out["base_color"] = _scalar_or_rgb(
+            desc.get("base_color", [1.0, 1.0, 1.0]), "base_color", "base_color"
+        )
         out["metallic"] = _number(desc.get("metallic", 1.0), "metallic", "metallic")
         out["roughness"] = _number(desc.get("roughness", 1.0), "roughness", "roughness")
     return out
@@ -213,9 +219,8 @@ def load_material(source: str) -> dict:
             raise MaterialError(f"inline material JSON is malformed: {exc}") from None
     path = Path(source)
     if not path.exists():
-        raise MaterialError(
-            f"{source!r} is neither a preset name ({', '.join(sorted(PRESETS))}) nor an existing file"
-        )
+        names = ", ".join(sorted(PRESETS))
+        raise MaterialError(f"{source!r} is neither a preset name ({names}) nor an existing file")
     try:
         desc = json.loads(path.read_text())
     except json.JSONDecodeError as exc:

@@ -51,15 +51,30 @@ PLAUSIBLE = {
     # Kurt et al.: alpha = 0 is always energy conserving; kd + ks <= 1.
     "thesis-alpha0-rough": lambda: thesis_bsdf(0.3, [(0.7, 0.4, 0.4, 1.0, 0.0)]),
     "thesis-alpha0-aniso": lambda: thesis_bsdf(0.0, [(1.0, 0.01, 0.5, 1.0, 0.0)]),
-    "thesis-alpha0-transmission": lambda: thesis_bsdf(0.0, [(1.0, 0.2, 0.2, 0.1, 0.0)], [(1.0, 0.2, 0.2, 0.1, 0.0)]),
+    "thesis-alpha0-transmission": lambda: thesis_bsdf(
+        0.0, [(1.0, 0.2, 0.2, 0.1, 0.0)], [(1.0, 0.2, 0.2, 0.1, 0.0)]
+    ),
     "ggx-white": lambda: microfacet_bsdf("ggx", 0.6, 0.6, Fresnel("none")),
     "ggx-white-aniso": lambda: microfacet_bsdf("ggx", 0.02, 0.8, Fresnel("none")),
     "beckmann-white": lambda: microfacet_bsdf("beckmann", 0.8, 0.8, Fresnel("none")),
     "gltf-white-metal": lambda: gltf_bsdf(1.0, 1.0, 0.7),
 }
-PLAUSIBLE.update({f"preset-{k}": (lambda k=k: build_bsdf(PRESETS[k])) for k in
-                  ("chrome", "lacquer", "plastic", "porcelain", "clear-glass", "frosted-glass",
-                   "gold-ggx", "brushed-steel-beckmann", "gltf-red-plastic")})
+PLAUSIBLE.update(
+    {
+        f"preset-{k}": (lambda k=k: build_bsdf(PRESETS[k]))
+        for k in (
+            "chrome",
+            "lacquer",
+            "plastic",
+            "porcelain",
+            "clear-glass",
+            "frosted-glass",
+            "gold-ggx",
+            "brushed-steel-beckmann",
+            "gltf-red-plastic",
+        )
+    }
+)
 
 
 @pytest.mark.parametrize("name", sorted(PLAUSIBLE))
@@ -89,9 +104,13 @@ def test_white_ggx_albedo_bounds_from_closed_form():
     of D(h) G cos(theta_h) dh. For alpha = 1, D = 1/pi is constant, so E < 2 int_0^{pi/4}
     cos sin = 1/2 exactly without masking; Smith masking brings it lower. For alpha = 0.05
     only the GGX tail beyond 45 deg (mass 1 - 1/(1 + alpha^2), about alpha^2) is lost."""
-    rough = microfacet_bsdf("ggx", 1.0, 1.0, Fresnel("none")).albedo(direction_from_angles_deg(0))[0]
+    rough = microfacet_bsdf("ggx", 1.0, 1.0, Fresnel("none")).albedo(direction_from_angles_deg(0))[
+        0
+    ]
     assert 0.25 < rough[0] < 0.5
-    smooth = microfacet_bsdf("ggx", 0.05, 0.05, Fresnel("none")).albedo(direction_from_angles_deg(0))[0]
+    smooth = microfacet_bsdf("ggx", 0.05, 0.05, Fresnel("none")).albedo(
+        direction_from_angles_deg(0)
+    )[0]
     lost_tail = 1.0 - 1.0 / (1.0 + 0.05**2)
     assert smooth[0] == pytest.approx(1.0 - lost_tail, abs=1e-3)
 
@@ -105,13 +124,22 @@ def _brute_force_albedo(bsdf: BSDF, wo: np.ndarray, n_theta=1500, n_phi=720):
     f = bsdf.eval(wi, np.broadcast_to(wo, wi.shape))
     w = (np.abs(np.cos(T)) * np.sin(T))[..., None] * (np.pi / n_theta) * (2 * np.pi / n_phi)
     upper = (T < np.pi / 2)[..., None]
-    return np.sum(np.where(upper, f * w, 0), axis=(0, 1)), np.sum(np.where(upper, 0, f * w), axis=(0, 1))
+    return np.sum(np.where(upper, f * w, 0), axis=(0, 1)), np.sum(
+        np.where(upper, 0, f * w), axis=(0, 1)
+    )
 
 
 @pytest.mark.parametrize(
     "preset,theta",
-    [("white-foil", 0), ("white-foil", 60), ("alanod-2000gs-2lobe", 30), ("frosted-glass", 45),
-     ("gltf-red-plastic", 70), ("brushed-steel-beckmann", 20), ("plastic", 50)],
+    [
+        ("white-foil", 0),
+        ("white-foil", 60),
+        ("alanod-2000gs-2lobe", 30),
+        ("frosted-glass", 45),
+        ("gltf-red-plastic", 70),
+        ("brushed-steel-beckmann", 20),
+        ("plastic", 50),
+    ],
 )
 def test_albedo_quadrature_matches_brute_force(preset, theta):
     bsdf = build_bsdf(PRESETS[preset])
@@ -154,8 +182,14 @@ def _gltf_spec_brdf(base, metallic, roughness, l, v):
     n_l, n_v, n_h = l @ n, v @ n, h @ n
     v_h, l_h = np.sum(v * h, -1), np.sum(l * h, -1)
     d = a * a * (n_h > 0) / (np.pi * (n_h * n_h * (a * a - 1) + 1) ** 2)
-    vis = (l_h > 0) * (v_h > 0) * 0.5 / (
-        n_l * np.sqrt(n_v * n_v * (1 - a * a) + a * a) + n_v * np.sqrt(n_l * n_l * (1 - a * a) + a * a)
+    vis = (
+        (l_h > 0)
+        * (v_h > 0)
+        * 0.5
+        / (
+            n_l * np.sqrt(n_v * n_v * (1 - a * a) + a * a)
+            + n_v * np.sqrt(n_l * n_l * (1 - a * a) + a * a)
+        )
     )
     specular = (vis * d)[:, None]
     diffuse = np.asarray(base) / np.pi
@@ -166,7 +200,10 @@ def _gltf_spec_brdf(base, metallic, roughness, l, v):
     return (1 - metallic) * dielectric + metallic * metal
 
 
-@pytest.mark.parametrize("base,metallic,roughness", [([0.8, 0.2, 0.1], 0.0, 0.5), ([0.9, 0.7, 0.3], 1.0, 0.25), ([0.5, 0.5, 0.5], 0.4, 0.8)])
+@pytest.mark.parametrize(
+    "base,metallic,roughness",
+    [([0.8, 0.2, 0.1], 0.0, 0.5), ([0.9, 0.7, 0.3], 1.0, 0.25), ([0.5, 0.5, 0.5], 0.4, 0.8)],
+)
 def test_gltf_matches_specification_appendix_b(base, metallic, roughness):
     rng = np.random.default_rng(5)
     l, v = _random_upper(rng, 4000), _random_upper(rng, 4000)
@@ -183,9 +220,9 @@ def test_thesis_lobe_matches_equation_3_4_written_out():
     h = (wi + wo) / np.linalg.norm(wi + wo, axis=-1, keepdims=True)
     theta_h = np.arccos(h[:, 2])
     phi_h = np.arctan2(h[:, 1], h[:, 0])
-    d = np.exp(-np.tan(theta_h) ** 2 * (np.cos(phi_h) ** 2 / mx**2 + np.sin(phi_h) ** 2 / my**2)) / (
-        np.pi * mx * my * np.cos(theta_h) ** 4
-    )
+    d = np.exp(
+        -(np.tan(theta_h) ** 2) * (np.cos(phi_h) ** 2 / mx**2 + np.sin(phi_h) ** 2 / my**2)
+    ) / (np.pi * mx * my * np.cos(theta_h) ** 4)
     u = np.sum(wo * h, -1)
     f = r0 + (1 - r0) * (1 - u) ** 5
     expected = ks * f * d / (4 * u * (wi[:, 2] * wo[:, 2]) ** alpha)
@@ -203,7 +240,10 @@ def test_transmission_lobe_is_reflection_lobe_mirrored():
     u = np.sum(wo * h, -1)
     f = 0.3 + 0.7 * (1 - u) ** 5
     np.testing.assert_allclose(
-        trans.eval(wi_below, wo)[:, 0], refl.eval(wi, wo)[:, 0] * (1 - f) / f, rtol=1e-9, atol=1e-250
+        trans.eval(wi_below, wo)[:, 0],
+        refl.eval(wi, wo)[:, 0] * (1 - f) / f,
+        rtol=1e-9,
+        atol=1e-250,
     )
     assert np.all(trans.eval(wi, wo) == 0.0)
     assert np.all(refl.eval(wi_below, wo) == 0.0)

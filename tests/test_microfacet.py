@@ -62,11 +62,14 @@ def test_beckmann_lambda_matches_numerical_integral_of_slopes():
     """Lambda for Beckmann from its definition: integral over slopes (Heitz 2014, Eq. 72)."""
     alpha = 0.35
     dist = MicrofacetDistribution("beckmann", alpha, alpha)
+
+    def slope_pdf(q):  # 1D marginal of the Beckmann slope distribution
+        return np.exp(-(q**2) / alpha**2) / (np.sqrt(np.pi) * alpha)
+
     for theta in (20.0, 60.0, 85.0):
         mu = 1.0 / np.tan(np.radians(theta))
-        # Lambda = 1/mu * integral_{mu}^{inf} (q - mu) P2(q) dq, with the 1D slope pdf P2.
-        p2 = lambda q: np.exp(-(q**2) / alpha**2) / (np.sqrt(np.pi) * alpha)  # noqa: E731
-        value, _ = integrate.quad(lambda q: (q - mu) * p2(q), mu, np.inf)
+        # Lambda = 1/mu * integral_{mu}^{inf} (q - mu) P2(q) dq.
+        value, _ = integrate.quad(lambda q, mu=mu: (q - mu) * slope_pdf(q), mu, np.inf)
         reference = value / mu
         w = direction_from_angles_deg(theta, 0.0)
         assert dist.lambda_(w[None])[0] == pytest.approx(reference, rel=1e-6)

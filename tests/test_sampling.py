@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from chi2_util import SphereDomain, chi2_test
 
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.conductor import MicrofacetReflection
@@ -14,6 +13,8 @@ from lobeview.materials.gltf import gltf_bsdf
 from lobeview.materials.microfacet import MicrofacetDistribution
 from lobeview.materials.thesis import KurtLobe, thesis_bsdf
 from lobeview.materials.vec import direction_from_angles_deg, mirror_z, reflect
+
+from chi2_util import SphereDomain, chi2_test
 
 N_SAMPLES = 400_000
 
@@ -27,18 +28,92 @@ CASES = [
     ("kurt-iso-rough", lambda: _single(KurtLobe(1.0, 0.3, 0.3, 0.5, 0.3)), 0, 0, None),
     ("kurt-iso-rough-oblique", lambda: _single(KurtLobe(1.0, 0.3, 0.3, 0.5, 0.3)), 60, 30, None),
     ("kurt-aniso-alanod", lambda: _single(KurtLobe(0.9, 0.11, 0.072, 0.89, 0.43)), 40, 70, 0.6),
-    ("kurt-near-mirror-miro", lambda: _single(KurtLobe(0.98, 0.0068, 0.0297, 0.84, 0.49)), 35, 10, 0.12),
+    (
+        "kurt-near-mirror-miro",
+        lambda: _single(KurtLobe(0.98, 0.0068, 0.0297, 0.84, 0.49)),
+        35,
+        10,
+        0.12,
+    ),
     ("kurt-aniso-ratio-25", lambda: _single(KurtLobe(1.0, 0.02, 0.5, 0.9, 0.0)), 20, 45, None),
     ("kurt-grazing", lambda: _single(KurtLobe(1.0, 0.2, 0.2, 0.9, 0.5)), 80, 0, None),
-    ("kurt-transmission", lambda: _single(KurtLobe(0.67, 0.25, 0.17, 0.75, 0.6, transmission=True)), 30, 0, None),
-    ("kurt-transmission-sharp", lambda: _single(KurtLobe(1.0, 0.01, 0.02, 0.08, 0.0, transmission=True)), 50, 60, 0.15),
-    ("thesis-mixture-foil", lambda: thesis_bsdf(0.76, [(0.78, 0.124, 0.136, 0.029, 0.5)], [(0.67, 0.25, 0.17, 0.75, 0.6)]), 45, 0, None),
-    ("thesis-mixture-alanod2", lambda: thesis_bsdf(0.003, [(0.9, 0.11, 0.07, 0.87, 0.45), (0.12, 0.25, 0.17, 0.89, 0.6)]), 25, 0, None),
-    ("ggx-vndf-iso", lambda: _single(MicrofacetReflection(MicrofacetDistribution("ggx", 0.5, 0.5), Fresnel("none"))), 30, 0, None),
-    ("ggx-vndf-aniso", lambda: _single(MicrofacetReflection(MicrofacetDistribution("ggx", 0.1, 0.6), Fresnel("schlick", r0=0.5))), 70, 40, None),
-    ("ggx-vndf-near-mirror", lambda: _single(MicrofacetReflection(MicrofacetDistribution("ggx", 0.01, 0.01), Fresnel("none"))), 45, 0, 0.2),
-    ("ggx-vndf-grazing", lambda: _single(MicrofacetReflection(MicrofacetDistribution("ggx", 0.3, 0.3), Fresnel("none"))), 85, 0, None),
-    ("beckmann-aniso", lambda: _single(MicrofacetReflection(MicrofacetDistribution("beckmann", 0.05, 0.3), Fresnel("none"))), 40, 20, None),
+    (
+        "kurt-transmission",
+        lambda: _single(KurtLobe(0.67, 0.25, 0.17, 0.75, 0.6, transmission=True)),
+        30,
+        0,
+        None,
+    ),
+    (
+        "kurt-transmission-sharp",
+        lambda: _single(KurtLobe(1.0, 0.01, 0.02, 0.08, 0.0, transmission=True)),
+        50,
+        60,
+        0.15,
+    ),
+    (
+        "thesis-mixture-foil",
+        lambda: thesis_bsdf(
+            0.76, [(0.78, 0.124, 0.136, 0.029, 0.5)], [(0.67, 0.25, 0.17, 0.75, 0.6)]
+        ),
+        45,
+        0,
+        None,
+    ),
+    (
+        "thesis-mixture-alanod2",
+        lambda: thesis_bsdf(0.003, [(0.9, 0.11, 0.07, 0.87, 0.45), (0.12, 0.25, 0.17, 0.89, 0.6)]),
+        25,
+        0,
+        None,
+    ),
+    (
+        "ggx-vndf-iso",
+        lambda: _single(
+            MicrofacetReflection(MicrofacetDistribution("ggx", 0.5, 0.5), Fresnel("none"))
+        ),
+        30,
+        0,
+        None,
+    ),
+    (
+        "ggx-vndf-aniso",
+        lambda: _single(
+            MicrofacetReflection(
+                MicrofacetDistribution("ggx", 0.1, 0.6), Fresnel("schlick", r0=0.5)
+            )
+        ),
+        70,
+        40,
+        None,
+    ),
+    (
+        "ggx-vndf-near-mirror",
+        lambda: _single(
+            MicrofacetReflection(MicrofacetDistribution("ggx", 0.01, 0.01), Fresnel("none"))
+        ),
+        45,
+        0,
+        0.2,
+    ),
+    (
+        "ggx-vndf-grazing",
+        lambda: _single(
+            MicrofacetReflection(MicrofacetDistribution("ggx", 0.3, 0.3), Fresnel("none"))
+        ),
+        85,
+        0,
+        None,
+    ),
+    (
+        "beckmann-aniso",
+        lambda: _single(
+            MicrofacetReflection(MicrofacetDistribution("beckmann", 0.05, 0.3), Fresnel("none"))
+        ),
+        40,
+        20,
+        None,
+    ),
     ("gltf-dielectric", lambda: gltf_bsdf([0.6, 0.05, 0.04], 0.0, 0.4), 50, 0, None),
     ("gltf-metal-smooth", lambda: gltf_bsdf([0.9, 0.8, 0.5], 1.0, 0.2), 30, 0, 0.5),
 ]

@@ -1,0 +1,206 @@
+"""Deterministic lobe patterns (thesis 4.4.3 / 4.5.3) and their Eq. 4.25 quadrature."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lobeview.materials.bsdf import BSDF
+from lobeview.materials.microfacet import MicrofacetDistribution
+from lobeview.materials.patterns import (
+    RING_XI1,
+    XI_BORDER,
+    choose_pattern,
+    cube_map_lod,
+    integrate_lobe,
+    integrate_specular,
+    lobe_sample_area,
+    lobe_samples,
+    pattern_half_vectors,
+    pattern_xi,
+    specular_lobes,
+    theta_thresh,
+)
+from lobeview.materials.presets import PRESETS
+from lobeview.materials.spec import build_bsdf
+from lobeview.materials.thesis import KurtLobe
+from lobeview.materials.vec import direction_from_angles_deg
+
+
+def constant(value=1.0):
+    return lambda dirs, lod: np.full((len(dirs), 3), value)
+
+
+@pytest.mark.parametrize("kind", ["ring", "multi_ring", "line_x", "line_y"])
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 7, 10, 11, 15, 19, 20])
+def test_pattern_has_n_samples_inside_the_lobe(kind, n):
+    xi1, xi2 = pattern_xi(n, kind)
+    assert len(xi1) == len(xi2) == n
+    assert np.all((xi1 > 0) & (xi1 <= 1)) and np.all((xi2 >= 0) & (xi2 < 1))
+    for dist in (
+        MicrofacetDistribution("beckmann", 0.1, 0.3),
+        MicrofacetDistribution("ggx", 0.2, 0.05),
+    ):
+        h = pattern_half_vectors(dist, xi1, xi2)
+        theta = np.arccos(np.clip(h[:, 2], -1, 1))
+        phi = np.arctan2(h[:, 1], h[:, 0])
+        # Every sample lies within the Eq. 4.10 threshold of its own azimuth.
+        assert np.all(theta <= theta_thresh(dist, phi) + 1e-12)
+
+
+@pytest.mark.parametrize("kind", ["ring", "multi_ring", "line_x", "line_y"])
+@pytest.mark.parametrize("n", [5, 7, 10, 15, 19])
+def test_pattern_is_symmetric_about_the_lobe_centre(kind, n):
+    """Isotropic lobe: the pattern's half-vector offsets balance out (ring and line patterns are
+    point symmetric, so the tangent-plane centroid is the lobe centre)."""
+    dist = MicrofacetDistribution("beckmann", 0.2, 0.2)
+    h = pattern_half_vectors(dist, *pattern_xi(n, kind))
+    np.testing.assert_allclose(h[:, :2].mean(axis=0), 0.0, atol=1e-12)
+
+
+def test_pattern_layouts_follow_the_thesis():
+    xi1, xi2 = pattern_xi(5, "line_y")
+    np.testing.assert_allclose(xi1, [0.2, 0.6, 1.0, 0.6, 0.2])  # thesis: n = 5 example
+    np.testing.assert_allclose(xi2[[0, 1, 3, 4]], [0.25, 0.25, 0.75, 0.75])
+    xi1, xi2 = pattern_xi(7, "ring")
+    assert xi1[0] == 1.0 and np.all(xi1[1:] == RING_XI1)
+    np.testing.assert_allclose(np.diff(xi2[1:]), 1 / 6)
+    xi1, _ = pattern_xi(10, "multi_ring")  # Fig. 4.34: centre + three rings of three
+    radii, counts = np.unique(np.round(1 - xi1[1:], 6), return_counts=True)
+    assert len(radii) == 3 and np.all(counts == 3)
+    assert choose_pattern(0.11, 0.072) == "ring"
+    assert choose_pattern(0.0068, 0.0297) == "line_y"  # Miro 5: elongated along the bitangent
+    assert choose_pattern(0.3, 0.05) == "line_x"
+    assert choose_pattern(0.2, 0.2, planar=True) == "multi_ring"
+
+
+def test_theta_thresh_matches_equation_4_10():
+    dist = MicrofacetDistribution("beckmann", 0.1, 0.3)
+    for phi in (0.0, 0.4, np.pi / 2):
+        a = np.cos(phi) ** 2 / 0.1**2 + np.sin(phi) ** 2 / 0.3**2
+        assert theta_thresh(dist, np.array(phi)) == pytest.approx(
+            np.arctan(np.sqrt(-np.log(XI_BORDER) / a))
+        )
+
+
+def test_lod_formula_equations_4_14_to_4_17():
+    # A sample area of exactly one texel at a face centre is MIP level 0; four texels level 1.
+    face = 256
+    texel_area = 4.0 / face**2
+    assert cube_map_lod(np.array([[0, 0, 1.0]]), texel_area, face)[0] == pytest.approx(0.0)
+    assert cube_map_lod(np.array([[0, 0, 1.0]]), 4 * texel_area, face)[0] == pytest.approx(1.0)
+    # Towards a cube corner the same solid angle covers 3^(3/2) times more texels.
+    corner = np.array([[1.0, 1.0, 1.0]]) / np.sqrt(3)
+    assert cube_map_lod(corner, texel_area, face)[0] == pytest.approx(0.5 * np.log2(3**1.5))
+    # Twice the samples, half the area each: half a MIP level finer.
+    dist = MicrofacetDistribution("beckmann", 0.1, 0.1)
+    wo = direction_from_angles_deg(0)
+    assert lobe_sample_area(dist, wo, 10) == pytest.approx(lobe_sample_area(dist, wo, 20) * 2)
+    # Ellipse semi-axes from Eq. 4.14-4.15 at normal incidence: the mirror of a half vector at
+    # theta_thresh is 2 theta_thresh away from the centre.
+    t = theta_thresh(dist, np.array(0.0))
+    assert lobe_sample_area(dist, wo, 1) == pytest.approx(np.pi * np.tan(2 * t) ** 2)
+
+
+# Measured worst relative error over n = 5, 11, 19 and theta <= 50 deg, rounded up: lobes with
+# m <= 0.15 stay within 2 %; the wide m = 0.25 lobes (frosted glass, the foil's transmission)
+# and GGX's long tails (cut at xi_border = 0.01, which for GGX leaves 1 % of the mass outside)
+# reach 7.5 %. Those are properties of the method; bench/ quantifies them per view.
+CONSTANT_RADIANCE_TOLERANCE = {
+    "alanod-2000gs-1lobe": 0.02,
+    "alanod-2000gs-2lobe": 0.02,
+    "miro5-2lobe": 0.02,
+    "chrome": 0.02,
+    "plastic": 0.02,
+    "white-foil": 0.03,
+    "frosted-glass": 0.08,
+    "gold-ggx": 0.06,
+}
+
+
+@pytest.mark.parametrize("preset", sorted(CONSTANT_RADIANCE_TOLERANCE))
+@pytest.mark.parametrize("theta", [0.0, 30.0, 50.0])
+def test_constant_radiance_gives_the_lobe_albedo(preset, theta):
+    """Eq. 4.25 with L = 1 is a weighted mean of the Monte-Carlo weights f cos / p over the
+    pattern, so it approximates the directional albedo of the specular lobes (thesis: 'a result
+    that matches the converged reference closely')."""
+    bsdf = build_bsdf(PRESETS[preset])
+    wo = direction_from_angles_deg(theta, 20)
+    r, t = BSDF(specular_lobes(bsdf)).albedo(wo, order=160)
+    for n in (5, 11, 19):
+        value = integrate_specular(bsdf, wo, constant(), n)
+        np.testing.assert_allclose(value, r + t, rtol=CONSTANT_RADIANCE_TOLERANCE[preset])
+
+
+def test_equation_4_25_is_the_f_cos_weighted_mean_of_mc_weights():
+    lobe = KurtLobe(0.9, 0.11, 0.072, 0.89, 0.43)
+    wo = direction_from_angles_deg(40, 10)
+    samples = lobe_samples(lobe, wo, 11)
+    wi = samples.wi[samples.valid]
+    wo_b = np.broadcast_to(wo, wi.shape)
+    f = lobe.eval(wi, wo_b)[:, 0]
+    p = lobe.lobe_pdf(wi, wo_b)
+    mc_weight = f * wi[:, 2] / p
+    expected = np.sum(mc_weight * f * wi[:, 2]) / np.sum(f * wi[:, 2])
+    assert integrate_lobe(lobe, wo, constant(), 11)[0] == pytest.approx(expected, rel=1e-12)
+    assert mc_weight.min() <= expected <= mc_weight.max()
+    # Eq. 4.24 with constant radiance: sum cos^2 f / sum p cos.
+    expected_424 = np.sum(wi[:, 2] ** 2 * f) / np.sum(p * wi[:, 2])
+    assert integrate_lobe(lobe, wo, constant(), 11, weighting="eq4.24")[0] == pytest.approx(
+        expected_424
+    )
+
+
+def _smooth_radiance(dirs, lod):
+    return np.stack([1 + 0.5 * dirs[:, 0], 1 + 0.7 * dirs[:, 1] ** 2, 1.5 + dirs[:, 2]], -1)
+
+
+@pytest.mark.parametrize(
+    "preset,tolerance",
+    [
+        ("alanod-2000gs-2lobe", 0.02),
+        ("miro5-1lobe", 0.01),
+        ("lacquer", 0.01),
+        ("frosted-glass", 0.06),
+    ],
+)
+def test_pattern_quadrature_converges_to_monte_carlo_for_smooth_light(preset, tolerance):
+    bsdf = build_bsdf(PRESETS[preset])
+    spec = BSDF(specular_lobes(bsdf))
+    wo = direction_from_angles_deg(35, 60)
+    rng = np.random.default_rng(4)
+    u = rng.random((2, 400_000))
+    s = spec.sample(u[0], u[1], wo)
+    reference = np.mean(s.weight * _smooth_radiance(s.wi, None), axis=0)
+    value = integrate_specular(bsdf, wo, _smooth_radiance, 15)
+    np.testing.assert_allclose(value, reference, rtol=tolerance)
+
+
+def test_lobe_samples_discard_directions_below_the_horizon():
+    lobe = KurtLobe(1.0, 0.4, 0.4, 1.0, 0.0)
+    s = lobe_samples(lobe, direction_from_angles_deg(85), 19)
+    assert 0 < s.valid.sum() < 19
+    assert np.all(s.wi[s.valid, 2] > 0)
+    t = lobe_samples(
+        KurtLobe(1.0, 0.4, 0.4, 1.0, 0.0, transmission=True), direction_from_angles_deg(85), 19
+    )
+    assert np.all(t.wi[t.valid, 2] < 0)
+
+
+def test_frame_rotates_lookups_but_not_the_result_for_isotropic_light():
+    lobe = KurtLobe(1.0, 0.1, 0.1, 0.5, 0.2)
+    wo = direction_from_angles_deg(30, 0)
+    angle = 0.7
+    frame = np.array(
+        [[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]]
+    )
+    seen = []
+
+    def record(dirs, lod):
+        seen.append(dirs)
+        return np.ones((len(dirs), 3))
+
+    a = integrate_lobe(lobe, wo, record, 7)
+    b = integrate_lobe(lobe, wo, record, 7, frame=frame)
+    np.testing.assert_allclose(a, b)
+    np.testing.assert_allclose(seen[1], seen[0] @ frame.T)
