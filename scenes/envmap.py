@@ -1,0 +1,134 @@
+"""Equirectangular environment maps and the one orientation convention used everywhere.
+
+World space is glTF's: right-handed, +Y up, a default camera looks down -Z.
+Equirectangular (u, v) in [0, 1]^2, u to the right, v down from the top row:
+
+    direction(u, v) = (sin(theta) sin(phi), cos(theta), -sin(theta) cos(phi))
+    with phi = 2 pi (u - 0.5) and theta = pi v,
+
+so the image centre (u, v) = (0.5, 0.5) faces -Z (what a default glTF camera sees), u = 0.75
+faces +X, u = 0.25 faces -X, the top row is +Y (sky) and the bottom row -Y. This matches how
+Blender and Poly Haven panoramas appear when the -Z axis is "forward".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .hdrio import read_hdr_image, sanitize_radiance
+
+
+def equirect_direction(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    phi = 2.0 * np.pi * (np.asarray(u, dtype=np.float64) - 0.5)
+    theta = np.pi * np.asarray(v, dtype=np.float64)
+    s = np.sin(theta)
+    return np.stack([s * np.sin(phi), np.cos(theta), -s * np.cos(phi)], axis=-1)
+
+
+def direction_to_equirect(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d = np.asarray(d, dtype=np.float64)
+    d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
+    phi = np.arctan2(d[..., 0], -d[..., 2])
+    u = 0.5 + phi / (2.0 * np.pi)
+    v = np.arccos(np.clip(d[..., 1], -1.0, 1.0)) / np.pi
+    return u % 1.0, v
+
+
+@dataclass
+class EnvironmentMap:
+    """Linear radiance on the sphere, stored equirectangularly (float32, H x W x 3)."""
+
+    image: np.ndarray
+    name: str = "environment"
+
+    @classmethod
+    def load(cls, path: str | Path) -> EnvironmentMap:
+        path = Path(path)
+        image, _ = sanitize_radiance(read_hdr_image(path), str(path))
+        if image.shape[1] != 2 * image.shape[0]:
+            raise ValueError(
+                f"{path}: an equirectangular map must be twice as wide as high, got "
+                f"{image.shape[1]}x{image.shape[0]}"
+            )
+        return cls(image, path.name)
+
+    @classmethod
+    def from_function(cls, fn, height: int = 256, name: str = "procedural") -> EnvironmentMap:
+        """Sample ``fn(directions (..., 3)) -> radiance (..., 3)`` at texel centres."""
+        v, u = np.meshgrid(
+            (np.arange(height) + 0.5) / height,
+            (np.arange(2 * height) + 0.5) / (2 * height),
+            indexing="ij",
+        )
+        return cls(np.asarray(fn(equirect_direction(u, v)), dtype=np.float32), name)
+
+    @property
+    def height(self) -> int:
+        return self.image.shape[0]
+
+    @property
+    def width(self) -> int:
+        return self.image.shape[1]
+
+    def texel_solid_angles(self) -> np.ndarray:
+        """Solid angle of each texel row: (2 pi / W) (cos(theta0) - cos(theta1)); shape (H,)."""
+        edges = np.linspace(0.0, np.pi, self.height + 1)
+        return (2.0 * np.pi / self.width) * (np.cos(edges[:-1]) - np.cos(edges[1:]))
+
+    def lookup(self, d: np.ndarray) -> np.ndarray:
+        """Bilinear lookup (wrapping in u, clamped in v) in direction(s) ``d``."""
+        u, v = direction_to_equirect(d)
+        x = u * self.width - 0.5
+        y = np.clip(v * self.height - 0.5, 0.0, self.height - 1.0)
+        x0 = np.floor(x).astype(np.int64)
+        y0 = np.floor(y).astype(np.int64)
+        fx = (x - x0)[..., None]
+        fy = (y - y0)[..., None]
+        x0 %= self.width
+        x1 = (x0 + 1) % self.width
+        y1 = np.minimum(y0 + 1, self.height - 1)
+        img = self.image
+        top = img[y0, x0] * (1 - fx) + img[y0, x1] * fx
+        bottom = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
+        return top * (1 - fy) + bottom * fy
+
+    def downsampled(self, height: int) -> EnvironmentMap:
+        """Box-filtered copy with the given height (must divide the current height)."""
+        factor = self.height // height
+        if factor < 1 or self.height % height:
+            raise ValueError(f"cannot box-downsample height {self.height} to {height}")
+        img = self.image.reshape(height, factor, 2 * height, factor, 3).astype(np.float64)
+        # Weight rows by their solid angle so the downsampled map keeps the same integral.
+        weights = np.sin((np.arange(self.height) + 0.5) / self.height * np.pi).reshape(
+            height, factor
+        )
+        img = (img * weights[:, :, None, None, None]).sum(axis=(1, 3)) / (
+            weights.sum(1)[:, None, None] * factor
+        )
+        return EnvironmentMap(img.astype(np.float32), self.name)
+
+    def irradiance(self, normals: np.ndarray, source_height: int = 64) -> np.ndarray:
+        """Irradiance E(n) = integral of L(w) max(0, n.w) dw by brute-force summation over a
+        box-downsampled copy of the map (exact up to that resolution)."""
+        src = self
+        while src.height > source_height and src.height % 2 == 0:
+            src = src.downsampled(src.height // 2)
+        v, u = np.meshgrid(
+            (np.arange(src.height) + 0.5) / src.height,
+            (np.arange(src.width) + 0.5) / src.width,
+            indexing="ij",
+        )
+        dirs = equirect_direction(u, v).reshape(-1, 3)
+        radiance = (src.image.astype(np.float64) * src.texel_solid_angles()[:, None, None]).reshape(
+            -1, 3
+        )
+        normals = np.asarray(normals, dtype=np.float64)
+        flat = normals.reshape(-1, 3)
+        out = np.empty_like(flat)
+        for start in range(0, len(flat), 4096):
+            cos = np.maximum(flat[start : start + 4096] @ dirs.T, 0.0)
+            out[start : start + 4096] = cos @ radiance
+        return out.reshape(normals.shape)

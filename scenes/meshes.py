@@ -1,0 +1,146 @@
+"""Triangle meshes for rendering: vertex positions, normals, tangents (xyz + handedness w),
+UVs and indices, with normals and tangents generated when missing."""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+class MeshError(ValueError):
+    pass
+
+
+@dataclass
+class Mesh:
+    positions: np.ndarray  # (V, 3) float32
+    normals: np.ndarray  # (V, 3)
+    tangents: np.ndarray  # (V, 4)
+    uvs: np.ndarray  # (V, 2)
+    indices: np.ndarray  # (T, 3) uint32
+    name: str = "mesh"
+
+    def interleaved(self) -> np.ndarray:
+        return np.concatenate([self.positions, self.normals, self.tangents], axis=1).astype(
+            np.float32
+        )
+
+    @property
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.positions.min(axis=0), self.positions.max(axis=0)
+
+
+def uv_sphere(radius: float = 1.0, rings: int = 96, segments: int = 192) -> Mesh:
+    """Sphere with analytic normals, UVs and tangents along increasing u (longitude, +phi)."""
+    theta = np.linspace(0.0, np.pi, rings + 1)
+    phi = np.linspace(0.0, 2.0 * np.pi, segments + 1)
+    T, P = np.meshgrid(theta, phi, indexing="ij")
+    normals = np.stack([np.sin(T) * np.sin(P), np.cos(T), np.sin(T) * np.cos(P)], -1).reshape(-1, 3)
+    tangent = np.stack([np.cos(P), np.zeros_like(P), -np.sin(P)], -1).reshape(-1, 3)
+    uvs = np.stack([P / (2 * np.pi), T / np.pi], -1).reshape(-1, 2)
+    idx = []
+    cols = segments + 1
+    for r in range(rings):
+        for s in range(segments):
+            a, b = r * cols + s, r * cols + s + 1
+            c, d = a + cols, b + cols
+            if r > 0:
+                idx.append((a, c, b))
+            if r < rings - 1:
+                idx.append((b, c, d))
+    tangents = np.concatenate([tangent, np.ones((len(tangent), 1))], axis=1)
+    return Mesh(
+        (normals * radius).astype(np.float32),
+        normals.astype(np.float32),
+        tangents.astype(np.float32),
+        uvs.astype(np.float32),
+        np.asarray(idx, dtype=np.uint32),
+        "sphere",
+    )
+
+
+def vertex_normals(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals; vertices of degenerate-only triangles get +Y (warned)."""
+    p = positions.astype(np.float64)
+    face_n = np.cross(p[indices[:, 1]] - p[indices[:, 0]], p[indices[:, 2]] - p[indices[:, 0]])
+    normals = np.zeros_like(p)
+    for k in range(3):
+        np.add.at(normals, indices[:, k], face_n)
+    length = np.linalg.norm(normals, axis=1, keepdims=True)
+    bad = length[:, 0] < 1e-20
+    if np.any(bad):
+        warnings.warn(
+            f"{int(bad.sum())} vertices only touch degenerate triangles; normal set to +Y",
+            stacklevel=2,
+        )
+    normals = np.where(
+        bad[:, None], [0.0, 1.0, 0.0], normals / np.where(bad, 1.0, length[:, 0])[:, None]
+    )
+    return normals.astype(np.float32)
+
+
+def vertex_tangents(positions, normals, uvs, indices) -> np.ndarray:
+    """Per-vertex tangents from UV derivatives (Lengyel's method), Gram-Schmidt against the
+    normal, with handedness in w. Where UVs are missing or degenerate the tangent is any vector
+    orthogonal to the normal (the shader does the same), so anisotropy direction is arbitrary
+    there: a documented fallback."""
+    p = positions.astype(np.float64)
+    uv = uvs.astype(np.float64)
+    i0, i1, i2 = indices[:, 0], indices[:, 1], indices[:, 2]
+    e1, e2 = p[i1] - p[i0], p[i2] - p[i0]
+    d1, d2 = uv[i1] - uv[i0], uv[i2] - uv[i0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(det) > 1e-20
+    r = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    sdir = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * r
+    tdir = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * r
+    tan1 = np.zeros_like(p)
+    tan2 = np.zeros_like(p)
+    for k in (i0, i1, i2):
+        np.add.at(tan1, k, sdir)
+        np.add.at(tan2, k, tdir)
+    n = normals.astype(np.float64)
+    t = tan1 - n * np.sum(n * tan1, axis=1, keepdims=True)
+    length = np.linalg.norm(t, axis=1, keepdims=True)
+    bad = length[:, 0] < 1e-12
+    helper = np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+    fallback = np.cross(n, helper)
+    fallback /= np.linalg.norm(fallback, axis=1, keepdims=True)
+    t = np.where(bad[:, None], fallback, t / np.where(bad, 1.0, length[:, 0])[:, None])
+    w = np.where(np.sum(np.cross(n, t) * tan2, axis=1) < 0.0, -1.0, 1.0)
+    return np.concatenate([t, w[:, None]], axis=1).astype(np.float32)
+
+
+def load_mesh_file(path: str | Path) -> Mesh:
+    """A single mesh from any file trimesh reads (OBJ, PLY, STL, glTF/GLB: all geometry merged)."""
+    import trimesh
+
+    path = Path(path)
+    if not path.exists():
+        raise MeshError(f"{path}: no such file")
+    try:
+        loaded = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:
+        raise MeshError(f"{path}: cannot load mesh: {exc}") from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise MeshError(f"{path}: contains no triangles")
+    positions = np.asarray(loaded.vertices, dtype=np.float32)
+    indices = np.asarray(loaded.faces, dtype=np.uint32)
+    uv = getattr(loaded.visual, "uv", None)
+    uvs = (
+        np.asarray(uv, dtype=np.float32)
+        if uv is not None and len(uv) == len(positions)
+        else np.zeros((len(positions), 2), np.float32)
+    )
+    normals = vertex_normals(positions, indices)
+    return Mesh(
+        positions,
+        normals,
+        vertex_tangents(positions, normals, uvs, indices),
+        uvs,
+        indices,
+        path.stem,
+    )

@@ -1,0 +1,261 @@
+// GLSL twin of lobeview.materials (microfacet.py, fresnel.py, thesis.py, conductor.py,
+// gltf.py, patterns.py). Local shading frame: n = +z, tangent = +x; wi towards the light,
+// wo towards the viewer. Tests hold every function here against the numpy reference by
+// rendering through the real pipeline (tests/test_render_vs_numpy.py).
+
+const float PI = 3.14159265358979323846;
+const float COS_EPS = 1e-7;
+
+#define LOBE_KURT_REFLECTION 0
+#define LOBE_KURT_TRANSMISSION 1
+#define LOBE_MICROFACET 2
+#define LOBE_GLTF_SPECULAR 3
+#define DIST_BECKMANN 0
+#define DIST_GGX 1
+#define FRESNEL_NONE 0
+#define FRESNEL_SCHLICK 1
+#define FRESNEL_CONDUCTOR 2
+
+struct Lobe {
+    int type;
+    int dist;
+    float ax;
+    float ay;
+    vec3 k;        // ks / kt / scale
+    float alpha;   // thesis shadowing exponent (Eq. 3.4)
+    vec3 r0;       // Schlick r0 (thesis, microfacet) or base colour (glTF)
+    int fresnel;
+    vec3 eta;
+    float metallic;
+    vec3 kappa;
+};
+
+uniform int u_lobe_count;
+uniform vec4 u_lobes[MAX_LOBES * 5];
+
+Lobe get_lobe(int i) {
+    vec4 a = u_lobes[5 * i];
+    vec4 b = u_lobes[5 * i + 1];
+    vec4 c = u_lobes[5 * i + 2];
+    vec4 d = u_lobes[5 * i + 3];
+    vec4 e = u_lobes[5 * i + 4];
+    Lobe l;
+    l.type = int(a.x + 0.5);
+    l.dist = int(a.y + 0.5);
+    l.ax = a.z;
+    l.ay = a.w;
+    l.k = b.rgb;
+    l.alpha = b.w;
+    l.r0 = c.rgb;
+    l.fresnel = int(c.w + 0.5);
+    l.eta = d.rgb;
+    l.metallic = d.w;
+    l.kappa = e.rgb;
+    return l;
+}
+
+bool lobe_is_transmission(Lobe l) { return l.type == LOBE_KURT_TRANSMISSION; }
+
+// ---- microfacet distribution (microfacet.py) ----------------------------------------------
+
+float D_eval(Lobe l, vec3 h) {
+    if (h.z <= 0.0) return 0.0;
+    float x2 = h.x * h.x / (l.ax * l.ax);
+    float y2 = h.y * h.y / (l.ay * l.ay);
+    float z2 = h.z * h.z;
+    if (l.dist == DIST_GGX) {
+        float d = x2 + y2 + z2;
+        return 1.0 / (PI * l.ax * l.ay * d * d);
+    }
+    // Thesis Eq. 3.3; exp underflows to 0 long before cos^4 does.
+    float e = (x2 + y2) / max(z2, 1e-30);
+    if (e > 80.0) return 0.0;
+    return exp(-e) / (PI * l.ax * l.ay * z2 * z2);
+}
+
+// Numerical Recipes erfcc: fractional error < 1.2e-7 everywhere.
+float erfc_nr(float x) {
+    float t = 1.0 / (1.0 + 0.5 * x);
+    return t * exp(-x * x - 1.26551223 + t * (1.00002368 + t * (0.37409196 + t * (0.09678418 +
+           t * (-0.18628806 + t * (0.27886807 + t * (-1.13520398 + t * (1.48851587 +
+           t * (-0.82215223 + t * 0.17087277)))))))));
+}
+
+float lambda_smith(Lobe l, vec3 w) {
+    float z2 = max(w.z * w.z, 1e-30);
+    float s = (l.ax * l.ax * w.x * w.x + l.ay * l.ay * w.y * w.y) / z2;
+    if (l.dist == DIST_GGX) return s / (2.0 * (sqrt(1.0 + s) + 1.0));
+    if (s <= 0.0) return 0.0;
+    float a = inversesqrt(s);
+    if (a >= 2.6) {
+        // Asymptotic series of erfc: Lambda = e^{-a^2}/(2 a sqrt(pi)) (1/(2a^2) - 3/(4a^4) + 15/(8a^6))
+        float ia2 = 1.0 / (a * a);
+        return exp(-a * a) / (2.0 * a * sqrt(PI)) * (0.5 * ia2 - 0.75 * ia2 * ia2 + 1.875 * ia2 * ia2 * ia2);
+    }
+    return max((exp(-a * a) / (a * sqrt(PI)) - erfc_nr(a)) * 0.5, 0.0);
+}
+
+float G1_smith(Lobe l, vec3 w) { return 1.0 / (1.0 + lambda_smith(l, w)); }
+
+float phi_from_xi(Lobe l, float xi2) {
+    // Eq. 4.5 / 4.12, quadrant-correct.
+    float angle = 2.0 * PI * xi2;
+    return atan(l.ay * sin(angle), l.ax * cos(angle));
+}
+
+float tan2_theta_from_xi(Lobe l, float xi1, float phi) {
+    // Eq. 4.6 (Beckmann: -ln xi1; GGX: (1 - xi1)/xi1), xi1 in (0, 1].
+    xi1 = clamp(xi1, 1e-30, 1.0);
+    float t = (l.dist == DIST_BECKMANN) ? -log(xi1) : (1.0 - xi1) / xi1;
+    float c = cos(phi);
+    float s = sin(phi);
+    float inv_alpha2 = c * c / (l.ax * l.ax) + s * s / (l.ay * l.ay);
+    return t / inv_alpha2;
+}
+
+vec3 spherical_dir(float theta, float phi) {
+    float s = sin(theta);
+    return vec3(s * cos(phi), s * sin(phi), cos(theta));
+}
+
+vec3 half_vector_from_xi(Lobe l, float xi1, float xi2) {
+    float phi = phi_from_xi(l, xi2);
+    float tan2 = tan2_theta_from_xi(l, xi1, phi);
+    float cos_t = inversesqrt(1.0 + tan2);
+    float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
+    return vec3(sin_t * cos(phi), sin_t * sin(phi), cos_t);
+}
+
+// GGX visible normals (Heitz 2018).
+vec3 sample_visible_normal(Lobe l, vec3 wo, vec2 u) {
+    vec3 vh = normalize(vec3(l.ax * wo.x, l.ay * wo.y, wo.z));
+    float lensq = vh.x * vh.x + vh.y * vh.y;
+    vec3 t1 = lensq > 0.0 ? vec3(-vh.y, vh.x, 0.0) * inversesqrt(lensq) : vec3(1.0, 0.0, 0.0);
+    vec3 t2 = cross(vh, t1);
+    float r = sqrt(u.x);
+    float phi = 2.0 * PI * u.y;
+    float p1 = r * cos(phi);
+    float p2 = r * sin(phi);
+    float s = 0.5 * (1.0 + vh.z);
+    p2 = (1.0 - s) * sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2;
+    vec3 nh = p1 * t1 + p2 * t2 + sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0)) * vh;
+    return normalize(vec3(l.ax * nh.x, l.ay * nh.y, max(nh.z, 0.0)));
+}
+
+// ---- Fresnel (fresnel.py) ------------------------------------------------------------------
+
+vec3 schlick(float u, vec3 r0) {
+    float m = 1.0 - clamp(u, 0.0, 1.0);
+    float m2 = m * m;
+    return r0 + (1.0 - r0) * (m2 * m2 * m);
+}
+
+vec3 fresnel_conductor(float cos_theta, vec3 eta, vec3 k) {
+    float c = clamp(cos_theta, 0.0, 1.0);
+    float c2 = c * c;
+    float s2 = 1.0 - c2;
+    vec3 t0 = eta * eta - k * k - s2;
+    vec3 a2plusb2 = sqrt(t0 * t0 + 4.0 * eta * eta * k * k);
+    vec3 a = sqrt(max(0.5 * (a2plusb2 + t0), 0.0));
+    vec3 t1 = a2plusb2 + c2;
+    vec3 t2 = 2.0 * c * a;
+    vec3 rs = (t1 - t2) / max(t1 + t2, vec3(1e-30));
+    vec3 t3 = c2 * a2plusb2 + s2 * s2;
+    vec3 t4 = t2 * s2;
+    vec3 rp = rs * (t3 - t4) / max(t3 + t4, vec3(1e-30));
+    return clamp(0.5 * (rp + rs), 0.0, 1.0);
+}
+
+vec3 lobe_fresnel(Lobe l, float wo_h) {
+    if (l.type == LOBE_GLTF_SPECULAR) {
+        return (1.0 - l.metallic) * schlick(abs(wo_h), vec3(0.04)) + l.metallic * schlick(abs(wo_h), l.r0);
+    }
+    if (l.fresnel == FRESNEL_SCHLICK) return schlick(wo_h, l.r0);
+    if (l.fresnel == FRESNEL_CONDUCTOR) return fresnel_conductor(wo_h, l.eta, l.kappa);
+    return vec3(1.0);
+}
+
+// ---- lobes (thesis.py, conductor.py, gltf.py) -----------------------------------------------
+
+// The incident direction as the reflection formulas see it (Eq. 3.5 mirrors transmission).
+vec3 reflected_wi(Lobe l, vec3 wi) { return lobe_is_transmission(l) ? vec3(wi.xy, -wi.z) : wi; }
+
+vec3 lobe_eval(Lobe l, vec3 wi, vec3 wo) {
+    vec3 wr = reflected_wi(l, wi);
+    if (wo.z <= COS_EPS || wr.z <= COS_EPS) return vec3(0.0);
+    vec3 h = normalize(wr + wo);
+    float wo_h = max(dot(wo, h), COS_EPS);
+    float d = D_eval(l, h);
+    if (l.type == LOBE_KURT_REFLECTION || l.type == LOBE_KURT_TRANSMISSION) {
+        vec3 f = schlick(wo_h, l.r0);
+        if (lobe_is_transmission(l)) f = 1.0 - f;
+        // Eq. 3.4: F D / (4 (wo.h) ((wi.n)(wo.n))^alpha)
+        float denom = 4.0 * wo_h * exp(l.alpha * (log(wr.z) + log(wo.z)));
+        return l.k * f * (d / denom);
+    }
+    float g2 = 1.0 / (1.0 + lambda_smith(l, wr) + lambda_smith(l, wo));
+    if (dot(wr, h) <= 0.0) g2 = 0.0;
+    return l.k * lobe_fresnel(l, wo_h) * (d * g2 / (4.0 * wr.z * wo.z));
+}
+
+// Half-vector density D(h) cos(theta_h) / (4 wo.h) (Eq. 4.9), mirrored for transmission.
+float lobe_half_pdf(Lobe l, vec3 wi, vec3 wo) {
+    vec3 wr = reflected_wi(l, wi);
+    if (wo.z <= COS_EPS || wr.z <= COS_EPS) return 0.0;
+    vec3 h = normalize(wr + wo);
+    return D_eval(l, h) * h.z / (4.0 * max(dot(wo, h), COS_EPS));
+}
+
+bool lobe_uses_vndf(Lobe l) {
+    return (l.type == LOBE_MICROFACET || l.type == LOBE_GLTF_SPECULAR) && l.dist == DIST_GGX;
+}
+
+// Density of lobe_sample().
+float lobe_sample_pdf(Lobe l, vec3 wi, vec3 wo) {
+    if (!lobe_uses_vndf(l)) return lobe_half_pdf(l, wi, wo);
+    if (wo.z <= COS_EPS || wi.z <= COS_EPS) return 0.0;
+    vec3 h = normalize(wi + wo);
+    float wo_h = max(dot(wo, h), COS_EPS);
+    float d_vis = G1_smith(l, wo) * wo_h * D_eval(l, h) / wo.z;
+    return d_vis / (4.0 * wo_h);
+}
+
+// Importance sample of the lobe (Eq. 4.5-4.8, or GGX visible normals); check the pdf > 0.
+vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
+    vec3 h = lobe_uses_vndf(l) ? sample_visible_normal(l, wo, u) : half_vector_from_xi(l, 1.0 - u.x, u.y);
+    vec3 wr = 2.0 * dot(wo, h) * h - wo;
+    return reflected_wi(l, wr);
+}
+
+// ---- deterministic patterns (patterns.py) ---------------------------------------------------
+
+const float XI_BORDER = 0.01;
+const float MAX_ELLIPSE_ANGLE = 1.3962634015954636;  // 80 degrees
+
+float theta_thresh(Lobe l, float phi) { return atan(sqrt(tan2_theta_from_xi(l, XI_BORDER, phi))); }
+
+vec3 pattern_half_vector(Lobe l, vec2 xi) {
+    float phi = phi_from_xi(l, xi.y);
+    return spherical_dir((1.0 - xi.x) * theta_thresh(l, phi), phi);
+}
+
+// Eq. 4.14-4.15 divided by n: area of one sample at unit distance.
+float lobe_sample_area(Lobe l, vec3 wo, int n) {
+    vec3 centre = vec3(-wo.xy, wo.z);
+    vec3 hu = spherical_dir(theta_thresh(l, 0.0), 0.0);
+    vec3 hv = spherical_dir(theta_thresh(l, 0.5 * PI), 0.5 * PI);
+    vec3 wu = 2.0 * dot(wo, hu) * hu - wo;
+    vec3 wv = 2.0 * dot(wo, hv) * hv - wo;
+    float au = min(acos(clamp(dot(wu, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
+    float av = min(acos(clamp(dot(wv, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
+    return PI * tan(au) * tan(av) / float(n);
+}
+
+// Eq. 4.16-4.17 (and Colbert-Krivanek's lod with solid angle omega_s): MIP level of a lookup
+// covering solid angle `area` in world direction `dir` on a cube map with faces of size `face`.
+float cube_lod(vec3 dir, float area, float face) {
+    vec3 a = abs(dir);
+    float max_c = max(max(a.x, a.y), max(a.z, 1e-6));
+    float texels = area / (max_c * max_c * max_c) * face * face * 0.25;
+    return 0.5 * log2(max(texels, 1e-30));
+}

@@ -1,0 +1,63 @@
+"""Pinhole camera: look-at view and OpenGL perspective projection (right-handed, +Y up,
+looking down -Z in view space, as glTF cameras)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def look_at(eye, target, up) -> np.ndarray:
+    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    forward = target - eye
+    if np.linalg.norm(forward) < 1e-12:
+        raise ValueError("camera position and target coincide")
+    forward /= np.linalg.norm(forward)
+    right = np.cross(forward, up)
+    if np.linalg.norm(right) < 1e-9:
+        raise ValueError("camera up vector is parallel to the viewing direction")
+    right /= np.linalg.norm(right)
+    true_up = np.cross(right, forward)
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = right, true_up, -forward
+    view[:3, 3] = -view[:3, :3] @ eye
+    return view
+
+
+def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    f = 1.0 / np.tan(np.radians(fov_y_deg) / 2.0)
+    proj = np.zeros((4, 4))
+    proj[0, 0] = f / aspect
+    proj[1, 1] = f
+    proj[2, 2] = (far + near) / (near - far)
+    proj[2, 3] = 2.0 * far * near / (near - far)
+    proj[3, 2] = -1.0
+    return proj
+
+
+@dataclass
+class Camera:
+    position: tuple = (0.0, 0.0, 3.0)
+    target: tuple = (0.0, 0.0, 0.0)
+    up: tuple = (0.0, 1.0, 0.0)
+    fov_y: float = 40.0
+    near: float = 0.05
+    far: float = 200.0
+
+    def view(self) -> np.ndarray:
+        return look_at(self.position, self.target, self.up)
+
+    def view_projection(self, aspect: float) -> np.ndarray:
+        return perspective(self.fov_y, aspect, self.near, self.far) @ self.view()
+
+    def describe(self) -> str:
+        """The ``lobeview shot`` flags that reproduce this camera exactly."""
+
+        def fmt(v):
+            return ",".join(f"{x:.6g}" for x in v)
+
+        return (
+            f"--camera {fmt(self.position)} --target {fmt(self.target)} "
+            f"--up {fmt(self.up)} --fov {self.fov_y:.6g}"
+        )

@@ -1,0 +1,97 @@
+"""Packing a numpy-reference BSDF into the uniforms of shaders/bsdf.glsl, and the per-lobe
+deterministic patterns for lobe-N."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from lobeview.materials.bsdf import BSDF, Lambert
+from lobeview.materials.conductor import MicrofacetReflection
+from lobeview.materials.gltf import GltfDiffuse, GltfSpecular
+from lobeview.materials.patterns import choose_pattern, pattern_xi
+from lobeview.materials.thesis import KurtLobe
+
+MAX_LOBES = 8
+MAX_PATTERN = 32
+LOBE_VEC4S = 5
+_FRESNEL = {"none": 0, "schlick": 1, "conductor": 2}
+_DIST = {"beckmann": 0, "ggx": 1}
+
+
+@dataclass
+class PackedMaterial:
+    kd: np.ndarray
+    gltf_diffuse: bool
+    lobes: np.ndarray  # (MAX_LOBES * 5, 4) float32
+    lobe_count: int
+    lobe_distributions: list
+
+    @property
+    def has_diffuse(self) -> bool:
+        return bool(np.any(self.kd > 0))
+
+
+def pack_material(bsdf: BSDF) -> PackedMaterial:
+    kd = np.zeros(3)
+    gltf_diffuse = False
+    rows = []
+    dists = []
+    for comp in bsdf.components:
+        if isinstance(comp, Lambert):
+            kd = kd + comp.kd
+            continue
+        if isinstance(comp, GltfDiffuse):
+            kd = kd + (1.0 - comp.metallic) * comp.base_color
+            gltf_diffuse = True
+            continue
+        d = comp.distribution
+        if isinstance(comp, KurtLobe):
+            kind = 1 if comp.transmission else 0
+            row = [
+                [kind, _DIST[d.kind], d.alpha_x, d.alpha_y],
+                [*comp.k, comp.alpha],
+                [*comp.r0, _FRESNEL["schlick"]],
+                [0, 0, 0, 0],
+                [0, 0, 0, 0],
+            ]
+        elif isinstance(comp, GltfSpecular):
+            row = [
+                [3, _DIST[d.kind], d.alpha_x, d.alpha_y],
+                [1, 1, 1, 0],
+                [*comp.base_color, 0],
+                [0, 0, 0, comp.metallic],
+                [0, 0, 0, 0],
+            ]
+        elif isinstance(comp, MicrofacetReflection):
+            fr = comp.fresnel
+            row = [
+                [2, _DIST[d.kind], d.alpha_x, d.alpha_y],
+                [*comp.scale, 0],
+                [*fr.r0, _FRESNEL[fr.kind]],
+                [*fr.eta, 0],
+                [*fr.k, 0],
+            ]
+        else:
+            raise TypeError(f"no GPU version of BSDF component {type(comp).__name__}")
+        rows.append(row)
+        dists.append(d)
+    if len(rows) > MAX_LOBES:
+        raise ValueError(f"material has {len(rows)} lobes; the renderer supports {MAX_LOBES}")
+    lobes = np.zeros((MAX_LOBES * LOBE_VEC4S, 4), dtype=np.float32)
+    if rows:
+        lobes[: len(rows) * LOBE_VEC4S] = np.asarray(rows, dtype=np.float32).reshape(-1, 4)
+    return PackedMaterial(kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists)
+
+
+def pack_patterns(material: PackedMaterial, n: int) -> np.ndarray:
+    """(MAX_LOBES * MAX_PATTERN, 2) pattern coordinates, each lobe's pattern chosen by
+    :func:`lobeview.materials.patterns.choose_pattern`."""
+    if not 1 <= n <= MAX_PATTERN:
+        raise ValueError(f"lobe-N supports 1 <= N <= {MAX_PATTERN}, got {n}")
+    out = np.zeros((MAX_LOBES * MAX_PATTERN, 2), dtype=np.float32)
+    for i, d in enumerate(material.lobe_distributions):
+        xi1, xi2 = pattern_xi(n, choose_pattern(d.alpha_x, d.alpha_y))
+        out[i * MAX_PATTERN : i * MAX_PATTERN + n] = np.stack([xi1, xi2], -1)
+    return out

@@ -1,0 +1,106 @@
+"""GLSL sources from ``shaders/``: ``#include "name.glsl"`` resolution with a cycle check, and
+program variants chosen by ``#define``s, cached by the sorted tuple of defines.
+
+Only defines listed in :data:`KNOWN_DEFINES` are accepted (an unknown name is a typo that would
+silently select the wrong variant); a define with value ``False``/``None`` is left out, any other
+value is emitted as ``#define NAME value`` (``True`` -> ``1``).
+"""
+
+from __future__ import annotations
+
+import re
+from importlib import resources
+
+import moderngl
+
+KNOWN_DEFINES = {
+    "MAX_LOBES",
+    "MAX_PATTERN",
+    "METHOD_LOBE",
+    "METHOD_FIS",
+    "METHOD_MC",
+    "HAS_DIFFUSE",
+    "DEBUG_VIEW",
+}
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
+
+
+class ShaderError(RuntimeError):
+    pass
+
+
+def read_source(name: str) -> str:
+    try:
+        return resources.files("lobeview.shaders").joinpath(name).read_text()
+    except FileNotFoundError:
+        raise ShaderError(f"shader source {name!r} not found in lobeview/shaders") from None
+
+
+def resolve_includes(name: str, _stack: tuple[str, ...] = ()) -> str:
+    if name in _stack:
+        raise ShaderError(f"#include cycle: {' -> '.join(_stack + (name,))}")
+    source = read_source(name)
+
+    def replace(match: re.Match) -> str:
+        included = match.group(1)
+        body = resolve_includes(included, _stack + (name,))
+        return f"// begin {included}\n{body}\n// end {included}"
+
+    return _INCLUDE.sub(replace, source)
+
+
+def define_block(defines: dict) -> str:
+    unknown = set(defines) - KNOWN_DEFINES
+    if unknown:
+        raise ShaderError(
+            f"unknown shader define(s) {sorted(unknown)}; known: {sorted(KNOWN_DEFINES)}"
+        )
+    lines = []
+    for key in sorted(defines):
+        value = defines[key]
+        if value is False or value is None:
+            continue
+        lines.append(f"#define {key} {1 if value is True else value}")
+    return "\n".join(lines)
+
+
+def assemble(name: str, defines: dict) -> str:
+    body = resolve_includes(name)
+    if not body.lstrip().startswith("#version"):
+        raise ShaderError(f"{name}: must start with a #version line")
+    version, rest = body.lstrip().split("\n", 1)
+    return f"{version}\n{define_block(defines)}\n#line 2\n{rest}"
+
+
+class ProgramCache:
+    """Programs keyed by (vertex, fragment/compute, sorted defines)."""
+
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self._programs: dict[tuple, moderngl.Program | moderngl.ComputeShader] = {}
+
+    def program(self, vertex: str, fragment: str, defines: dict | None = None) -> moderngl.Program:
+        defines = dict(defines or {})
+        key = (vertex, fragment, tuple(sorted(defines.items())))
+        if key not in self._programs:
+            try:
+                self._programs[key] = self.ctx.program(
+                    vertex_shader=assemble(vertex, defines),
+                    fragment_shader=assemble(fragment, defines),
+                )
+            except moderngl.Error as exc:
+                raise ShaderError(
+                    f"compiling {vertex} + {fragment} with {defines}: {exc}"
+                ) from None
+        return self._programs[key]
+
+    def compute(self, name: str, defines: dict | None = None) -> moderngl.ComputeShader:
+        defines = dict(defines or {})
+        key = (name, None, tuple(sorted(defines.items())))
+        if key not in self._programs:
+            try:
+                self._programs[key] = self.ctx.compute_shader(assemble(name, defines))
+            except moderngl.Error as exc:
+                raise ShaderError(f"compiling {name} with {defines}: {exc}") from None
+        return self._programs[key]
