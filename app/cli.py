@@ -1,7 +1,8 @@
 """The ``lobeview`` command line.
 
-Implemented so far: ``lobeview material list|show|plot`` (material library). The viewer,
-screenshot, bake and bench commands arrive with their issues; see README.
+Implemented so far: ``lobeview material list|show|plot`` (material library) and
+``lobeview shot`` for the object preview. The window, bake and bench commands arrive with their
+issues; see README.
 """
 
 from __future__ import annotations
@@ -13,9 +14,13 @@ import sys
 import numpy as np
 
 from lobeview import __version__
+from lobeview.app.shot import ShotError
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import MaterialError, build_bsdf, load_material
 from lobeview.materials.vec import direction_from_angles_deg
+from lobeview.scenes.hdrio import HDRImageError
+from lobeview.scenes.meshes import MeshError
+from lobeview.viewer.context import HeadlessContextError
 
 SHOW_ANGLES_DEG = (0.0, 30.0, 60.0, 80.0)
 
@@ -105,6 +110,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("material", help="preset name, JSON file or inline JSON object")
     p.add_argument("-o", "--output", default="lobe.png", help="output PNG (default: lobe.png)")
     p.set_defaults(func=cmd_material_plot)
+    from lobeview.app import shot
+
+    p = sub.add_parser("shot", help="render a headless screenshot (object preview)")
+    shot.add_arguments(p)
+    p.set_defaults(func=shot.run)
     return parser
 
 
@@ -112,7 +122,10 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except MaterialError as exc:
+    except (MaterialError, ShotError, HDRImageError, MeshError, HeadlessContextError) as exc:
+        print(f"lobeview: error: {exc}", file=sys.stderr)
+        return 2
+    except ValueError as exc:  # bad option values (method, environment name, ...)
         print(f"lobeview: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:

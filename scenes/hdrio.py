@@ -204,8 +204,8 @@ def _write_rgbe(path: Path, image: np.ndarray) -> None:
 
 @dataclass
 class SanitizeReport:
-    non_finite: int = 0
-    negative: int = 0
+    non_finite: int = 0  # texels with a NaN/Inf channel
+    negative: int = 0  # texels with a negative channel
 
     @property
     def changed(self) -> bool:
@@ -219,14 +219,14 @@ def sanitize_radiance(
     with the counts. Lossy-compressed EXRs (DWAB) routinely hold tiny negatives."""
     image = np.asarray(image, dtype=np.float32)
     finite = np.isfinite(image)
-    report = SanitizeReport(non_finite=int(np.count_nonzero(~finite)))
+    report = SanitizeReport(non_finite=int(np.count_nonzero(~np.all(finite, axis=-1))))
     clean = np.where(finite, image, 0.0)
     negative = clean < 0.0
-    report.negative = int(np.count_nonzero(negative))
+    report.negative = int(np.count_nonzero(np.any(negative, axis=-1)))
     clean = np.where(negative, 0.0, clean).astype(np.float32)
     if report.non_finite:
         warnings.warn(
-            f"{name}: {report.non_finite} NaN/Inf texel values replaced by 0",
+            f"{name}: {report.non_finite} texels with NaN/Inf values set to 0",
             HDRImageWarning,
             stacklevel=2,
         )
@@ -234,8 +234,8 @@ def sanitize_radiance(
         most_negative = float(image[finite].min()) if np.any(finite) else 0.0
         if most_negative < -negative_tolerance:
             warnings.warn(
-                f"{name}: {report.negative} negative texel values (down to {most_negative:.3g}) "
-                "clamped to 0",
+                f"{name}: {report.negative} texels with negative values (down to "
+                f"{most_negative:.3g}) clamped to 0",
                 HDRImageWarning,
                 stacklevel=2,
             )

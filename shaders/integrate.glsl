@@ -4,13 +4,16 @@
 //   METHOD_FIS   fis-N: the same N quasi-random importance samples at every pixel, each
 //                filtered with Colbert & Krivanek's lod = 0.5 log2(omega_s / omega_p) + bias
 //   METHOD_MC    mc-N / reference: importance samples from a Sobol sequence with a per-pixel
-//                Cranley-Patterson rotation, no filtering (unbiased; accumulated over passes)
+//                Cranley-Patterson rotation, no filtering (unbiased; accumulated over passes).
+//                With ENV_SAMPLING (the reference method) every BSDF sample is paired with a
+//                sample of the environment's importance map, combined by multiple importance
+//                sampling with the power heuristic (Veach 1997), so suns converge.
 #include "bsdf.glsl"
 
 uniform samplerCube u_radiance;     // incident radiance, full MIP chain
 uniform float u_face_size;          // size of MIP level 0 of u_radiance
 uniform samplerCube u_irradiance;   // irradiance E(n) for the diffuse term (lobe-N, fis-N)
-uniform sampler2D u_sobol;          // 2D Sobol points, row-major, u_sobol_count of them
+uniform sampler2D u_sobol;          // 4D Sobol points (RGBA), row-major, u_sobol_count of them
 uniform int u_sobol_count;
 uniform int u_sample_offset;        // first Sobol index of this pass (progressive refinement)
 uniform int u_samples;              // N
@@ -33,11 +36,64 @@ vec2 pixel_rotation(uvec2 pixel, int lobe) {
     return vec2(float(h1 >> 8u), float(h2 >> 8u)) / 16777216.0;
 }
 
-vec2 sobol_point(int index) {
+vec4 sobol_point4(int index) {
     int i = index % u_sobol_count;
     ivec2 size = textureSize(u_sobol, 0);
-    return texelFetch(u_sobol, ivec2(i % size.x, i / size.x), 0).xy;
+    return texelFetch(u_sobol, ivec2(i % size.x, i / size.x), 0);
 }
+
+vec2 sobol_point(int index) { return sobol_point4(index).xy; }
+
+#if defined(ENV_SAMPLING)
+// Environment importance sampling (numpy reference: scenes/env_sampling.py).
+uniform sampler2D u_env_cdf;      // cumulative texel probabilities, rows of 1024
+uniform int u_env_texels;         // 6 * size^2
+uniform int u_env_size;           // importance face size
+uniform samplerCube u_env_pdf;    // P_t (size/2)^2 per texel, nearest filtering
+
+float env_cdf(int i) { return texelFetch(u_env_cdf, ivec2(i % 1024, i / 1024), 0).r; }
+
+float env_pdf(vec3 d) {
+    vec3 a = abs(d);
+    float m = max(max(a.x, a.y), a.z);
+    return textureLod(u_env_pdf, d, 0.0).r / (m * m * m);
+}
+
+vec3 cube_face_direction(int face, float sc, float tc) {
+    if (face == 0) return vec3(1.0, -tc, -sc);
+    if (face == 1) return vec3(-1.0, -tc, sc);
+    if (face == 2) return vec3(sc, 1.0, tc);
+    if (face == 3) return vec3(sc, -1.0, -tc);
+    if (face == 4) return vec3(sc, -tc, 1.0);
+    return vec3(-sc, -tc, -1.0);
+}
+
+vec3 env_sample(vec2 u) {
+    int lo = 0;
+    int hi = u_env_texels - 1;
+    while (lo < hi) {  // smallest texel with cdf > u.x
+        int mid = (lo + hi) / 2;
+        if (env_cdf(mid) > u.x) hi = mid; else lo = mid + 1;
+    }
+    float lower = lo > 0 ? env_cdf(lo - 1) : 0.0;
+    float s_in = clamp((u.x - lower) / max(env_cdf(lo) - lower, 1e-30), 0.0, 0.99999);
+    int face = lo / (u_env_size * u_env_size);
+    int row = (lo / u_env_size) % u_env_size;
+    int col = lo % u_env_size;
+    float sc = 2.0 * (float(col) + s_in) / float(u_env_size) - 1.0;
+    float tc = 2.0 * (float(row) + u.y) / float(u_env_size) - 1.0;
+    return normalize(cube_face_direction(face, sc, tc));
+}
+
+float power_heuristic(float a, float b) {
+    // a^2 / (a^2 + b^2), scaled to avoid overflow for near-mirror densities.
+    float m = max(a, b);
+    if (m <= 0.0) return 0.0;
+    a /= m;
+    b /= m;
+    return a * a / (a * a + b * b);
+}
+#endif
 
 vec3 lookup(vec3 dir_world, float lod) { return textureLod(u_radiance, dir_world, max(lod, 0.0)).rgb; }
 
@@ -95,6 +151,33 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     return vec3(den.r > 0.0 ? num.r / den.r : 0.0, den.g > 0.0 ? num.g / den.g : 0.0,
                 den.b > 0.0 ? num.b / den.b : 0.0);
 }
+#elif defined(ENV_SAMPLING)
+vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
+    vec3 sum = vec3(0.0);
+    vec2 rotation = pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index);
+    vec2 rotation_env = pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index + 2 * MAX_LOBES);
+    for (int i = 0; i < u_samples; ++i) {
+        vec4 q = sobol_point4(u_sample_offset + i);
+        // BSDF sample, MIS-weighted against the environment sampler.
+        vec3 wi = lobe_sample(l, fract(q.xy + rotation), wo);
+        float p_bsdf = lobe_sample_pdf(l, wi, wo);
+        if (p_bsdf > 0.0) {
+            vec3 world = tbn * wi;
+            float w = power_heuristic(p_bsdf, env_pdf(world));
+            sum += lookup(world, 0.0) * lobe_eval(l, wi, wo) * (abs(wi.z) * w / p_bsdf);
+        }
+        // Environment sample, MIS-weighted against the BSDF sampler.
+        vec3 world_e = env_sample(fract(q.zw + rotation_env));
+        vec3 wi_e = transpose(tbn) * world_e;
+        vec3 f = lobe_eval(l, wi_e, wo);
+        if (any(greaterThan(f, vec3(0.0)))) {
+            float p_env = env_pdf(world_e);
+            float w = power_heuristic(p_env, lobe_sample_pdf(l, wi_e, wo));
+            sum += lookup(world_e, 0.0) * f * (abs(wi_e.z) * w / p_env);
+        }
+    }
+    return sum / float(u_samples);
+}
 #else
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     vec3 sum = vec3(0.0);
@@ -128,11 +211,31 @@ vec3 integrate_diffuse(vec3 wo, mat3 tbn) {
 #if defined(METHOD_MC)
     vec3 sum = vec3(0.0);
     vec2 rotation = pixel_rotation(uvec2(gl_FragCoord.xy), MAX_LOBES);
+#if defined(ENV_SAMPLING)
+    vec2 rotation_env = pixel_rotation(uvec2(gl_FragCoord.xy), 3 * MAX_LOBES);
+#endif
     for (int i = 0; i < u_samples; ++i) {
-        vec3 wi = cosine_hemisphere(fract(sobol_point(u_sample_offset + i) + rotation));
-        if (wi.z <= 0.0) continue;
-        // f cos / pdf with pdf = cos / pi
-        sum += lookup(tbn * wi, 0.0) * diffuse_eval(wi, wo) * PI;
+        vec4 q = sobol_point4(u_sample_offset + i);
+        vec3 wi = cosine_hemisphere(fract(q.xy + rotation));
+        if (wi.z > 0.0) {
+            // f cos / pdf with pdf = cos / pi
+            vec3 world = tbn * wi;
+#if defined(ENV_SAMPLING)
+            float w = power_heuristic(wi.z / PI, env_pdf(world));
+#else
+            float w = 1.0;
+#endif
+            sum += lookup(world, 0.0) * diffuse_eval(wi, wo) * (PI * w);
+        }
+#if defined(ENV_SAMPLING)
+        vec3 world_e = env_sample(fract(q.zw + rotation_env));
+        vec3 wi_e = transpose(tbn) * world_e;
+        if (wi_e.z > 0.0) {
+            float p_env = env_pdf(world_e);
+            float w = power_heuristic(p_env, wi_e.z / PI);
+            sum += lookup(world_e, 0.0) * diffuse_eval(wi_e, wo) * (wi_e.z * w / p_env);
+        }
+#endif
     }
     return sum / float(u_samples);
 #else

@@ -1,11 +1,6 @@
 """Cube maps of incident radiance: conversion from equirectangular maps, upload with a full MIP
 chain, an irradiance cube for the diffuse term, and a GPU lookup used by the numpy reference.
-
-Face order and texel directions follow the OpenGL specification (table 8.19, "cube map face
-selection"): faces +X, -X, +Y, -Y, +Z, -Z; texel (column i, row j) of a face of size S has
-(s, t) = ((i + 0.5)/S, (j + 0.5)/S), sc = 2 s - 1, tc = 2 t - 1 and direction
-+X: (1, -tc, -sc)  -X: (-1, -tc, sc)  +Y: (sc, 1, tc)  -Y: (sc, -1, -tc)
-+Z: (sc, -tc, 1)   -Z: (-sc, -tc, -1).
+Face layout: :mod:`lobeview.scenes.cube_layout`.
 """
 
 from __future__ import annotations
@@ -13,34 +8,13 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from lobeview.scenes.cube_layout import face_directions
+from lobeview.scenes.env_sampling import CubeImportance
 from lobeview.scenes.envmap import EnvironmentMap
 
 from .shaders import ProgramCache
 
 GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
-
-
-def face_directions(face: int, size: int, supersample: int = 1) -> np.ndarray:
-    """Unit directions of the texel centres (or of supersample^2 sub-texel points, in an extra
-    axis) of one face; shape (size, size, 3) or (size, size, k*k, 3), rows = t."""
-    k = supersample
-    offsets = (np.arange(k) + 0.5) / k
-    coords = (np.arange(size)[:, None] + offsets[None, :]).reshape(-1) / size
-    tc, sc = np.meshgrid(2.0 * coords - 1.0, 2.0 * coords - 1.0, indexing="ij")
-    one = np.ones_like(sc)
-    dirs = {
-        0: (one, -tc, -sc),
-        1: (-one, -tc, sc),
-        2: (sc, one, tc),
-        3: (sc, -one, -tc),
-        4: (sc, -tc, one),
-        5: (-sc, -tc, -one),
-    }[face]
-    d = np.stack(dirs, axis=-1)
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    if k == 1:
-        return d
-    return d.reshape(size, k, size, k, 3).transpose(0, 2, 1, 3, 4).reshape(size, size, k * k, 3)
 
 
 def equirect_to_cube_faces(env: EnvironmentMap, size: int, supersample: int = 2) -> np.ndarray:
@@ -75,8 +49,12 @@ def mip_levels(size: int) -> int:
     return int(np.floor(np.log2(size))) + 1
 
 
+CDF_ROW = 1024  # texels per row of the CDF texture (shaders/integrate.glsl)
+
+
 class EnvironmentCubes:
-    """The GPU resources of one environment: radiance cube (with MIP chain) and irradiance cube."""
+    """The GPU resources of one environment: radiance cube (with MIP chain), irradiance cube,
+    and the importance map (texel CDF + per-texel density cube) for the reference method."""
 
     def __init__(
         self,
@@ -84,6 +62,7 @@ class EnvironmentCubes:
         env: EnvironmentMap,
         face_size: int = 256,
         irradiance_size: int = 16,
+        importance_size: int = 64,
     ):
         self.env = env
         self.face_size = face_size
@@ -93,10 +72,23 @@ class EnvironmentCubes:
             [env.irradiance(face_directions(f, irradiance_size)) for f in range(6)]
         ).astype(np.float32)
         self.irradiance = upload_cube(ctx, irradiance_faces, mipmaps=False)
+        self.importance = CubeImportance.from_faces(self.faces, size=importance_size)
+        cdf = self.importance.cdf.astype(np.float32)
+        rows = (len(cdf) + CDF_ROW - 1) // CDF_ROW
+        padded = np.ones(rows * CDF_ROW, dtype=np.float32)
+        padded[: len(cdf)] = cdf
+        self.env_cdf = ctx.texture((CDF_ROW, rows), 1, padded.tobytes(), dtype="f4")
+        self.env_cdf.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        size = self.importance.size
+        self.env_pdf = ctx.texture_cube((size, size), 1, dtype="f4")
+        scale = self.importance.pdf_scale().astype(np.float32)
+        for face in range(6):
+            self.env_pdf.write(face, np.ascontiguousarray(scale[face]).tobytes())
+        self.env_pdf.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
     def release(self):
-        self.radiance.release()
-        self.irradiance.release()
+        for texture in (self.radiance, self.irradiance, self.env_cdf, self.env_pdf):
+            texture.release()
 
 
 class CubeLookup:

@@ -24,7 +24,7 @@ from .cubemap import EnvironmentCubes
 from .material_gpu import MAX_LOBES, MAX_PATTERN, pack_material, pack_patterns
 from .shaders import ProgramCache
 
-SOBOL_SIDE = 256  # 65536 scrambled 2D Sobol points
+SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
 SOBOL_SEED = 20100501
 REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
 DEFAULT_FIS_LOD_BIAS = 1.0  # Colbert & Krivanek's +1; measured in bench/ (issue 7)
@@ -56,9 +56,9 @@ class Method:
 
 
 def sobol_points(count: int = SOBOL_SIDE * SOBOL_SIDE, seed: int = SOBOL_SEED) -> np.ndarray:
-    """Owen-scrambled 2D Sobol points (scipy's generator), fixed seed: a frame renders the same
-    image every time."""
-    return qmc.Sobol(d=2, scramble=True, seed=seed).random(count).astype(np.float32)
+    """Owen-scrambled 4D Sobol points (scipy's generator), fixed seed: a frame renders the same
+    image every time. Dimensions 0-1 drive BSDF sampling, 2-3 environment sampling."""
+    return qmc.Sobol(d=4, scramble=True, seed=seed).random(count).astype(np.float32)
 
 
 @dataclass
@@ -91,7 +91,7 @@ class PreviewRenderer:
         self.vbo = ctx.buffer(mesh.interleaved().tobytes())
         self.ibo = ctx.buffer(np.ascontiguousarray(mesh.indices, dtype=np.uint32).tobytes())
         sobol = sobol_points()
-        self.sobol = ctx.texture((SOBOL_SIDE, SOBOL_SIDE), 2, sobol.tobytes(), dtype="f4")
+        self.sobol = ctx.texture((SOBOL_SIDE, SOBOL_SIDE), 4, sobol.tobytes(), dtype="f4")
         self.sobol.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.sobol_count = len(sobol)
         self.resize(size)
@@ -110,6 +110,7 @@ class PreviewRenderer:
             "METHOD_LOBE": method.kind == "lobe",
             "METHOD_FIS": method.kind == "fis",
             "METHOD_MC": method.kind in ("mc", "reference"),
+            "ENV_SAMPLING": method.kind == "reference",
             "HAS_DIFFUSE": has_diffuse,
         }
         program = self.programs.program("mesh.vert", "preview.frag", defines)
@@ -168,6 +169,13 @@ class PreviewRenderer:
         self._set(program, "u_radiance", 0)
         self._set(program, "u_irradiance", 1)
         self._set(program, "u_sobol", 2)
+        if method.kind == "reference":
+            self.cubes.env_cdf.use(3)
+            self.cubes.env_pdf.use(4)
+            self._set(program, "u_env_cdf", 3)
+            self._set(program, "u_env_pdf", 4)
+            self._set(program, "u_env_texels", int(self.cubes.importance.probabilities.size))
+            self._set(program, "u_env_size", int(self.cubes.importance.size))
 
         passes = 1
         if method.kind == "reference":

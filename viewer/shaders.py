@@ -19,6 +19,7 @@ KNOWN_DEFINES = {
     "METHOD_LOBE",
     "METHOD_FIS",
     "METHOD_MC",
+    "ENV_SAMPLING",
     "HAS_DIFFUSE",
     "DEBUG_VIEW",
 }

@@ -1,0 +1,94 @@
+"""Importance sampling of incident radiance stored in a cube map (numpy reference of the GLSL
+sampler used by the ``reference`` method).
+
+A texel of a coarse "importance" copy of the cube (box-filtered to ``size`` per face) is chosen
+with probability P_t proportional to its luminance times its solid angle, and a point uniform in
+the texel's (s, t) square is returned. Its density per solid angle is
+
+    pdf(w) = P_t(w) * (size/2)^2 * (1 + sc^2 + tc^2)^(3/2) = P_t(w) * (size/2)^2 / |w_major|^3,
+
+since d(omega) = d(sc) d(tc) / (1 + sc^2 + tc^2)^(3/2) on a face and a texel spans (2/size)^2
+in (sc, tc). A floor of ``uniform_fraction`` of the probability mass is spread by solid angle so
+that every direction has a positive density (MIS stays unbiased even where the coarse copy is 0).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cube_layout import direction_to_face, face_point_directions, texel_solid_angles
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+def box_downsample_faces(faces: np.ndarray, size: int) -> np.ndarray:
+    factor = faces.shape[1] // size
+    if factor < 1 or faces.shape[1] % size:
+        raise ValueError(f"cannot box-downsample faces of {faces.shape[1]} to {size}")
+    return faces.reshape(6, size, factor, size, factor, -1).mean(axis=(2, 4))
+
+
+@dataclass
+class CubeImportance:
+    probabilities: np.ndarray  # (6, size, size) discrete texel probabilities P_t, sum 1
+    size: int
+
+    @classmethod
+    def from_faces(
+        cls, faces: np.ndarray, size: int = 64, uniform_fraction: float = 0.02
+    ) -> CubeImportance:
+        size = min(size, faces.shape[1])
+        coarse = box_downsample_faces(np.asarray(faces, dtype=np.float64), size)
+        # Texel solid angles are symmetric in sc and tc, so the (row, col) order does not matter.
+        omega = texel_solid_angles(size)[None].repeat(6, axis=0)
+        weight = np.maximum(coarse @ LUMINANCE, 0.0) * omega
+        total = weight.sum()
+        uniform = omega / omega.sum()
+        if total <= 0 or not np.isfinite(total):
+            probabilities = uniform
+        else:
+            probabilities = (1.0 - uniform_fraction) * weight / total + uniform_fraction * uniform
+        return cls(probabilities / probabilities.sum(), size)
+
+    @property
+    def cdf(self) -> np.ndarray:
+        c = np.cumsum(self.probabilities.ravel())
+        c[-1] = 1.0
+        return c
+
+    def pdf_scale(self) -> np.ndarray:
+        """P_t (size/2)^2 per texel: pdf(w) = pdf_scale[texel(w)] / |w_major|^3."""
+        return self.probabilities * (self.size / 2.0) ** 2
+
+    def pdf(self, dirs: np.ndarray) -> np.ndarray:
+        dirs = np.asarray(dirs, dtype=np.float64)
+        dirs = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
+        face, sc, tc = direction_to_face(dirs)
+        col = np.clip(((sc + 1.0) * 0.5 * self.size).astype(np.int64), 0, self.size - 1)
+        row = np.clip(((tc + 1.0) * 0.5 * self.size).astype(np.int64), 0, self.size - 1)
+        major = np.max(np.abs(dirs), axis=-1)
+        return self.pdf_scale()[face, row, col] / major**3
+
+    def sample(self, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+        """Directions for uniform numbers in [0, 1): u1 picks the texel (and, rescaled, the
+        position along s), u2 the position along t."""
+        u1 = np.asarray(u1, dtype=np.float64)
+        u2 = np.asarray(u2, dtype=np.float64)
+        cdf = self.cdf
+        index = np.minimum(np.searchsorted(cdf, u1, side="right"), len(cdf) - 1)
+        lower = np.where(index > 0, cdf[np.maximum(index - 1, 0)], 0.0)
+        p = self.probabilities.ravel()[index]
+        s_in = np.clip((u1 - lower) / np.maximum(p, 1e-300), 0.0, 1.0 - 1e-12)
+        face = index // (self.size * self.size)
+        row = (index // self.size) % self.size
+        col = index % self.size
+        sc = 2.0 * (col + s_in) / self.size - 1.0
+        tc = 2.0 * (row + u2) / self.size - 1.0
+        out = np.empty(u1.shape + (3,))
+        for f in range(6):
+            sel = face == f
+            if np.any(sel):
+                out[sel] = face_point_directions(f, sc[sel], tc[sel])
+        return out

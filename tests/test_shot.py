@@ -1,0 +1,138 @@
+"""`lobeview shot`: outputs, stage report, and clear errors for bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lobeview.app.cli import main
+from lobeview.scenes.hdrio import read_hdr_image, write_hdr_image
+
+
+def test_shot_writes_png_exr_and_npy(tmp_path, capsys):
+    common = [
+        "shot",
+        "--object",
+        "sphere",
+        "--size",
+        "64x48",
+        "--face-size",
+        "32",
+        "--method",
+        "lobe-5",
+    ]
+    assert main(common + ["--out", str(tmp_path / "a.npy")]) == 0
+    out = capsys.readouterr().out
+    assert "method lobe-5" in out and "stages:" in out and "--camera 0,0.35,3.2" in out
+    radiance = np.load(tmp_path / "a.npy")
+    assert radiance.shape == (48, 64, 3) and radiance.dtype == np.float32
+    assert np.all(np.isfinite(radiance)) and radiance.min() >= 0 and radiance.max() > 0
+    assert main(common + ["--out", str(tmp_path / "a.exr")]) == 0
+    np.testing.assert_allclose(read_hdr_image(tmp_path / "a.exr"), radiance, rtol=1e-6)
+    assert main(common + ["--out", str(tmp_path / "a.png")]) == 0
+    from PIL import Image
+
+    png = np.asarray(Image.open(tmp_path / "a.png"))
+    assert png.shape == (48, 64, 3) and png.std() > 5
+
+
+def test_shot_reference_reports_samples(tmp_path, capsys):
+    args = [
+        "shot",
+        "--object",
+        "sphere",
+        "--size",
+        "32x32",
+        "--face-size",
+        "32",
+        "--method",
+        "reference",
+        "--spp",
+        "128",
+        "--out",
+        str(tmp_path / "r.npy"),
+    ]
+    assert main(args) == 0
+    assert "128 spp per lobe" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "extra,message",
+    [
+        ([], "not implemented yet"),
+        (["--object", "sphere", "--method", "lobe-99"], "N must be in"),
+        (["--object", "sphere", "--method", "phong-3"], "unknown method"),
+        (["--object", "sphere", "--size", "64by48"], "--size: expected WxH"),
+        (["--object", "sphere", "--camera", "0,0"], "--camera: expected three"),
+        (["--object", "sphere", "--env", "/no/such/env.exr"], "no such file"),
+        (["--object", "sphere", "--env", "builtin:moon"], "unknown built-in environment"),
+        (
+            ["--object", "sphere", "--material", '{"model": "gltf", "roughness": 2}'],
+            "roughness = 2",
+        ),
+        (["--object", "/no/such/mesh.obj"], "no such file"),
+    ],
+)
+def test_shot_bad_input_gives_a_clear_error(tmp_path, capsys, extra, message):
+    size = [] if "--size" in extra else ["--size", "32x32"]
+    assert main(["shot", *extra, *size, "--out", str(tmp_path / "x.png")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_shot_with_nan_and_negative_environment_texels_warns_and_renders(tmp_path, capsys):
+    env = np.full((16, 32, 3), 0.5, dtype=np.float32)
+    env[3, 4] = np.nan
+    env[5, 6] = np.inf
+    env[7, 8] = -2.0
+    path = write_hdr_image(tmp_path / "bad.exr", env)
+    with pytest.warns(UserWarning) as record:
+        assert (
+            main(
+                [
+                    "shot",
+                    "--object",
+                    "sphere",
+                    "--env",
+                    str(path),
+                    "--size",
+                    "32x32",
+                    "--face-size",
+                    "16",
+                    "--out",
+                    str(tmp_path / "x.npy"),
+                ]
+            )
+            == 0
+        )
+    messages = " ".join(str(w.message) for w in record)
+    assert "2 texels with NaN/Inf values set to 0" in messages
+    assert "1 texels with negative values (down to -2) clamped to 0" in messages
+    radiance = np.load(tmp_path / "x.npy")
+    assert np.all(np.isfinite(radiance)) and radiance.min() >= 0
+
+
+def test_corrupt_hdr_files_are_rejected_with_the_file_name(tmp_path):
+    from lobeview.scenes.hdrio import HDRImageError
+
+    (tmp_path / "junk.exr").write_bytes(b"not an exr at all")
+    with pytest.raises(HDRImageError, match="junk.exr"):
+        read_hdr_image(tmp_path / "junk.exr")
+    (tmp_path / "junk.hdr").write_bytes(
+        b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 4\n\x01\x02"
+    )
+    with pytest.raises(HDRImageError, match="truncated"):
+        read_hdr_image(tmp_path / "junk.hdr")
+    (tmp_path / "x.tga").write_bytes(b"")
+    with pytest.raises(HDRImageError, match="unsupported HDR format"):
+        read_hdr_image(tmp_path / "x.tga")
+
+
+def test_rgbe_round_trip_and_shared_assets_statistics(tmp_path):
+    rng = np.random.default_rng(0)
+    image = (rng.random((20, 40, 3)) * 100).astype(np.float32)
+    image[0, 0] = 0
+    back = read_hdr_image(write_hdr_image(tmp_path / "x.hdr", image))
+    # RGBE keeps 8 bits of mantissa: relative error below 1/128 of the brightest channel.
+    assert np.all(np.abs(back - image) <= image.max(axis=-1, keepdims=True) / 128 + 1e-30)
+    assert np.all(back[0, 0] == 0)
