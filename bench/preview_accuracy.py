@@ -163,7 +163,8 @@ def main(argv=None) -> int:
         "- thesis: PSNR of figures 4.39-4.41 at the same samples per lobe (other scene, environment"
         " and tonemapping; the thesis' chrome is blurry, lobeview's is sharp)",
         "",
-        "| preset | method | PSNR (dB) | relRMSE | ms / frame | thesis PSNR (dB) | ref. floor (dB) |",
+        "| preset | method | PSNR (dB) | relRMSE | ms / frame | thesis PSNR (dB) | ref. floor (dB) "
+        "|",
         "|---|---|---|---|---|---|---|",
     ]
     for preset, method, value, rel_rmse, ms, thesis, floor in rows:
