@@ -1,8 +1,7 @@
 """The ``lobeview`` command line.
 
-Implemented so far: ``lobeview material list|show|plot`` (material library) and
-``lobeview shot`` for the object preview. The window, bake and bench commands arrive with their
-issues; see README.
+Implemented so far: ``lobeview material list|show|plot``, ``lobeview shot`` (scenes, the demo,
+object preview) and ``lobeview bake``. The window and bench commands arrive with their issues.
 """
 
 from __future__ import annotations
@@ -18,6 +17,7 @@ from lobeview.app.shot import ShotError
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import MaterialError, build_bsdf, load_material
 from lobeview.materials.vec import direction_from_angles_deg
+from lobeview.scenes.gltf_loader import GltfError
 from lobeview.scenes.hdrio import HDRImageError
 from lobeview.scenes.meshes import MeshError
 from lobeview.viewer.context import HeadlessContextError
@@ -110,11 +110,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("material", help="preset name, JSON file or inline JSON object")
     p.add_argument("-o", "--output", default="lobe.png", help="output PNG (default: lobe.png)")
     p.set_defaults(func=cmd_material_plot)
-    from lobeview.app import shot
+    from lobeview.app import bake, shot
 
-    p = sub.add_parser("shot", help="render a headless screenshot (object preview)")
+    p = sub.add_parser("shot", help="render a headless screenshot of a scene or an object preview")
     shot.add_arguments(p)
     p.set_defaults(func=shot.run)
+    p = sub.add_parser("bake", help="bake lightmaps for a glTF scene")
+    bake.add_arguments(p)
+    p.set_defaults(func=bake.run)
     return parser
 
 
@@ -122,7 +125,14 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (MaterialError, ShotError, HDRImageError, MeshError, HeadlessContextError) as exc:
+    except (
+        MaterialError,
+        ShotError,
+        HDRImageError,
+        MeshError,
+        HeadlessContextError,
+        GltfError,
+    ) as exc:
         print(f"lobeview: error: {exc}", file=sys.stderr)
         return 2
     except ValueError as exc:  # bad option values (method, environment name, ...)

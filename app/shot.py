@@ -1,12 +1,15 @@
 """``lobeview shot``: headless screenshot, a contract other tools script against.
 
-Implemented: the object preview (``--object sphere|MESH_FILE``: one object lit only by the
-environment). Scenes (glTF with lightmaps and per-object cube maps) and the built-in demo are
-not implemented yet; asking for them is an error that says so.
+Two modes:
+- scene (default): a glTF scene with lightmaps (``SCENE``), or the built-in demo scene when
+  ``SCENE`` is omitted; diffuse from lightmaps, lobes from per-object cube maps.
+- object preview (``--object sphere|MESH_FILE``): one object lit only by a distant
+  environment, no lightmaps; the mode for material work and exact comparisons.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 from pathlib import Path
 
@@ -17,10 +20,13 @@ from lobeview.scenes.builtin_env import load_environment
 from lobeview.scenes.hdrio import write_hdr_image
 from lobeview.scenes.meshes import load_mesh_file, uv_sphere
 from lobeview.viewer.camera import Camera
-from lobeview.viewer.preview import Method
+from lobeview.viewer.render_base import Method
 from lobeview.viewer.tonemap import TONEMAPS, to_uint8, tonemap
 
 OUTPUT_SUFFIXES = (".png", ".exr", ".npy")
+PREVIEW_ENV = "builtin:studio"
+SCENE_ENV = "builtin:overcast"
+PREVIEW_CAMERA = ((0.0, 0.35, 3.2), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0)
 
 
 class ShotError(ValueError):
@@ -48,100 +54,158 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def add_arguments(p) -> None:
-    p.add_argument("scene", nargs="?", help="glTF scene (not implemented yet; use --object)")
-    p.add_argument(
+    a = p.add_argument
+    a("scene", nargs="?", help="glTF scene (.gltf/.glb) with lightmaps; omitted: the built-in demo")
+    a(
         "--env",
-        default="builtin:studio",
-        help="equirectangular .exr/.hdr, or builtin:studio|sky (default builtin:studio)",
+        help="equirectangular .exr/.hdr or builtin:studio|sky|overcast "
+        f"(default {SCENE_ENV} for scenes, {PREVIEW_ENV} for --object)",
     )
-    p.add_argument("--object", help="preview object: 'sphere' or a mesh file (OBJ/PLY/STL/glTF)")
-    p.add_argument(
+    a(
+        "--object",
+        help="object preview instead of a scene: 'sphere' or a mesh file (OBJ/PLY/STL/glTF)",
+    )
+    a(
         "--material",
         default="alanod-2000gs-1lobe",
-        help="preset name, JSON file or inline JSON (default alanod-2000gs-1lobe)",
+        help="--object material: preset, JSON file or inline JSON (default alanod-2000gs-1lobe)",
     )
-    p.add_argument(
-        "--camera", default="0,0.35,3.2", help="camera position X,Y,Z (default 0,0.35,3.2)"
-    )
-    p.add_argument("--target", default="0,0,0", help="look-at point X,Y,Z (default origin)")
-    p.add_argument("--up", default="0,1,0", help="up vector X,Y,Z (default 0,1,0)")
-    p.add_argument(
-        "--fov", type=float, default=40.0, help="vertical field of view in degrees (default 40)"
-    )
-    p.add_argument("--size", default="640x400", help="image size WxH (default 640x400)")
-    p.add_argument(
-        "--method", default="lobe-11", help="lobe-N | fis-N | mc-N | reference (default lobe-11)"
-    )
-    p.add_argument(
+    a("--view", help="scene camera by name or index (default: the scene's first camera)")
+    a("--camera", help="camera position X,Y,Z (overrides --view)")
+    a("--target", default="0,0,0", help="look-at point X,Y,Z (default origin)")
+    a("--up", default="0,1,0", help="up vector X,Y,Z (default 0,1,0)")
+    a("--fov", type=float, help="vertical field of view in degrees (default: the view's, or 40)")
+    a("--size", default="640x400", help="image size WxH (default 640x400)")
+    a("--method", default="lobe-11", help="lobe-N | fis-N | mc-N | reference (default lobe-11)")
+    a(
         "--spp",
         type=int,
         default=1024,
         help="samples per pixel per lobe for --method reference (default 1024)",
     )
-    p.add_argument(
+    a(
         "--lod-bias",
         type=float,
         default=None,
         help="MIP level bias (default: 1 for fis-N, 0 for lobe-N)",
     )
-    p.add_argument(
-        "--face-size", type=int, default=256, help="cube-map face resolution (default 256)"
+    a("--face-size", type=int, default=256, help="cube-map face resolution (default 256)")
+    a(
+        "--cache",
+        help="cache folder for the demo scene and cube maps (default ~/.cache/lobeview or $LOBEVIEW_CACHE)",
     )
-    p.add_argument("--tonemap", default="aces", choices=TONEMAPS, help="PNG tonemap (default aces)")
-    p.add_argument(
-        "--exposure", type=float, default=0.0, help="exposure in stops for PNG output (default 0)"
-    )
-    p.add_argument(
+    a("--tonemap", default="aces", choices=TONEMAPS, help="PNG tonemap (default aces)")
+    a("--exposure", type=float, default=0.0, help="exposure in stops for PNG output (default 0)")
+    a(
         "--no-background",
         action="store_true",
-        help="black instead of the environment behind the object",
+        help="--object: black instead of the environment behind the object",
     )
-    p.add_argument(
+    a(
         "--out",
         required=True,
         help="output file: .png (tonemapped sRGB) or .exr/.npy (linear radiance)",
     )
 
 
+def _camera_from_args(args, default) -> Camera:
+    position, target, up, fov = default
+    if args.camera is not None:
+        position = parse_vec3(args.camera, "--camera")
+        target = parse_vec3(args.target, "--target")
+        up = parse_vec3(args.up, "--up")
+    if args.fov is not None:
+        fov = args.fov
+    if not 1.0 <= fov <= 170.0:
+        raise ShotError(f"--fov must be in [1, 170] degrees, got {fov}")
+    camera = Camera(position=tuple(position), target=tuple(target), up=tuple(up), fov_y=fov)
+    camera.view()  # validates position != target and up not parallel
+    return camera
+
+
+def _scene_view(scene, view: str | None):
+    if not scene.cameras:
+        lo, hi = scene.bounds
+        centre = (lo + hi) / 2
+        eye = centre + np.array([0.0, 0.25, 1.2]) * float(np.max(hi - lo))
+        return (tuple(eye), tuple(centre), (0.0, 1.0, 0.0), 50.0)
+    if view is None:
+        cam = scene.cameras[0]
+    elif view.isdigit() and int(view) < len(scene.cameras):
+        cam = scene.cameras[int(view)]
+    else:
+        matches = [c for c in scene.cameras if c.name == view]
+        if not matches:
+            raise ShotError(f"--view: no camera {view!r}; the scene has {[c.name for c in scene.cameras]}")
+        cam = matches[0]
+    return (tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
+
+
+def _write(out: Path, radiance: np.ndarray, args) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    if out.suffix.lower() == ".png":
+        from PIL import Image
+
+        Image.fromarray(to_uint8(tonemap(radiance, args.tonemap, args.exposure))).save(out)
+    elif out.suffix.lower() == ".exr":
+        write_hdr_image(out, radiance)
+    else:
+        np.save(out, radiance.astype(np.float32))
+
+
 def run(args) -> int:
     from lobeview.viewer.context import create_headless_context, renderer_description
-    from lobeview.viewer.preview import PreviewRenderer
 
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
-        raise ShotError(
-            f"--out: unsupported output type {out.suffix!r}; use {', '.join(OUTPUT_SUFFIXES)}"
-        )
-    if args.scene is not None or args.object is None:
-        raise ShotError(
-            "scene rendering (glTF + lightmaps) and the built-in demo scene are not implemented "
-            "yet; render the object preview with --object sphere (or --object MESH_FILE)"
-        )
+        raise ShotError(f"--out: unsupported output type {out.suffix!r}; use {', '.join(OUTPUT_SUFFIXES)}")
+    if args.object is not None and args.scene is not None:
+        raise ShotError("give either a SCENE or --object, not both")
     method = Method.parse(args.method)
     if args.spp < 1:
         raise ShotError("--spp must be at least 1")
+    if not 8 <= args.face_size <= 2048 or args.face_size & (args.face_size - 1):
+        raise ShotError(f"--face-size must be a power of two in [8, 2048], got {args.face_size}")
     size = parse_size(args.size)
-    camera = Camera(
-        position=parse_vec3(args.camera, "--camera"),
-        target=parse_vec3(args.target, "--target"),
-        up=parse_vec3(args.up, "--up"),
-        fov_y=args.fov,
-    )
-    if not 1.0 <= args.fov <= 170.0:
-        raise ShotError(f"--fov must be in [1, 170] degrees, got {args.fov}")
     stages = {}
     t0 = time.perf_counter()
-    desc = load_material(args.material)
-    bsdf = build_bsdf(desc)
-    env = load_environment(args.env)
+    if args.object is not None:
+        return _run_preview(args, out, method, size, stages, t0, create_headless_context, renderer_description)
+    return _run_scene(args, out, method, size, stages, t0, create_headless_context, renderer_description)
+
+
+def _report(
+    what: str,
+    method: Method,
+    size,
+    samples: int,
+    ctx,
+    camera: Camera,
+    stages: dict,
+    out: Path,
+    describe,
+) -> None:
+    extra = f", {samples} spp per lobe" if method.kind == "reference" else ""
+    print(f"rendered {what}, {size[0]}x{size[1]}, method {method}{extra}")
+    print(f"device: {describe(ctx)}")
+    print(f"camera: {camera.describe()}")
+    print("stages: " + ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in stages.items()))
+    print(f"wrote {out}")
+
+
+def _run_preview(args, out, method, size, stages, t0, create_context, describe) -> int:
+    from lobeview.viewer.preview import PreviewRenderer
+
+    bsdf = build_bsdf(load_material(args.material))
+    env = load_environment(args.env or PREVIEW_ENV)
     mesh = uv_sphere() if args.object == "sphere" else load_mesh_file(args.object)
     if args.object != "sphere":
         lo, hi = mesh.bounds
-        mesh.positions = (mesh.positions - (lo + hi) / 2) / max(float(np.max(hi - lo)) / 2, 1e-9)
+        mesh.positions = ((mesh.positions - (lo + hi) / 2) / max(float(np.max(hi - lo)) / 2, 1e-9)).astype(np.float32)
+    camera = _camera_from_args(args, PREVIEW_CAMERA)
     stages["load"] = time.perf_counter() - t0
-
     t0 = time.perf_counter()
-    ctx = create_headless_context()
+    ctx = create_context()
     renderer = PreviewRenderer(ctx, env, mesh, size=size, face_size=args.face_size)
     stages["cube maps"] = time.perf_counter() - t0
     result = renderer.render(
@@ -153,31 +217,61 @@ def run(args) -> int:
         background=not args.no_background,
     )
     stages.update(result.timings)
-
-    t0 = time.perf_counter()
     if result.invalid.any():
-        print(f"warning: {int(result.invalid.sum())} pixels produced NaN/Inf and were set to 0")
-    if out.suffix.lower() == ".png":
-        from PIL import Image
-
-        out.parent.mkdir(parents=True, exist_ok=True)
-        Image.fromarray(to_uint8(tonemap(result.radiance, args.tonemap, args.exposure))).save(out)
-    elif out.suffix.lower() == ".exr":
-        write_hdr_image(out, result.radiance)
-    else:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        np.save(out, result.radiance.astype(np.float32))
+        print(
+            f"warning: {int(result.invalid.sum())} pixels produced NaN/Inf and were set to 0",
+            file=sys.stderr,
+        )
+    t0 = time.perf_counter()
+    _write(out, result.radiance, args)
     stages["write"] = time.perf_counter() - t0
-
-    print(
-        f"rendered {args.object} with {args.material} under {env.name}, {size[0]}x{size[1]}, "
-        f"method {method}"
-        + (f", {result.samples_per_pixel} spp per lobe" if method.kind == "reference" else "")
+    _report(
+        f"{args.object} with {args.material} under {env.name}",
+        method,
+        size,
+        result.samples_per_pixel,
+        ctx,
+        camera,
+        stages,
+        out,
+        describe,
     )
-    print(f"device: {renderer_description(ctx)}")
-    print(f"camera: {camera.describe()}")
-    print("stages: " + ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in stages.items()))
-    print(f"wrote {out}")
+    renderer.release()
+    ctx.release()
+    return 0
+
+
+def _run_scene(args, out, method, size, stages, t0, create_context, describe) -> int:
+    from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene, cache_dir
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    cache = Path(args.cache) if args.cache else cache_dir()
+    if args.scene is None:
+        path = build_demo_scene(directory=cache / "demo")
+        env_name = args.env or DEMO_ENVIRONMENT
+    else:
+        path = Path(args.scene)
+        env_name = args.env or SCENE_ENV
+    scene = load_gltf(path)
+    env = load_environment(env_name)
+    camera = _camera_from_args(args, _scene_view(scene, args.view))
+    stages["load"] = time.perf_counter() - t0
+    ctx = create_context()
+    renderer = SceneRenderer(ctx, scene, env, size=size, cube_face_size=args.face_size, cache_dir=cache / "cubes")
+    print(renderer.analysis.report())
+    result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias)
+    stages.update(result.timings)
+    if result.invalid.any():
+        print(
+            f"warning: {int(result.invalid.sum())} pixels produced NaN/Inf and were set to 0",
+            file=sys.stderr,
+        )
+    t0 = time.perf_counter()
+    _write(out, result.radiance, args)
+    stages["write"] = time.perf_counter() - t0
+    what = f"{'the demo scene' if args.scene is None else path.name} under {env.name}"
+    _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe)
     renderer.release()
     ctx.release()
     return 0

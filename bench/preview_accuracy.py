@@ -85,12 +85,8 @@ def timed(renderer, repeats, *args, **kwargs):
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument(
-        "--env", default=str(DEFAULT_ENV) if DEFAULT_ENV.exists() else "builtin:studio"
-    )
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--env", default=str(DEFAULT_ENV) if DEFAULT_ENV.exists() else "builtin:studio")
     parser.add_argument("--size", type=int, default=320)
     parser.add_argument("--reference-spp", type=int, default=8192)
     parser.add_argument("--repeats", type=int, default=3)
@@ -115,9 +111,7 @@ def main(argv=None) -> int:
         ref_tm = tonemap(ref.radiance, "aces", exposure)[mask]
         ref_lin = ref.radiance[mask]
         # Noise floor: a second, independent reference (other per-pixel scrambling seed).
-        ref_b = renderer.render(
-            camera, bsdf, "reference", spp=args.reference_spp, seed=1, background=False
-        )
+        ref_b = renderer.render(camera, bsdf, "reference", spp=args.reference_spp, seed=1, background=False)
         floor = psnr(tonemap(ref_b.radiance, "aces", exposure)[mask], ref_tm)
         methods = [f"lobe-{n}" for n in LOBE_N] + [FIS]
         for method in methods:
@@ -154,25 +148,19 @@ def main(argv=None) -> int:
         f"- reference: `reference`, {args.reference_spp} BSDF + {args.reference_spp} environment"
         " samples per lobe (MIS), unfiltered; its own noise floor is the PSNR between two"
         " references with different seeds (column 'ref. floor')",
-        "- PSNR: object pixels, 8-bit sRGB after ACES, exposure mapping the reference's median"
-        " luminance to 0.18",
+        "- PSNR: object pixels, 8-bit sRGB after ACES, exposure mapping the reference's median luminance to 0.18",
         "- relRMSE: RMS of the linear radiance error over RMS of the reference (object pixels)",
-        f"- time: median of {args.repeats} frames after a warm-up, wall clock around glFinish,"
-        " shading pass only",
+        f"- time: median of {args.repeats} frames after a warm-up, wall clock around glFinish, shading pass only",
         "- lod bias: 0 for lobe-N (thesis), +1 for fis-N (Colbert & Krivanek)",
         "- thesis: PSNR of figures 4.39-4.41 at the same samples per lobe (other scene, environment"
         " and tonemapping; the thesis' chrome is blurry, lobeview's is sharp)",
         "",
-        "| preset | method | PSNR (dB) | relRMSE | ms / frame | thesis PSNR (dB) | ref. floor (dB) "
-        "|",
+        "| preset | method | PSNR (dB) | relRMSE | ms / frame | thesis PSNR (dB) | ref. floor (dB) |",
         "|---|---|---|---|---|---|---|",
     ]
     for preset, method, value, rel_rmse, ms, thesis, floor in rows:
         thesis_text = f"{thesis:.2f}" if thesis != "" else ""
-        lines.append(
-            f"| {preset} | {method} | {value:.2f} | {rel_rmse:.4f} | {ms:.1f} | {thesis_text}"
-            f" | {floor:.2f} |"
-        )
+        lines.append(f"| {preset} | {method} | {value:.2f} | {rel_rmse:.4f} | {ms:.1f} | {thesis_text} | {floor:.2f} |")
     path.write_text("\n".join(lines) + "\n")
     print(f"wrote {path}")
     renderer.release()

@@ -172,9 +172,7 @@ class BSDF:
             chosen = index == c
             if not np.any(chosen) or self.selection_probabilities[c] == 0:
                 continue
-            u1_c = np.clip(
-                (u1[chosen] - lower[c]) / self.selection_probabilities[c], 0.0, 1.0 - 1e-16
-            )
+            u1_c = np.clip((u1[chosen] - lower[c]) / self.selection_probabilities[c], 0.0, 1.0 - 1e-16)
             wi_c = comp.sample_wi(u1_c, u2[chosen], wo[chosen])
             wi[chosen] = wi_c
             # A sample that failed for its own component (e.g. a reflection below the horizon)
@@ -183,9 +181,7 @@ class BSDF:
         pdf = self.pdf(wi, wo)
         f = self.eval(wi, wo)
         ok = own_ok & (pdf > 0.0)
-        weight = np.where(
-            ok[..., None], f * np.abs(wi[..., 2:3]) / np.where(ok, pdf, 1.0)[..., None], 0.0
-        )
+        weight = np.where(ok[..., None], f * np.abs(wi[..., 2:3]) / np.where(ok, pdf, 1.0)[..., None], 0.0)
         return BSDFSample(wi, weight, np.where(ok, pdf, 0.0))
 
     # -- directional albedo by quadrature -------------------------------------------------------
@@ -212,9 +208,7 @@ class BSDF:
             pdf = comp.pdf(wi, wo_b)
             ok = pdf > 0.0
             f = comp.eval(wi, wo_b)
-            integrand = np.where(
-                ok[..., None], f * np.abs(wi[..., 2:3]) / np.where(ok, pdf, 1.0)[..., None], 0.0
-            )
+            integrand = np.where(ok[..., None], f * np.abs(wi[..., 2:3]) / np.where(ok, pdf, 1.0)[..., None], 0.0)
             totals[comp.hemisphere] += np.einsum("ij,ijc->c", quad_w, integrand)
         return totals["reflection"], totals["transmission"]
 

@@ -72,8 +72,6 @@ class MicrofacetReflection(Component):
         return reflect(wo, self._sample_normal(u1, u2, wo))
 
 
-def microfacet_bsdf(
-    distribution: str, alpha_x: float, alpha_y: float, fresnel: Fresnel, scale=1.0
-) -> BSDF:
+def microfacet_bsdf(distribution: str, alpha_x: float, alpha_y: float, fresnel: Fresnel, scale=1.0) -> BSDF:
     dist = MicrofacetDistribution(distribution, alpha_x, alpha_y)
     return BSDF([MicrofacetReflection(dist, fresnel, scale)], name=f"{distribution} conductor")

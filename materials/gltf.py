@@ -51,12 +51,7 @@ class GltfDiffuse(Component):
     def eval(self, wi, wo):
         valid = _valid_pair(wi, wo, False)
         h = normalize(wi + wo)
-        f = (
-            (1.0 - self.metallic)
-            * (1.0 - _dielectric_fresnel(dot(wo, h)))
-            * self.base_color
-            / np.pi
-        )
+        f = (1.0 - self.metallic) * (1.0 - _dielectric_fresnel(dot(wo, h))) * self.base_color / np.pi
         return np.where(valid[..., None], f, 0.0)
 
     def pdf(self, wi, wo):

@@ -165,9 +165,7 @@ class MicrofacetDistribution:
         p2 = (1.0 - s) * np.sqrt(np.clip(1.0 - p1 * p1, 0.0, None)) + s * p2
         p3 = np.sqrt(np.clip(1.0 - p1 * p1 - p2 * p2, 0.0, None))
         nh = p1[..., None] * t1 + p2[..., None] * t2 + p3[..., None] * vh
-        return normalize(
-            np.stack([ax * nh[..., 0], ay * nh[..., 1], np.maximum(nh[..., 2], 0.0)], axis=-1)
-        )
+        return normalize(np.stack([ax * nh[..., 0], ay * nh[..., 1], np.maximum(nh[..., 2], 0.0)], axis=-1))
 
     def pdf_visible_normal(self, wo: np.ndarray, wm: np.ndarray) -> np.ndarray:
         cos_o = np.maximum(wo[..., 2], 1e-300)

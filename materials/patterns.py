@@ -95,9 +95,7 @@ def pattern_xi(n: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array(xi1), np.array(xi2)
 
 
-def theta_thresh(
-    distribution: MicrofacetDistribution, phi: np.ndarray, xi_border: float = XI_BORDER
-):
+def theta_thresh(distribution: MicrofacetDistribution, phi: np.ndarray, xi_border: float = XI_BORDER):
     """Eq. 4.10: the half-vector angle that bounds the sampled part of the lobe at azimuth phi."""
     return np.arctan(np.sqrt(distribution.tan2_theta_from_xi(np.asarray(xi_border, float), phi)))
 
@@ -128,9 +126,7 @@ def lobe_sample_area(
     return float(np.pi * u * v / n)
 
 
-def cube_map_lod(
-    world_dirs: np.ndarray, sample_area: float | np.ndarray, face_size: int
-) -> np.ndarray:
+def cube_map_lod(world_dirs: np.ndarray, sample_area: float | np.ndarray, face_size: int) -> np.ndarray:
     """Eq. 4.16-4.17: MIP level of a cube-map lookup covering ``sample_area`` (at unit distance)
     in direction ``world_dirs``. May be negative (the texture unit clamps at level 0)."""
     max_component = np.max(np.abs(world_dirs), axis=-1)
@@ -206,9 +202,7 @@ def integrate_lobe(
     if weighting == "eq4.25":
         ok = p > 0.0
         num = np.sum(
-            np.where(
-                ok[:, None], li * (cos_i**2)[:, None] * f * f / np.where(ok, p, 1.0)[:, None], 0.0
-            ),
+            np.where(ok[:, None], li * (cos_i**2)[:, None] * f * f / np.where(ok, p, 1.0)[:, None], 0.0),
             axis=0,
         )
         den = np.sum(f * cos_i[:, None], axis=0)

@@ -17,9 +17,7 @@ def _plane_curve(bsdf: BSDF, wo: np.ndarray, plane_phi: float, n: int = 721):
     """f(wi, wo) |cos theta_i| along the great circle through n in the plane at azimuth
     ``plane_phi``; returns signed angle from +n (-180..180 deg) and RGB-mean values."""
     angle = np.linspace(-np.pi, np.pi, n)
-    wi = np.stack(
-        [np.sin(angle) * np.cos(plane_phi), np.sin(angle) * np.sin(plane_phi), np.cos(angle)], -1
-    )
+    wi = np.stack([np.sin(angle) * np.cos(plane_phi), np.sin(angle) * np.sin(plane_phi), np.cos(angle)], -1)
     value = bsdf.eval(wi, np.broadcast_to(wo, wi.shape)).mean(axis=-1) * np.abs(wi[:, 2])
     return angle, value
 
@@ -49,9 +47,7 @@ def plot_material(bsdf: BSDF, title: str, out_path: str | Path, resolution: int 
             # Cube root as in the thesis' plots, so the diffuse floor and sharp peaks both show.
             ax.plot(angle, np.cbrt(value), color=color, lw=1.4, label=f"view {theta_o:.0f} deg")
             # Marker on the viewer direction.
-            ax.plot(
-                [np.radians(theta_o)], [np.cbrt(value).max() * 1.05], marker="v", color=color, ms=5
-            )
+            ax.plot([np.radians(theta_o)], [np.cbrt(value).max() * 1.05], marker="v", color=color, ms=5)
         ax.set_title(f"(f cos)^(1/3), {label}", fontsize=9)
         ax.legend(fontsize=7, loc="lower left", bbox_to_anchor=(-0.25, -0.18))
 
@@ -62,9 +58,7 @@ def plot_material(bsdf: BSDF, title: str, out_path: str | Path, resolution: int 
     inside = X**2 + Y**2 < 1
     Z = np.sqrt(np.clip(1 - X**2 - Y**2, 0, None))
     has_transmission = any(c.hemisphere == "transmission" for c in bsdf.components)
-    for idx, (sign, name) in enumerate(
-        ((1.0, "reflection (upper hemisphere)"), (-1.0, "transmission (lower)"))
-    ):
+    for idx, (sign, name) in enumerate(((1.0, "reflection (upper hemisphere)"), (-1.0, "transmission (lower)"))):
         if sign < 0 and not has_transmission:
             ax = fig.add_subplot(2, 3, 4 + idx)
             ax.axis("off")

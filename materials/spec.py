@@ -67,9 +67,7 @@ def _number(value: Any, where: str, key: str) -> float:
         raise MaterialError(f"{where}: expected a number in [{low}, {high}], got {value!r}")
     v = float(value)
     if not math.isfinite(v):
-        raise MaterialError(
-            f"{where} = {value!r} is not finite; expected a number in [{low}, {high}]"
-        )
+        raise MaterialError(f"{where} = {value!r} is not finite; expected a number in [{low}, {high}]")
     if not (low <= v <= high):
         raise MaterialError(f"{where} = {value!r} is outside its range [{low}, {high}]")
     return v
@@ -88,9 +86,7 @@ def _check_keys(obj: dict, allowed: set[str], required: set[str], where: str) ->
         raise MaterialError(f"{where}: expected a JSON object, got {type(obj).__name__}")
     unknown = set(obj) - allowed
     if unknown:
-        raise MaterialError(
-            f"{where}: unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}"
-        )
+        raise MaterialError(f"{where}: unknown parameter(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
     missing = required - set(obj)
     if missing:
         raise MaterialError(f"{where}: missing parameter(s) {sorted(missing)}")
@@ -140,9 +136,7 @@ def validate(desc: Any) -> dict:
         allowed = common | {"distribution", "alpha", "alpha_u", "alpha_v", "fresnel", "scale"}
         _check_keys(desc, allowed, {"distribution"}, "microfacet material")
         if desc["distribution"] not in ("ggx", "beckmann"):
-            raise MaterialError(
-                f"distribution: expected 'ggx' or 'beckmann', got {desc['distribution']!r}"
-            )
+            raise MaterialError(f"distribution: expected 'ggx' or 'beckmann', got {desc['distribution']!r}")
         out["distribution"] = desc["distribution"]
         if "alpha" in desc:
             if "alpha_u" in desc or "alpha_v" in desc:
@@ -158,9 +152,7 @@ def validate(desc: Any) -> dict:
         out["scale"] = _scalar_or_rgb(desc.get("scale", 1.0), "scale", "scale")
     else:
         _check_keys(desc, common | {"base_color", "metallic", "roughness"}, set(), "glTF material")
-        out["base_color"] = _scalar_or_rgb(
-            desc.get("base_color", [1.0, 1.0, 1.0]), "base_color", "base_color"
-        )
+        out["base_color"] = _scalar_or_rgb(desc.get("base_color", [1.0, 1.0, 1.0]), "base_color", "base_color")
         out["metallic"] = _number(desc.get("metallic", 1.0), "metallic", "metallic")
         out["roughness"] = _number(desc.get("roughness", 1.0), "roughness", "roughness")
     return out

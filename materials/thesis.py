@@ -62,9 +62,7 @@ def thesis_bsdf(kd, lobes, transmission_lobes=(), name: str = "thesis") -> BSDF:
     def make(spec, transmission):
         if isinstance(spec, dict):
             key = "kt" if transmission else "ks"
-            return KurtLobe(
-                spec[key], spec["mx"], spec["my"], spec["r0"], spec["alpha"], transmission
-            )
+            return KurtLobe(spec[key], spec["mx"], spec["my"], spec["r0"], spec["alpha"], transmission)
         return KurtLobe(*spec, transmission=transmission)
 
     components = [Lambert(broadcast_rgb(kd, "kd"))]

@@ -1,6 +1,7 @@
 """Procedural environments that ship with lobeview (no files needed): ``builtin:studio`` (grey
 studio with soft boxes, a strip and a rim light) and ``builtin:sky`` (clear sky with a sun of
-radiance ~2e4, the case that stresses sampling). Both in the orientation of envmap.py."""
+radiance ~2e4, the case that stresses sampling) and ``builtin:overcast`` (CIE overcast sky, the
+demo scene's daylight). All in the orientation of envmap.py."""
 
 from __future__ import annotations
 
@@ -39,7 +40,16 @@ def sky(d: np.ndarray) -> np.ndarray:
     return 1.5 * sky_col + ground + sun
 
 
-BUILTIN = {"studio": studio, "sky": sky}
+def overcast(d: np.ndarray) -> np.ndarray:
+    """CIE standard overcast sky, L(theta) = Lz (1 + 2 cos(theta)) / 3 with Lz = 3, over a grey
+    ground of radiance 0.35: soft daylight with no sun, what the demo scene's window shows."""
+    up = d[..., 1:2]
+    sky_col = 3.0 * (1.0 + 2.0 * np.clip(up, 0.0, 1.0)) / 3.0 * np.array([0.95, 0.98, 1.0])
+    ground = np.array([0.35, 0.33, 0.3]) * (0.7 + 0.3 * np.exp(4.0 * np.minimum(up, 0.0)))
+    return np.where(up > 0, sky_col, ground)
+
+
+BUILTIN = {"studio": studio, "sky": sky, "overcast": overcast}
 
 
 def load_environment(spec: str) -> EnvironmentMap:

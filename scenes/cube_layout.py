@@ -54,14 +54,8 @@ def direction_to_face(d: np.ndarray):
     ma = np.where(x_major, ax, np.where(y_major, ay, az))
     ma = np.maximum(ma, 1e-300)
     x, y, z = d[..., 0], d[..., 1], d[..., 2]
-    sc = (
-        np.select([face == 0, face == 1, face == 2, face == 3, face == 4], [-z, z, x, x, x], -x)
-        / ma
-    )
-    tc = (
-        np.select([face == 0, face == 1, face == 2, face == 3, face == 4], [-y, -y, z, -z, -y], -y)
-        / ma
-    )
+    sc = np.select([face == 0, face == 1, face == 2, face == 3, face == 4], [-z, z, x, x, x], -x) / ma
+    tc = np.select([face == 0, face == 1, face == 2, face == 3, face == 4], [-y, -y, z, -z, -y], -y) / ma
     return face, sc, tc
 
 

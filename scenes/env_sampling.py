@@ -36,9 +36,7 @@ class CubeImportance:
     size: int
 
     @classmethod
-    def from_faces(
-        cls, faces: np.ndarray, size: int = 64, uniform_fraction: float = 0.02
-    ) -> CubeImportance:
+    def from_faces(cls, faces: np.ndarray, size: int = 64, uniform_fraction: float = 0.02) -> CubeImportance:
         size = min(size, faces.shape[1])
         coarse = box_downsample_faces(np.asarray(faces, dtype=np.float64), size)
         # Texel solid angles are symmetric in sc and tc, so the (row, col) order does not matter.

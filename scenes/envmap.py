@@ -50,8 +50,7 @@ class EnvironmentMap:
         image, _ = sanitize_radiance(read_hdr_image(path), str(path))
         if image.shape[1] != 2 * image.shape[0]:
             raise ValueError(
-                f"{path}: an equirectangular map must be twice as wide as high, got "
-                f"{image.shape[1]}x{image.shape[0]}"
+                f"{path}: an equirectangular map must be twice as wide as high, got {image.shape[1]}x{image.shape[0]}"
             )
         return cls(image, path.name)
 
@@ -102,12 +101,8 @@ class EnvironmentMap:
             raise ValueError(f"cannot box-downsample height {self.height} to {height}")
         img = self.image.reshape(height, factor, 2 * height, factor, 3).astype(np.float64)
         # Weight rows by their solid angle so the downsampled map keeps the same integral.
-        weights = np.sin((np.arange(self.height) + 0.5) / self.height * np.pi).reshape(
-            height, factor
-        )
-        img = (img * weights[:, :, None, None, None]).sum(axis=(1, 3)) / (
-            weights.sum(1)[:, None, None] * factor
-        )
+        weights = np.sin((np.arange(self.height) + 0.5) / self.height * np.pi).reshape(height, factor)
+        img = (img * weights[:, :, None, None, None]).sum(axis=(1, 3)) / (weights.sum(1)[:, None, None] * factor)
         return EnvironmentMap(img.astype(np.float32), self.name)
 
     def irradiance(self, normals: np.ndarray, source_height: int = 64) -> np.ndarray:
@@ -122,9 +117,7 @@ class EnvironmentMap:
             indexing="ij",
         )
         dirs = equirect_direction(u, v).reshape(-1, 3)
-        radiance = (src.image.astype(np.float64) * src.texel_solid_angles()[:, None, None]).reshape(
-            -1, 3
-        )
+        radiance = (src.image.astype(np.float64) * src.texel_solid_angles()[:, None, None]).reshape(-1, 3)
         normals = np.asarray(normals, dtype=np.float64)
         flat = normals.reshape(-1, 3)
         out = np.empty_like(flat)

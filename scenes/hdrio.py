@@ -73,9 +73,7 @@ def _read_exr(path: Path) -> np.ndarray:
                 y = np.asarray(channels["Y"].pixels, dtype=np.float32)
                 rgb = np.repeat(y[..., None], 3, axis=-1)
             else:
-                raise HDRImageError(
-                    f"{path}: no R, G, B (or Y) channels in the EXR (has {sorted(channels)})"
-                )
+                raise HDRImageError(f"{path}: no R, G, B (or Y) channels in the EXR (has {sorted(channels)})")
     except HDRImageError:
         raise
     except Exception as exc:  # OpenEXR raises RuntimeError/OSError variants for corrupt files
@@ -115,9 +113,7 @@ def _read_rgbe(path: Path) -> np.ndarray:
         raise HDRImageError(f"{path}: not a Radiance HDR file (missing '#?' signature)")
     for line in header_lines:
         if line.startswith(b"FORMAT=") and line != b"FORMAT=32-bit_rle_rgbe":
-            raise HDRImageError(
-                f"{path}: unsupported Radiance format {line.decode(errors='replace')}"
-            )
+            raise HDRImageError(f"{path}: unsupported Radiance format {line.decode(errors='replace')}")
     end = data.find(b"\n", pos)
     match = _RESOLUTION.match(data[pos:end].strip()) if end >= 0 else None
     if match is None:
@@ -133,14 +129,10 @@ def _read_rgbe(path: Path) -> np.ndarray:
     return _rgbe_to_float(rgbe)
 
 
-def _read_scanline(
-    buf: np.ndarray, pos: int, width: int, out: np.ndarray, path: Path, y: int
-) -> int:
+def _read_scanline(buf: np.ndarray, pos: int, width: int, out: np.ndarray, path: Path, y: int) -> int:
     if pos + 4 > len(buf):
         raise HDRImageError(f"{path}: truncated pixel data at scanline {y}")
-    new_rle = (
-        8 <= width < 32768 and buf[pos] == 2 and buf[pos + 1] == 2 and not (buf[pos + 2] & 0x80)
-    )
+    new_rle = 8 <= width < 32768 and buf[pos] == 2 and buf[pos + 1] == 2 and not (buf[pos + 2] & 0x80)
     if not new_rle:
         # Flat (uncompressed) scanline; old-style RLE is not produced by current tools.
         end = pos + 4 * width
@@ -188,9 +180,7 @@ def _write_rgbe(path: Path, image: np.ndarray) -> None:
     img = np.clip(np.nan_to_num(image.astype(np.float64), nan=0.0, posinf=0.0), 0.0, None)
     brightest = img.max(axis=-1)
     mantissa, exponent = np.frexp(brightest)
-    scale = np.where(
-        brightest > 1e-32, mantissa * 256.0 / np.where(brightest > 0, brightest, 1.0), 0.0
-    )
+    scale = np.where(brightest > 1e-32, mantissa * 256.0 / np.where(brightest > 0, brightest, 1.0), 0.0)
     rgbe = np.zeros(img.shape[:2] + (4,), dtype=np.uint8)
     rgbe[..., :3] = np.clip(np.floor(img * scale[..., None]), 0, 255).astype(np.uint8)
     rgbe[..., 3] = np.where(brightest > 1e-32, exponent + 128, 0).astype(np.uint8)
@@ -234,8 +224,7 @@ def sanitize_radiance(
         most_negative = float(image[finite].min()) if np.any(finite) else 0.0
         if most_negative < -negative_tolerance:
             warnings.warn(
-                f"{name}: {report.negative} texels with negative values (down to "
-                f"{most_negative:.3g}) clamped to 0",
+                f"{name}: {report.negative} texels with negative values (down to {most_negative:.3g}) clamped to 0",
                 HDRImageWarning,
                 stacklevel=2,
             )

@@ -24,9 +24,7 @@ class Mesh:
     name: str = "mesh"
 
     def interleaved(self) -> np.ndarray:
-        return np.concatenate([self.positions, self.normals, self.tangents], axis=1).astype(
-            np.float32
-        )
+        return np.concatenate([self.positions, self.normals, self.tangents], axis=1).astype(np.float32)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -76,9 +74,7 @@ def vertex_normals(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
             f"{int(bad.sum())} vertices only touch degenerate triangles; normal set to +Y",
             stacklevel=2,
         )
-    normals = np.where(
-        bad[:, None], [0.0, 1.0, 0.0], normals / np.where(bad, 1.0, length[:, 0])[:, None]
-    )
+    normals = np.where(bad[:, None], [0.0, 1.0, 0.0], normals / np.where(bad, 1.0, length[:, 0])[:, None])
     return normals.astype(np.float32)
 
 

@@ -45,9 +45,7 @@ class SphereDomain:
     cap_angle: float = np.pi
 
     def __post_init__(self):
-        self.frame = (
-            _frame_from_z(np.asarray(self.centre, float)) if self.centre is not None else np.eye(3)
-        )
+        self.frame = _frame_from_z(np.asarray(self.centre, float)) if self.centre is not None else np.eye(3)
         self.a_max = np.sqrt(1.0 - np.cos(self.cap_angle)) if self.centre is not None else 1.0
 
     def to_params(self, w: np.ndarray):
@@ -94,9 +92,7 @@ def expected_histogram(pdf_fn, domain: SphereDomain, order: int = 6) -> np.ndarr
 def observed_histogram(samples: np.ndarray, domain: SphereDomain) -> np.ndarray:
     a, phi = domain.to_params(samples)
     a0, a1 = domain.a_range()
-    hist, _, _ = np.histogram2d(
-        a, phi, bins=[domain.res_a, domain.res_b], range=[[a0, a1], [-np.pi, np.pi]]
-    )
+    hist, _, _ = np.histogram2d(a, phi, bins=[domain.res_a, domain.res_b], range=[[a0, a1], [-np.pi, np.pi]])
     return hist
 
 
@@ -148,9 +144,7 @@ def chi2_test(
     dof = len(e_cells) - 1
     p_value = float(stats.chi2.sf(stat, dof)) if dof > 0 else 1.0
     passed = p_value > SIGNIFICANCE
-    message = (
-        f"{name}: chi2 = {stat:.1f}, dof = {dof}, p = {p_value:.3g} (level {SIGNIFICANCE:.2g})"
-    )
+    message = f"{name}: chi2 = {stat:.1f}, dof = {dof}, p = {p_value:.3g} (level {SIGNIFICANCE:.2g})"
     if not passed and dump_dir is not None:
         dump_dir.mkdir(parents=True, exist_ok=True)
         path = dump_dir / f"chi2_{name.replace(' ', '_')}.txt"

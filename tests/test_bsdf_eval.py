@@ -51,9 +51,7 @@ PLAUSIBLE = {
     # Kurt et al.: alpha = 0 is always energy conserving; kd + ks <= 1.
     "thesis-alpha0-rough": lambda: thesis_bsdf(0.3, [(0.7, 0.4, 0.4, 1.0, 0.0)]),
     "thesis-alpha0-aniso": lambda: thesis_bsdf(0.0, [(1.0, 0.01, 0.5, 1.0, 0.0)]),
-    "thesis-alpha0-transmission": lambda: thesis_bsdf(
-        0.0, [(1.0, 0.2, 0.2, 0.1, 0.0)], [(1.0, 0.2, 0.2, 0.1, 0.0)]
-    ),
+    "thesis-alpha0-transmission": lambda: thesis_bsdf(0.0, [(1.0, 0.2, 0.2, 0.1, 0.0)], [(1.0, 0.2, 0.2, 0.1, 0.0)]),
     "ggx-white": lambda: microfacet_bsdf("ggx", 0.6, 0.6, Fresnel("none")),
     "ggx-white-aniso": lambda: microfacet_bsdf("ggx", 0.02, 0.8, Fresnel("none")),
     "beckmann-white": lambda: microfacet_bsdf("beckmann", 0.8, 0.8, Fresnel("none")),
@@ -104,13 +102,9 @@ def test_white_ggx_albedo_bounds_from_closed_form():
     of D(h) G cos(theta_h) dh. For alpha = 1, D = 1/pi is constant, so E < 2 int_0^{pi/4}
     cos sin = 1/2 exactly without masking; Smith masking brings it lower. For alpha = 0.05
     only the GGX tail beyond 45 deg (mass 1 - 1/(1 + alpha^2), about alpha^2) is lost."""
-    rough = microfacet_bsdf("ggx", 1.0, 1.0, Fresnel("none")).albedo(direction_from_angles_deg(0))[
-        0
-    ]
+    rough = microfacet_bsdf("ggx", 1.0, 1.0, Fresnel("none")).albedo(direction_from_angles_deg(0))[0]
     assert 0.25 < rough[0] < 0.5
-    smooth = microfacet_bsdf("ggx", 0.05, 0.05, Fresnel("none")).albedo(
-        direction_from_angles_deg(0)
-    )[0]
+    smooth = microfacet_bsdf("ggx", 0.05, 0.05, Fresnel("none")).albedo(direction_from_angles_deg(0))[0]
     lost_tail = 1.0 - 1.0 / (1.0 + 0.05**2)
     assert smooth[0] == pytest.approx(1.0 - lost_tail, abs=1e-3)
 
@@ -124,9 +118,7 @@ def _brute_force_albedo(bsdf: BSDF, wo: np.ndarray, n_theta=1500, n_phi=720):
     f = bsdf.eval(wi, np.broadcast_to(wo, wi.shape))
     w = (np.abs(np.cos(T)) * np.sin(T))[..., None] * (np.pi / n_theta) * (2 * np.pi / n_phi)
     upper = (T < np.pi / 2)[..., None]
-    return np.sum(np.where(upper, f * w, 0), axis=(0, 1)), np.sum(
-        np.where(upper, 0, f * w), axis=(0, 1)
-    )
+    return np.sum(np.where(upper, f * w, 0), axis=(0, 1)), np.sum(np.where(upper, 0, f * w), axis=(0, 1))
 
 
 @pytest.mark.parametrize(
@@ -186,10 +178,7 @@ def _gltf_spec_brdf(base, metallic, roughness, l, v):
         (l_h > 0)
         * (v_h > 0)
         * 0.5
-        / (
-            n_l * np.sqrt(n_v * n_v * (1 - a * a) + a * a)
-            + n_v * np.sqrt(n_l * n_l * (1 - a * a) + a * a)
-        )
+        / (n_l * np.sqrt(n_v * n_v * (1 - a * a) + a * a) + n_v * np.sqrt(n_l * n_l * (1 - a * a) + a * a))
     )
     specular = (vis * d)[:, None]
     diffuse = np.asarray(base) / np.pi
@@ -220,9 +209,9 @@ def test_thesis_lobe_matches_equation_3_4_written_out():
     h = (wi + wo) / np.linalg.norm(wi + wo, axis=-1, keepdims=True)
     theta_h = np.arccos(h[:, 2])
     phi_h = np.arctan2(h[:, 1], h[:, 0])
-    d = np.exp(
-        -(np.tan(theta_h) ** 2) * (np.cos(phi_h) ** 2 / mx**2 + np.sin(phi_h) ** 2 / my**2)
-    ) / (np.pi * mx * my * np.cos(theta_h) ** 4)
+    d = np.exp(-(np.tan(theta_h) ** 2) * (np.cos(phi_h) ** 2 / mx**2 + np.sin(phi_h) ** 2 / my**2)) / (
+        np.pi * mx * my * np.cos(theta_h) ** 4
+    )
     u = np.sum(wo * h, -1)
     f = r0 + (1 - r0) * (1 - u) ** 5
     expected = ks * f * d / (4 * u * (wi[:, 2] * wo[:, 2]) ** alpha)

@@ -39,15 +39,11 @@ def test_egl_context_draws_triangle_into_float_framebuffer():
         # A triangle covering the left half of the screen, with HDR values above 1 to prove the
         # target is float (an 8-bit target would clamp them).
         radiance = (4.0, 0.5, 1e-3)
-        vertices = np.array(
-            [[-1, -1, *radiance], [0, -1, *radiance], [-1, 1, *radiance]], dtype="f4"
-        )
+        vertices = np.array([[-1, -1, *radiance], [0, -1, *radiance], [-1, 1, *radiance]], dtype="f4")
         vbo = ctx.buffer(vertices.tobytes())
         vao = ctx.vertex_array(program, [(vbo, "2f 3f", "in_position", "in_color")])
         vao.render()
-        pixels = np.frombuffer(fbo.read(components=4, dtype="f4"), dtype="f4").reshape(
-            size, size, 4
-        )
+        pixels = np.frombuffer(fbo.read(components=4, dtype="f4"), dtype="f4").reshape(size, size, 4)
         # Inside the triangle (lower-left quarter area): exactly the float radiance.
         np.testing.assert_allclose(pixels[8, 8, :3], radiance, rtol=1e-6)
         assert pixels[8, 8, 3] == 1.0

@@ -78,9 +78,7 @@ def test_theta_thresh_matches_equation_4_10():
     dist = MicrofacetDistribution("beckmann", 0.1, 0.3)
     for phi in (0.0, 0.4, np.pi / 2):
         a = np.cos(phi) ** 2 / 0.1**2 + np.sin(phi) ** 2 / 0.3**2
-        assert theta_thresh(dist, np.array(phi)) == pytest.approx(
-            np.arctan(np.sqrt(-np.log(XI_BORDER) / a))
-        )
+        assert theta_thresh(dist, np.array(phi)) == pytest.approx(np.arctan(np.sqrt(-np.log(XI_BORDER) / a)))
 
 
 def test_lod_formula_equations_4_14_to_4_17():
@@ -146,9 +144,7 @@ def test_equation_4_25_is_the_f_cos_weighted_mean_of_mc_weights():
     assert mc_weight.min() <= expected <= mc_weight.max()
     # Eq. 4.24 with constant radiance: sum cos^2 f / sum p cos.
     expected_424 = np.sum(wi[:, 2] ** 2 * f) / np.sum(p * wi[:, 2])
-    assert integrate_lobe(lobe, wo, constant(), 11, weighting="eq4.24")[0] == pytest.approx(
-        expected_424
-    )
+    assert integrate_lobe(lobe, wo, constant(), 11, weighting="eq4.24")[0] == pytest.approx(expected_424)
 
 
 def _smooth_radiance(dirs, lod):
@@ -181,9 +177,7 @@ def test_lobe_samples_discard_directions_below_the_horizon():
     s = lobe_samples(lobe, direction_from_angles_deg(85), 19)
     assert 0 < s.valid.sum() < 19
     assert np.all(s.wi[s.valid, 2] > 0)
-    t = lobe_samples(
-        KurtLobe(1.0, 0.4, 0.4, 1.0, 0.0, transmission=True), direction_from_angles_deg(85), 19
-    )
+    t = lobe_samples(KurtLobe(1.0, 0.4, 0.4, 1.0, 0.0, transmission=True), direction_from_angles_deg(85), 19)
     assert np.all(t.wi[t.valid, 2] < 0)
 
 
@@ -191,9 +185,7 @@ def test_frame_rotates_lookups_but_not_the_result_for_isotropic_light():
     lobe = KurtLobe(1.0, 0.1, 0.1, 0.5, 0.2)
     wo = direction_from_angles_deg(30, 0)
     angle = 0.7
-    frame = np.array(
-        [[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]]
-    )
+    frame = np.array([[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]])
     seen = []
 
     def record(dirs, lod):

@@ -24,16 +24,8 @@ def smooth_sky(d):
     Monte Carlo references converge quickly; max radiance ~8."""
     up = d[..., 1:2]
     sky = np.where(up > 0, [0.4, 0.6, 1.0] * (0.5 + up), [0.35, 0.25, 0.15] * (1.0 + up))
-    light1 = (
-        6.0
-        * np.exp(-((1 - np.sum(d * [0.6, 0.6, -0.52915], -1)) / 0.05))[..., None]
-        * [1.0, 0.9, 0.7]
-    )
-    light2 = (
-        3.0
-        * np.exp(-((1 - np.sum(d * [-0.8, 0.2, 0.56569], -1)) / 0.1))[..., None]
-        * [0.6, 0.8, 1.0]
-    )
+    light1 = 6.0 * np.exp(-((1 - np.sum(d * [0.6, 0.6, -0.52915], -1)) / 0.05))[..., None] * [1.0, 0.9, 0.7]
+    light2 = 3.0 * np.exp(-((1 - np.sum(d * [-0.8, 0.2, 0.56569], -1)) / 0.1))[..., None] * [0.6, 0.8, 1.0]
     return sky + light1 + light2
 
 
@@ -159,9 +151,7 @@ def test_methods_agree_on_a_constant_environment():
     ctx = create_headless_context()
     try:
         env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=32)
-        renderer = PreviewRenderer(
-            ctx, env, uv_sphere(rings=32, segments=64), size=(48, 48), face_size=32
-        )
+        renderer = PreviewRenderer(ctx, env, uv_sphere(rings=32, segments=64), size=(48, 48), face_size=32)
         bsdf = build_bsdf(load_material("alanod-2000gs-1lobe"))
         spec = BSDF(specular_lobes(bsdf))
         for method, tolerance in (("reference", 0.02), ("fis-32", 0.02), ("lobe-11", 0.03)):
@@ -207,9 +197,7 @@ def test_reference_with_a_sun_matches_numpy_multiple_importance_sampling(preset)
     ctx = create_headless_context()
     try:
         env = EnvironmentMap.from_function(sky, height=256, name="sky")
-        renderer = PreviewRenderer(
-            ctx, env, uv_sphere(rings=48, segments=96), size=(48, 48), face_size=128
-        )
+        renderer = PreviewRenderer(ctx, env, uv_sphere(rings=48, segments=96), size=(48, 48), face_size=128)
         lookup = CubeLookup(ctx, renderer.programs)
         bsdf = build_bsdf(load_material(preset))
         result = renderer.render(CAMERA, bsdf, "reference", spp=1024, background=False)

@@ -53,9 +53,7 @@ CASES = [
     ),
     (
         "thesis-mixture-foil",
-        lambda: thesis_bsdf(
-            0.76, [(0.78, 0.124, 0.136, 0.029, 0.5)], [(0.67, 0.25, 0.17, 0.75, 0.6)]
-        ),
+        lambda: thesis_bsdf(0.76, [(0.78, 0.124, 0.136, 0.029, 0.5)], [(0.67, 0.25, 0.17, 0.75, 0.6)]),
         45,
         0,
         None,
@@ -69,47 +67,35 @@ CASES = [
     ),
     (
         "ggx-vndf-iso",
-        lambda: _single(
-            MicrofacetReflection(MicrofacetDistribution("ggx", 0.5, 0.5), Fresnel("none"))
-        ),
+        lambda: _single(MicrofacetReflection(MicrofacetDistribution("ggx", 0.5, 0.5), Fresnel("none"))),
         30,
         0,
         None,
     ),
     (
         "ggx-vndf-aniso",
-        lambda: _single(
-            MicrofacetReflection(
-                MicrofacetDistribution("ggx", 0.1, 0.6), Fresnel("schlick", r0=0.5)
-            )
-        ),
+        lambda: _single(MicrofacetReflection(MicrofacetDistribution("ggx", 0.1, 0.6), Fresnel("schlick", r0=0.5))),
         70,
         40,
         None,
     ),
     (
         "ggx-vndf-near-mirror",
-        lambda: _single(
-            MicrofacetReflection(MicrofacetDistribution("ggx", 0.01, 0.01), Fresnel("none"))
-        ),
+        lambda: _single(MicrofacetReflection(MicrofacetDistribution("ggx", 0.01, 0.01), Fresnel("none"))),
         45,
         0,
         0.2,
     ),
     (
         "ggx-vndf-grazing",
-        lambda: _single(
-            MicrofacetReflection(MicrofacetDistribution("ggx", 0.3, 0.3), Fresnel("none"))
-        ),
+        lambda: _single(MicrofacetReflection(MicrofacetDistribution("ggx", 0.3, 0.3), Fresnel("none"))),
         85,
         0,
         None,
     ),
     (
         "beckmann-aniso",
-        lambda: _single(
-            MicrofacetReflection(MicrofacetDistribution("beckmann", 0.05, 0.3), Fresnel("none"))
-        ),
+        lambda: _single(MicrofacetReflection(MicrofacetDistribution("beckmann", 0.05, 0.3), Fresnel("none"))),
         40,
         20,
         None,

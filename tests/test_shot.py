@@ -59,7 +59,8 @@ def test_shot_reference_reports_samples(tmp_path, capsys):
 @pytest.mark.parametrize(
     "extra,message",
     [
-        ([], "not implemented yet"),
+        (["--object", "sphere", "some.glb"], "either a SCENE or --object"),
+        (["/no/such/scene.glb"], "no such file"),
         (["--object", "sphere", "--method", "lobe-99"], "N must be in"),
         (["--object", "sphere", "--method", "phong-3"], "unknown method"),
         (["--object", "sphere", "--size", "64by48"], "--size: expected WxH"),
@@ -118,9 +119,7 @@ def test_corrupt_hdr_files_are_rejected_with_the_file_name(tmp_path):
     (tmp_path / "junk.exr").write_bytes(b"not an exr at all")
     with pytest.raises(HDRImageError, match="junk.exr"):
         read_hdr_image(tmp_path / "junk.exr")
-    (tmp_path / "junk.hdr").write_bytes(
-        b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 4\n\x01\x02"
-    )
+    (tmp_path / "junk.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 4 +X 4\n\x01\x02")
     with pytest.raises(HDRImageError, match="truncated"):
         read_hdr_image(tmp_path / "junk.hdr")
     (tmp_path / "x.tga").write_bytes(b"")

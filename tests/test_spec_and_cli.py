@@ -88,14 +88,10 @@ def test_bad_materials_are_rejected_with_a_message_naming_the_parameter(desc, me
 def test_load_material_from_preset_file_and_inline_json(tmp_path):
     assert load_material("chrome")["model"] == "thesis"
     path = tmp_path / "m.json"
-    path.write_text(
-        json.dumps({"model": "gltf", "base_color": [1, 0, 0], "metallic": 0, "roughness": 0.3})
-    )
+    path.write_text(json.dumps({"model": "gltf", "base_color": [1, 0, 0], "metallic": 0, "roughness": 0.3}))
     assert load_material(str(path))["roughness"] == 0.3
     assert (
-        load_material(
-            '{"model": "microfacet", "distribution": "beckmann", "alpha_u": 0.1, "alpha_v": 0.2}'
-        )["alpha_v"]
+        load_material('{"model": "microfacet", "distribution": "beckmann", "alpha_u": 0.1, "alpha_v": 0.2}')["alpha_v"]
         == 0.2
     )
     with pytest.raises(MaterialError, match="neither a preset name"):
@@ -113,9 +109,7 @@ def test_cli_material_list_and_show(capsys):
     assert main(["material", "show", "alanod-2000gs-1lobe"]) == 0
     out = capsys.readouterr().out
     assert "ks=0.9" in out and "mx=0.11" in out
-    lines = [
-        line for line in out.splitlines() if line.strip().startswith(("0°", "30°", "60°", "80°"))
-    ]
+    lines = [line for line in out.splitlines() if line.strip().startswith(("0°", "30°", "60°", "80°"))]
     assert len(lines) == 4
     assert main(["material", "show", "white-foil", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)

@@ -57,7 +57,4 @@ class Camera:
         def fmt(v):
             return ",".join(f"{x:.6g}" for x in v)
 
-        return (
-            f"--camera {fmt(self.position)} --target {fmt(self.target)} "
-            f"--up {fmt(self.up)} --fov {self.fov_y:.6g}"
-        )
+        return f"--camera {fmt(self.position)} --target {fmt(self.target)} --up {fmt(self.up)} --fov {self.fov_y:.6g}"

@@ -28,9 +28,7 @@ def equirect_to_cube_faces(env: EnvironmentMap, size: int, supersample: int = 2)
     return faces
 
 
-def upload_cube(
-    ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True
-) -> moderngl.TextureCube:
+def upload_cube(ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True) -> moderngl.TextureCube:
     size = faces.shape[1]
     cube = ctx.texture_cube((size, size), 4, dtype="f4")
     rgba = np.concatenate([faces, np.ones(faces.shape[:-1] + (1,), np.float32)], axis=-1)
@@ -52,26 +50,14 @@ def mip_levels(size: int) -> int:
 CDF_ROW = 1024  # texels per row of the CDF texture (shaders/integrate.glsl)
 
 
-class EnvironmentCubes:
-    """The GPU resources of one environment: radiance cube (with MIP chain), irradiance cube,
-    and the importance map (texel CDF + per-texel density cube) for the reference method."""
+class RadianceCube:
+    """Incident radiance as a cube map with a full MIP chain, plus its importance map (texel CDF
+    + per-texel density cube) for the reference method's environment sampling."""
 
-    def __init__(
-        self,
-        ctx: moderngl.Context,
-        env: EnvironmentMap,
-        face_size: int = 256,
-        irradiance_size: int = 16,
-        importance_size: int = 64,
-    ):
-        self.env = env
-        self.face_size = face_size
-        self.faces = equirect_to_cube_faces(env, face_size)
+    def __init__(self, ctx: moderngl.Context, faces: np.ndarray, importance_size: int = 64):
+        self.faces = np.asarray(faces, dtype=np.float32)
+        self.face_size = self.faces.shape[1]
         self.radiance = upload_cube(ctx, self.faces)
-        irradiance_faces = np.stack(
-            [env.irradiance(face_directions(f, irradiance_size)) for f in range(6)]
-        ).astype(np.float32)
-        self.irradiance = upload_cube(ctx, irradiance_faces, mipmaps=False)
         self.importance = CubeImportance.from_faces(self.faces, size=importance_size)
         cdf = self.importance.cdf.astype(np.float32)
         rows = (len(cdf) + CDF_ROW - 1) // CDF_ROW
@@ -87,8 +73,32 @@ class EnvironmentCubes:
         self.env_pdf.filter = (moderngl.NEAREST, moderngl.NEAREST)
 
     def release(self):
-        for texture in (self.radiance, self.irradiance, self.env_cdf, self.env_pdf):
+        for texture in (self.radiance, self.env_cdf, self.env_pdf):
             texture.release()
+
+
+class EnvironmentCubes(RadianceCube):
+    """A distant environment: radiance cube resampled from the equirectangular map, and an
+    irradiance cube for diffuse shading without lightmaps (object preview)."""
+
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        env: EnvironmentMap,
+        face_size: int = 256,
+        irradiance_size: int = 16,
+        importance_size: int = 64,
+    ):
+        self.env = env
+        super().__init__(ctx, equirect_to_cube_faces(env, face_size), importance_size)
+        irradiance_faces = np.stack([env.irradiance(face_directions(f, irradiance_size)) for f in range(6)]).astype(
+            np.float32
+        )
+        self.irradiance = upload_cube(ctx, irradiance_faces, mipmaps=False)
+
+    def release(self):
+        super().release()
+        self.irradiance.release()
 
 
 class CubeLookup:

@@ -21,6 +21,7 @@ KNOWN_DEFINES = {
     "METHOD_MC",
     "ENV_SAMPLING",
     "HAS_DIFFUSE",
+    "SPECULAR",
     "DEBUG_VIEW",
 }
 
@@ -54,9 +55,7 @@ def resolve_includes(name: str, _stack: tuple[str, ...] = ()) -> str:
 def define_block(defines: dict) -> str:
     unknown = set(defines) - KNOWN_DEFINES
     if unknown:
-        raise ShaderError(
-            f"unknown shader define(s) {sorted(unknown)}; known: {sorted(KNOWN_DEFINES)}"
-        )
+        raise ShaderError(f"unknown shader define(s) {sorted(unknown)}; known: {sorted(KNOWN_DEFINES)}")
     lines = []
     for key in sorted(defines):
         value = defines[key]
@@ -91,9 +90,7 @@ class ProgramCache:
                     fragment_shader=assemble(fragment, defines),
                 )
             except moderngl.Error as exc:
-                raise ShaderError(
-                    f"compiling {vertex} + {fragment} with {defines}: {exc}"
-                ) from None
+                raise ShaderError(f"compiling {vertex} + {fragment} with {defines}: {exc}") from None
         return self._programs[key]
 
     def compute(self, name: str, defines: dict | None = None) -> moderngl.ComputeShader:

@@ -1,0 +1,94 @@
+"""Scene analysis: decide once what each object needs, so the renderer builds only those
+resources and compiles only the shader variants in use."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from lobeview.materials.bsdf import Lambert
+from lobeview.materials.gltf import GltfDiffuse
+from lobeview.materials.patterns import specular_lobes
+from lobeview.materials.spec import build_bsdf
+
+from .scene import Scene
+
+ANISOTROPY_RATIO = 1.5  # a lobe counts as anisotropic above this max/min roughness ratio
+
+
+@dataclass
+class ObjectNeeds:
+    name: str
+    specular_lobes: int
+    transmission_lobes: int
+    anisotropic: bool
+    diffuse: bool
+    emissive: bool
+    has_lightmap: bool
+
+    @property
+    def needs_cube_map(self) -> bool:
+        """Any view-dependent lobe is shaded from a cube map of the object's surroundings."""
+        return self.specular_lobes + self.transmission_lobes > 0
+
+    @property
+    def kind(self) -> str:
+        if not self.needs_cube_map:
+            return "lightmap only"
+        parts = ["specular"]
+        if self.transmission_lobes:
+            parts.append("transmission")
+        if self.anisotropic:
+            parts.append("anisotropic")
+        return " + ".join(parts)
+
+
+@dataclass
+class SceneAnalysis:
+    objects: list[ObjectNeeds]
+
+    @property
+    def cube_mapped(self) -> list[int]:
+        return [i for i, o in enumerate(self.objects) if o.needs_cube_map]
+
+    @property
+    def needs_specular_variant(self) -> bool:
+        return bool(self.cube_mapped)
+
+    def report(self) -> str:
+        lines = [f"{'object':<24} {'needs':<38} cube map  lightmap"]
+        for o in self.objects:
+            lobes = f"{o.kind} ({o.specular_lobes} refl, {o.transmission_lobes} trans)" if o.needs_cube_map else o.kind
+            lines.append(
+                f"{o.name:<24} {lobes:<38} {'yes' if o.needs_cube_map else 'no':<9} "
+                + ("yes" if o.has_lightmap else "NO (fallback)")
+            )
+        return "\n".join(lines)
+
+
+def analyse(scene: Scene) -> SceneAnalysis:
+    needs = []
+    for obj in scene.objects:
+        mat = scene.materials[obj.material]
+        bsdf = build_bsdf(mat.desc)
+        lobes = specular_lobes(bsdf)
+        transmission = sum(1 for lobe in lobes if getattr(lobe, "transmission", False))
+        anisotropic = any(
+            max(lobe.distribution.alpha_x, lobe.distribution.alpha_y)
+            / min(lobe.distribution.alpha_x, lobe.distribution.alpha_y)
+            > ANISOTROPY_RATIO
+            for lobe in lobes
+        )
+        diffuse = any(isinstance(c, Lambert | GltfDiffuse) and c.selection_weight > 0 for c in bsdf.components)
+        has_lightmap = mat.lightmap is not None and (mat.lightmap.tex_coord != 1 or obj.uv1 is not None)
+        needs.append(
+            ObjectNeeds(
+                obj.name,
+                len(lobes) - transmission,
+                transmission,
+                anisotropic,
+                diffuse,
+                bool(max(mat.emission) > 0),
+                has_lightmap,
+            )
+        )
+    return SceneAnalysis(needs)

@@ -1,0 +1,453 @@
+"""glTF 2.0 loading (.gltf and .glb) into a world-space :class:`~lobeview.scenes.scene.Scene`.
+
+pygltflib parses the container (JSON, GLB chunks); accessors, transforms and materials are read
+here with numpy because lobeview needs what general loaders drop: TEXCOORD_1 and the
+``MOZ_lightmap`` material extension (``index`` = texture with linear irradiance in EXR or
+Radiance .hdr, ``texCoord``, ``intensity``), and a thesis-model material in ``extras.lobeview``
+(a preset name or a material object, see README).
+
+Bad input gets a :class:`GltfError` naming the file and the problem (missing file, corrupt or
+truncated GLB, unsupported required extension, sparse accessors, missing buffers); recoverable
+problems (missing images, non-triangle primitives, degenerate triangles, missing lightmaps) are
+warned and use the documented fallbacks listed in :data:`FALLBACKS`.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+import struct
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from lobeview.materials.spec import MaterialError, load_material, validate
+
+from .hdrio import HDRImageError, read_hdr_image, sanitize_radiance
+from .meshes import Mesh, vertex_normals, vertex_tangents
+from .scene import Lightmap, Scene, SceneCamera, SceneMaterial, SceneObject
+
+SUPPORTED_EXTENSIONS = {"MOZ_lightmap", "KHR_materials_emissive_strength"}
+
+FALLBACKS = {
+    "missing image": "the texture is ignored (factor only)",
+    "missing lightmap": "the object gets a constant irradiance (see Scene.warnings)",
+    "non-triangle primitive": "skipped",
+    "degenerate triangles": "dropped",
+    "missing normals": "area-weighted vertex normals",
+    "missing tangents": "from TEXCOORD_0, or any vector orthogonal to the normal",
+}
+
+_COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+_DTYPES = {
+    5120: np.int8,
+    5121: np.uint8,
+    5122: np.int16,
+    5123: np.uint16,
+    5125: np.uint32,
+    5126: np.float32,
+}
+_NORMALIZE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
+
+
+class GltfError(ValueError):
+    pass
+
+
+class GltfWarning(UserWarning):
+    pass
+
+
+def _warn(scene_warnings: list, message: str) -> None:
+    scene_warnings.append(message)
+    warnings.warn(message, GltfWarning, stacklevel=3)
+
+
+def _parse(path: Path):
+    import pygltflib
+
+    data = path.read_bytes()
+    if path.suffix.lower() == ".glb":
+        if len(data) < 20 or data[:4] != b"glTF":
+            raise GltfError(f"{path}: not a GLB file (bad magic) or truncated")
+        version, length = struct.unpack_from("<II", data, 4)
+        if version != 2:
+            raise GltfError(f"{path}: GLB version {version}; only glTF 2.0 is supported")
+        if length > len(data):
+            raise GltfError(f"{path}: truncated GLB ({len(data)} of {length} bytes)")
+    try:
+        if path.suffix.lower() == ".glb":
+            gltf = pygltflib.GLTF2.load_from_bytes(data)
+        else:
+            gltf = pygltflib.GLTF2.gltf_from_json(data.decode("utf-8"))
+    except Exception as exc:
+        raise GltfError(f"{path}: cannot parse glTF: {exc}") from None
+    if gltf is None or gltf.asset is None:
+        raise GltfError(f"{path}: cannot parse glTF (no asset description)")
+    if not str(gltf.asset.version).startswith("2"):
+        raise GltfError(f"{path}: glTF version {gltf.asset.version}; only 2.0 is supported")
+    return gltf
+
+
+class _Reader:
+    def __init__(self, gltf, path: Path):
+        self.gltf = gltf
+        self.path = path
+        self._buffers: dict[int, bytes] = {}
+
+    def buffer(self, index: int) -> bytes:
+        if index in self._buffers:
+            return self._buffers[index]
+        buf = self.gltf.buffers[index]
+        if buf.uri is None:
+            blob = self.gltf.binary_blob()
+            if blob is None:
+                raise GltfError(f"{self.path}: buffer {index} has no uri and there is no GLB binary chunk")
+            data = bytes(blob)
+        elif buf.uri.startswith("data:"):
+            try:
+                data = base64.b64decode(buf.uri.split(",", 1)[1])
+            except Exception:
+                raise GltfError(f"{self.path}: buffer {index} has a corrupt data URI") from None
+        else:
+            file = self.path.parent / buf.uri
+            if not file.exists():
+                raise GltfError(f"{self.path}: buffer file {buf.uri!r} not found")
+            data = file.read_bytes()
+        if len(data) < buf.byteLength:
+            raise GltfError(f"{self.path}: buffer {index} is truncated ({len(data)} of {buf.byteLength} bytes)")
+        self._buffers[index] = data
+        return data
+
+    def view_bytes(self, view_index: int) -> tuple[bytes, int, int | None]:
+        view = self.gltf.bufferViews[view_index]
+        data = self.buffer(view.buffer)
+        start = view.byteOffset or 0
+        end = start + view.byteLength
+        if end > len(data):
+            raise GltfError(f"{self.path}: bufferView {view_index} runs past the end of its buffer")
+        return data[start:end], 0, view.byteStride
+
+    def accessor(self, index: int) -> np.ndarray:
+        acc = self.gltf.accessors[index]
+        if acc.sparse is not None:
+            raise GltfError(f"{self.path}: accessor {index} is sparse; sparse accessors are not supported")
+        if acc.componentType not in _DTYPES or acc.type not in _COMPONENTS:
+            raise GltfError(f"{self.path}: accessor {index} has an unsupported type {acc.type}/{acc.componentType}")
+        dtype = np.dtype(_DTYPES[acc.componentType]).newbyteorder("<")
+        ncomp = _COMPONENTS[acc.type]
+        if acc.bufferView is None:
+            out = np.zeros((acc.count, ncomp), dtype=np.float64)
+        else:
+            raw, _, stride = self.view_bytes(acc.bufferView)
+            offset = acc.byteOffset or 0
+            item = dtype.itemsize * ncomp
+            stride = stride or item
+            needed = offset + stride * (acc.count - 1) + item if acc.count else 0
+            if needed > len(raw):
+                raise GltfError(f"{self.path}: accessor {index} reads past the end of its bufferView")
+            if stride == item:
+                out = np.frombuffer(raw, dtype=dtype, count=acc.count * ncomp, offset=offset).reshape(acc.count, ncomp)
+            else:
+                out = (
+                    np.lib.stride_tricks.as_strided(
+                        np.frombuffer(raw, dtype=np.uint8, offset=offset),
+                        shape=(acc.count, item),
+                        strides=(stride, 1),
+                    )
+                    .copy()
+                    .view(dtype)
+                    .reshape(acc.count, ncomp)
+                )
+        out = out.astype(np.float64) if acc.componentType == 5126 or acc.normalized else out
+        if acc.normalized and acc.componentType in _NORMALIZE:
+            out = np.maximum(out / _NORMALIZE[acc.componentType], -1.0)
+        return out
+
+    def image(self, texture_index: int, hdr: bool = False) -> np.ndarray | None:
+        """Texture image as float32 (H, W, 3): sRGB-decoded for 8-bit colour, linear for HDR."""
+        try:
+            texture = self.gltf.textures[texture_index]
+            image = self.gltf.images[texture.source]
+        except (IndexError, TypeError):
+            return None
+        try:
+            if image.uri is not None and not image.uri.startswith("data:"):
+                file = self.path.parent / image.uri
+                if not file.exists():
+                    return None
+                if file.suffix.lower() in (".exr", ".hdr", ".pic"):
+                    return read_hdr_image(file)
+                data = file.read_bytes()
+            elif image.uri is not None:
+                data = base64.b64decode(image.uri.split(",", 1)[1])
+            else:
+                raw, _, _ = self.view_bytes(image.bufferView)
+                data = raw
+            from PIL import Image
+
+            pil = Image.open(io.BytesIO(data)).convert("RGB")
+            rgb = np.asarray(pil, dtype=np.float32) / 255.0
+            if hdr:
+                return rgb
+            return np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4).astype(np.float32)
+        except (HDRImageError, OSError, ValueError):
+            return None
+
+
+def _node_matrix(node) -> np.ndarray:
+    if node.matrix is not None and len(node.matrix) == 16:
+        return np.asarray(node.matrix, dtype=np.float64).reshape(4, 4).T
+    t = np.asarray(node.translation or [0, 0, 0], dtype=np.float64)
+    x, y, z, w = np.asarray(node.rotation or [0, 0, 0, 1], dtype=np.float64)
+    s = np.asarray(node.scale or [1, 1, 1], dtype=np.float64)
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    m = np.eye(4)
+    m[:3, :3] = r * s[None, :]
+    m[:3, 3] = t
+    return m
+
+
+def _material(reader: _Reader, index: int | None, scene_warnings: list) -> SceneMaterial:
+    gltf = reader.gltf
+    path = reader.path
+    if index is None:
+        return SceneMaterial(
+            "default",
+            validate({"model": "gltf", "base_color": [0.8, 0.8, 0.8], "metallic": 0.0, "roughness": 1.0}),
+        )
+    mat = gltf.materials[index]
+    name = mat.name or f"material{index}"
+    pbr = mat.pbrMetallicRoughness
+    extras = mat.extras or {}
+    custom = extras.get("lobeview") if isinstance(extras, dict) else None
+    try:
+        if custom is not None:
+            desc = load_material(custom) if isinstance(custom, str) else validate(custom)
+        else:
+            base = list(pbr.baseColorFactor[:3]) if pbr and pbr.baseColorFactor else [1.0, 1.0, 1.0]
+            desc = validate(
+                {
+                    "model": "gltf",
+                    "base_color": [min(max(float(c), 0.0), 1.0) for c in base],
+                    "metallic": min(
+                        max(
+                            float(pbr.metallicFactor if pbr and pbr.metallicFactor is not None else 1.0),
+                            0.0,
+                        ),
+                        1.0,
+                    ),
+                    "roughness": min(
+                        max(
+                            float(pbr.roughnessFactor if pbr and pbr.roughnessFactor is not None else 1.0),
+                            0.0,
+                        ),
+                        1.0,
+                    ),
+                }
+            )
+    except MaterialError as exc:
+        raise GltfError(f"{path}: material {name!r}: {exc}") from None
+    out = SceneMaterial(name, desc, double_sided=bool(mat.doubleSided))
+    if pbr is not None and pbr.baseColorTexture is not None:
+        image = reader.image(pbr.baseColorTexture.index)
+        if image is None:
+            _warn(
+                scene_warnings,
+                f"{path}: material {name!r}: base colour image missing or unreadable; {FALLBACKS['missing image']}",
+            )
+        else:
+            out.base_color_texture = image
+    emissive = np.asarray(mat.emissiveFactor or [0, 0, 0], dtype=np.float64)
+    strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    out.emission = emissive * float(strength)
+    if mat.emissiveTexture is not None and np.any(out.emission > 0):
+        _warn(
+            scene_warnings,
+            f"{path}: material {name!r}: emissive textures are not supported; its emission is ignored",
+        )
+        out.emission = np.zeros(3)
+    lightmap_ext = (mat.extensions or {}).get("MOZ_lightmap")
+    if lightmap_ext is not None:
+        image = reader.image(int(lightmap_ext.get("index", -1)), hdr=True)
+        if image is None:
+            _warn(
+                scene_warnings,
+                f"{path}: material {name!r}: lightmap image missing or unreadable; {FALLBACKS['missing lightmap']}",
+            )
+        else:
+            clean, _ = sanitize_radiance(image, f"{path}: lightmap of {name!r}")
+            out.lightmap = Lightmap(
+                clean,
+                tex_coord=int(lightmap_ext.get("texCoord", 1)),
+                intensity=float(lightmap_ext.get("intensity", 1.0)),
+                source=name,
+            )
+    return out
+
+
+def load_gltf(path: str | Path) -> Scene:
+    path = Path(path)
+    if not path.exists():
+        raise GltfError(f"{path}: no such file")
+    if path.suffix.lower() not in (".gltf", ".glb"):
+        raise GltfError(f"{path}: not a glTF file (expected .gltf or .glb)")
+    gltf = _parse(path)
+    required = set(gltf.extensionsRequired or [])
+    unsupported = required - SUPPORTED_EXTENSIONS
+    if unsupported:
+        raise GltfError(
+            f"{path}: requires unsupported extension(s) {sorted(unsupported)}; "
+            f"supported: {sorted(SUPPORTED_EXTENSIONS)}"
+        )
+    reader = _Reader(gltf, path)
+    scene_warnings: list[str] = []
+    materials = [_material(reader, i, scene_warnings) for i in range(len(gltf.materials or []))]
+    default_material = len(materials)
+    materials.append(_material(reader, None, scene_warnings))
+
+    objects: list[SceneObject] = []
+    cameras: list[SceneCamera] = []
+    scene_index = gltf.scene if gltf.scene is not None else 0
+    if not gltf.scenes:
+        raise GltfError(f"{path}: contains no scene")
+    roots = gltf.scenes[scene_index].nodes or []
+
+    def visit(node_index: int, parent: np.ndarray, depth: int):
+        if depth > 64:
+            raise GltfError(f"{path}: node hierarchy deeper than 64 (cycle?)")
+        node = gltf.nodes[node_index]
+        world = parent @ _node_matrix(node)
+        if node.mesh is not None:
+            for p_index, prim in enumerate(gltf.meshes[node.mesh].primitives):
+                name = f"{node.name or gltf.meshes[node.mesh].name or f'node{node_index}'}" + (
+                    f"#{p_index}" if p_index else ""
+                )
+                obj = _primitive(reader, prim, world, name, scene_warnings)
+                if obj is not None:
+                    if obj.material < 0:
+                        obj.material = default_material
+                    objects.append(obj)
+        if node.camera is not None:
+            cam = gltf.cameras[node.camera]
+            if cam.type == "perspective" and cam.perspective is not None:
+                position = world[:3, 3]
+                forward = -world[:3, 2] / np.linalg.norm(world[:3, 2])
+                up = world[:3, 1] / np.linalg.norm(world[:3, 1])
+                cameras.append(
+                    SceneCamera(
+                        cam.name or f"camera{node.camera}",
+                        position,
+                        position + forward,
+                        up,
+                        float(np.degrees(cam.perspective.yfov)),
+                    )
+                )
+        for child in node.children or []:
+            visit(child, world, depth + 1)
+
+    for root in roots:
+        visit(root, np.eye(4), 0)
+    if not objects:
+        raise GltfError(f"{path}: no triangle geometry in the default scene")
+    for obj in objects:
+        mat = materials[obj.material]
+        if mat.lightmap is not None and obj.uv1 is None and mat.lightmap.tex_coord == 1:
+            _warn(
+                scene_warnings,
+                f"{path}: object {obj.name!r} uses a lightmap but has no TEXCOORD_1; {FALLBACKS['missing lightmap']}",
+            )
+    return Scene(objects, materials, cameras, str(path), scene_warnings)
+
+
+def _primitive(reader: _Reader, prim, world: np.ndarray, name: str, scene_warnings: list) -> SceneObject | None:
+    path = reader.path
+    mode = 4 if prim.mode is None else prim.mode
+    if mode != 4:
+        _warn(
+            scene_warnings,
+            f"{path}: primitive {name!r} has mode {mode} (not triangles); {FALLBACKS['non-triangle primitive']}",
+        )
+        return None
+    attrs = prim.attributes
+    if attrs.POSITION is None:
+        raise GltfError(f"{path}: primitive {name!r} has no POSITION attribute")
+    positions = reader.accessor(attrs.POSITION)[:, :3]
+    count = len(positions)
+    if prim.indices is not None:
+        indices = reader.accessor(prim.indices).astype(np.int64).reshape(-1)
+    else:
+        indices = np.arange(count)
+    if len(indices) % 3:
+        raise GltfError(f"{path}: primitive {name!r} has {len(indices)} indices (not a multiple of 3)")
+    if len(indices) and (indices.min() < 0 or indices.max() >= count):
+        raise GltfError(f"{path}: primitive {name!r} has indices outside its {count} vertices")
+    tris = indices.reshape(-1, 3)
+    if not np.all(np.isfinite(positions)):
+        raise GltfError(f"{path}: primitive {name!r} has NaN/Inf vertex positions")
+    world_pos = positions @ world[:3, :3].T + world[:3, 3]
+    area = np.linalg.norm(
+        np.cross(
+            world_pos[tris[:, 1]] - world_pos[tris[:, 0]],
+            world_pos[tris[:, 2]] - world_pos[tris[:, 0]],
+        ),
+        axis=1,
+    )
+    degenerate = area <= 1e-12 * max(float(np.max(area)) if len(area) else 0.0, 1e-30)
+    if np.any(degenerate):
+        _warn(
+            scene_warnings,
+            f"{path}: primitive {name!r}: {int(degenerate.sum())} degenerate triangles; "
+            + FALLBACKS["degenerate triangles"],
+        )
+        tris = tris[~degenerate]
+    if len(tris) == 0:
+        _warn(scene_warnings, f"{path}: primitive {name!r} has no usable triangles; skipped")
+        return None
+    normal_matrix = np.linalg.inv(world[:3, :3]).T
+    flip = np.linalg.det(world[:3, :3]) < 0
+    if flip:  # mirrored transform: keep counter-clockwise front faces
+        tris = tris[:, ::-1]
+    uv0 = reader.accessor(attrs.TEXCOORD_0)[:, :2] if attrs.TEXCOORD_0 is not None else np.zeros((count, 2))
+    uv1 = reader.accessor(attrs.TEXCOORD_1)[:, :2] if attrs.TEXCOORD_1 is not None else None
+    tri32 = tris.astype(np.uint32)
+    if attrs.NORMAL is not None:
+        normals = reader.accessor(attrs.NORMAL)[:, :3] @ normal_matrix.T
+        lengths = np.linalg.norm(normals, axis=1, keepdims=True)
+        bad = ~np.isfinite(lengths[:, 0]) | (lengths[:, 0] < 1e-12)
+        normals = np.where(bad[:, None], 0.0, normals / np.where(bad, 1.0, lengths[:, 0])[:, None])
+        if np.any(bad):
+            generated = vertex_normals(world_pos.astype(np.float32), tri32)
+            normals[bad] = generated[bad]
+            _warn(
+                scene_warnings,
+                f"{path}: primitive {name!r}: {int(bad.sum())} zero/NaN normals replaced by generated ones",
+            )
+    else:
+        normals = vertex_normals(world_pos.astype(np.float32), tri32)
+    if attrs.TANGENT is not None:
+        t = reader.accessor(attrs.TANGENT)
+        tangents = np.concatenate([t[:, :3] @ world[:3, :3].T, t[:, 3:4]], axis=1)
+        if not np.all(np.isfinite(tangents)):
+            tangents = vertex_tangents(world_pos, normals, uv0, tri32)
+    else:
+        tangents = vertex_tangents(world_pos, normals, uv0, tri32)
+    if not np.all(np.isfinite(uv0)):
+        raise GltfError(f"{path}: primitive {name!r} has NaN/Inf TEXCOORD_0")
+    mesh = Mesh(
+        world_pos.astype(np.float32),
+        normals.astype(np.float32),
+        tangents.astype(np.float32),
+        uv0.astype(np.float32),
+        tri32,
+        name,
+    )
+    material = -1 if prim.material is None else int(prim.material)
+    return SceneObject(name, mesh, material, None if uv1 is None else uv1.astype(np.float32))

@@ -1,0 +1,24 @@
+#version 450 core
+// World-space scene geometry (transforms applied at load time).
+in vec3 in_position;
+in vec3 in_normal;
+in vec4 in_tangent;
+in vec2 in_uv0;
+in vec2 in_uv1;
+
+uniform mat4 u_view_projection;
+
+out vec3 v_position;
+out vec3 v_normal;
+out vec4 v_tangent;
+out vec2 v_uv0;
+out vec2 v_uv1;
+
+void main() {
+    v_position = in_position;
+    v_normal = in_normal;
+    v_tangent = in_tangent;
+    v_uv0 = in_uv0;
+    v_uv1 = in_uv1;
+    gl_Position = u_view_projection * vec4(in_position, 1.0);
+}

@@ -1,0 +1,169 @@
+"""What the preview and scene renderers share: method parsing, the Sobol table, float render
+targets with a G-buffer, material/cube uniforms and the environment background."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import moderngl
+import numpy as np
+from scipy.stats import qmc
+
+from .cubemap import RadianceCube
+from .material_gpu import MAX_LOBES, MAX_PATTERN, PackedMaterial, pack_patterns
+from .shaders import ProgramCache
+
+SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
+SOBOL_SEED = 20100501
+REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
+DEFAULT_FIS_LOD_BIAS = 1.0  # Colbert & Krivanek's +1; measured in bench/ (issue 7)
+DEFAULT_LOBE_LOD_BIAS = 0.0
+
+_METHOD = re.compile(r"^(lobe|fis|mc)-(\d+)$|^(reference)$")
+
+
+@dataclass(frozen=True)
+class Method:
+    kind: str  # 'lobe', 'fis', 'mc', 'reference'
+    samples: int  # N per lobe (reference: per pass)
+
+    @classmethod
+    def parse(cls, text: str) -> Method:
+        m = _METHOD.match(text.strip())
+        if not m:
+            raise ValueError(f"unknown method {text!r}; use lobe-N, fis-N, mc-N or reference")
+        if m.group(3):
+            return cls("reference", REFERENCE_BATCH)
+        n = int(m.group(2))
+        limit = MAX_PATTERN if m.group(1) == "lobe" else 4096
+        if not 1 <= n <= limit:
+            raise ValueError(f"{text}: N must be in [1, {limit}]")
+        return cls(m.group(1), n)
+
+    def __str__(self) -> str:
+        return "reference" if self.kind == "reference" else f"{self.kind}-{self.samples}"
+
+    def defines(self) -> dict:
+        return {
+            "MAX_LOBES": MAX_LOBES,
+            "MAX_PATTERN": MAX_PATTERN,
+            "METHOD_LOBE": self.kind == "lobe",
+            "METHOD_FIS": self.kind == "fis",
+            "METHOD_MC": self.kind in ("mc", "reference"),
+            "ENV_SAMPLING": self.kind == "reference",
+        }
+
+    def default_lod_bias(self) -> float:
+        return DEFAULT_FIS_LOD_BIAS if self.kind == "fis" else DEFAULT_LOBE_LOD_BIAS
+
+    def passes(self, spp: int) -> int:
+        return max(1, int(np.ceil(spp / self.samples))) if self.kind == "reference" else 1
+
+
+def sobol_points(count: int = SOBOL_SIDE * SOBOL_SIDE, seed: int = SOBOL_SEED) -> np.ndarray:
+    """Owen-scrambled 4D Sobol points (scipy's generator), fixed seed: a frame renders the same
+    image every time. Dimensions 0-1 drive BSDF sampling, 2-3 environment sampling."""
+    return qmc.Sobol(d=4, scramble=True, seed=seed).random(count).astype(np.float32)
+
+
+@dataclass
+class RenderResult:
+    radiance: np.ndarray  # (H, W, 3) linear
+    position: np.ndarray  # (H, W, 3) world
+    normal: np.ndarray  # (H, W, 3) shading normal used
+    tangent: np.ndarray  # (H, W, 3)
+    mask: np.ndarray  # (H, W) object pixels
+    invalid: np.ndarray  # (H, W) pixels whose shading produced NaN/Inf (written as 0)
+    timings: dict = field(default_factory=dict)
+    samples_per_pixel: int = 0
+
+
+def set_uniform(program, name: str, value) -> None:
+    if name in program:
+        program[name].value = value
+
+
+class RendererBase:
+    """Float RGBA targets (radiance, position, normal, tangent) + depth, the Sobol table."""
+
+    def __init__(self, ctx: moderngl.Context, size):
+        self.ctx = ctx
+        self.programs = ProgramCache(ctx)
+        sobol = sobol_points()
+        self.sobol = ctx.texture((SOBOL_SIDE, SOBOL_SIDE), 4, sobol.tobytes(), dtype="f4")
+        self.sobol.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.sobol_count = len(sobol)
+        self._vaos: dict = {}
+        self.targets: list = []
+        self.resize(size)
+
+    def resize(self, size):
+        for t in self.targets:
+            t.release()
+        self.size = (int(size[0]), int(size[1]))
+        self.targets = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(4)]
+        self.depth = self.ctx.depth_renderbuffer(self.size)
+        self.fbo = self.ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
+
+    def read(self, attachment: int, fbo=None, size=None) -> np.ndarray:
+        """Row 0 at the top (OpenGL rows start at the bottom)."""
+        fbo = fbo or self.fbo
+        width, height = size or self.size
+        data = fbo.read(components=4, attachment=attachment, dtype="f4")
+        return np.frombuffer(data, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
+
+    def set_material(
+        self, program, material: PackedMaterial, method: Method, lod_bias: float | None, seed: int
+    ) -> None:
+        set_uniform(program, "u_lobe_count", material.lobe_count)
+        if "u_lobes" in program:
+            program["u_lobes"].write(material.lobes.tobytes())
+        if method.kind == "lobe" and "u_pattern" in program:
+            program["u_pattern"].write(pack_patterns(material, method.samples).tobytes())
+        set_uniform(program, "u_kd", tuple(float(x) for x in material.kd))
+        set_uniform(program, "u_gltf_diffuse", 1.0 if material.gltf_diffuse else 0.0)
+        set_uniform(program, "u_samples", method.samples)
+        set_uniform(
+            program,
+            "u_lod_bias",
+            float(method.default_lod_bias() if lod_bias is None else lod_bias),
+        )
+        set_uniform(program, "u_sobol_count", self.sobol_count)
+        set_uniform(program, "u_seed", int(seed))
+
+    def bind_cube(self, program, cube: RadianceCube, method: Method) -> None:
+        """Texture units: 0 radiance, 2 Sobol, 3-4 importance (reference only)."""
+        cube.radiance.use(0)
+        self.sobol.use(2)
+        set_uniform(program, "u_radiance", 0)
+        set_uniform(program, "u_sobol", 2)
+        set_uniform(program, "u_face_size", float(cube.face_size))
+        if method.kind == "reference":
+            cube.env_cdf.use(3)
+            cube.env_pdf.use(4)
+            set_uniform(program, "u_env_cdf", 3)
+            set_uniform(program, "u_env_pdf", 4)
+            set_uniform(program, "u_env_texels", int(cube.importance.probabilities.size))
+            set_uniform(program, "u_env_size", int(cube.importance.size))
+
+    def draw_background(self, cube: RadianceCube, view_proj: np.ndarray) -> None:
+        """Environment behind everything (depth test off, so it writes no depth)."""
+        program = self.programs.program("background.vert", "background.frag", {})
+        key = ("background", id(program))
+        if key not in self._vaos:
+            self._vaos[key] = self.ctx.vertex_array(program, [])
+        program["u_inverse_view_projection"].value = tuple(np.linalg.inv(view_proj).T.astype("f4").ravel())
+        cube.radiance.use(0)
+        program["u_radiance"].value = 0
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self._vaos[key].render(moderngl.TRIANGLES, vertices=3)
+
+    def release(self):
+        for vao in self._vaos.values():
+            vao.release()
+        for t in self.targets:
+            t.release()
+        self.depth.release()
+        self.fbo.release()
+        self.sobol.release()

@@ -1,0 +1,336 @@
+"""Light-mapped scene renderer (thesis 4.3-4.4): diffuse from lightmaps, view-dependent lobes
+from a cube map per object.
+
+Only what the scene analysis asks for is built: a cube map for each object with specular or
+transmission lobes (rendered from the centre of its bounding box, without the object itself,
+light-mapped diffuse + emission + the environment through openings), and the specular shader
+variant only if some object needs it. Cube maps are cached on disk keyed by a hash of the scene
+content, the environment, the face size and the renderer version.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from lobeview.materials.spec import build_bsdf
+from lobeview.scenes.analysis import analyse
+from lobeview.scenes.envmap import EnvironmentMap
+from lobeview.scenes.scene import Scene
+
+from .camera import Camera, perspective
+from .cubemap import RadianceCube, equirect_to_cube_faces
+from .material_gpu import MAX_LOBES, PackedMaterial, pack_material
+from .render_base import Method, RendererBase, RenderResult, set_uniform
+
+CUBE_CACHE_VERSION = 2
+CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
+FALLBACK_IRRADIANCE = 1.0  # E for objects whose lightmap is missing (warned), i.e. kd/pi shading
+
+
+def face_view(face: int, eye) -> np.ndarray:
+    """View matrix whose image plane maps (x, y) in NDC to (sc, tc) of the cube face, so the
+    framebuffer (row 0 = t = 0) is the face's texel layout (scenes/cube_layout.py)."""
+    from lobeview.scenes.cube_layout import face_point_directions
+
+    zero = np.zeros(1)
+    f = face_point_directions(face, zero, zero)[0]
+    r = face_point_directions(face, np.ones(1), zero)[0] * np.sqrt(2) - f  # d/dsc
+    u = face_point_directions(face, zero, np.ones(1))[0] * np.sqrt(2) - f  # d/dtc
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = r, u, -f
+    view[:3, 3] = -view[:3, :3] @ np.asarray(eye, dtype=np.float64)
+    return view
+
+
+class _GpuObject:
+    def __init__(self, ctx, obj, material: PackedMaterial, index: int):
+        m = obj.mesh
+        uv1 = obj.uv1 if obj.uv1 is not None else np.zeros((len(m.positions), 2), np.float32)
+        data = np.concatenate([m.positions, m.normals, m.tangents, m.uvs, uv1], axis=1).astype(np.float32)
+        self.vbo = ctx.buffer(data.tobytes())
+        self.ibo = ctx.buffer(np.ascontiguousarray(m.indices, dtype=np.uint32).tobytes())
+        self.material = material
+        self.index = index
+        self.name = obj.name
+        lo, hi = m.positions.min(axis=0), m.positions.max(axis=0)
+        self.centre = (lo + hi) / 2.0
+        self.cube: RadianceCube | None = None
+
+    def release(self):
+        self.vbo.release()
+        self.ibo.release()
+        if self.cube is not None:
+            self.cube.release()
+
+
+class SceneRenderer(RendererBase):
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        scene: Scene,
+        environment: EnvironmentMap,
+        size=(640, 400),
+        cube_face_size: int = 256,
+        cache_dir: Path | None = None,
+        progress: bool = True,
+        cube_bounces: int = 2,
+    ):
+        super().__init__(ctx, size)
+        self.scene = scene
+        self.analysis = analyse(scene)
+        self.progress = progress
+        self.timings: dict = {}
+        t0 = time.perf_counter()
+        self.environment = RadianceCube(ctx, equirect_to_cube_faces(environment, 256))
+        self.environment_name = environment.name
+        self._env_hash = hashlib.sha256(environment.image.tobytes()).hexdigest()[:16]
+        self.textures: dict[int, moderngl.Texture] = {}
+        # Every sampler uniform gets its own unit and a texture, even when unused: two samplers
+        # of different types on one unit make the draw call fail (GL_INVALID_OPERATION).
+        self._white = ctx.texture((1, 1), 3, np.ones(3, np.float32).tobytes(), dtype="f4")
+        self.objects = []
+        for i, obj in enumerate(scene.objects):
+            material = pack_material(build_bsdf(scene.materials[obj.material].desc))
+            self.objects.append(_GpuObject(ctx, obj, material, i))
+        for needs in self.analysis.objects:
+            if not needs.has_lightmap:
+                warnings.warn(
+                    f"object {needs.name!r} has no usable lightmap: shaded with a constant "
+                    f"irradiance of {FALLBACK_IRRADIANCE} (kd / pi)",
+                    stacklevel=2,
+                )
+        self.timings["upload"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.cube_face_size = cube_face_size
+        self.cube_bounces = max(1, int(cube_bounces))
+        self._build_cube_maps(cache_dir)
+        self.timings["cube maps"] = time.perf_counter() - t0
+
+    # -- resources -------------------------------------------------------------------------
+    def _texture(self, image: np.ndarray) -> moderngl.Texture:
+        key = id(image)
+        if key not in self.textures:
+            img = np.ascontiguousarray(image, dtype=np.float32)
+            tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype="f4")
+            tex.build_mipmaps()
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = True
+            self.textures[key] = tex
+        return self.textures[key]
+
+    def _scene_hash(self) -> str:
+        h = hashlib.sha256()
+        h.update(f"v{CUBE_CACHE_VERSION} face{self.cube_face_size} b{self.cube_bounces} env{self._env_hash}".encode())
+        for obj in self.scene.objects:
+            h.update(obj.mesh.positions.tobytes())
+            h.update(obj.mesh.indices.tobytes())
+            if obj.uv1 is not None:
+                h.update(obj.uv1.tobytes())
+        for mat in self.scene.materials:
+            h.update(repr(sorted(mat.desc.items())).encode())
+            h.update(np.asarray(mat.emission, np.float64).tobytes())
+            if mat.lightmap is not None:
+                h.update(hashlib.sha256(mat.lightmap.image.tobytes()).digest())
+            if mat.base_color_texture is not None:
+                h.update(hashlib.sha256(mat.base_color_texture.tobytes()).digest())
+        return h.hexdigest()[:20]
+
+    def _build_cube_maps(self, cache_dir: Path | None):
+        """Cube maps of every object that needs one. Bounce 1 sees the light-mapped diffuse scene
+        (the thesis' cube maps, where metals are black); each further bounce re-renders them with
+        the other objects' lobes shaded from the previous bounce's cube maps, so a chrome sphere
+        shows up in the gold torus and a glass pane is see-through."""
+        wanted = self.analysis.cube_mapped
+        if not wanted:
+            return
+        key = self._scene_hash()
+        cache_file = Path(cache_dir) / f"cubes-{key}.npz" if cache_dir else None
+        if cache_file is not None and cache_file.exists():
+            with np.load(cache_file) as data:
+                if {f"cube_{i}" for i in wanted} <= set(data.files):
+                    for i in wanted:
+                        self.objects[i].cube = RadianceCube(self.ctx, data[f"cube_{i}"].astype(np.float32))
+                    return
+        faces = {}
+        for bounce in range(self.cube_bounces):
+            t0 = time.perf_counter()
+            for i in wanted:
+                faces[i] = self.render_cube_faces(self.objects[i].centre, exclude=i, specular=bounce > 0)
+            for i in wanted:
+                if self.objects[i].cube is not None:
+                    self.objects[i].cube.release()
+                self.objects[i].cube = RadianceCube(self.ctx, faces[i])
+            if self.progress:
+                print(
+                    f"[cube] bounce {bounce + 1}: {len(wanted)} cube maps of {self.cube_face_size}^2 x 6"
+                    f" in {time.perf_counter() - t0:.2f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        if cache_file is not None:
+            cache_file.parent.mkdir(parents=True, exist_ok=True)
+            np.savez_compressed(cache_file, **{f"cube_{i}": f.astype(np.float16) for i, f in faces.items()})
+
+    def render_cube_faces(self, eye, exclude: int | None = None, specular: bool = False) -> np.ndarray:
+        """Six faces of the light-mapped scene seen from ``eye`` (float32, (6, S, S, 3)); with
+        ``specular``, objects that have cube maps are shaded with their lobes too."""
+        size = self.cube_face_size
+        color = self.ctx.texture((size, size), 4, dtype="f4")
+        extra = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(3)]
+        depth = self.ctx.depth_renderbuffer((size, size))
+        fbo = self.ctx.framebuffer(color_attachments=[color, *extra], depth_attachment=depth)
+        extent = float(np.max(self.scene.bounds[1] - self.scene.bounds[0]))
+        proj = perspective(90.0, 1.0, 1e-3 * extent, 4.0 * extent)
+        faces = np.empty((6, size, size, 3), dtype=np.float32)
+        try:
+            for face in range(6):
+                view_proj = proj @ face_view(face, eye)
+                fbo.use()
+                self.ctx.viewport = (0, 0, size, size)
+                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                self.draw_background(self.environment, view_proj)
+                self._draw_objects(view_proj, eye, CUBE_BOUNCE_METHOD, specular=specular, exclude=exclude)
+                self.ctx.finish()
+                data = np.frombuffer(fbo.read(components=4, attachment=0, dtype="f4"), np.float32)
+                faces[face] = data.reshape(size, size, 4)[..., :3]  # row 0 = t = 0, no flip
+        finally:
+            fbo.release()
+            depth.release()
+            color.release()
+            for t in extra:
+                t.release()
+            self.ctx.viewport = (0, 0, *self.size)
+        return faces
+
+    # -- drawing -----------------------------------------------------------------------------
+    def _program(self, method: Method, specular: bool):
+        defines = (
+            {**method.defines(), "SPECULAR": specular}
+            if specular
+            else {"MAX_LOBES": MAX_LOBES, "MAX_PATTERN": 32, "METHOD_LOBE": True}
+        )
+        return self.programs.program("scene.vert", "scene.frag", defines)
+
+    def _vao(self, program, obj: _GpuObject):
+        key = (id(program), obj.index)
+        if key not in self._vaos:
+            self._vaos[key] = self.ctx.vertex_array(
+                program,
+                [
+                    (
+                        obj.vbo,
+                        "3f 3f 4f 2f 2f",
+                        "in_position",
+                        "in_normal",
+                        "in_tangent",
+                        "in_uv0",
+                        "in_uv1",
+                    )
+                ],
+                obj.ibo,
+            )
+        return self._vaos[key]
+
+    def _draw_objects(
+        self,
+        view_proj,
+        eye,
+        method: Method,
+        specular: bool,
+        exclude=None,
+        lod_bias=None,
+        sample_offset=0,
+        seed=0,
+    ):
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        for obj in self.objects:
+            if obj.index == exclude or (not specular and self.analysis.objects[obj.index].transmission_lobes):
+                # Thin transmissive panes are see-through in the diffuse pass that fills cube
+                # maps (as in the baker): a black pane would hide what lies behind it.
+                continue
+            use_specular = specular and obj.cube is not None
+            program = self._program(method, use_specular)
+            mat = self.scene.materials[self.scene.objects[obj.index].material]
+            set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
+            set_uniform(program, "u_camera_position", tuple(float(x) for x in eye))
+            self.set_material(program, obj.material, method, lod_bias, seed)
+            set_uniform(program, "u_sample_offset", int(sample_offset))
+            set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
+            lightmap = mat.lightmap
+            if lightmap is not None and (lightmap.tex_coord != 1 or self.scene.objects[obj.index].uv1 is not None):
+                self._texture(lightmap.image).use(5)
+                set_uniform(program, "u_lightmap", 5)
+                set_uniform(program, "u_lightmap_texcoord", int(lightmap.tex_coord))
+                set_uniform(program, "u_lightmap_intensity", float(lightmap.intensity))
+            else:
+                self._white.use(5)
+                set_uniform(program, "u_lightmap", 5)
+                set_uniform(program, "u_lightmap_texcoord", -1)
+                set_uniform(program, "u_fallback_irradiance", (FALLBACK_IRRADIANCE,) * 3)
+            set_uniform(program, "u_base_color", 6)
+            if mat.base_color_texture is not None:
+                self._texture(mat.base_color_texture).use(6)
+                set_uniform(program, "u_has_base_color", 1)
+            else:
+                self._white.use(6)
+                set_uniform(program, "u_has_base_color", 0)
+            if use_specular:
+                self.bind_cube(program, obj.cube, method)
+            self._vao(program, obj).render(moderngl.TRIANGLES)
+
+    def render(
+        self,
+        camera: Camera,
+        method: Method | str,
+        spp: int = 1024,
+        lod_bias: float | None = None,
+        seed: int = 0,
+    ) -> RenderResult:
+        method = Method.parse(method) if isinstance(method, str) else method
+        width, height = self.size
+        view_proj = camera.view_projection(width / height)
+        passes = method.passes(spp)
+        accumulated = np.zeros((height, width, 3))
+        invalid = np.zeros((height, width), dtype=bool)
+        t_shade = 0.0
+        g_buffers = None
+        for p in range(passes):
+            t0 = time.perf_counter()
+            self.fbo.use()
+            self.ctx.viewport = (0, 0, width, height)
+            self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.draw_background(self.environment, view_proj)
+            self._draw_objects(view_proj, camera.position, method, True, None, lod_bias, p * method.samples, seed)
+            self.ctx.finish()
+            t_shade += time.perf_counter() - t0
+            radiance = self.read(0)
+            accumulated += radiance[..., :3]
+            invalid |= radiance[..., 3] < 0.0
+            if g_buffers is None:
+                g_buffers = [self.read(i) for i in (1, 2, 3)]
+        return RenderResult(
+            radiance=(accumulated / passes).astype(np.float32),
+            position=g_buffers[0][..., :3],
+            normal=g_buffers[1][..., :3],
+            tangent=g_buffers[2][..., :3],
+            mask=g_buffers[0][..., 3] > 0.5,
+            invalid=invalid,
+            timings={**self.timings, "shade": t_shade},
+            samples_per_pixel=passes * method.samples,
+        )
+
+    def release(self):
+        super().release()
+        for obj in self.objects:
+            obj.release()
+        for tex in self.textures.values():
+            tex.release()
+        self._white.release()
+        self.environment.release()
