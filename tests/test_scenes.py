@@ -331,3 +331,20 @@ def test_demo_scene_builds_renders_and_is_cached(ctx, tmp_path):
     assert result.radiance.mean() > 0.05
     assert list((tmp_path / "cubes").glob("cubes-*.npz"))
     renderer.release()
+
+
+def test_bake_command_unwraps_and_writes_a_lightmapped_scene(tmp_path, capsys):
+    from lobeview.app.cli import main
+
+    scene = _small_scene()
+    for obj in scene.objects:
+        obj.uv1 = None  # force unwrapping
+    source = write_glb(scene, tmp_path / "plain.glb")
+    out = tmp_path / "baked.glb"
+    assert main(["bake", str(source), "--resolution", "64", "--rays", "8", "--bounces", "1", "--out", str(out)]) == 0
+    assert "unwrapping 2 objects" in capsys.readouterr().out
+    baked = load_gltf(out)
+    assert all(o.uv1 is not None for o in baked.objects)
+    assert all(m.lightmap is not None for m in baked.materials[:2])
+    image = baked.materials[0].lightmap.image
+    assert np.all(np.isfinite(image)) and image.max() > 0

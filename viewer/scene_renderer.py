@@ -29,7 +29,7 @@ from .cubemap import RadianceCube, equirect_to_cube_faces
 from .material_gpu import MAX_LOBES, PackedMaterial, pack_material
 from .render_base import Method, RendererBase, RenderResult, set_uniform
 
-CUBE_CACHE_VERSION = 2
+CUBE_CACHE_VERSION = 3
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
 FALLBACK_IRRADIANCE = 1.0  # E for objects whose lightmap is missing (warned), i.e. kd/pi shading
 
@@ -176,7 +176,8 @@ class SceneRenderer(RendererBase):
                 )
         if cache_file is not None:
             cache_file.parent.mkdir(parents=True, exist_ok=True)
-            np.savez_compressed(cache_file, **{f"cube_{i}": f.astype(np.float16) for i, f in faces.items()})
+            # float32, not float16: a sun seen through a window exceeds half precision's 65504.
+            np.savez_compressed(cache_file, **{f"cube_{i}": f.astype(np.float32) for i, f in faces.items()})
 
     def render_cube_faces(self, eye, exclude: int | None = None, specular: bool = False) -> np.ndarray:
         """Six faces of the light-mapped scene seen from ``eye`` (float32, (6, S, S, 3)); with
