@@ -174,6 +174,15 @@ def run(args) -> int:
     return _run_scene(args, out, method, size, stages, t0, create_headless_context, renderer_description)
 
 
+def _finish(result, out: Path, args, stages: dict) -> None:
+    stages.update(result.timings)
+    if result.invalid.any():
+        print(f"warning: {int(result.invalid.sum())} pixels produced NaN/Inf and were set to 0", file=sys.stderr)
+    t0 = time.perf_counter()
+    _write(out, result.radiance, args)
+    stages["write"] = time.perf_counter() - t0
+
+
 def _report(
     what: str,
     method: Method,
@@ -216,15 +225,7 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
         lod_bias=args.lod_bias,
         background=not args.no_background,
     )
-    stages.update(result.timings)
-    if result.invalid.any():
-        print(
-            f"warning: {int(result.invalid.sum())} pixels produced NaN/Inf and were set to 0",
-            file=sys.stderr,
-        )
-    t0 = time.perf_counter()
-    _write(out, result.radiance, args)
-    stages["write"] = time.perf_counter() - t0
+    _finish(result, out, args, stages)
     _report(
         f"{args.object} with {args.material} under {env.name}",
         method,
@@ -261,15 +262,7 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
     renderer = SceneRenderer(ctx, scene, env, size=size, cube_face_size=args.face_size, cache_dir=cache / "cubes")
     print(renderer.analysis.report())
     result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias)
-    stages.update(result.timings)
-    if result.invalid.any():
-        print(
-            f"warning: {int(result.invalid.sum())} pixels produced NaN/Inf and were set to 0",
-            file=sys.stderr,
-        )
-    t0 = time.perf_counter()
-    _write(out, result.radiance, args)
-    stages["write"] = time.perf_counter() - t0
+    _finish(result, out, args, stages)
     what = f"{'the demo scene' if args.scene is None else path.name} under {env.name}"
     _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe)
     renderer.release()

@@ -64,7 +64,18 @@ def _valid_pair(wi: np.ndarray, wo: np.ndarray, transmission: bool) -> np.ndarra
     return above_o & (wi[..., 2] > COS_EPSILON)
 
 
-class Lambert(Component):
+class CosineSampled(Component):
+    """A reflection term importance-sampled with the cosine-weighted hemisphere (pdf cos/pi)."""
+
+    def pdf(self, wi, wo):
+        valid = _valid_pair(wi, wo, False)
+        return np.where(valid, wi[..., 2] / np.pi, 0.0)
+
+    def sample_wi(self, u1, u2, wo):
+        return cosine_hemisphere(u1, u2)
+
+
+class Lambert(CosineSampled):
     """kd / pi, sampled by cosine-weighted hemisphere sampling."""
 
     name = "diffuse"
@@ -79,13 +90,6 @@ class Lambert(Component):
     def eval(self, wi, wo):
         valid = _valid_pair(wi, wo, False)
         return np.where(valid[..., None], self.kd / np.pi, 0.0)
-
-    def pdf(self, wi, wo):
-        valid = _valid_pair(wi, wo, False)
-        return np.where(valid, wi[..., 2] / np.pi, 0.0)
-
-    def sample_wi(self, u1, u2, wo):
-        return cosine_hemisphere(u1, u2)
 
 
 class HalfVectorLobe(Component):

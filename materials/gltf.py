@@ -19,11 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .bsdf import BSDF, Component, _valid_pair
+from .bsdf import BSDF, CosineSampled, _valid_pair
 from .conductor import MicrofacetReflection
 from .fresnel import Fresnel, schlick
 from .microfacet import ALPHA_MIN, MicrofacetDistribution
-from .vec import broadcast_rgb, cosine_hemisphere, dot, normalize
+from .vec import broadcast_rgb, dot, normalize
 
 DIELECTRIC_F0 = 0.04
 
@@ -37,7 +37,7 @@ def _dielectric_fresnel(wo_h: np.ndarray) -> np.ndarray:
     return schlick(np.abs(wo_h), np.full(3, DIELECTRIC_F0))
 
 
-class GltfDiffuse(Component):
+class GltfDiffuse(CosineSampled):
     name = "glTF diffuse"
 
     def __init__(self, base_color: np.ndarray, metallic: float):
@@ -53,13 +53,6 @@ class GltfDiffuse(Component):
         h = normalize(wi + wo)
         f = (1.0 - self.metallic) * (1.0 - _dielectric_fresnel(dot(wo, h))) * self.base_color / np.pi
         return np.where(valid[..., None], f, 0.0)
-
-    def pdf(self, wi, wo):
-        valid = _valid_pair(wi, wo, False)
-        return np.where(valid, wi[..., 2] / np.pi, 0.0)
-
-    def sample_wi(self, u1, u2, wo):
-        return cosine_hemisphere(u1, u2)
 
 
 class GltfSpecular(MicrofacetReflection):
