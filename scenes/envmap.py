@@ -44,15 +44,23 @@ class EnvironmentMap:
     image: np.ndarray
     name: str = "environment"
 
+    def __post_init__(self):
+        # Every way in (files, functions, arrays) is sanitised: NaN/Inf and negative radiance
+        # become 0 with a warning, so no shader ever sees them.
+        image = np.asarray(self.image, dtype=np.float32)
+        if image.ndim != 3 or image.shape[2] != 3:
+            raise ValueError(f"{self.name}: an environment map must be (H, W, 3), got {image.shape}")
+        self.image, _ = sanitize_radiance(image, self.name)
+
     @classmethod
     def load(cls, path: str | Path) -> EnvironmentMap:
         path = Path(path)
-        image, _ = sanitize_radiance(read_hdr_image(path), str(path))
+        image = read_hdr_image(path)
         if image.shape[1] != 2 * image.shape[0]:
             raise ValueError(
                 f"{path}: an equirectangular map must be twice as wide as high, got {image.shape[1]}x{image.shape[0]}"
             )
-        return cls(image, path.name)
+        return cls(image, str(path))
 
     @classmethod
     def from_function(cls, fn, height: int = 256, name: str = "procedural") -> EnvironmentMap:

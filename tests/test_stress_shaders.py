@@ -1,0 +1,228 @@
+"""Numerical stress through the real shaders (a CI-sized subset of the stability suite):
+extreme roughness, anisotropy, alpha and r0, grazing and back-facing views, radiance from 1e-6
+to 1e6, degenerate tangents and normals, and bad environment texels. Nothing may come out NaN,
+Inf or negative; the white-furnace bound, the mirror limit and monotonicity in roughness hold."""
+
+from __future__ import annotations
+
+import itertools
+import warnings
+
+import numpy as np
+import pytest
+
+from lobeview.materials.bsdf import BSDF
+from lobeview.materials.patterns import specular_lobes
+from lobeview.materials.spec import build_bsdf, validate
+from lobeview.scenes.envmap import EnvironmentMap
+from lobeview.scenes.meshes import Mesh, uv_sphere
+from lobeview.viewer.camera import Camera
+from lobeview.viewer.context import create_headless_context
+from lobeview.viewer.cubemap import CubeLookup
+from lobeview.viewer.preview import PreviewRenderer
+
+SIZE = (40, 40)
+CAMERA = Camera(position=(0.0, 0.3, 2.6), fov_y=50.0)
+METHODS = ("lobe-7", "fis-16", "mc-8", "reference")
+
+
+def thesis(m, ratio=1.0, alpha=0.0, r0=0.5, transmission=False):
+    lobe = {"mx": max(m / ratio, 1e-4), "my": m, "r0": r0, "alpha": alpha}
+    desc = {"model": "thesis", "kd": 0.0, "lobes": [{"ks": 1.0, **lobe}]}
+    if transmission:
+        desc["transmission_lobes"] = [{"kt": 1.0, **lobe}]
+    return build_bsdf(validate(desc))
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    context = create_headless_context()
+    yield context
+    context.release()
+
+
+@pytest.fixture(scope="module")
+def furnace(ctx):
+    env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=16, name="white")
+    renderer = PreviewRenderer(ctx, env, uv_sphere(rings=32, segments=64), size=SIZE, face_size=16)
+    yield renderer
+    renderer.release()
+
+
+def _clean(result):
+    r = result.radiance
+    return not result.invalid.any() and np.all(np.isfinite(r)) and r.min() >= 0.0
+
+
+EXTREMES = [
+    dict(m=1e-4),
+    dict(m=1e-4, ratio=1.0, alpha=1.0),
+    dict(m=1.0),
+    dict(m=1.0, alpha=1.0, r0=1.0),
+    dict(m=0.5, ratio=1000.0),
+    dict(m=0.3, r0=0.0),
+    dict(m=0.05, transmission=True),
+    dict(m=1.0, alpha=0.5, transmission=True),
+]
+
+
+@pytest.mark.parametrize("params", EXTREMES, ids=[str(p) for p in EXTREMES])
+@pytest.mark.parametrize("method", METHODS)
+def test_extreme_parameters_stay_finite_and_obey_the_white_furnace(furnace, params, method):
+    bsdf = thesis(**params)
+    result = furnace.render(CAMERA, bsdf, method, spp=512, background=False)
+    assert _clean(result), f"{params} {method}: NaN/Inf/negative pixels"
+    if method.startswith("lobe") and params["m"] > LOBE_METHOD_MAX_ROUGHNESS:
+        return  # known defect, pinned by test_lobe_method_overshoots_the_furnace_for_very_rough_lobes
+    # White furnace: radiance 1 everywhere -> the directional albedo (numpy quadrature at the
+    # same view), within each method's stated tolerance: reference (512 MIS samples) 5 %;
+    # fis-16 is a fixed 16-point quadrature, 20 %; lobe-7 8 % (m <= 0.3); mc-8 is per-pixel
+    # noise, so its mean over the sampled pixels is held to 10 %.
+    spec = BSDF(specular_lobes(bsdf))
+    rng = np.random.default_rng(0)
+    pixels = np.argwhere(result.mask)
+    got, albedo = [], []
+    for y, x in pixels[rng.choice(len(pixels), size=20, replace=False)]:
+        n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
+        t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
+        t /= np.linalg.norm(t)
+        frame = np.stack([t, np.cross(n, t), n], axis=1)
+        wo = frame.T @ (np.asarray(CAMERA.position) - result.position[y, x])
+        wo /= np.linalg.norm(wo)
+        wo[2] = max(wo[2], 1e-4)
+        r, t_ = spec.albedo(wo / np.linalg.norm(wo), order=96)
+        got.append(result.radiance[y, x])
+        albedo.append(r + t_)
+    got, albedo = np.array(got), np.array(albedo)
+    tolerance = {"reference": 0.05, "fis-16": 0.20, "lobe-7": 0.08, "mc-8": 0.10}[method]
+    if method == "mc-8":
+        assert got.mean() <= albedo.mean() * (1 + tolerance) + 0.02, (params, got.mean(), albedo.mean())
+    else:
+        assert np.all(got <= albedo * (1 + tolerance) + 0.02), (params, method, got[:, 0], albedo[:, 0])
+
+
+# The deterministic patterns cover the core of a lobe (theta_h up to 0.4 theta_thresh on the
+# ring); for very rough lobes much of the real lobe lies beyond it and below the horizon, and
+# Eq. 4.25 (a weighted mean of Monte Carlo weights over the valid samples) cannot see that loss.
+# The thesis uses the method for "specular to moderately glossy" materials; the bound is
+# asserted up to m = 0.2 and the defect beyond is pinned by a strict xfail below.
+LOBE_METHOD_MAX_ROUGHNESS = 0.2  # the thesis fitted lobes of m = 0.0046 to 0.25
+
+
+@pytest.mark.xfail(
+    strict=True, reason="lobe-N (Eq. 4.25) ignores the lobe mass its pattern does not cover; see issue notes"
+)
+def test_lobe_method_overshoots_the_furnace_for_very_rough_lobes(furnace):
+    bsdf = thesis(1.0)
+    result = furnace.render(CAMERA, bsdf, "lobe-7", background=False)
+    albedo_at_normal = BSDF(specular_lobes(bsdf)).albedo(np.array([0.0, 0.0, 1.0]), order=96)[0][0]
+    centre = result.radiance[SIZE[1] // 2 - 1 : SIZE[1] // 2 + 1, SIZE[0] // 2 - 1 : SIZE[0] // 2 + 1]
+    # Measured: ~0.37 against an albedo of ~0.16 (2.2x).
+    assert np.all(centre <= albedo_at_normal * 1.1)
+
+
+def test_huge_dynamic_range_environment(ctx):
+    """1e-6 background with a 1e6 'sun' (0.5 deg): finite everywhere, and the sun shows up."""
+    sun = np.array([0.3, 0.8, 0.52])
+    sun /= np.linalg.norm(sun)
+
+    def env_fn(d):
+        return np.where((d @ sun > np.cos(np.radians(0.5)))[..., None], 1e6, 1e-6) * np.ones(3)
+
+    renderer = PreviewRenderer(
+        ctx, EnvironmentMap.from_function(env_fn, height=512), uv_sphere(rings=32, segments=64), size=SIZE, face_size=64
+    )
+    for m, method in itertools.product((1e-4, 0.05, 0.6), METHODS):
+        result = renderer.render(CAMERA, thesis(m, alpha=0.5, r0=0.9), method, spp=128, background=False)
+        assert _clean(result), (m, method)
+    # The sun is visible in the rough sphere's reflection.
+    result = renderer.render(CAMERA, thesis(0.3, r0=0.9), "reference", spp=256, background=False)
+    assert result.radiance.max() > 1.0
+    renderer.release()
+
+
+def test_degenerate_normals_and_tangents_render_finite(ctx):
+    sphere = uv_sphere(rings=24, segments=48)
+    rng = np.random.default_rng(3)
+    normals = sphere.normals.copy()
+    tangents = sphere.tangents.copy()
+    normals[rng.random(len(normals)) < 0.2] = 0.0  # zero normals
+    normals[rng.random(len(normals)) < 0.1] = np.nan  # NaN normals
+    tangents[rng.random(len(tangents)) < 0.3, :3] = 0.0  # zero tangents
+    tangents[:, :3][rng.random(len(tangents)) < 0.3] = normals[rng.random(len(tangents)) < 2][:1]  # parallel to n
+    inward = Mesh(sphere.positions, -sphere.normals, sphere.tangents, sphere.uvs, sphere.indices)  # back-facing
+    broken = Mesh(sphere.positions, normals, tangents, sphere.uvs, sphere.indices)
+    env = EnvironmentMap.from_function(lambda d: 0.5 + 0.5 * np.abs(d), height=32)
+    for mesh in (broken, inward):
+        renderer = PreviewRenderer(ctx, env, mesh, size=SIZE, face_size=32)
+        for method in METHODS:
+            result = renderer.render(CAMERA, thesis(0.1, ratio=10.0, alpha=0.3), method, spp=64, background=False)
+            assert _clean(result), method
+            assert result.mask.mean() > 0.2
+        renderer.release()
+
+
+def test_nan_inf_negative_environment_texels_are_sanitised(ctx):
+    image = np.full((32, 64, 3), 0.5, np.float32)
+    image[4, 4] = np.nan
+    image[6, 9] = np.inf
+    image[10, 20] = -5.0
+    with pytest.warns(UserWarning, match="NaN/Inf"):
+        env = EnvironmentMap(image, "injected")
+    renderer = PreviewRenderer(ctx, env, uv_sphere(rings=24, segments=48), size=SIZE, face_size=16)
+    for method in METHODS:
+        result = renderer.render(CAMERA, thesis(0.2), method, spp=64)
+        assert _clean(result), method
+    renderer.release()
+
+
+def test_lobe_method_approaches_the_mirror_reflection(ctx):
+    """roughness -> 0: lobe-N's value tends to (albedo x) the radiance in the mirror direction."""
+
+    def env_fn(d):
+        return np.stack([1.0 + d[..., 0], 1.0 + 0.5 * d[..., 1], 1.0 + 0.5 * d[..., 2] ** 2], -1)
+
+    env = EnvironmentMap.from_function(env_fn, height=256)
+    renderer = PreviewRenderer(ctx, env, uv_sphere(rings=48, segments=96), size=SIZE, face_size=128)
+    lookup = CubeLookup(ctx, renderer.programs)
+    errors = []
+    for m in (0.1, 0.01, 1e-3, 1e-4):
+        bsdf = thesis(m, r0=1.0)
+        result = renderer.render(CAMERA, bsdf, "lobe-7", background=False)
+        y, x = SIZE[1] // 2, SIZE[0] // 2 + 5
+        n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
+        view = np.asarray(CAMERA.position) - result.position[y, x]
+        view /= np.linalg.norm(view)
+        mirror = 2 * (view @ n) * n - view
+        expected = lookup(renderer.cubes.radiance, mirror[None], 0.0)[0] * (view @ n)  # alpha=0: albedo ~ cos
+        errors.append(np.max(np.abs(result.radiance[y, x] - expected) / expected))
+    assert errors[-1] < 0.01, errors
+    assert errors[0] > errors[-1]
+    renderer.release()
+
+
+def test_peak_highlight_falls_monotonically_with_roughness(ctx):
+    """A single small light: the brightest pixel of the highlight gets dimmer as the lobe widens
+    (energy spreads), for the deterministic and the unbiased method alike."""
+    light = np.array([0.0, 0.3, 1.0])
+    light /= np.linalg.norm(light)
+
+    def env_fn(d):
+        return 0.01 + 200.0 * (d @ light > np.cos(np.radians(3)))[..., None] * np.ones(3)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        renderer = PreviewRenderer(
+            ctx,
+            EnvironmentMap.from_function(env_fn, height=256),
+            uv_sphere(rings=48, segments=96),
+            size=(64, 64),
+            face_size=128,
+        )
+    for method in ("lobe-11", "reference"):
+        peaks = []
+        for m in (0.02, 0.05, 0.1, 0.2, 0.4):
+            result = renderer.render(CAMERA, thesis(m, r0=1.0), method, spp=512, background=False)
+            peaks.append(float(result.radiance[result.mask].max()))
+        assert all(a > b for a, b in zip(peaks, peaks[1:], strict=False)), (method, peaks)
+    renderer.release()
