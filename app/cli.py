@@ -110,11 +110,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("material", help="preset name, JSON file or inline JSON object")
     p.add_argument("-o", "--output", default="lobe.png", help="output PNG (default: lobe.png)")
     p.set_defaults(func=cmd_material_plot)
-    from lobeview.app import bake, shot
+    from lobeview.app import bake, shot, view
 
     p = sub.add_parser("shot", help="render a headless screenshot of a scene or an object preview")
     shot.add_arguments(p)
     p.set_defaults(func=shot.run)
+    p = sub.add_parser("view", help="open the interactive walkthrough window")
+    view.add_arguments(p)
+    p.set_defaults(func=view.run)
     p = sub.add_parser("bake", help="bake lightmaps for a glTF scene")
     bake.add_arguments(p)
     p.set_defaults(func=bake.run)

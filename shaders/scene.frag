@@ -18,6 +18,7 @@ uniform vec3 u_fallback_irradiance;
 uniform sampler2D u_base_color;
 uniform int u_has_base_color;
 uniform vec3 u_emission;
+uniform float u_object_id;            // for picking: written + 1 into the normal buffer's w
 
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_position;
@@ -45,6 +46,6 @@ void main() {
     bool bad = any(isnan(radiance)) || any(isinf(radiance));
     out_radiance = bad ? vec4(0.0, 0.0, 0.0, -1.0) : vec4(radiance, 1.0);
     out_position = vec4(v_position, 1.0);
-    out_normal = vec4(tbn[2], 1.0);
+    out_normal = vec4(tbn[2], u_object_id + 1.0);
     out_tangent = vec4(tbn[0], 1.0);
 }

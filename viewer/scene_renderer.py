@@ -264,6 +264,7 @@ class SceneRenderer(RendererBase):
             self.set_material(program, obj.material, method, lod_bias, seed)
             set_uniform(program, "u_sample_offset", int(sample_offset))
             set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
+            set_uniform(program, "u_object_id", float(obj.index))
             lightmap = mat.lightmap
             if lightmap is not None and (lightmap.tex_coord != 1 or self.scene.objects[obj.index].uv1 is not None):
                 self._texture(lightmap.image).use(5)
@@ -286,6 +287,44 @@ class SceneRenderer(RendererBase):
                 self.bind_cube(program, obj.cube, method)
             self._vao(program, obj).render(moderngl.TRIANGLES)
 
+    def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:
+        """One pass into the renderer's own float targets (radiance in ``targets[0]``), no read
+        back: what the interactive viewer calls every frame."""
+        width, height = self.size
+        view_proj = camera.view_projection(width / height)
+        self.fbo.use()
+        self.ctx.viewport = (0, 0, width, height)
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        self.draw_background(self.environment, view_proj)
+        self._draw_objects(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed)
+
+    def pick(self, x: int, y: int) -> int | None:
+        """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
+        width, height = self.size
+        if not (0 <= x < width and 0 <= y < height):
+            return None
+        data = self.fbo.read(viewport=(int(x), int(height - 1 - y), 1, 1), components=4, attachment=2, dtype="f4")
+        value = float(np.frombuffer(data, dtype=np.float32)[3])
+        return int(round(value)) - 1 if value >= 0.5 else None
+
+    def update_material(self, index: int, desc: dict) -> None:
+        """Replace the material of object ``index`` with a (validated) description. Other
+        objects' cube maps keep the old appearance until :meth:`rebuild_cube_maps`."""
+        from lobeview.materials.spec import validate
+
+        desc = validate(desc)
+        material_index = self.scene.objects[index].material
+        self.scene.materials[material_index].desc = desc
+        packed = pack_material(build_bsdf(desc))
+        self.analysis = analyse(self.scene)
+        for gpu_obj in self.objects:
+            if self.scene.objects[gpu_obj.index].material == material_index:
+                gpu_obj.material = packed
+                if gpu_obj.cube is None and self.analysis.objects[gpu_obj.index].needs_cube_map:
+                    # A diffuse object that became glossy gets its cube map now (~0.1 s).
+                    faces = self.render_cube_faces(gpu_obj.centre, exclude=gpu_obj.index, specular=True)
+                    gpu_obj.cube = RadianceCube(self.ctx, faces)
+
     def render(
         self,
         camera: Camera,
@@ -296,7 +335,6 @@ class SceneRenderer(RendererBase):
     ) -> RenderResult:
         method = Method.parse(method) if isinstance(method, str) else method
         width, height = self.size
-        view_proj = camera.view_projection(width / height)
         passes = method.passes(spp)
         accumulated = np.zeros((height, width, 3))
         invalid = np.zeros((height, width), dtype=bool)
@@ -304,11 +342,7 @@ class SceneRenderer(RendererBase):
         g_buffers = None
         for p in range(passes):
             t0 = time.perf_counter()
-            self.fbo.use()
-            self.ctx.viewport = (0, 0, width, height)
-            self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.draw_background(self.environment, view_proj)
-            self._draw_objects(view_proj, camera.position, method, True, None, lod_bias, p * method.samples, seed)
+            self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
             self.ctx.finish()
             t_shade += time.perf_counter() - t0
             radiance = self.read(0)

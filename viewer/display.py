@@ -1,0 +1,66 @@
+"""GPU-side progressive accumulation and display tonemapping for the interactive viewer."""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from .shaders import ProgramCache
+from .tonemap import TONEMAPS
+
+
+class Accumulator:
+    """Float RGBA buffer holding sum(weight * radiance) in rgb and sum(weight) in alpha; the
+    displayed image is their ratio, so passes with different sample counts average correctly."""
+
+    def __init__(self, ctx: moderngl.Context, programs: ProgramCache, size):
+        self.ctx = ctx
+        self.programs = programs
+        self.size = (int(size[0]), int(size[1]))
+        self.texture = ctx.texture(self.size, 4, dtype="f4")
+        self.fbo = ctx.framebuffer(color_attachments=[self.texture])
+        self.accumulate = programs.program("fullscreen.vert", "accumulate.frag", {})
+        self.display = programs.program("fullscreen.vert", "tonemap.frag", {})
+        self._vao_acc = ctx.vertex_array(self.accumulate, [])
+        self._vao_display = ctx.vertex_array(self.display, [])
+        self.weight = 0.0
+        self.reset()
+
+    def reset(self) -> None:
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+        self.weight = 0.0
+
+    def add(self, source: moderngl.Texture, weight: float = 1.0) -> None:
+        self.fbo.use()
+        self.ctx.viewport = (0, 0, *self.size)
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.ctx.enable(moderngl.BLEND)
+        self.ctx.blend_func = moderngl.ONE, moderngl.ONE
+        source.use(0)
+        self.accumulate["u_source"].value = 0
+        self.accumulate["u_weight"].value = float(weight)
+        self._vao_acc.render(moderngl.TRIANGLES, vertices=3)
+        self.ctx.disable(moderngl.BLEND)
+        self.weight += weight
+
+    def show(self, target, viewport, exposure: float = 0.0, operator: str = "aces") -> None:
+        target.use()
+        self.ctx.viewport = viewport
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.texture.use(0)
+        self.display["u_source"].value = 0
+        self.display["u_exposure"].value = float(exposure)
+        self.display["u_operator"].value = TONEMAPS.index(operator)
+        self._vao_display.render(moderngl.TRIANGLES, vertices=3)
+
+    def radiance(self) -> np.ndarray:
+        """The mean radiance, (H, W, 3) float32, row 0 at the top."""
+        data = np.frombuffer(self.texture.read(), dtype=np.float32).reshape(self.size[1], self.size[0], 4)[::-1]
+        w = np.maximum(data[..., 3:4], 1e-30)
+        return np.where(data[..., 3:4] > 0, data[..., :3] / w, 0.0).astype(np.float32)
+
+    def release(self) -> None:
+        self._vao_acc.release()
+        self._vao_display.release()
+        self.fbo.release()
+        self.texture.release()
