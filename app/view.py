@@ -313,6 +313,9 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
             self.samples = 0
             self.frame_ms = 0.0
             self.pass_ms = 0.0
+            self.cube_ms = 0.0
+            self.camera_index = None
+            self.vsync = not args.no_vsync
             self.frame = 0
             self.script = list(script)
             self.dirty = True
@@ -484,6 +487,12 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                 self.samples += batch.samples
             self.ctx.finish()
             self.pass_ms = (time.perf_counter() - t0) * 1000.0
+            t0 = time.perf_counter()
+            refreshed = self.renderer.refresh_one_stale_cube()
+            if refreshed is not None:
+                self.cube_ms = (time.perf_counter() - t0) * 1000.0
+                self.message = f"updated the cube map of {refreshed} ({len(self.renderer.stale_cubes)} to go)"
+                self.dirty = True
             if self.still_frames > 0 and self.progressive:
                 # Keep frames near the target time: scale the batch by the measured cost.
                 ratio = TARGET_FRAME_MS / max(self.pass_ms, 1e-3)
@@ -508,7 +517,8 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
             imgui.begin("lobeview")
             io = imgui.get_io()
             imgui.text(f"{self.ctx.info['GL_RENDERER']}")
-            imgui.text(f"{io.framerate:.1f} fps, frame {self.frame_ms:.1f} ms, shading {self.pass_ms:.1f} ms")
+            imgui.text(f"{io.framerate:.1f} fps, frame {self.frame_ms:.1f} ms")
+            imgui.text(f"shading + accumulation {self.pass_ms:.1f} ms, last cube map {self.cube_ms:.1f} ms")
             imgui.text(
                 f"refined: {self.samples} spp per lobe (batch {self.batch})"
                 if self.samples
@@ -522,6 +532,20 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                     self.method = Method.parse(f"{kinds[k]}-{min(n, 32) if kinds[k] == 'lobe' else n}")
                     self.dirty = True
                 _, self.progressive = imgui.checkbox("refine when still", self.progressive)
+                if scene.cameras:
+                    names = [c.name for c in scene.cameras]
+                    c, pick = imgui.combo("scene camera", -1 if self.camera_index is None else self.camera_index, names)
+                    if c:
+                        self.camera_index = pick
+                        cam = scene.cameras[pick]
+                        self.walk = WalkCamera.from_camera(
+                            Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
+                        )
+                        self.dirty = True
+                c, vsync = imgui.checkbox("vsync", self.vsync)
+                if c:
+                    self.vsync = vsync
+                    self.wnd.vsync = vsync
                 _, self.exposure = imgui.slider_float("exposure", self.exposure, -6.0, 6.0)
                 c, t = imgui.combo("tonemap", TONEMAPS.index(self.tonemap), list(TONEMAPS))
                 self.tonemap = TONEMAPS[t]
@@ -534,6 +558,18 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
             ):
                 desc = self.editor.desc(self.selected)
                 imgui.text(f"{scene.objects[self.selected].name}: {desc['model']} model")
+                override = self.renderer.object_methods.get(self.selected)
+                choices = ["global", *REALTIME_METHODS]
+                current = 0 if override is None else choices.index(override.kind)
+                c, k = imgui.combo("object method", current, choices)
+                n = override.samples if override else self.method.samples
+                c2, n = imgui.slider_int("object N", n, 1, 32)
+                if c or c2:
+                    if choices[k] == "global":
+                        self.renderer.object_methods.pop(self.selected, None)
+                    else:
+                        self.renderer.object_methods[self.selected] = Method.parse(f"{choices[k]}-{n}")
+                    self.dirty = True
                 changed, new = material_widgets(imgui, desc)
                 if changed:
                     self.message = self.editor.apply(self.selected, new) or ""

@@ -110,6 +110,8 @@ class SceneRenderer(RendererBase):
         t0 = time.perf_counter()
         self.cube_face_size = cube_face_size
         self.cube_bounces = max(1, int(cube_bounces))
+        self.object_methods: dict[int, Method] = {}
+        self.stale_cubes: list[int] = []
         self._build_cube_maps(cache_dir)
         self.timings["cube maps"] = time.perf_counter() - t0
 
@@ -257,11 +259,13 @@ class SceneRenderer(RendererBase):
                 # maps (as in the baker): a black pane would hide what lies behind it.
                 continue
             use_specular = specular and obj.cube is not None
-            program = self._program(method, use_specular)
+            # Per-object real-time method (the panel's override); the reference ignores it.
+            obj_method = method if method.kind == "reference" else self.object_methods.get(obj.index, method)
+            program = self._program(obj_method, use_specular)
             mat = self.scene.materials[self.scene.objects[obj.index].material]
             set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
             set_uniform(program, "u_camera_position", tuple(float(x) for x in eye))
-            self.set_material(program, obj.material, method, lod_bias, seed)
+            self.set_material(program, obj.material, obj_method, lod_bias, seed)
             set_uniform(program, "u_sample_offset", int(sample_offset))
             set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
             set_uniform(program, "u_object_id", float(obj.index))
@@ -284,7 +288,7 @@ class SceneRenderer(RendererBase):
                 self._white.use(6)
                 set_uniform(program, "u_has_base_color", 0)
             if use_specular:
-                self.bind_cube(program, obj.cube, method)
+                self.bind_cube(program, obj.cube, obj_method)
             self._vao(program, obj).render(moderngl.TRIANGLES)
 
     def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:
@@ -317,6 +321,8 @@ class SceneRenderer(RendererBase):
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
         self.analysis = analyse(self.scene)
+        # Everything else that reflects this object now sees an outdated appearance.
+        self.stale_cubes = [i for i in self.analysis.cube_mapped if self.scene.objects[i].material != material_index]
         for gpu_obj in self.objects:
             if self.scene.objects[gpu_obj.index].material == material_index:
                 gpu_obj.material = packed
@@ -324,6 +330,20 @@ class SceneRenderer(RendererBase):
                     # A diffuse object that became glossy gets its cube map now (~0.1 s).
                     faces = self.render_cube_faces(gpu_obj.centre, exclude=gpu_obj.index, specular=True)
                     gpu_obj.cube = RadianceCube(self.ctx, faces)
+
+    def refresh_one_stale_cube(self) -> str | None:
+        """Re-render one out-of-date cube map (after a material edit changed what it sees);
+        the viewer calls this once per frame so edits never freeze the UI. Returns its name."""
+        while self.stale_cubes:
+            index = self.stale_cubes.pop(0)
+            obj = self.objects[index]
+            if obj.cube is None:
+                continue
+            faces = self.render_cube_faces(obj.centre, exclude=index, specular=self.cube_bounces > 1)
+            obj.cube.release()
+            obj.cube = RadianceCube(self.ctx, faces)
+            return obj.name
+        return None
 
     def render(
         self,
