@@ -242,20 +242,26 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
     return 0
 
 
-def _run_scene(args, out, method, size, stages, t0, create_context, describe) -> int:
+def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache_arg: str | None):
+    """(scene path, Scene, EnvironmentMap, cache folder) for ``shot`` and ``view``: the demo
+    (built and cached on first use) when no scene is given, with the matching default sky."""
     from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene, cache_dir
     from lobeview.scenes.gltf_loader import load_gltf
+
+    cache = Path(cache_arg) if cache_arg else cache_dir()
+    if scene_arg is None:
+        path = build_demo_scene(directory=cache / "demo")
+        env_name = env_arg or DEMO_ENVIRONMENT
+    else:
+        path = Path(scene_arg)
+        env_name = env_arg or SCENE_ENV
+    return path, load_gltf(path), load_environment(env_name), cache
+
+
+def _run_scene(args, out, method, size, stages, t0, create_context, describe) -> int:
     from lobeview.viewer.scene_renderer import SceneRenderer
 
-    cache = Path(args.cache) if args.cache else cache_dir()
-    if args.scene is None:
-        path = build_demo_scene(directory=cache / "demo")
-        env_name = args.env or DEMO_ENVIRONMENT
-    else:
-        path = Path(args.scene)
-        env_name = args.env or SCENE_ENV
-    scene = load_gltf(path)
-    env = load_environment(env_name)
+    path, scene, env, cache = load_scene_and_environment(args.scene, args.env, args.cache)
     camera = _camera_from_args(args, _scene_view(scene, args.view))
     stages["load"] = time.perf_counter() - t0
     ctx = create_context()

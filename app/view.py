@@ -234,7 +234,7 @@ def run(args) -> int:
             file=sys.stderr,
         )
         return 2
-    from lobeview.app.shot import SCENE_ENV, parse_size
+    from lobeview.app.shot import parse_size
     from lobeview.viewer.render_base import Method
 
     width, height = parse_size(args.size)
@@ -244,19 +244,9 @@ def run(args) -> int:
 
     import moderngl_window as mglw
 
-    from lobeview.scenes.builtin_env import load_environment
-    from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene, cache_dir
-    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.app.shot import load_scene_and_environment
 
-    cache = Path(args.cache) if args.cache else cache_dir()
-    if args.scene is None:
-        scene_path = build_demo_scene(directory=cache / "demo")
-        env_name = args.env or DEMO_ENVIRONMENT
-    else:
-        scene_path = Path(args.scene)
-        env_name = args.env or SCENE_ENV
-    scene = load_gltf(scene_path)
-    environment = load_environment(env_name)
+    scene_path, scene, environment, cache = load_scene_and_environment(args.scene, args.env, args.cache)
     script = json.loads(Path(args.script).read_text()) if args.script else []
 
     config = _window_class(scene, scene_path, environment, args, method, cache, script)
