@@ -409,11 +409,19 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
             return directory / f"{stem}.png"
 
         def run_script(self):
-            """Scripted actions, one per frame when due: {"frame": N, "action": ..., ...}."""
+            """Scripted actions, due at their frame: {"frame": N, "action": A, ...} with A one of
+            press/release (key: W, S, ...), move (direction, seconds), look (dx, dy), select
+            (object), set (path into the selected material, value), method (value), screenshot
+            (name), save_materials (path), quit."""
             while self.script and self.script[0].get("frame", 0) <= self.frame:
                 step = self.script.pop(0)
                 action = step["action"]
-                if action == "move":
+                if action in ("press", "release"):
+                    # A real key event through the window's handler (held keys move the camera).
+                    keys = self.wnd.keys
+                    state = keys.ACTION_PRESS if action == "press" else keys.ACTION_RELEASE
+                    self.on_key_event(getattr(keys, step["key"]), state, self.wnd.modifiers)
+                elif action == "move":
                     self.walk.move(np.asarray(step["direction"], float), float(step.get("seconds", 0.2)))
                 elif action == "look":
                     self.walk.look(float(step["dx"]), float(step["dy"]))

@@ -65,10 +65,11 @@ def test_scripted_session_under_xvfb(xvfb, tmp_path):
         {"frame": 9, "action": "set", "path": ["lobes", 0, "mx"], "value": 0.25},
         {"frame": 9, "action": "set", "path": ["lobes", 0, "my"], "value": 0.25},
         {"frame": 16, "action": "screenshot", "name": "rough"},
-        {"frame": 17, "action": "move", "direction": [1, 0, 0], "seconds": 0.4},
-        {"frame": 18, "action": "screenshot", "name": "moved"},
-        {"frame": 18, "action": "save_materials", "path": str(tmp_path / "materials.json")},
-        {"frame": 19, "action": "quit"},
+        {"frame": 17, "action": "press", "key": "D"},
+        {"frame": 20, "action": "release", "key": "D"},
+        {"frame": 21, "action": "screenshot", "name": "moved"},
+        {"frame": 21, "action": "save_materials", "path": str(tmp_path / "materials.json")},
+        {"frame": 22, "action": "quit"},
     ]
     (tmp_path / "script.json").write_text(json.dumps(script))
     env = {**os.environ, "DISPLAY": xvfb}
