@@ -89,6 +89,11 @@ def add_arguments(p) -> None:
         default=None,
         help="MIP level bias (default: 1 for fis-N, 0 for lobe-N)",
     )
+    a(
+        "--lobe-normalize",
+        action="store_true",
+        help="lobe-N: rescale Eq. 4.25 by each lobe's directional albedo (exact under uniform light)",
+    )
     a("--face-size", type=int, default=256, help="cube-map face resolution (default 256)")
     a(
         "--cache",
@@ -162,6 +167,8 @@ def run(args) -> int:
     if args.object is not None and args.scene is not None:
         raise ShotError("give either a SCENE or --object, not both")
     method = Method.parse(args.method)
+    if args.lobe_normalize:
+        method = Method(method.kind, method.samples, True)
     if args.spp < 1:
         raise ShotError("--spp must be at least 1")
     if not 8 <= args.face_size <= 2048 or args.face_size & (args.face_size - 1):

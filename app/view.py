@@ -39,6 +39,7 @@ def add_arguments(p) -> None:
     p.add_argument("--env", help="environment outside the scene (default builtin:overcast)")
     p.add_argument("--size", default="1280x800", help="window size WxH (default 1280x800)")
     p.add_argument("--method", default="lobe-11", help="real-time method while moving (default lobe-11)")
+    p.add_argument("--lobe-normalize", action="store_true", help="lobe-N: energy normalisation by each lobe's albedo")
     p.add_argument("--view", help="start at this scene camera (name or index)")
     p.add_argument("--no-vsync", action="store_true", help="disable vsync")
     p.add_argument("--face-size", type=int, default=256, help="cube-map face resolution (default 256)")
@@ -239,6 +240,8 @@ def run(args) -> int:
 
     width, height = parse_size(args.size)
     method = Method.parse(args.method)
+    if args.lobe_normalize:
+        method = Method(method.kind, method.samples, True)
     if method.kind == "reference":
         raise ValueError("--method must be a real-time method (lobe-N, fis-N, mc-N); refinement is automatic")
 
@@ -526,8 +529,10 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                 kinds = list(REALTIME_METHODS)
                 c, k = imgui.combo("method", kinds.index(self.method.kind), kinds)
                 c2, n = imgui.slider_int("samples N", self.method.samples, 1, 32 if self.method.kind == "lobe" else 256)
-                if c or c2:
-                    self.method = Method.parse(f"{kinds[k]}-{min(n, 32) if kinds[k] == 'lobe' else n}")
+                c3, normalize = imgui.checkbox("lobe-N energy normalisation", self.method.normalize)
+                if c or c2 or c3:
+                    base = Method.parse(f"{kinds[k]}-{min(n, 32) if kinds[k] == 'lobe' else n}")
+                    self.method = Method(base.kind, base.samples, normalize)
                     self.dirty = True
                 _, self.progressive = imgui.checkbox("refine when still", self.progressive)
                 if scene.cameras:

@@ -181,12 +181,17 @@ def integrate_lobe(
     frame: np.ndarray | None = None,
     kind: str | None = None,
     weighting: str = "eq4.25",
+    albedo_table: AlbedoTable | None = None,
 ) -> np.ndarray:
     """Outgoing radiance of one lobe by the deterministic pattern quadrature.
 
     ``radiance(world_dirs (n, 3), lod (n,)) -> (n, 3)`` gives incident radiance, typically a
     MIP-filtered environment lookup; ``frame`` (3x3, columns = tangent, bitangent, normal in
     world space) maps local directions to world space (identity if None).
+
+    With ``albedo_table`` (lobeview's energy normalisation, not in the thesis) the Eq. 4.25
+    result is rescaled by albedo(wo) / Eq. 4.25(L = 1): exact under a uniform environment, so
+    lobes wider than their pattern or cut by the horizon keep their true energy.
     """
     samples = lobe_samples(lobe, wo, n, face_size, frame, kind)
     valid = samples.valid
@@ -206,12 +211,60 @@ def integrate_lobe(
             axis=0,
         )
         den = np.sum(f * cos_i[:, None], axis=0)
+        if albedo_table is not None:
+            # Eq. 4.25 with L = 1 uses the same samples: num / num_1 * albedo(wo).
+            num_1 = np.sum(
+                np.where(ok[:, None], (cos_i**2)[:, None] * f * f / np.where(ok, p, 1.0)[:, None], 0.0), axis=0
+            )
+            target = albedo_table.lookup(np.asarray(wo, dtype=np.float64).reshape(3))
+            return np.where(num_1 > 0.0, num * target / np.where(num_1 > 0.0, num_1, 1.0), 0.0)
     elif weighting == "eq4.24":
         num = np.sum(li * (cos_i**2)[:, None] * f, axis=0)
         den = np.full(3, np.sum(p * cos_i))
     else:
         raise ValueError(f"unknown weighting {weighting!r}; use 'eq4.25' or 'eq4.24'")
     return np.where(den > 0.0, num / np.where(den > 0.0, den, 1.0), 0.0)
+
+
+ALBEDO_MU = 32  # cos(theta_o) samples of the normalisation table
+ALBEDO_PHI = 16  # azimuth samples for anisotropic lobes (isotropic lobes repeat one row)
+
+
+@dataclass(frozen=True)
+class AlbedoTable:
+    """Directional albedo of one lobe over (cos theta_o, phi_o): values (ALBEDO_PHI + 1, ALBEDO_MU,
+    3), row ALBEDO_PHI repeating row 0 so bilinear interpolation wraps in phi. Sample points are
+    texel centres, mu_i = (i + 0.5) / ALBEDO_MU and phi_j = 2 pi j / ALBEDO_PHI, i.e. exactly what
+    a linearly filtered texture with clamp in mu returns (shaders/integrate.glsl)."""
+
+    values: np.ndarray
+
+    @classmethod
+    def build(cls, lobe, order: int = 48) -> AlbedoTable:
+        single = BSDF([lobe])
+        d = lobe.distribution
+        isotropic = d.alpha_x == d.alpha_y
+        mus = (np.arange(ALBEDO_MU) + 0.5) / ALBEDO_MU
+        phis = np.arange(ALBEDO_PHI) / ALBEDO_PHI * 2 * np.pi
+        values = np.zeros((ALBEDO_PHI + 1, ALBEDO_MU, 3))
+        for j, phi in enumerate(phis[:1] if isotropic else phis):
+            for i, mu in enumerate(mus):
+                s = np.sqrt(max(1 - mu * mu, 0.0))
+                r, t = single.albedo(np.array([s * np.cos(phi), s * np.sin(phi), mu]), order)
+                values[j, i] = r + t
+        if isotropic:
+            values[:] = values[0]
+        values[ALBEDO_PHI] = values[0]
+        return cls(values)
+
+    def lookup(self, wo: np.ndarray) -> np.ndarray:
+        x = np.clip(wo[2] * ALBEDO_MU - 0.5, 0.0, ALBEDO_MU - 1.0)
+        y = (np.arctan2(wo[1], wo[0]) / (2 * np.pi)) % 1.0 * ALBEDO_PHI
+        x0, y0 = int(np.floor(x)), int(np.floor(y))
+        x1, y1 = min(x0 + 1, ALBEDO_MU - 1), min(y0 + 1, ALBEDO_PHI)
+        fx, fy = x - x0, y - y0
+        v = self.values
+        return (v[y0, x0] * (1 - fx) + v[y0, x1] * fx) * (1 - fy) + (v[y1, x0] * (1 - fx) + v[y1, x1] * fx) * fy
 
 
 def specular_lobes(bsdf: BSDF) -> list:

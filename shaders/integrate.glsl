@@ -127,11 +127,27 @@ vec3 cosine_hemisphere(vec2 u) {
 }
 
 #if defined(METHOD_LOBE)
+#if defined(LOBE_NORMALIZE)
+// Per-lobe directional albedo over (cos theta_o, phi_o), blocks of ALBEDO_ROWS rows per lobe
+// (materials/patterns.py AlbedoTable); linear filtering between texel centres.
+const int ALBEDO_PHI = 16;
+const int ALBEDO_ROWS = ALBEDO_PHI + 1;
+uniform sampler2D u_albedo;
+
+vec3 lobe_albedo(int lobe_index, vec3 wo) {
+    float phi = atan(wo.y, wo.x) / (2.0 * PI);
+    phi = phi - floor(phi);
+    float row = float(lobe_index * ALBEDO_ROWS) + phi * float(ALBEDO_PHI) + 0.5;
+    return texture(u_albedo, vec2(wo.z, row / float(MAX_LOBES * ALBEDO_ROWS))).rgb;
+}
+#endif
+
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     int n = u_samples;
     float area = lobe_sample_area(l, wo, n);
     vec3 num = vec3(0.0);
     vec3 den = vec3(0.0);
+    vec3 num_unit = vec3(0.0);  // Eq. 4.25's numerator for L = 1 (normalisation)
     for (int i = 0; i < n; ++i) {
         vec3 h = pattern_half_vector(l, u_pattern[lobe_index * MAX_PATTERN + i]);
         vec3 wr = 2.0 * dot(wo, h) * h - wo;   // Eq. 4.8
@@ -146,10 +162,19 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // Eq. 4.25: sum L c^2 f^2 / p / sum f c, written as (f c / p) (f c) to stay in range.
         vec3 fc = f * c;
         num += li * (fc / p) * fc;
+        num_unit += (fc / p) * fc;
         den += fc;
     }
+#if defined(LOBE_NORMALIZE)
+    // lobeview's energy normalisation: Eq. 4.25 rescaled to be exact under uniform light.
+    vec3 target = lobe_albedo(lobe_index, wo);
+    return vec3(num_unit.r > 0.0 ? num.r * target.r / num_unit.r : 0.0,
+                num_unit.g > 0.0 ? num.g * target.g / num_unit.g : 0.0,
+                num_unit.b > 0.0 ? num.b * target.b / num_unit.b : 0.0);
+#else
     return vec3(den.r > 0.0 ? num.r / den.r : 0.0, den.g > 0.0 ? num.g / den.g : 0.0,
                 den.b > 0.0 ? num.b / den.b : 0.0);
+#endif
 }
 #elif defined(ENV_SAMPLING)
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {

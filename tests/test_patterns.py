@@ -130,6 +130,25 @@ def test_constant_radiance_gives_the_lobe_albedo(preset, theta):
         np.testing.assert_allclose(value, r + t, rtol=CONSTANT_RADIANCE_TOLERANCE[preset])
 
 
+def test_albedo_table_and_normalised_quadrature():
+    from lobeview.materials.patterns import ALBEDO_MU, AlbedoTable
+
+    lobe = KurtLobe(1.0, 0.05, 0.4, 0.5, 0.3)  # anisotropic: the table varies with phi
+    table = AlbedoTable.build(lobe)
+    spec = BSDF([lobe])
+    for i, j in ((0, 0), (10, 3), (31, 8)):
+        mu, phi = (i + 0.5) / ALBEDO_MU, 2 * np.pi * j / 16
+        wo = np.array([np.sqrt(1 - mu * mu) * np.cos(phi), np.sqrt(1 - mu * mu) * np.sin(phi), mu])
+        np.testing.assert_allclose(table.lookup(wo), sum(spec.albedo(wo, order=48)), rtol=1e-9)
+    assert not np.allclose(table.values[0], table.values[4])
+    # With L = 1 the normalised Eq. 4.25 returns the table value exactly, for any N.
+    wo = direction_from_angles_deg(63.0, 27.0)
+    for n in (3, 7, 19):
+        np.testing.assert_allclose(
+            integrate_lobe(lobe, wo, constant(), n, albedo_table=table), table.lookup(wo), rtol=1e-12
+        )
+
+
 def test_equation_4_25_is_the_f_cos_weighted_mean_of_mc_weights():
     lobe = KurtLobe(0.9, 0.11, 0.072, 0.89, 0.43)
     wo = direction_from_angles_deg(40, 10)

@@ -107,12 +107,18 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     assert errors.max() < 0.08, errors.max(axis=1)
 
 
-@pytest.mark.parametrize("preset", MATERIALS + ["chrome", "clear-glass", "lacquer", "porcelain"])
-@pytest.mark.parametrize("n", [5, 11, 19])
-def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n):
+@pytest.mark.parametrize(
+    "preset,n,normalize",
+    [(p, n, False) for p in MATERIALS + ["chrome", "clear-glass", "lacquer", "porcelain"] for n in (5, 11, 19)]
+    + [(p, 7, True) for p in ("alanod-2000gs-2lobe", "frosted-glass", "miro5-2lobe", "gold-ggx", "gltf-red-plastic")],
+)
+def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
+    from lobeview.viewer.material_gpu import albedo_table_for
+    from lobeview.viewer.render_base import Method
+
     renderer, lookup = gl
     bsdf = build_bsdf(load_material(preset))
-    result = renderer.render(CAMERA, bsdf, f"lobe-{n}", background=False)
+    result = renderer.render(CAMERA, bsdf, Method("lobe", n, normalize), background=False)
     assert not result.invalid.any()
     cube = renderer.cubes.radiance
     for y, x in _pixels(result, count=10, seed=n):
@@ -123,7 +129,8 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n):
 
         expected = np.zeros(3)
         for lobe in specular_lobes(bsdf):
-            expected += integrate_lobe(lobe, wo, radiance, n, renderer.cubes.face_size, frame)
+            table = albedo_table_for(lobe) if normalize else None
+            expected += integrate_lobe(lobe, wo, radiance, n, renderer.cubes.face_size, frame, albedo_table=table)
         diffuse = [c for c in bsdf.components if c not in specular_lobes(bsdf)]
         if diffuse:
             kd = sum(c.kd if hasattr(c, "kd") else (1 - c.metallic) * c.base_color for c in diffuse)

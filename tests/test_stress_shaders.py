@@ -121,6 +121,30 @@ def test_lobe_method_overshoots_the_furnace_for_very_rough_lobes(furnace):
     assert np.all(centre <= albedo_at_normal * 1.1)
 
 
+@pytest.mark.parametrize("params", EXTREMES, ids=[str(p) for p in EXTREMES])
+def test_normalised_lobe_method_is_exact_in_the_white_furnace(furnace, params):
+    """The fix for the defect above (lobeview's energy normalisation of Eq. 4.25): under
+    uniform radiance lobe-N returns the lobe's tabulated directional albedo, for every lobe."""
+    from lobeview.viewer.render_base import Method
+
+    bsdf = thesis(**params)
+    result = furnace.render(CAMERA, bsdf, Method("lobe", 7, True), background=False)
+    assert _clean(result)
+    spec = BSDF(specular_lobes(bsdf))
+    rng = np.random.default_rng(1)
+    pixels = np.argwhere(result.mask)
+    for y, x in pixels[rng.choice(len(pixels), size=10, replace=False)]:
+        n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
+        t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
+        t /= np.linalg.norm(t)
+        frame = np.stack([t, np.cross(n, t), n], axis=1)
+        wo = frame.T @ (np.asarray(CAMERA.position) - result.position[y, x])
+        wo /= np.linalg.norm(wo)
+        r, t_ = spec.albedo(wo, order=96)
+        # The table interpolates 32 x 16 albedo samples: 3 % + 0.005 covers its error.
+        np.testing.assert_allclose(result.radiance[y, x], r + t_, rtol=0.03, atol=0.005, err_msg=str(params))
+
+
 def test_huge_dynamic_range_environment(ctx):
     """1e-6 background with a 1e6 'sun' (0.5 deg): finite everywhere, and the sun shows up."""
     sun = np.array([0.3, 0.8, 0.52])

@@ -10,7 +10,7 @@ import numpy as np
 from lobeview.materials.bsdf import BSDF, Lambert
 from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.gltf import GltfDiffuse, GltfSpecular
-from lobeview.materials.patterns import choose_pattern, pattern_xi
+from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, pattern_xi
 from lobeview.materials.thesis import KurtLobe
 
 MAX_LOBES = 8
@@ -27,6 +27,7 @@ class PackedMaterial:
     lobes: np.ndarray  # (MAX_LOBES * 5, 4) float32
     lobe_count: int
     lobe_distributions: list
+    lobe_components: list
 
     @property
     def has_diffuse(self) -> bool:
@@ -38,6 +39,7 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
     gltf_diffuse = False
     rows = []
     dists = []
+    components = []
     for comp in bsdf.components:
         if isinstance(comp, Lambert):
             kd = kd + comp.kd
@@ -77,12 +79,50 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
             raise TypeError(f"no GPU version of BSDF component {type(comp).__name__}")
         rows.append(row)
         dists.append(d)
+        components.append(comp)
     if len(rows) > MAX_LOBES:
         raise ValueError(f"material has {len(rows)} lobes; the renderer supports {MAX_LOBES}")
     lobes = np.zeros((MAX_LOBES * LOBE_VEC4S, 4), dtype=np.float32)
     if rows:
         lobes[: len(rows) * LOBE_VEC4S] = np.asarray(rows, dtype=np.float32).reshape(-1, 4)
-    return PackedMaterial(kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists)
+    return PackedMaterial(kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components)
+
+
+_ALBEDO_CACHE: dict = {}
+
+
+def _lobe_key(comp) -> tuple:
+    """Everything that determines a lobe's albedo (its packed uniforms)."""
+    return (type(comp).__name__, *pack_material_row_key(comp))
+
+
+def pack_material_row_key(comp) -> tuple:
+    values = []
+    for name in ("k", "r0", "alpha", "transmission", "scale", "base_color", "metallic"):
+        v = getattr(comp, name, None)
+        values.append(None if v is None else tuple(np.atleast_1d(np.asarray(v, float)).tolist()))
+    fresnel = getattr(comp, "fresnel", None)
+    if fresnel is not None:
+        values.append((fresnel.kind, *fresnel.r0, *fresnel.eta, *fresnel.k))
+    d = comp.distribution
+    return (d.kind, d.alpha_x, d.alpha_y, *values)
+
+
+def albedo_texture_data(material: PackedMaterial) -> np.ndarray:
+    """(MAX_LOBES * (ALBEDO_PHI + 1), ALBEDO_MU, 3) float32: each lobe's AlbedoTable stacked
+    (shaders/integrate.glsl, LOBE_NORMALIZE). Tables are cached by lobe parameters."""
+    data = np.zeros((MAX_LOBES * (ALBEDO_PHI + 1), ALBEDO_MU, 3), dtype=np.float32)
+    rows = ALBEDO_PHI + 1
+    for i, comp in enumerate(material.lobe_components):
+        data[i * rows : (i + 1) * rows] = albedo_table_for(comp).values
+    return data
+
+
+def albedo_table_for(comp) -> AlbedoTable:
+    key = _lobe_key(comp)
+    if key not in _ALBEDO_CACHE:
+        _ALBEDO_CACHE[key] = AlbedoTable.build(comp)
+    return _ALBEDO_CACHE[key]
 
 
 def pack_patterns(material: PackedMaterial, n: int) -> np.ndarray:

@@ -11,7 +11,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from .cubemap import RadianceCube
-from .material_gpu import MAX_LOBES, MAX_PATTERN, PackedMaterial, pack_patterns
+from .material_gpu import MAX_LOBES, MAX_PATTERN, PackedMaterial, albedo_texture_data, pack_patterns
 from .shaders import ProgramCache
 
 SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
@@ -27,6 +27,7 @@ _METHOD = re.compile(r"^(lobe|fis|mc)-(\d+)$|^(reference)$")
 class Method:
     kind: str  # 'lobe', 'fis', 'mc', 'reference'
     samples: int  # N per lobe (reference: per pass)
+    normalize: bool = False  # lobe-N: energy normalisation by the lobe's albedo table
 
     @classmethod
     def parse(cls, text: str) -> Method:
@@ -42,7 +43,9 @@ class Method:
         return cls(m.group(1), n)
 
     def __str__(self) -> str:
-        return "reference" if self.kind == "reference" else f"{self.kind}-{self.samples}"
+        if self.kind == "reference":
+            return "reference"
+        return f"{self.kind}-{self.samples}" + (" (normalised)" if self.normalize and self.kind == "lobe" else "")
 
     def defines(self) -> dict:
         return {
@@ -52,6 +55,7 @@ class Method:
             "METHOD_FIS": self.kind == "fis",
             "METHOD_MC": self.kind in ("mc", "reference"),
             "ENV_SAMPLING": self.kind == "reference",
+            "LOBE_NORMALIZE": self.kind == "lobe" and self.normalize,
         }
 
     def default_lod_bias(self) -> float:
@@ -95,6 +99,7 @@ class RendererBase:
         self.sobol.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.sobol_count = len(sobol)
         self._vaos: dict = {}
+        self._albedo_textures: dict = {}
         self.targets: list = []
         self.resize(size)
 
@@ -131,6 +136,16 @@ class RendererBase:
         )
         set_uniform(program, "u_sobol_count", self.sobol_count)
         set_uniform(program, "u_seed", int(seed))
+        if method.kind == "lobe" and method.normalize and "u_albedo" in program:
+            key = ("albedo", id(material))
+            if key not in self._albedo_textures:
+                data = albedo_texture_data(material)
+                tex = self.ctx.texture((data.shape[1], data.shape[0]), 3, data.tobytes(), dtype="f4")
+                tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+                tex.repeat_x = tex.repeat_y = False
+                self._albedo_textures[key] = (tex, material)  # keep the material alive: id() stays unique
+            self._albedo_textures[key][0].use(7)
+            set_uniform(program, "u_albedo", 7)
 
     def bind_cube(self, program, cube: RadianceCube, method: Method) -> None:
         """Texture units: 0 radiance, 2 Sobol, 3-4 importance (reference only)."""
@@ -160,6 +175,8 @@ class RendererBase:
         self._vaos[key].render(moderngl.TRIANGLES, vertices=3)
 
     def release(self):
+        for tex, _ in self._albedo_textures.values():
+            tex.release()
         for vao in self._vaos.values():
             vao.release()
         for t in self.targets:

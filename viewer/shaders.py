@@ -20,6 +20,7 @@ KNOWN_DEFINES = {
     "METHOD_FIS",
     "METHOD_MC",
     "ENV_SAMPLING",
+    "LOBE_NORMALIZE",
     "HAS_DIFFUSE",
     "SPECULAR",
     "DEBUG_VIEW",
