@@ -49,6 +49,18 @@ def furnace(ctx):
     renderer.release()
 
 
+def _local_view(result, y, x) -> np.ndarray:
+    """The viewer direction at pixel (y, x) in the shading frame the shader used."""
+    n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
+    t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
+    t /= np.linalg.norm(t)
+    frame = np.stack([t, np.cross(n, t), n], axis=1)
+    wo = frame.T @ (np.asarray(CAMERA.position) - result.position[y, x])
+    wo /= np.linalg.norm(wo)
+    wo[2] = max(wo[2], 1e-4)
+    return wo / np.linalg.norm(wo)
+
+
 def _clean(result):
     r = result.radiance
     return not result.invalid.any() and np.all(np.isfinite(r)) and r.min() >= 0.0
@@ -83,14 +95,7 @@ def test_extreme_parameters_stay_finite_and_obey_the_white_furnace(furnace, para
     pixels = np.argwhere(result.mask)
     got, albedo = [], []
     for y, x in pixels[rng.choice(len(pixels), size=20, replace=False)]:
-        n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
-        t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
-        t /= np.linalg.norm(t)
-        frame = np.stack([t, np.cross(n, t), n], axis=1)
-        wo = frame.T @ (np.asarray(CAMERA.position) - result.position[y, x])
-        wo /= np.linalg.norm(wo)
-        wo[2] = max(wo[2], 1e-4)
-        r, t_ = spec.albedo(wo / np.linalg.norm(wo), order=96)
+        r, t_ = spec.albedo(_local_view(result, y, x), order=96)
         got.append(result.radiance[y, x])
         albedo.append(r + t_)
     got, albedo = np.array(got), np.array(albedo)
@@ -134,13 +139,7 @@ def test_normalised_lobe_method_is_exact_in_the_white_furnace(furnace, params):
     rng = np.random.default_rng(1)
     pixels = np.argwhere(result.mask)
     for y, x in pixels[rng.choice(len(pixels), size=10, replace=False)]:
-        n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
-        t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
-        t /= np.linalg.norm(t)
-        frame = np.stack([t, np.cross(n, t), n], axis=1)
-        wo = frame.T @ (np.asarray(CAMERA.position) - result.position[y, x])
-        wo /= np.linalg.norm(wo)
-        r, t_ = spec.albedo(wo, order=96)
+        r, t_ = spec.albedo(_local_view(result, y, x), order=96)
         # The table interpolates 32 x 16 albedo samples: 3 % + 0.005 covers its error.
         np.testing.assert_allclose(result.radiance[y, x], r + t_, rtol=0.03, atol=0.005, err_msg=str(params))
 
