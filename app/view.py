@@ -308,6 +308,7 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
             self.pass_ms = 0.0
             self.cube_ms = 0.0
             self.camera_index = None
+            self._plot_key, self._plot = None, None
             self.vsync = not args.no_vsync
             self.frame = 0
             self.script = list(script)
@@ -577,7 +578,10 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                 if changed:
                     self.message = self.editor.apply(self.selected, new) or ""
                     self.dirty = True
-                x, y = lobe_plot_values(self.editor.desc(self.selected))
+                key = json.dumps(self.editor.desc(self.selected), sort_keys=True)
+                if self._plot_key != key:  # a BSDF build + 181 evaluations: not every frame
+                    self._plot_key, self._plot = key, lobe_plot_values(json.loads(key))
+                x, y = self._plot
                 if implot.begin_plot("lobe, 45 deg view", (-1, 160)):
                     implot.plot_line("(f cos)^1/3", x, y)
                     implot.end_plot()

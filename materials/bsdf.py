@@ -19,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .microfacet import MicrofacetDistribution, reflection_jacobian
-from .vec import COS_EPSILON, as_dirs, cosine_hemisphere, mirror_z, normalize
+from .vec import COS_EPSILON, as_dirs, cosine_hemisphere, mirror_z, normalize, reflect
 
 
 class BSDFSample(NamedTuple):
@@ -65,7 +65,10 @@ def _valid_pair(wi: np.ndarray, wo: np.ndarray, transmission: bool) -> np.ndarra
 
 
 class CosineSampled(Component):
-    """A reflection term importance-sampled with the cosine-weighted hemisphere (pdf cos/pi)."""
+    """A diffuse reflection term, importance-sampled with the cosine-weighted hemisphere (pdf
+    cos/pi); ``diffuse_albedo`` is its kd, what a lightmap's irradiance is multiplied by."""
+
+    diffuse_albedo: np.ndarray
 
     def pdf(self, wi, wo):
         valid = _valid_pair(wi, wo, False)
@@ -82,6 +85,7 @@ class Lambert(CosineSampled):
 
     def __init__(self, kd: np.ndarray):
         self.kd = np.asarray(kd, dtype=np.float64)
+        self.diffuse_albedo = self.kd
 
     @property
     def selection_weight(self) -> float:
@@ -125,8 +129,7 @@ class HalfVectorLobe(Component):
     def sample_wi(self, u1, u2, wo):
         # xi1 = 1 - u1 maps [0,1) to the thesis' (0,1] with xi1 = 1 at the lobe centre.
         h = self.distribution.half_vector_from_xi(1.0 - np.asarray(u1, dtype=np.float64), u2)
-        wr = 2.0 * np.sum(wo * h, axis=-1, keepdims=True) * h - wo
-        return self._reflected_wi(wr)
+        return self._reflected_wi(reflect(wo, h))
 
 
 class BSDF:
@@ -216,19 +219,11 @@ class BSDF:
             totals[comp.hemisphere] += np.einsum("ij,ijc->c", quad_w, integrand)
         return totals["reflection"], totals["transmission"]
 
-    def hemispherical_albedo(self, order: int = 48, albedo_order: int = 96) -> np.ndarray:
-        """Reflectance + transmittance averaged over viewer directions with cosine weight
-        (the 'white-sky' albedo): 2 * integral of a(theta) cos(theta) sin(theta) dtheta.
-        Isotropic average over azimuth is approximated by azimuths 0 and 90 degrees."""
-        nodes, weights = np.polynomial.legendre.leggauss(order)
-        mu = 0.5 * (nodes + 1.0)  # cos(theta_o) in (0, 1)
-        total = np.zeros(3)
-        for m, wgt in zip(mu, 0.5 * weights, strict=True):
-            s = np.sqrt(max(1.0 - m * m, 0.0))
-            acc = np.zeros(3)
-            for phi in (0.0, np.pi / 2):
-                wo = np.array([s * np.cos(phi), s * np.sin(phi), m])
-                r, t = self.albedo(wo, albedo_order)
-                acc += 0.5 * (r + t)
-            total += 2.0 * m * wgt * acc
-        return total
+
+def diffuse_albedo(bsdf: BSDF) -> np.ndarray:
+    """Sum of the BSDF's diffuse kd (Lambert kd, glTF (1 - metallic) baseColor), shape (3,)."""
+    total = np.zeros(3)
+    for comp in bsdf.components:
+        if isinstance(comp, CosineSampled):
+            total = total + comp.diffuse_albedo
+    return total

@@ -43,10 +43,11 @@ class GltfDiffuse(CosineSampled):
     def __init__(self, base_color: np.ndarray, metallic: float):
         self.base_color = base_color
         self.metallic = metallic
+        self.diffuse_albedo = (1.0 - metallic) * base_color
 
     @property
     def selection_weight(self) -> float:
-        return float(np.mean(self.base_color)) * (1.0 - self.metallic)
+        return float(np.mean(self.diffuse_albedo))
 
     def eval(self, wi, wo):
         valid = _valid_pair(wi, wo, False)

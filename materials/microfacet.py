@@ -175,7 +175,3 @@ class MicrofacetDistribution:
 def reflection_jacobian(wo: np.ndarray, wm: np.ndarray) -> np.ndarray:
     """d(omega_m)/d(omega_i) for wi = reflect(wo, wm): 1 / (4 |wo.wm|) (Walter et al. 2007)."""
     return 1.0 / (4.0 * np.maximum(np.abs(dot(wo, wm)), 1e-300))
-
-
-def half_vector(wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    return normalize(wi + wo)

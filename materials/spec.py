@@ -24,8 +24,6 @@ import math
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from .bsdf import BSDF
 from .conductor import microfacet_bsdf
 from .fresnel import Fresnel
@@ -223,7 +221,3 @@ def load_material(source: str) -> dict:
         return validate(desc)
     except MaterialError as exc:
         raise MaterialError(f"{path}: {exc}") from None
-
-
-def as_rgb(value) -> np.ndarray:
-    return np.broadcast_to(np.asarray(value, dtype=np.float64), (3,)).copy()

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from lobeview.materials.bsdf import Lambert
-from lobeview.materials.gltf import GltfDiffuse
+import numpy as np
+
+from lobeview.materials.bsdf import diffuse_albedo
 from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf
 
@@ -78,7 +79,7 @@ def analyse(scene: Scene) -> SceneAnalysis:
             > ANISOTROPY_RATIO
             for lobe in lobes
         )
-        diffuse = any(isinstance(c, Lambert | GltfDiffuse) and c.selection_weight > 0 for c in bsdf.components)
+        diffuse = bool(np.any(diffuse_albedo(bsdf) > 0))
         has_lightmap = mat.lightmap is not None and (mat.lightmap.tex_coord != 1 or obj.uv1 is not None)
         needs.append(
             ObjectNeeds(

@@ -137,6 +137,7 @@ def bake_lightmap(
     light_samples: int = 32,
 ) -> np.ndarray:
     """Bake one shared atlas for all objects with TEXCOORD_1; returns (res, res, 3) irradiance."""
+    from lobeview.materials.bsdf import diffuse_albedo
     from lobeview.materials.spec import build_bsdf
 
     t_start = time.perf_counter()
@@ -160,13 +161,7 @@ def bake_lightmap(
     kd_face, emission_face = [], []
     for o in blockers:
         mat = scene.materials[o.material]
-        bsdf = build_bsdf(mat.desc)
-        kd = np.zeros(3)
-        for comp in bsdf.components:
-            if hasattr(comp, "kd"):
-                kd = kd + comp.kd
-            elif type(comp).__name__ == "GltfDiffuse":
-                kd = kd + (1 - comp.metallic) * comp.base_color
+        kd = diffuse_albedo(build_bsdf(mat.desc))
         if mat.base_color_texture is not None:
             kd = kd * mat.base_color_texture.reshape(-1, 3).mean(axis=0)
         kd_face.append(np.broadcast_to(kd, (len(o.mesh.indices), 3)))

@@ -120,14 +120,15 @@ class _Reader:
         self._buffers[index] = data
         return data
 
-    def view_bytes(self, view_index: int) -> tuple[bytes, int, int | None]:
+    def view_bytes(self, view_index: int) -> tuple[bytes, int | None]:
+        """The bytes of a bufferView and its byteStride."""
         view = self.gltf.bufferViews[view_index]
         data = self.buffer(view.buffer)
         start = view.byteOffset or 0
         end = start + view.byteLength
         if end > len(data):
             raise GltfError(f"{self.path}: bufferView {view_index} runs past the end of its buffer")
-        return data[start:end], 0, view.byteStride
+        return data[start:end], view.byteStride
 
     def accessor(self, index: int) -> np.ndarray:
         acc = self.gltf.accessors[index]
@@ -140,7 +141,7 @@ class _Reader:
         if acc.bufferView is None:
             out = np.zeros((acc.count, ncomp), dtype=np.float64)
         else:
-            raw, _, stride = self.view_bytes(acc.bufferView)
+            raw, stride = self.view_bytes(acc.bufferView)
             offset = acc.byteOffset or 0
             item = dtype.itemsize * ncomp
             stride = stride or item
@@ -183,8 +184,7 @@ class _Reader:
             elif image.uri is not None:
                 data = base64.b64decode(image.uri.split(",", 1)[1])
             else:
-                raw, _, _ = self.view_bytes(image.bufferView)
-                data = raw
+                data, _ = self.view_bytes(image.bufferView)
             from PIL import Image
 
             pil = Image.open(io.BytesIO(data)).convert("RGB")

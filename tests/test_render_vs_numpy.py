@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lobeview.materials.bsdf import BSDF
+from lobeview.materials.bsdf import BSDF, diffuse_albedo
 from lobeview.materials.patterns import integrate_lobe, specular_lobes
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.cube_layout import face_directions
@@ -131,12 +131,11 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
         for lobe in specular_lobes(bsdf):
             table = albedo_table_for(lobe) if normalize else None
             expected += integrate_lobe(lobe, wo, radiance, n, renderer.cubes.face_size, frame, albedo_table=table)
-        diffuse = [c for c in bsdf.components if c not in specular_lobes(bsdf)]
-        if diffuse:
-            kd = sum(c.kd if hasattr(c, "kd") else (1 - c.metallic) * c.base_color for c in diffuse)
+        kd = diffuse_albedo(bsdf)
+        if np.any(kd > 0):
             irradiance = lookup(renderer.cubes.irradiance, frame[:, 2][None], 0.0)[0]
             factor = 1.0
-            if any(type(c).__name__ == "GltfDiffuse" for c in diffuse):
+            if any(type(c).__name__ == "GltfDiffuse" for c in bsdf.components):
                 factor = 1.0 - (0.04 + 0.96 * (1.0 - wo[2]) ** 5)
             expected += kd / np.pi * irradiance * factor
         # Same lookups, same formulas: float32 shader arithmetic against float64.

@@ -43,10 +43,6 @@ def upload_cube(ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True) 
     return cube
 
 
-def mip_levels(size: int) -> int:
-    return int(np.floor(np.log2(size))) + 1
-
-
 CDF_ROW = 1024  # texels per row of the CDF texture (shaders/integrate.glsl)
 
 

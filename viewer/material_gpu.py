@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lobeview.materials.bsdf import BSDF, Lambert
+from lobeview.materials.bsdf import BSDF, CosineSampled, diffuse_albedo
 from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.gltf import GltfDiffuse, GltfSpecular
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, pattern_xi
@@ -35,18 +35,13 @@ class PackedMaterial:
 
 
 def pack_material(bsdf: BSDF) -> PackedMaterial:
-    kd = np.zeros(3)
-    gltf_diffuse = False
+    kd = diffuse_albedo(bsdf)
+    gltf_diffuse = any(isinstance(comp, GltfDiffuse) for comp in bsdf.components)
     rows = []
     dists = []
     components = []
     for comp in bsdf.components:
-        if isinstance(comp, Lambert):
-            kd = kd + comp.kd
-            continue
-        if isinstance(comp, GltfDiffuse):
-            kd = kd + (1.0 - comp.metallic) * comp.base_color
-            gltf_diffuse = True
+        if isinstance(comp, CosineSampled):
             continue
         d = comp.distribution
         if isinstance(comp, KurtLobe):

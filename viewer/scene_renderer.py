@@ -26,7 +26,7 @@ from lobeview.scenes.scene import Scene
 
 from .camera import Camera, perspective
 from .cubemap import RadianceCube, equirect_to_cube_faces
-from .material_gpu import MAX_LOBES, PackedMaterial, pack_material
+from .material_gpu import MAX_LOBES, MAX_PATTERN, PackedMaterial, pack_material
 from .render_base import Method, RendererBase, RenderResult, set_uniform
 
 CUBE_CACHE_VERSION = 3
@@ -217,7 +217,7 @@ class SceneRenderer(RendererBase):
         defines = (
             {**method.defines(), "SPECULAR": specular}
             if specular
-            else {"MAX_LOBES": MAX_LOBES, "MAX_PATTERN": 32, "METHOD_LOBE": True}
+            else {"MAX_LOBES": MAX_LOBES, "MAX_PATTERN": MAX_PATTERN, "METHOD_LOBE": True}
         )
         return self.programs.program("scene.vert", "scene.frag", defines)
 
