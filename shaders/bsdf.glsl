@@ -3,7 +3,7 @@
 // wo towards the viewer. Tests hold every function here against the numpy reference by
 // rendering through the real pipeline (tests/test_render_vs_numpy.py).
 
-const float PI = 3.14159265358979323846;
+#include "cube.glsl"
 const float COS_EPS = 1e-7;
 
 #define LOBE_KURT_REFLECTION 0
@@ -249,13 +249,4 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
     float au = min(acos(clamp(dot(wu, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
     float av = min(acos(clamp(dot(wv, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
     return PI * tan(au) * tan(av) / float(n);
-}
-
-// Eq. 4.16-4.17 (and Colbert-Krivanek's lod with solid angle omega_s): MIP level of a lookup
-// covering solid angle `area` in world direction `dir` on a cube map with faces of size `face`.
-float cube_lod(vec3 dir, float area, float face) {
-    vec3 a = abs(dir);
-    float max_c = max(max(a.x, a.y), max(a.z, 1e-6));
-    float texels = area / (max_c * max_c * max_c) * face * face * 0.25;
-    return 0.5 * log2(max(texels, 1e-30));
 }

@@ -59,15 +59,6 @@ float env_pdf(vec3 d) {
     return textureLod(u_env_pdf, d, 0.0).r / (m * m * m);
 }
 
-vec3 cube_face_direction(int face, float sc, float tc) {
-    if (face == 0) return vec3(1.0, -tc, -sc);
-    if (face == 1) return vec3(-1.0, -tc, sc);
-    if (face == 2) return vec3(sc, 1.0, tc);
-    if (face == 3) return vec3(sc, -1.0, -tc);
-    if (face == 4) return vec3(sc, -tc, 1.0);
-    return vec3(-sc, -tc, -1.0);
-}
-
 vec3 env_sample(vec2 u) {
     int lo = 0;
     int hi = u_env_texels - 1;
@@ -175,6 +166,46 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     return vec3(den.r > 0.0 ? num.r / den.r : 0.0, den.g > 0.0 ? num.g / den.g : 0.0,
                 den.b > 0.0 ? num.b / den.b : 0.0);
 #endif
+}
+#elif defined(METHOD_PREFILTERED)
+// One lookup per lobe (viewer/prefiltered.py). Split-sum (Karis 2013) for microfacet and glTF
+// lobes: the cube map prefiltered at the lobe's roughness (isotropic alpha = sqrt(ax ay)) times
+// F0 A + B from the DFG table. Kautz-McCool lobe maps (seed 000, section 5.1) for the rest, or
+// for every lobe when selected: the 3D map at the fitted lobe axis and cos(theta_o), times the
+// true directional albedo of that elevation (the energy rescaling of section 3.1).
+uniform samplerCube u_split_sum[2];            // by distribution (DIST_BECKMANN, DIST_GGX)
+uniform float u_split_sum_max_level;
+uniform sampler2D u_dfg;                       // rg: Beckmann (A, B), ba: GGX; x = cos, y = roughness
+uniform sampler3D u_lobe_maps[MAX_LOBES];
+uniform int u_lobe_map_mode[MAX_LOBES];        // 0: split-sum, 1: lobe map
+uniform int u_lobe_map_depth[MAX_LOBES];       // LOBE_SLICES (3D map) or 1 (2D lobe, Phong)
+uniform float u_lobe_peak[MAX_LOBES * LOBE_SLICES];   // lobe axis polar angle per elevation
+uniform vec3 u_lobe_energy[MAX_LOBES * LOBE_SLICES];  // directional albedo per elevation
+
+vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
+    if (wo.z <= 0.0) return vec3(0.0);
+    if (u_lobe_map_mode[lobe_index] == 0) {
+        vec3 r = tbn * vec3(-wo.xy, wo.z);
+        float roughness = sqrt(sqrt(l.ax * l.ay));
+        vec3 radiance = textureLod(u_split_sum[l.dist], r, roughness * u_split_sum_max_level).rgb;
+        vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
+        vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
+        vec3 f0 = lobe_fresnel(l, 1.0);
+        vec3 scale = l.type == LOBE_GLTF_SPECULAR ? vec3(1.0) : l.k;
+        return radiance * (f0 * ab.x + ab.y) * scale;
+    }
+    float s = clamp(wo.z, 0.0, 1.0) * float(LOBE_SLICES - 1);
+    int s0 = min(int(floor(s)), LOBE_SLICES - 2);
+    float f = s - float(s0);
+    int base = lobe_index * LOBE_SLICES;
+    float t = mix(u_lobe_peak[base + s0], u_lobe_peak[base + s0 + 1], f);
+    vec3 energy = mix(u_lobe_energy[base + s0], u_lobe_energy[base + s0 + 1], f);
+    // Lobe axis in the plane of incidence on the mirror side, at polar angle t.
+    float len_xy = length(wo.xy);
+    vec2 mirror_azimuth = len_xy > 1e-7 ? -wo.xy / len_xy : vec2(1.0, 0.0);
+    vec3 axis = tbn * vec3(sin(t) * mirror_azimuth, cos(t));
+    float z = u_lobe_map_depth[lobe_index] > 1 ? (s + 0.5) / float(LOBE_SLICES) : 0.5;
+    return texture(u_lobe_maps[lobe_index], vec3(direction_to_latlong(axis), z)).rgb * energy;
 }
 #elif defined(ENV_SAMPLING)
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {

@@ -67,8 +67,20 @@ class RadianceCube:
         for face in range(6):
             self.env_pdf.write(face, np.ascontiguousarray(scale[face]).tobytes())
         self.env_pdf.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self._prefiltered = None
+        self.cache_dir = None  # where prefiltered maps are cached (set by the owner)
+
+    def prefiltered_maps(self, programs: ProgramCache | None = None):
+        """The prefiltered maps of this radiance (viewer/prefiltered.py), created on first use."""
+        if self._prefiltered is None:
+            from .prefiltered import PrefilteredMaps
+
+            self._prefiltered = PrefilteredMaps(self.radiance.ctx, self, programs, self.cache_dir)
+        return self._prefiltered
 
     def release(self):
+        if self._prefiltered is not None:
+            self._prefiltered.release()
         for texture in (self.radiance, self.env_cdf, self.env_pdf):
             texture.release()
 

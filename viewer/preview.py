@@ -76,7 +76,7 @@ class PreviewRenderer(RendererBase):
         set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
         set_uniform(program, "u_camera_position", tuple(float(x) for x in camera.position))
         self.set_material(program, material, method, lod_bias, seed)
-        self.bind_cube(program, self.cubes, method)
+        self.bind_cube(program, self.cubes, method, material)
         self.cubes.irradiance.use(1)
         set_uniform(program, "u_irradiance", 1)
 

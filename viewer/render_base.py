@@ -10,6 +10,10 @@ import moderngl
 import numpy as np
 from scipy.stats import qmc
 
+from lobeview.materials.conductor import MicrofacetReflection
+from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_map
+from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
+
 from .cubemap import RadianceCube
 from .material_gpu import MAX_LOBES, MAX_PATTERN, PackedMaterial, albedo_texture_data, pack_patterns
 from .shaders import ProgramCache
@@ -20,7 +24,9 @@ REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
 DEFAULT_FIS_LOD_BIAS = 1.0  # Colbert & Krivanek's +1; measured in bench/ (issue 7)
 DEFAULT_LOBE_LOD_BIAS = 0.0
 
-_METHOD = re.compile(r"^(lobe|fis|mc)-(\d+)$|^(reference)$")
+_METHOD = re.compile(r"^(lobe|fis|mc)-(\d+)$|^(reference)$|^prefiltered(?:-(splitsum|lobe|lobe2d|phong))?$")
+#: prefiltered sub-modes: auto = split-sum for microfacet/glTF lobes, lobe maps for the rest
+PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong")
 
 
 @dataclass(frozen=True)
@@ -28,14 +34,20 @@ class Method:
     kind: str  # 'lobe', 'fis', 'mc', 'reference'
     samples: int  # N per lobe (reference: per pass)
     normalize: bool = False  # lobe-N: energy normalisation by the lobe's albedo table
+    mode: str = ""  # prefiltered: one of PREFILTER_MODES
 
     @classmethod
     def parse(cls, text: str) -> Method:
         m = _METHOD.match(text.strip())
         if not m:
-            raise ValueError(f"unknown method {text!r}; use lobe-N, fis-N, mc-N or reference")
+            raise ValueError(
+                f"unknown method {text!r}; use lobe-N, fis-N, mc-N, reference or "
+                "prefiltered[-splitsum|-lobe|-lobe2d|-phong]"
+            )
         if m.group(3):
             return cls("reference", REFERENCE_BATCH)
+        if m.group(1) is None:
+            return cls("prefiltered", 1, mode=m.group(4) or "auto")
         n = int(m.group(2))
         limit = MAX_PATTERN if m.group(1) == "lobe" else 4096
         if not 1 <= n <= limit:
@@ -45,6 +57,8 @@ class Method:
     def __str__(self) -> str:
         if self.kind == "reference":
             return "reference"
+        if self.kind == "prefiltered":
+            return "prefiltered" if self.mode == "auto" else f"prefiltered-{self.mode}"
         return f"{self.kind}-{self.samples}" + (" (normalised)" if self.normalize and self.kind == "lobe" else "")
 
     def defines(self) -> dict:
@@ -56,6 +70,8 @@ class Method:
             "METHOD_MC": self.kind in ("mc", "reference"),
             "ENV_SAMPLING": self.kind == "reference",
             "LOBE_NORMALIZE": self.kind == "lobe" and self.normalize,
+            "METHOD_PREFILTERED": self.kind == "prefiltered",
+            "LOBE_SLICES": LOBE_SLICES,
         }
 
     def default_lod_bias(self) -> float:
@@ -63,6 +79,19 @@ class Method:
 
     def passes(self, spp: int) -> int:
         return max(1, int(np.ceil(spp / self.samples))) if self.kind == "reference" else 1
+
+
+def prefilter_plan(material: PackedMaterial, mode: str) -> list[str]:
+    """Per lobe: 'splitsum' or the lobe-map fit mode ('lobe', 'lobe2d', 'phong'). Split-sum needs
+    a microfacet BRDF (its DFG table); the thesis' Kurt lobes always use lobe maps."""
+    plan = []
+    for comp in material.lobe_components:
+        microfacet = isinstance(comp, MicrofacetReflection)  # includes glTF specular
+        if mode in ("auto", "splitsum"):
+            plan.append("splitsum" if microfacet else "lobe")
+        else:
+            plan.append(mode)
+    return plan
 
 
 def sobol_points(count: int = SOBOL_SIDE * SOBOL_SIDE, seed: int = SOBOL_SEED) -> np.ndarray:
@@ -147,8 +176,11 @@ class RendererBase:
             self._albedo_textures[key][0].use(7)
             set_uniform(program, "u_albedo", 7)
 
-    def bind_cube(self, program, cube: RadianceCube, method: Method) -> None:
-        """Texture units: 0 radiance, 2 Sobol, 3-4 importance (reference only)."""
+    def bind_cube(self, program, cube: RadianceCube, method: Method, material: PackedMaterial | None = None) -> None:
+        """Texture units: 0 radiance, 2 Sobol, 3-4 importance (reference only), 8-18
+        prefiltered maps (prefiltered only, built on first use for this cube and material)."""
+        if method.kind == "prefiltered":
+            self.bind_prefiltered(program, cube, material, method)
         cube.radiance.use(0)
         self.sobol.use(2)
         set_uniform(program, "u_radiance", 0)
@@ -161,6 +193,54 @@ class RendererBase:
             set_uniform(program, "u_env_pdf", 4)
             set_uniform(program, "u_env_texels", int(cube.importance.probabilities.size))
             set_uniform(program, "u_env_size", int(cube.importance.size))
+
+    def bind_prefiltered(self, program, cube: RadianceCube, material: PackedMaterial, method: Method) -> None:
+        maps = cube.prefiltered_maps(self.programs)
+        plan = prefilter_plan(material, method.mode)
+        for unit, kind in ((8, "beckmann"), (9, "ggx")):
+            if any(p == "splitsum" and material.lobe_distributions[i].kind == kind for i, p in enumerate(plan)):
+                maps.split_sum(kind).use(unit)
+            else:
+                self._dummy_texture("cube").use(unit)
+        set_uniform(program, "u_split_sum", [8, 9])
+        set_uniform(program, "u_split_sum_max_level", float(SPLIT_SUM_LEVELS - 1))
+        maps.dfg().use(10)
+        set_uniform(program, "u_dfg", 10)
+        modes = np.zeros(MAX_LOBES, dtype=np.int32)
+        depth = np.ones(MAX_LOBES, dtype=np.int32)
+        peaks = np.zeros((MAX_LOBES, LOBE_SLICES), dtype=np.float32)
+        energy = np.zeros((MAX_LOBES, LOBE_SLICES, 3), dtype=np.float32)
+        units = list(range(11, 11 + MAX_LOBES))
+        for i in range(MAX_LOBES):
+            texture = self._dummy_texture("3d")
+            if i < len(plan) and plan[i] != "splitsum":
+                fit = fit_lobe_map(material.lobe_components[i], plan[i])
+                texture = maps.lobe_map(fit, f"lobe {i}")
+                modes[i] = 1
+                depth[i] = len(fit.profiles)
+                peaks[i] = fit.peak_theta
+                energy[i] = fit.energy
+            texture.use(units[i])
+        set_uniform(program, "u_lobe_maps", units)
+        for name, values in (
+            ("u_lobe_map_mode", modes),
+            ("u_lobe_map_depth", depth),
+            ("u_lobe_peak", peaks),
+            ("u_lobe_energy", energy),
+        ):
+            if name in program:
+                program[name].write(np.ascontiguousarray(values).tobytes())
+
+    def _dummy_texture(self, kind: str):
+        """A 1-texel black texture for sampler slots a material does not use."""
+        key = ("dummy", kind)
+        if key not in self._albedo_textures:
+            if kind == "cube":
+                tex = self.ctx.texture_cube((1, 1), 4, b"\0" * 16 * 6, dtype="f4")
+            else:
+                tex = self.ctx.texture3d((1, 1, 1), 4, b"\0" * 16, dtype="f4")
+            self._albedo_textures[key] = (tex, None)
+        return self._albedo_textures[key][0]
 
     def draw_background(self, cube: RadianceCube, view_proj: np.ndarray) -> None:
         """Environment behind everything (depth test off, so it writes no depth)."""

@@ -288,7 +288,7 @@ class SceneRenderer(RendererBase):
                 self._white.use(6)
                 set_uniform(program, "u_has_base_color", 0)
             if use_specular:
-                self.bind_cube(program, obj.cube, obj_method)
+                self.bind_cube(program, obj.cube, obj_method, obj.material)
             self._vao(program, obj).render(moderngl.TRIANGLES)
 
     def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:

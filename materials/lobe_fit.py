@@ -1,0 +1,272 @@
+"""Kautz & McCool lobe fitting (seed 000, section 3): radially symmetric approximations of a
+BRDF lobe, one per sampled view elevation, for prefiltered environment maps.
+
+The function approximated is the lobe's slice  g(wi) = f(wi, wo) |cos theta_i|  for fixed wo
+(the seed fits f and approximates n.l by n.r, Eq. 2; fitting the cosine-weighted slice avoids
+that approximation). Modes:
+
+* ``lobe``   (3.1): per elevation the peak direction (searched in the plane of incidence, where
+  an isotropic lobe peaks), the mean of the profile curves around it, rescaled to the true
+  directional albedo; rendered from a 3D map (direction x cos theta_o).
+* ``lobe2d`` (3.2): one average shape for every elevation and a weight k(theta_o) (the true
+  albedo); a 2D map, so the sharpening at glancing angles is lost.
+* ``phong``  (Heidrich & Seidel, seed 001 section 4): a cos^n lobe around the mirror direction
+  with n matched to the average shape's median angle, weighted by the true albedo.
+* :func:`fit_multi_lobe` (3.3): greedy fitting with minimum profiles, for the error-versus-lobe
+  count study (Figure 7 of the seed); the renderer uses single lobes (see README).
+
+Anisotropic lobes are fitted through their isotropic equivalent (alpha = sqrt(ax ay)) and scaled
+to their own albedo averaged over the view azimuth; the method assumes isotropy (seed 000, 3.1),
+so brushed metals lose their stretched highlights (use lobe-N for them).
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from .bsdf import BSDF, Component
+from .microfacet import MicrofacetDistribution
+from .prefilter import RadialProfile
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+LOBE_SLICES = 16  # view elevations, uniform in cos(theta_o) from 0 to 1 (the seed used 16)
+MIN_COS_O = 0.02  # the grazing slice is fitted at this cosine (wo on the horizon is degenerate)
+FIT_MODES = ("lobe", "lobe2d", "phong")
+
+_PSI = np.pi * (np.arange(161) / 160.0) ** 2  # radial nodes, dense near the axis
+_BETA = (np.arange(64) + 0.5) / 64 * 2.0 * np.pi
+
+
+def slice_cosines(slices: int = LOBE_SLICES) -> np.ndarray:
+    return np.linspace(0.0, 1.0, slices)
+
+
+def is_isotropic(component: Component) -> bool:
+    d = getattr(component, "distribution", None)
+    return d is None or abs(d.alpha_x - d.alpha_y) <= 1e-9 * max(d.alpha_x, d.alpha_y)
+
+
+def isotropic_equivalent(component: Component) -> Component:
+    """The component with its microfacet distribution made isotropic at alpha = sqrt(ax ay)."""
+    if is_isotropic(component):
+        return component
+    d = component.distribution
+    alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
+    twin = copy.copy(component)
+    twin.distribution = MicrofacetDistribution(d.kind, alpha, alpha)
+    return twin
+
+
+def _frame(axis: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    helper = np.array([0.0, 1.0, 0.0]) if abs(axis[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    t = np.cross(helper, axis)
+    t /= np.linalg.norm(t)
+    return t, np.cross(axis, t)
+
+
+def polar_grid(axis: np.ndarray, psi: np.ndarray = _PSI, beta: np.ndarray = _BETA):
+    """Directions (len(psi), len(beta), 3) around ``axis`` and their solid-angle weights."""
+    t, b = _frame(axis)
+    sp, cp = np.sin(psi)[:, None, None], np.cos(psi)[:, None, None]
+    ring = np.cos(beta)[None, :, None] * t + np.sin(beta)[None, :, None] * b
+    dirs = cp * axis + sp * ring
+    dpsi = np.gradient(psi)
+    weights = (np.sin(psi) * dpsi)[:, None] * np.full(len(beta), 2.0 * np.pi / len(beta))[None, :]
+    return dirs, weights
+
+
+def _wo(cos_theta_o: float) -> np.ndarray:
+    c = max(float(cos_theta_o), MIN_COS_O)
+    return np.array([np.sqrt(1.0 - c * c), 0.0, c])
+
+
+def _in_plane(t: float) -> np.ndarray:
+    """Direction at polar angle t in the plane of incidence, on the mirror side (t in [0, pi]:
+    t < pi/2 above the surface, t > pi/2 below; the mirror direction of wo is t = theta_o)."""
+    return np.array([-np.sin(t), 0.0, np.cos(t)])
+
+
+def slice_values(component: Component, wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
+    """g(wi) = f(wi, wo) |cos theta_i| (RGB), the function a lobe approximates."""
+    f = component.eval(wi, np.broadcast_to(wo, wi.shape))
+    return f * np.abs(wi[..., 2:3])
+
+
+def _luminance(rgb: np.ndarray) -> np.ndarray:
+    return rgb @ LUMINANCE
+
+
+def _mirror_axis(component: Component, wo: np.ndarray) -> np.ndarray:
+    axis = np.array([-wo[0], -wo[1], wo[2]])
+    return axis * np.array([1.0, 1.0, -1.0]) if component.transmission else axis
+
+
+def find_peak(component: Component, wo: np.ndarray) -> float:
+    """Polar angle t of the maximum of the slice in the plane of incidence (seed 000, 3.1)."""
+    theta_o = np.arccos(wo[2])
+    start = np.pi - theta_o if component.transmission else theta_o
+    ts = np.clip(start + np.linspace(-1.2, 1.2, 481), 0.0, np.pi)
+    values = _luminance(slice_values(component, wo, np.stack([_in_plane(t) for t in ts])))
+    best = int(np.argmax(values))
+    lo, hi = ts[max(best - 1, 0)], ts[min(best + 1, len(ts) - 1)]
+    if hi <= lo:
+        return float(ts[best])
+    res = minimize_scalar(
+        lambda t: -_luminance(slice_values(component, wo, _in_plane(t)[None]))[0],
+        bounds=(lo, hi),
+        method="bounded",
+        options={"xatol": 1e-7},
+    )
+    return float(res.x) if -res.fun >= values[best] else float(ts[best])
+
+
+def mean_profile_values(component: Component, wo: np.ndarray, peak: np.ndarray) -> np.ndarray:
+    """Mean of the profile curves around the peak (luminance), on the radial nodes _PSI."""
+    dirs, _ = polar_grid(peak)
+    return _luminance(slice_values(component, wo, dirs)).mean(axis=1)
+
+
+def directional_energy(component: Component, wo: np.ndarray) -> np.ndarray:
+    """Directional albedo of the lobe; for an anisotropic lobe the mean over the view azimuth
+    (an isotropic map cannot follow the azimuth, but its energy stays the true one on average)."""
+    azimuths = (0.0,) if is_isotropic(component) else np.arange(8) * np.pi / 8
+    total = np.zeros(3)
+    for phi in azimuths:
+        c, s = np.cos(phi), np.sin(phi)
+        w = np.array([c * wo[0] - s * wo[1], s * wo[0] + c * wo[1], wo[2]])
+        reflection, transmission = BSDF([component]).albedo(w, order=128)
+        total += transmission if component.transmission else reflection
+    return total / len(azimuths)
+
+
+def relative_rms(component: Component, wo: np.ndarray, approximation) -> float:
+    """Relative RMS error of an approximation of the slice (luminance) over the whole sphere:
+    sqrt(integral (g - a)^2 / integral g^2), on a polar grid around the mirror direction."""
+    dirs, weights = polar_grid(_mirror_axis(component, wo))
+    g = _luminance(slice_values(component, wo, dirs))
+    a = approximation(dirs)
+    return float(np.sqrt(np.sum(weights * (g - a) ** 2) / max(np.sum(weights * g * g), 1e-300)))
+
+
+@dataclass
+class LobeMapFit:
+    """A fitted lobe over the view elevations cos(theta_o) = slice_cosines(S)."""
+
+    mode: str
+    cos_theta_o: np.ndarray  # (S,)
+    peak_theta: np.ndarray  # (S,) polar angle t of the lobe axis in the plane of incidence
+    profiles: list  # RadialProfile per slice ('lobe') or one for all ('lobe2d', 'phong')
+    energy: np.ndarray  # (S, 3) directional albedo the lobe is scaled to
+    error: np.ndarray  # (S,) relative RMS of the approximation over the slice
+    isotropic_approximation: bool  # the component was anisotropic and fitted isotropically
+    phong_exponent: float | None = None
+
+    def profile(self, slice_index: int) -> RadialProfile:
+        return self.profiles[slice_index if len(self.profiles) > 1 else 0]
+
+    def axis(self, slice_index: int) -> np.ndarray:
+        """Lobe axis in the local frame for wo in the x-z plane (mirror azimuth = -x)."""
+        return _in_plane(self.peak_theta[slice_index])
+
+
+def _interp_profiles(profiles: list) -> RadialProfile:
+    """Average of unit-mass shapes on the common radial nodes (seed 000, 3.2)."""
+    return RadialProfile.from_values(_PSI, np.mean([p(_PSI) for p in profiles], axis=0))
+
+
+def phong_exponent_for(profile: RadialProfile) -> float:
+    """Exponent n of cos^n with the same median angle (mass of cos^n within psi: 1 - cos^(n+1))."""
+    c = np.cos(min(profile.median_angle, 1.5))
+    return float(max(np.log(0.5) / np.log(c) - 1.0, 0.0))
+
+
+@lru_cache(maxsize=64)
+def _fit_cached(key: str, component: Component, mode: str, slices: int) -> LobeMapFit:
+    del key  # the cache key; the component itself is not hashable by value
+    anisotropic = not is_isotropic(component)
+    comp = isotropic_equivalent(component)
+    cosines = slice_cosines(slices)
+    peaks, shapes, energies = [], [], []
+    for c in cosines:
+        wo = _wo(c)
+        t = find_peak(comp, wo)
+        peaks.append(t)
+        shapes.append(RadialProfile.from_values(_PSI, mean_profile_values(comp, wo, _in_plane(t))))
+        energies.append(directional_energy(component, wo))
+    peaks = np.array(peaks)
+    energies = np.array(energies)
+    exponent = None
+    if mode == "lobe2d":
+        shapes = [_interp_profiles(shapes)]
+    elif mode == "phong":
+        from .prefilter import phong_profile
+
+        exponent = phong_exponent_for(_interp_profiles(shapes))
+        shapes = [phong_profile(exponent)]
+        theta_o = np.arccos(np.maximum(cosines, MIN_COS_O))
+        peaks = np.pi - theta_o if comp.transmission else theta_o
+    errors = []
+    for s, c in enumerate(cosines):
+        wo = _wo(c)
+        axis = _in_plane(peaks[s])
+        shape = shapes[s if len(shapes) > 1 else 0]
+        scale = float(energies[s] @ LUMINANCE)
+        errors.append(
+            relative_rms(comp, wo, lambda d, shape=shape, axis=axis, scale=scale: scale * shape.of_cosine(d @ axis))
+        )
+    return LobeMapFit(mode, cosines, peaks, shapes, energies, np.array(errors), anisotropic, exponent)
+
+
+def component_key(component: Component) -> str:
+    items = {k: (np.asarray(v).tolist() if isinstance(v, np.ndarray) else repr(v)) for k, v in vars(component).items()}
+    return f"{type(component).__name__}:{sorted(items.items())}"
+
+
+def fit_lobe_map(component: Component, mode: str = "lobe", slices: int = LOBE_SLICES) -> LobeMapFit:
+    """Fit one specular component (reflection or transmission lobe) for a prefiltered mode."""
+    if mode not in FIT_MODES:
+        raise ValueError(f"unknown lobe-map mode {mode!r}; use one of {FIT_MODES}")
+    return _fit_cached(component_key(component) + mode + str(slices), component, mode, slices)
+
+
+# -- greedy multi-lobe fitting (seed 000, 3.3) --------------------------------------------------
+@dataclass
+class MultiLobeFit:
+    axes: list  # lobe axes (3,)
+    profiles: list  # (len(_PSI),) minimum-profile values (unnormalised, luminance)
+    errors: list  # relative RMS after 1, 2, ... lobes
+
+
+def fit_multi_lobe(component: Component, cos_theta_o: float, lobes: int = 8) -> MultiLobeFit:
+    """Greedy fitting with minimum profiles at one view elevation: find the maximum of what is
+    left, take around it the smallest profile curve (so the residual never goes negative),
+    subtract, repeat. Lobes may sit anywhere (not only in the plane of incidence)."""
+    comp = isotropic_equivalent(component)
+    wo = _wo(cos_theta_o)
+    search_dirs, _ = polar_grid(_mirror_axis(comp, wo))
+    search_dirs = search_dirs.reshape(-1, 3)
+    axes, profiles, errors = [], [], []
+
+    def approximation(d):
+        total = np.zeros(d.shape[:-1])
+        for axis, prof in zip(axes, profiles, strict=True):
+            total = total + np.interp(np.arccos(np.clip(d @ axis, -1.0, 1.0)), _PSI, prof, right=0.0)
+        return total
+
+    def residual(d):
+        return _luminance(slice_values(comp, wo, d)) - approximation(d)
+
+    for _ in range(lobes):
+        r = residual(search_dirs)
+        axis = search_dirs[int(np.argmax(r))]
+        dirs, _ = polar_grid(axis)
+        minimum_profile = np.maximum(residual(dirs).min(axis=1), 0.0)
+        axes.append(axis)
+        profiles.append(minimum_profile)
+        errors.append(relative_rms(comp, wo, approximation))
+    return MultiLobeFit(axes, profiles, errors)

@@ -1,0 +1,286 @@
+"""Prefiltered environment lookups, numpy reference (issue 6).
+
+A prefiltered map stores, per direction d, the environment convolved with a radially symmetric
+kernel around d:  M(d) = integral p(angle(d, l)) L(l) dl  with  integral p dl = 1.
+Every prefiltered mode of lobeview is such a map; only the kernel differs:
+
+* split-sum GGX/Beckmann (Karis 2013): with n = v = r the GGX importance-sampled prefilter
+  weighted by n.l has the kernel  p(psi) ~ D(cos(psi/2)) / 4 * max(cos psi, 0)  (pdf of the
+  reflected direction D cos(theta_h) / (4 v.h) with v.h = cos(theta_h) = cos(psi/2)), one map per
+  roughness level, times the DFG table  integral f cos = F0 A + B  (Schlick Fresnel);
+* Kautz & McCool lobe maps (lobe_fit.py): the fitted radially symmetric lobe of each view
+  elevation (seed 000, Eq. 1-2);
+* Phong maps (Heidrich & Seidel, seed 001 section 4): p ~ cos^n psi.
+
+This module holds the kernels (:class:`RadialProfile`), the DFG table, the brute-force prefilter
+the GPU version is tested against, and the hierarchical prefilter of Kautz, Vazquez, Heidrich and
+Seidel (seed 001, section 5.1).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lobeview.scenes.cube_layout import face_directions, face_point_directions, texel_solid_angles
+
+from .conductor import MicrofacetReflection
+from .fresnel import Fresnel
+from .microfacet import ALPHA_MIN, MicrofacetDistribution
+
+# Angles from the kernel axis: 0 plus a geometric grid (1.2 % steps) that resolves lobes down
+# to alpha ~ 1e-4 and reaches pi.
+PSI_GRID = np.concatenate([[0.0], np.geomspace(1e-5, np.pi, 1023)])
+
+
+@dataclass(frozen=True)
+class RadialProfile:
+    """A radially symmetric kernel p(psi) per steradian, tabulated on ``psi`` and normalised so
+    that its integral over the sphere is 1 (linear interpolation between nodes, 0 beyond pi)."""
+
+    psi: np.ndarray
+    density: np.ndarray
+    radial_mass: np.ndarray = field(repr=False)  # integral of p over the cap of angle psi
+
+    @classmethod
+    def from_values(cls, psi, values) -> RadialProfile:
+        psi = np.asarray(psi, dtype=np.float64)
+        values = np.nan_to_num(np.maximum(np.asarray(values, dtype=np.float64), 0.0))
+        ring = values * 2.0 * np.pi * np.sin(psi)
+        mass = np.concatenate([[0.0], np.cumsum(0.5 * (ring[1:] + ring[:-1]) * np.diff(psi))])
+        if not mass[-1] > 0.0:
+            raise ValueError("a radial profile needs positive values somewhere")
+        return cls(psi, values / mass[-1], mass / mass[-1])
+
+    def __call__(self, psi) -> np.ndarray:
+        return np.interp(psi, self.psi, self.density, right=0.0)
+
+    def of_cosine(self, cos_angle) -> np.ndarray:
+        return self(np.arccos(np.clip(cos_angle, -1.0, 1.0)))
+
+    def quantile(self, q) -> np.ndarray:
+        """The angle within which a fraction q of the kernel's mass lies."""
+        keep = np.concatenate([[True], np.diff(self.radial_mass) > 0])
+        return np.interp(q, self.radial_mass[keep], self.psi[keep])
+
+    @property
+    def median_angle(self) -> float:
+        return float(self.quantile(0.5))
+
+    def quadrature(self, rings: int, azimuths: int) -> tuple[np.ndarray, np.ndarray]:
+        """Stratified importance quadrature: ring k at the mass quantile (k + 1/2) / rings, each
+        of its ``azimuths`` samples standing for 1 / (rings azimuths) of the mass, hence for the
+        solid angle 1 / (rings azimuths p(psi_k)) (the footprint a filtered lookup should cover)."""
+        psi_k = self.quantile((np.arange(rings) + 0.5) / rings)
+        density = np.maximum(self(psi_k), 1e-30)
+        return psi_k, 1.0 / (rings * azimuths * density)
+
+
+def microfacet_kernel_values(kind: str, alpha: float, psi=PSI_GRID) -> np.ndarray:
+    """Split-sum kernel D(cos(psi/2)) / 4 max(cos psi, 0), unnormalised (see module doc)."""
+    distribution = MicrofacetDistribution(kind, max(alpha, ALPHA_MIN), max(alpha, ALPHA_MIN))
+    half = 0.5 * np.asarray(psi)
+    h = np.stack([np.sin(half), np.zeros_like(half), np.cos(half)], axis=-1)
+    return distribution.D(h) / 4.0 * np.maximum(np.cos(psi), 0.0)
+
+
+def split_sum_profile(kind: str, alpha: float) -> RadialProfile:
+    return RadialProfile.from_values(PSI_GRID, microfacet_kernel_values(kind, alpha))
+
+
+def phong_profile(exponent: float) -> RadialProfile:
+    return RadialProfile.from_values(PSI_GRID, np.maximum(np.cos(PSI_GRID), 0.0) ** exponent)
+
+
+# -- split-sum roughness levels and the DFG table -----------------------------------------------
+SPLIT_SUM_LEVELS = 6  # MIP levels 0..5 of the prefiltered cube; level l has roughness l / 5
+
+
+def split_sum_alpha(level: int, levels: int = SPLIT_SUM_LEVELS) -> float:
+    """Roughness of a MIP level: perceptual roughness r = level / (levels - 1), alpha = r^2."""
+    return (level / (levels - 1)) ** 2
+
+
+class _SchlickWeight(MicrofacetReflection):
+    """The microfacet BRDF with its Fresnel term replaced by (1 - wo.h)^5 (the B integral)."""
+
+    def fresnel_term(self, wo_h):
+        return np.broadcast_to(((1.0 - np.abs(wo_h)) ** 5)[..., None], np.shape(wo_h) + (3,))
+
+
+DFG_SIZE = 32
+
+
+def dfg_table(kind: str, size: int = DFG_SIZE, order: int = 48) -> np.ndarray:
+    """(size, size, 2) table of (A, B) with  integral f cos dwi = F0 A + B  for a microfacet BRDF
+    with Schlick Fresnel F0 + (1 - F0)(1 - wo.h)^5, rows = perceptual roughness r, columns =
+    cos(theta_o), both sampled at texel centres (i + 1/2) / size (for linear filtering).
+    Integrated like BSDF.albedo: Gauss-Legendre in the sampler's primary space, all view
+    angles of a row at once."""
+    centres = (np.arange(size) + 0.5) / size
+    nodes, weights = np.polynomial.legendre.leggauss(order)
+    x = 0.5 * (nodes + 1.0)
+    u1, u2 = np.meshgrid(x, x, indexing="ij")
+    quad_w = np.outer(0.5 * weights, 0.5 * weights)
+    wo = np.stack([np.sqrt(1.0 - centres**2), np.zeros(size), centres], axis=-1)
+    wo_b = np.broadcast_to(wo[:, None, None, :], (size, order, order, 3))
+    table = np.zeros((size, size, 2))
+    for row, r in enumerate(centres):
+        distribution = MicrofacetDistribution(kind, max(r * r, ALPHA_MIN), max(r * r, ALPHA_MIN))
+        total = MicrofacetReflection(distribution, Fresnel("none"))
+        grazing = _SchlickWeight(distribution, Fresnel("none"))
+        wi = total.sample_wi(u1[None], u2[None], wo_b)
+        pdf = total.pdf(wi, wo_b)
+        ok = pdf > 0.0
+        safe_pdf = np.where(ok, pdf, 1.0)
+        for column, comp in ((0, total), (1, grazing)):
+            integrand = np.where(ok, comp.eval(wi, wo_b)[..., 0] * np.abs(wi[..., 2]) / safe_pdf, 0.0)
+            table[row, :, column] = np.einsum("ij,mij->m", quad_w, integrand)
+    table[..., 0] -= table[..., 1]  # A = (A + B) - B
+    return table
+
+
+def dfg_lookup(table: np.ndarray, cos_theta_o, roughness) -> np.ndarray:
+    """Bilinear lookup between texel centres, clamped at the edges (GL_LINEAR + CLAMP_TO_EDGE)."""
+    size = table.shape[0]
+    x = np.clip(np.asarray(cos_theta_o, dtype=np.float64) * size - 0.5, 0.0, size - 1.0)
+    y = np.clip(np.asarray(roughness, dtype=np.float64) * size - 0.5, 0.0, size - 1.0)
+    x0 = np.minimum(np.floor(x).astype(int), size - 2)
+    y0 = np.minimum(np.floor(y).astype(int), size - 2)
+    fx = (x - x0)[..., None]
+    fy = (y - y0)[..., None]
+    top = table[y0, x0] * (1 - fx) + table[y0, x0 + 1] * fx
+    bottom = table[y0 + 1, x0] * (1 - fx) + table[y0 + 1, x0 + 1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+# -- brute-force and hierarchical prefiltering on cube maps -------------------------------------
+def cube_texels(size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Texel-centre directions (6 size^2, 3) and solid angles (6 size^2,) in face order."""
+    dirs = np.concatenate([face_directions(f, size).reshape(-1, 3) for f in range(6)])
+    omega = np.tile(texel_solid_angles(size).reshape(-1), 6)
+    return dirs, omega
+
+
+def prefilter_brute_force(faces: np.ndarray, profile: RadialProfile, dirs: np.ndarray, chunk: int = 256) -> np.ndarray:
+    """M(d) = sum over every texel t of p(angle(d, l_t)) L_t omega_t: the exact integral of the
+    kernel against the piecewise-constant cube map (up to the kernel's variation inside a texel)."""
+    faces = np.asarray(faces, dtype=np.float64)
+    texel_dirs, omega = cube_texels(faces.shape[1])
+    radiance = faces.reshape(-1, faces.shape[-1])
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    dirs = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
+    out = np.zeros((len(dirs), radiance.shape[1]))
+    for start in range(0, len(dirs), chunk):
+        weights = profile.of_cosine(dirs[start : start + chunk] @ texel_dirs.T) * omega
+        out[start : start + chunk] = weights @ radiance
+    return out
+
+
+@dataclass
+class HierarchicalResult:
+    values: np.ndarray  # (n, channels)
+    kernel_evaluations: int
+    seconds: float
+
+
+def _cube_pyramid(faces: np.ndarray):
+    """Per level (finest first): texel-centre directions (6, s, s, 3), integrated radiance
+    sum(L omega), solid angle, and angular radius (centre to farthest corner) per texel; the
+    environment levels are 2x2 box sums (seed 001, Fig. 2)."""
+    size = faces.shape[1]
+    if size & (size - 1):
+        raise ValueError("hierarchical prefiltering needs a power-of-two face size")
+    omega = np.broadcast_to(texel_solid_angles(size), (6, size, size))
+    integral = np.asarray(faces, dtype=np.float64) * omega[..., None]
+    levels = []
+    while True:
+        s = integral.shape[1]
+        dirs = np.stack([face_directions(f, s) for f in range(6)])
+        edges = np.linspace(-1.0, 1.0, s + 1)
+        corners = face_point_directions(0, *np.meshgrid(edges, edges, indexing="xy"))  # rows = t
+        centre = dirs[0]
+        radius = np.zeros((s, s))
+        for dy, dx in ((0, 0), (0, 1), (1, 0), (1, 1)):
+            c = np.einsum("ijc,ijc->ij", centre, corners[dy : dy + s, dx : dx + s])
+            radius = np.maximum(radius, np.arccos(np.clip(c, -1.0, 1.0)))
+        levels.append((dirs, integral, omega, radius))  # radius is the same on every face
+        if s == 1:
+            return levels
+        integral = integral.reshape(6, s // 2, 2, s // 2, 2, -1).sum(axis=(2, 4))
+        omega = omega.reshape(6, s // 2, 2, s // 2, 2).sum(axis=(2, 4))
+
+
+def prefilter_hierarchical(faces, kernel, dirs, threshold: float = 1e-3) -> HierarchicalResult:
+    """Hierarchical prefiltering (seed 001, section 5.1) of cube faces with a radially
+    decreasing ``kernel(cos)``, normalised by the kernel's own integral (a constant map stays
+    constant).
+
+    Starting from one texel per face, a texel of the environment pyramid is multiplied by the
+    kernel at its centre when the kernel varies by less than ``threshold`` x (kernel integral)
+    over the texel's solid angle, i.e. (k(psi - r) - k(psi + r)) omega < threshold K, with psi
+    the angle to the texel centre and r the texel's angular radius; otherwise its four children
+    are visited. The paper compares the filter's mip-map values with the four values of the
+    next level; point values at the children's centres miss kernels narrower than a texel (Phong
+    n = 500 lost 89 % of the result here), hence this bound on the variation. All target
+    directions advance level by level together (a vectorised frontier)."""
+    t0 = time.perf_counter()
+    levels = _cube_pyramid(np.asarray(faces, dtype=np.float64))
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    dirs = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
+    finest_dirs, _, finest_omega, _ = levels[0]
+    kernel_integral = float(
+        np.sum(kernel(finest_dirs.reshape(-1, 3) @ np.array([0.0, 0.0, 1.0])) * finest_omega.reshape(-1))
+    )
+    channels = faces.shape[-1]
+    acc = np.zeros((len(dirs), channels))
+    acc_weight = np.zeros(len(dirs))
+    target = np.repeat(np.arange(len(dirs)), 6)
+    face = np.tile(np.arange(6), len(dirs))
+    row = np.zeros_like(target)
+    col = np.zeros_like(target)
+    evaluations = 0
+    for level in range(len(levels) - 1, -1, -1):
+        centres, integral, omega, radius = levels[level]
+        cos_centre = np.clip(np.einsum("nc,nc->n", dirs[target], centres[face, row, col]), -1.0, 1.0)
+        k_node = kernel(cos_centre)
+        evaluations += len(target)
+        if level == 0:
+            accept = np.ones(len(target), dtype=bool)
+        else:
+            psi = np.arccos(cos_centre)
+            r = radius[row, col]
+            variation = kernel(np.cos(np.maximum(psi - r, 0.0))) - kernel(np.cos(np.minimum(psi + r, np.pi)))
+            evaluations += 2 * len(target)
+            accept = variation * omega[face, row, col] < threshold * kernel_integral
+        np.add.at(acc, target[accept], k_node[accept, None] * integral[face[accept], row[accept], col[accept]])
+        np.add.at(acc_weight, target[accept], k_node[accept] * omega[face[accept], row[accept], col[accept]])
+        refine = ~accept
+        target = np.repeat(target[refine], 4)
+        face = np.repeat(face[refine], 4)
+        row = (2 * row[refine, None] + np.array([0, 0, 1, 1])).reshape(-1)
+        col = (2 * col[refine, None] + np.array([0, 1, 0, 1])).reshape(-1)
+    values = acc / np.maximum(acc_weight, 1e-300)[:, None]
+    return HierarchicalResult(values, evaluations, time.perf_counter() - t0)
+
+
+def prefilter_kernel_brute_force(faces, kernel, dirs, chunk: int = 256) -> HierarchicalResult:
+    """The brute-force counterpart of :func:`prefilter_hierarchical`: every texel, same kernel,
+    same normalisation."""
+    t0 = time.perf_counter()
+    faces = np.asarray(faces, dtype=np.float64)
+    texel_dirs, omega = cube_texels(faces.shape[1])
+    radiance = faces.reshape(-1, faces.shape[-1])
+    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+    dirs = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
+    out = np.zeros((len(dirs), radiance.shape[1]))
+    for start in range(0, len(dirs), chunk):
+        weights = kernel(dirs[start : start + chunk] @ texel_dirs.T) * omega
+        out[start : start + chunk] = (weights @ radiance) / weights.sum(axis=1, keepdims=True)
+    return HierarchicalResult(out, len(dirs) * len(texel_dirs), time.perf_counter() - t0)
+
+
+def phong_kernel(exponent: float):
+    return lambda cos_angle: np.maximum(cos_angle, 0.0) ** exponent

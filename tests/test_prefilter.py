@@ -1,0 +1,176 @@
+"""Prefiltering and lobe fitting, numpy reference (materials/prefilter.py, lobe_fit.py), against
+closed forms and independent quadratures."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lobeview.materials import prefilter as pf
+from lobeview.materials.bsdf import BSDF, CosineSampled
+from lobeview.materials.conductor import MicrofacetReflection
+from lobeview.materials.fresnel import Fresnel
+from lobeview.materials.lobe_fit import fit_lobe_map, fit_multi_lobe, slice_cosines
+from lobeview.materials.microfacet import MicrofacetDistribution
+from lobeview.materials.spec import build_bsdf, load_material
+from lobeview.scenes.builtin_env import load_environment
+from lobeview.viewer.cubemap import equirect_to_cube_faces
+
+
+def _lobes(preset):
+    return [c for c in build_bsdf(load_material(preset)).components if not isinstance(c, CosineSampled)]
+
+
+@pytest.mark.parametrize("n", [1.0, 10.0, 200.0])
+def test_phong_profile_mass_matches_closed_form(n):
+    # Mass of cos^n within angle psi over the hemisphere: 1 - cos^(n+1) psi.
+    profile = pf.phong_profile(n)
+    for q in (0.1, 0.5, 0.9):
+        psi = profile.quantile(q)
+        assert 1.0 - np.cos(psi) ** (n + 1) == pytest.approx(q, abs=2e-3)
+    # Peak density (n + 1) / (2 pi).
+    assert profile(0.0) == pytest.approx((n + 1) / (2 * np.pi), rel=2e-3)
+
+
+@pytest.mark.parametrize("kind", ["ggx", "beckmann"])
+@pytest.mark.parametrize("alpha", [0.01, 0.2, 0.8])
+def test_split_sum_kernel_is_the_reflected_direction_density(kind, alpha):
+    """With n = v the kernel D(cos(psi/2))/4 max(cos psi, 0) normalised must equal the density
+    of reflected directions (pdf_h / (4 v.h)) weighted by n.l, checked by sampling h."""
+    profile = pf.split_sum_profile(kind, alpha)
+    d = MicrofacetDistribution(kind, alpha, alpha)
+    rng = np.random.default_rng(0)
+    h = d.half_vector_from_xi(rng.random(200_000), rng.random(200_000))
+    psi = 2.0 * np.arccos(np.clip(h[:, 2], -1, 1))  # angle between l = reflect(n, h) and n
+    weight = np.maximum(np.cos(psi), 0.0)  # the n.l weight of the prefilter
+    for q in (0.25, 0.5, 0.75):
+        psi_q = profile.quantile(q)
+        assert np.sum(weight * (psi < psi_q)) / np.sum(weight) == pytest.approx(q, abs=0.01)
+
+
+def test_quadrature_nodes_split_the_mass_evenly():
+    profile = pf.split_sum_profile("ggx", 0.3)
+    psi, omega = profile.quadrature(8, 4)
+    mass = profile.radial_mass
+    assert np.allclose(np.interp(psi, profile.psi, mass), (np.arange(8) + 0.5) / 8, atol=1e-3)
+    assert np.allclose(omega * profile(psi) * 32, 1.0)
+
+
+@pytest.mark.parametrize("kind", ["ggx", "beckmann"])
+def test_dfg_table_against_a_direction_grid_quadrature(kind):
+    """F0 A + B against the albedo of the Schlick-Fresnel BRDF integrated on a (theta, phi) grid
+    of directions: an independent quadrature."""
+    table = pf.dfg_table(kind, size=8, order=48)
+    n = 1200
+    theta = (np.arange(n) + 0.5) / n * np.pi / 2
+    phi = (np.arange(2 * n) + 0.5) / (2 * n) * 2 * np.pi
+    t, p = np.meshgrid(theta, phi, indexing="ij")
+    wi = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1)
+    dw = (np.pi / 2 / n) * (2 * np.pi / (2 * n)) * np.sin(t) * np.cos(t)
+    for row, col in ((3, 2), (5, 6), (6, 4)):
+        r, mu = (row + 0.5) / 8, (col + 0.5) / 8
+        comp = MicrofacetReflection(MicrofacetDistribution(kind, r * r, r * r), Fresnel("schlick", r0=0.3))
+        wo = np.array([np.sqrt(1 - mu * mu), 0.0, mu])
+        brute = np.sum(comp.eval(wi, np.broadcast_to(wo, wi.shape))[..., 0] * dw)
+        a, b = table[row, col]
+        assert 0.3 * a + b == pytest.approx(brute, rel=5e-3)
+        assert 0.0 <= b < a + b <= 1.0 + 1e-6
+
+
+def test_dfg_lookup_interpolates_between_texel_centres():
+    table = np.zeros((4, 4, 2))
+    table[..., 0] = np.arange(4)[None, :]
+    assert pf.dfg_lookup(table, 0.5, 0.5)[0] == pytest.approx(1.5)
+    assert pf.dfg_lookup(table, 0.0, 0.0)[0] == pytest.approx(0.0)  # clamped at the edge
+
+
+def _faces(size=32):
+    env = load_environment("builtin:studio")
+    return equirect_to_cube_faces(env, size)
+
+
+def test_brute_force_prefilter_keeps_a_constant_map_constant():
+    faces = np.full((6, 16, 16, 3), 2.5)
+    dirs = np.random.default_rng(1).normal(size=(20, 3))
+    out = pf.prefilter_brute_force(faces, pf.phong_profile(20.0), dirs)
+    assert np.allclose(out, 2.5, rtol=0.02)
+
+
+@pytest.mark.parametrize("exponent", [10.0, 100.0, 500.0])
+def test_hierarchical_prefilter_matches_brute_force_with_fewer_evaluations(exponent):
+    faces = _faces(32)
+    dirs = np.random.default_rng(2).normal(size=(40, 3))
+    kernel = pf.phong_kernel(exponent)
+    brute = pf.prefilter_kernel_brute_force(faces, kernel, dirs)
+    fast = pf.prefilter_hierarchical(faces, kernel, dirs, threshold=1e-3)
+    scale = np.sqrt(np.mean(brute.values**2))
+    assert np.sqrt(np.mean((fast.values - brute.values) ** 2)) / scale < 0.02
+    assert fast.kernel_evaluations < brute.kernel_evaluations / 1.5
+
+
+def test_hierarchical_prefilter_does_not_miss_kernels_narrower_than_a_coarse_texel():
+    # A single bright texel and a very narrow kernel centred on it: point-sampling the kernel at
+    # coarse texel centres would return ~0.
+    faces = np.zeros((6, 32, 32, 3))
+    faces[4, 16, 16] = 1000.0
+    from lobeview.scenes.cube_layout import face_directions
+
+    d = face_directions(4, 32)[16, 16]
+    kernel = pf.phong_kernel(3000.0)
+    brute = pf.prefilter_kernel_brute_force(faces, kernel, d[None])
+    fast = pf.prefilter_hierarchical(faces, kernel, d[None])
+    assert brute.values[0, 0] > 1.0
+    assert fast.values[0, 0] == pytest.approx(brute.values[0, 0], rel=0.02)
+
+
+@pytest.mark.parametrize("preset", ["plastic", "gold-ggx", "white-foil"])
+def test_single_lobe_fit_energy_and_peak(preset):
+    for comp in _lobes(preset):
+        fit = fit_lobe_map(comp, "lobe")
+        # Energy is the true directional albedo (section 3.1's rescaling), every slice; for an
+        # anisotropic lobe (fitted through its isotropic equivalent) the azimuthal mean.
+        anisotropic = comp.distribution.alpha_x != comp.distribution.alpha_y
+        assert fit.isotropic_approximation == anisotropic
+        for s in (3, 9, 15):
+            c = max(slice_cosines()[s], 0.02)
+            views = [
+                (np.sqrt(1 - c * c) * np.cos(p), np.sqrt(1 - c * c) * np.sin(p), c) for p in np.arange(8) * np.pi / 8
+            ]
+            albedos = [
+                BSDF([comp]).albedo(np.array(w))[1 if comp.transmission else 0]
+                for w in views[: 8 if anisotropic else 1]
+            ]
+            assert np.allclose(fit.energy[s], np.mean(albedos, axis=0), rtol=1e-3, atol=1e-6)
+        # At normal incidence an isotropic lobe peaks at the mirror (or straight through).
+        expected = np.pi if comp.transmission else 0.0
+        assert fit.peak_theta[-1] == pytest.approx(expected, abs=1e-3)
+        # Its shapes are unit-mass kernels and the fit is exact where the slice is symmetric.
+        assert fit.error[-1] < 0.05
+        # Glancing angles are harder (the horizon cuts the lobe) but the fit still helps.
+        assert np.all(fit.error < 1.0)
+
+
+def test_2d_lobe_and_phong_have_one_shape_and_lose_glancing_sharpening():
+    (comp,) = _lobes("plastic")
+    full = fit_lobe_map(comp, "lobe")
+    flat = fit_lobe_map(comp, "lobe2d")
+    phong = fit_lobe_map(comp, "phong")
+    assert len(full.profiles) == 16 and len(flat.profiles) == 1 and len(phong.profiles) == 1
+    # The true lobe narrows towards grazing (in the plane the lobe is compressed); the 3D fit
+    # follows it, the 2D fit cannot: its error grows away from where its average shape fits.
+    medians = [p.median_angle for p in full.profiles]
+    assert medians[2] < medians[-1]
+    assert np.mean(full.error) < np.mean(flat.error)
+    assert phong.phong_exponent > 1.0
+    assert np.allclose(phong.peak_theta[1:], np.arccos(slice_cosines()[1:]), atol=1e-9)
+
+
+@pytest.mark.parametrize("preset", ["plastic", "alanod-2000gs-1lobe", "gold-ggx"])
+def test_greedy_multi_lobe_error_decreases_with_the_first_lobes(preset):
+    comp = _lobes(preset)[0]
+    fit = fit_multi_lobe(comp, 0.5, lobes=4)
+    errors = np.array(fit.errors)
+    assert errors[0] < 1.0
+    assert errors[-1] < errors[0]
+    # Minimum profiles never overshoot: every lobe is non-negative.
+    assert all(np.all(p >= 0) for p in fit.profiles)
