@@ -9,6 +9,7 @@ Two modes:
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -168,7 +169,7 @@ def run(args) -> int:
         raise ShotError("give either a SCENE or --object, not both")
     method = Method.parse(args.method)
     if args.lobe_normalize:
-        method = Method(method.kind, method.samples, True)
+        method = dataclasses.replace(method, normalize=True)
     if args.spp < 1:
         raise ShotError("--spp must be at least 1")
     if not 8 <= args.face_size <= 2048 or args.face_size & (args.face_size - 1):

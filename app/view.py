@@ -15,6 +15,7 @@ that reproduce the camera, Esc quits.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import os
@@ -29,6 +30,30 @@ from lobeview.materials.spec import RANGES, MaterialError, validate
 from lobeview.viewer.camera import Camera
 
 REALTIME_METHODS = ("lobe", "fis", "mc")
+PREFILTERED_CHOICES = (
+    "prefiltered",
+    "prefiltered-splitsum",
+    "prefiltered-lobe",
+    "prefiltered-lobe2d",
+    "prefiltered-phong",
+)
+METHOD_CHOICES = REALTIME_METHODS + PREFILTERED_CHOICES
+
+
+def method_choice(method) -> str:
+    """The panel's combo entry of a method (sample counts have their own slider)."""
+    return str(method) if method.kind == "prefiltered" else method.kind
+
+
+def method_from_choice(choice: str, samples: int, normalize: bool = False):
+    from lobeview.viewer.render_base import Method
+
+    if choice.startswith("prefiltered"):
+        return Method.parse(choice)
+    base = Method.parse(f"{choice}-{min(samples, 32) if choice == 'lobe' else samples}")
+    return dataclasses.replace(base, normalize=normalize)
+
+
 TARGET_FRAME_MS = 50.0
 MAX_BATCH = 64
 SHOW_REFINED_AFTER = 32  # spp per lobe before the refined image replaces the real-time one
@@ -241,9 +266,11 @@ def run(args) -> int:
     width, height = parse_size(args.size)
     method = Method.parse(args.method)
     if args.lobe_normalize:
-        method = Method(method.kind, method.samples, True)
+        method = dataclasses.replace(method, normalize=True)
     if method.kind == "reference":
-        raise ValueError("--method must be a real-time method (lobe-N, fis-N, mc-N); refinement is automatic")
+        raise ValueError(
+            "--method must be a real-time method (lobe-N, fis-N, mc-N, prefiltered[-MODE]); refinement is automatic"
+        )
 
     import moderngl_window as mglw
 
@@ -527,13 +554,12 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                 else f"moving: {self.method}"
             )
             if imgui.collapsing_header("Rendering", imgui.TreeNodeFlags_.default_open.value):
-                kinds = list(REALTIME_METHODS)
-                c, k = imgui.combo("method", kinds.index(self.method.kind), kinds)
+                kinds = list(METHOD_CHOICES)
+                c, k = imgui.combo("method", kinds.index(method_choice(self.method)), kinds)
                 c2, n = imgui.slider_int("samples N", self.method.samples, 1, 32 if self.method.kind == "lobe" else 256)
                 c3, normalize = imgui.checkbox("lobe-N energy normalisation", self.method.normalize)
                 if c or c2 or c3:
-                    base = Method.parse(f"{kinds[k]}-{min(n, 32) if kinds[k] == 'lobe' else n}")
-                    self.method = Method(base.kind, base.samples, normalize)
+                    self.method = method_from_choice(kinds[k], n, normalize)
                     self.dirty = True
                 _, self.progressive = imgui.checkbox("refine when still", self.progressive)
                 if scene.cameras:
@@ -563,8 +589,8 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                 desc = self.editor.desc(self.selected)
                 imgui.text(f"{scene.objects[self.selected].name}: {desc['model']} model")
                 override = self.renderer.object_methods.get(self.selected)
-                choices = ["global", *REALTIME_METHODS]
-                current = 0 if override is None else choices.index(override.kind)
+                choices = ["global", *METHOD_CHOICES]
+                current = 0 if override is None else choices.index(method_choice(override))
                 c, k = imgui.combo("object method", current, choices)
                 n = override.samples if override else self.method.samples
                 c2, n = imgui.slider_int("object N", n, 1, 32)
@@ -572,8 +598,14 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                     if choices[k] == "global":
                         self.renderer.object_methods.pop(self.selected, None)
                     else:
-                        self.renderer.object_methods[self.selected] = Method.parse(f"{choices[k]}-{n}")
+                        self.renderer.object_methods[self.selected] = method_from_choice(choices[k], n)
                     self.dirty = True
+                cube = self.renderer.objects[self.selected].cube
+                maps = getattr(cube, "_prefiltered", None)
+                if maps is not None and maps.memory:
+                    imgui.text(f"prefiltered maps: {maps.total_memory() / 2**20:.1f} MB")
+                    for name, size in maps.memory.items():
+                        imgui.bullet_text(f"{name}: {size / 2**20:.2f} MB")
                 changed, new = material_widgets(imgui, desc)
                 if changed:
                     self.message = self.editor.apply(self.selected, new) or ""

@@ -234,8 +234,9 @@ class PrefilteredMaps:
         tex.repeat_y = False
         tex.repeat_z = False
         self._lobe_maps[key] = tex
-        self.memory[f"{name} ({fit.mode}, {width}x{height}x{depth})"] = width * height * depth * 16
-        self.seconds[f"{name} ({fit.mode})"] = time.perf_counter() - t0
+        label = f"{name} ({fit.mode}, {width}x{height}x{depth}, {hashlib.sha1(key[0]).hexdigest()[:6]})"
+        self.memory[label] = width * height * depth * 16
+        self.seconds[label] = time.perf_counter() - t0
         return tex
 
     def total_memory(self) -> int:

@@ -112,7 +112,11 @@ class SceneRenderer(RendererBase):
         self.cube_bounces = max(1, int(cube_bounces))
         self.object_methods: dict[int, Method] = {}
         self.stale_cubes: list[int] = []
+        self.cache_dir = Path(cache_dir) if cache_dir else None
         self._build_cube_maps(cache_dir)
+        for obj in self.objects:
+            if obj.cube is not None:
+                obj.cube.cache_dir = self.cache_dir  # prefiltered maps are cached beside the cubes
         self.timings["cube maps"] = time.perf_counter() - t0
 
     # -- resources -------------------------------------------------------------------------
