@@ -164,9 +164,8 @@ def cube_texels(size: int) -> tuple[np.ndarray, np.ndarray]:
     return dirs, omega
 
 
-def prefilter_brute_force(faces: np.ndarray, profile: RadialProfile, dirs: np.ndarray, chunk: int = 256) -> np.ndarray:
-    """M(d) = sum over every texel t of p(angle(d, l_t)) L_t omega_t: the exact integral of the
-    kernel against the piecewise-constant cube map (up to the kernel's variation inside a texel)."""
+def _convolve(faces, kernel_of_cos, dirs, normalise: bool, chunk: int = 256) -> np.ndarray:
+    """Sum over every texel t of k(d . l_t) L_t omega_t (optionally / sum of k omega)."""
     faces = np.asarray(faces, dtype=np.float64)
     texel_dirs, omega = cube_texels(faces.shape[1])
     radiance = faces.reshape(-1, faces.shape[-1])
@@ -174,9 +173,17 @@ def prefilter_brute_force(faces: np.ndarray, profile: RadialProfile, dirs: np.nd
     dirs = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
     out = np.zeros((len(dirs), radiance.shape[1]))
     for start in range(0, len(dirs), chunk):
-        weights = profile.of_cosine(dirs[start : start + chunk] @ texel_dirs.T) * omega
+        weights = kernel_of_cos(dirs[start : start + chunk] @ texel_dirs.T) * omega
         out[start : start + chunk] = weights @ radiance
+        if normalise:
+            out[start : start + chunk] /= weights.sum(axis=1, keepdims=True)
     return out
+
+
+def prefilter_brute_force(faces: np.ndarray, profile: RadialProfile, dirs: np.ndarray) -> np.ndarray:
+    """M(d) = sum over every texel t of p(angle(d, l_t)) L_t omega_t: the exact integral of the
+    kernel against the piecewise-constant cube map (up to the kernel's variation inside a texel)."""
+    return _convolve(faces, profile.of_cosine, dirs, normalise=False)
 
 
 @dataclass
@@ -266,20 +273,13 @@ def prefilter_hierarchical(faces, kernel, dirs, threshold: float = 1e-3) -> Hier
     return HierarchicalResult(values, evaluations, time.perf_counter() - t0)
 
 
-def prefilter_kernel_brute_force(faces, kernel, dirs, chunk: int = 256) -> HierarchicalResult:
+def prefilter_kernel_brute_force(faces, kernel, dirs) -> HierarchicalResult:
     """The brute-force counterpart of :func:`prefilter_hierarchical`: every texel, same kernel,
     same normalisation."""
     t0 = time.perf_counter()
-    faces = np.asarray(faces, dtype=np.float64)
-    texel_dirs, omega = cube_texels(faces.shape[1])
-    radiance = faces.reshape(-1, faces.shape[-1])
-    dirs = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
-    dirs = dirs / np.linalg.norm(dirs, axis=-1, keepdims=True)
-    out = np.zeros((len(dirs), radiance.shape[1]))
-    for start in range(0, len(dirs), chunk):
-        weights = kernel(dirs[start : start + chunk] @ texel_dirs.T) * omega
-        out[start : start + chunk] = (weights @ radiance) / weights.sum(axis=1, keepdims=True)
-    return HierarchicalResult(out, len(dirs) * len(texel_dirs), time.perf_counter() - t0)
+    values = _convolve(faces, kernel, dirs, normalise=True)
+    evaluations = len(values) * 6 * np.shape(faces)[1] ** 2
+    return HierarchicalResult(values, evaluations, time.perf_counter() - t0)
 
 
 def phong_kernel(exponent: float):
