@@ -601,7 +601,7 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                         self.renderer.object_methods[self.selected] = method_from_choice(choices[k], n)
                     self.dirty = True
                 cube = self.renderer.objects[self.selected].cube
-                maps = getattr(cube, "_prefiltered", None)
+                maps = cube.built_prefiltered_maps if cube is not None else None
                 if maps is not None and maps.memory:
                     imgui.text(f"prefiltered maps: {maps.total_memory() / 2**20:.1f} MB")
                     for name, size in maps.memory.items():

@@ -24,14 +24,13 @@ from __future__ import annotations
 
 import copy
 from dataclasses import dataclass
-from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .bsdf import BSDF, Component
 from .microfacet import MicrofacetDistribution
-from .prefilter import RadialProfile
+from .prefilter import RadialProfile, phong_profile
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 LOBE_SLICES = 16  # view elevations, uniform in cos(theta_o) from 0 to 1 (the seed used 16)
@@ -185,9 +184,7 @@ def phong_exponent_for(profile: RadialProfile) -> float:
     return float(max(np.log(0.5) / np.log(c) - 1.0, 0.0))
 
 
-@lru_cache(maxsize=64)
-def _fit_cached(key: str, component: Component, mode: str, slices: int) -> LobeMapFit:
-    del key  # the cache key; the component itself is not hashable by value
+def _fit(component: Component, mode: str, slices: int) -> LobeMapFit:
     anisotropic = not is_isotropic(component)
     comp = isotropic_equivalent(component)
     cosines = slice_cosines(slices)
@@ -204,8 +201,6 @@ def _fit_cached(key: str, component: Component, mode: str, slices: int) -> LobeM
     if mode == "lobe2d":
         shapes = [_interp_profiles(shapes)]
     elif mode == "phong":
-        from .prefilter import phong_profile
-
         exponent = phong_exponent_for(_interp_profiles(shapes))
         shapes = [phong_profile(exponent)]
         theta_o = np.arccos(np.maximum(cosines, MIN_COS_O))
@@ -227,11 +222,22 @@ def component_key(component: Component) -> str:
     return f"{type(component).__name__}:{sorted(items.items())}"
 
 
+_FITS: dict[str, LobeMapFit] = {}
+_MAX_CACHED_FITS = 64
+
+
 def fit_lobe_map(component: Component, mode: str = "lobe", slices: int = LOBE_SLICES) -> LobeMapFit:
-    """Fit one specular component (reflection or transmission lobe) for a prefiltered mode."""
+    """Fit one specular component (reflection or transmission lobe) for a prefiltered mode.
+    Fits (~0.25 s each) are cached by the component's parameters, not its identity, so a
+    rebuilt material with the same lobes is not fitted again."""
     if mode not in FIT_MODES:
         raise ValueError(f"unknown lobe-map mode {mode!r}; use one of {FIT_MODES}")
-    return _fit_cached(component_key(component) + mode + str(slices), component, mode, slices)
+    key = f"{component_key(component)}|{mode}|{slices}"
+    if key not in _FITS:
+        if len(_FITS) >= _MAX_CACHED_FITS:
+            _FITS.pop(next(iter(_FITS)))  # oldest first
+        _FITS[key] = _fit(component, mode, slices)
+    return _FITS[key]
 
 
 # -- greedy multi-lobe fitting (seed 000, 3.3) --------------------------------------------------

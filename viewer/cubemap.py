@@ -78,6 +78,11 @@ class RadianceCube:
             self._prefiltered = PrefilteredMaps(self.radiance.ctx, self, programs, self.cache_dir)
         return self._prefiltered
 
+    @property
+    def built_prefiltered_maps(self):
+        """The prefiltered maps if any were built (for memory reports), else None."""
+        return self._prefiltered
+
     def release(self):
         if self._prefiltered is not None:
             self._prefiltered.release()

@@ -90,20 +90,23 @@ class PrefilteredMaps:
         self.seconds: dict[str, float] = {}
 
     # -- kernels as quadrature nodes -------------------------------------------------------------
-    def _nodes_texture(self, profiles, rings: int):
-        nodes = np.zeros((len(profiles), rings, 2), dtype=np.float32)
+    def _nodes(self, profiles) -> np.ndarray:
+        """(psi_k, omega_k) per kernel row and ring: what the prefilter shaders read, and the
+        key of a map in the caches."""
+        nodes = np.zeros((len(profiles), self.rings, 2), dtype=np.float32)
         for row, profile in enumerate(profiles):
             if profile is None:  # the mirror level: one lookup at the centre, finest level
                 nodes[row, 0] = (0.0, 1e-12)
                 continue
-            psi, omega = profile.quadrature(rings, self.azimuths)
+            psi, omega = profile.quadrature(self.rings, self.azimuths)
             nodes[row, :, 0] = psi
             nodes[row, :, 1] = omega
-        tex = self.ctx.texture((rings, len(profiles)), 2, nodes.tobytes(), dtype="f4")
-        tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        return tex, nodes
+        return nodes
 
-    def _bind_source(self, shader, nodes_texture):
+    def _bind_source(self, shader, nodes: np.ndarray):
+        """Bind the source cube and upload the nodes; returns the nodes texture to release."""
+        nodes_texture = self.ctx.texture((nodes.shape[1], nodes.shape[0]), 2, nodes.tobytes(), dtype="f4")
+        nodes_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.cube.radiance.use(0)
         nodes_texture.use(1)
         shader["u_source"] = 0
@@ -113,6 +116,7 @@ class PrefilteredMaps:
         # Bias 0: against brute force, +1 (Colbert & Krivanek) blurred light out of bright
         # regions (mean error 5.7 % vs 0.5 %, GGX alpha 0.16, tests/test_prefiltered_gpu.py).
         shader["u_lod_bias"] = 0.0
+        return nodes_texture
 
     def _cache_file(self, kind: str, nodes: np.ndarray, extra: str) -> Path | None:
         if self.cache_dir is None:
@@ -127,7 +131,7 @@ class PrefilteredMaps:
         t0 = time.perf_counter()
         size = self.cube.face_size
         profiles = [None] + [split_sum_profile(kind, split_sum_alpha(level)) for level in range(1, SPLIT_SUM_LEVELS)]
-        nodes_texture, nodes = self._nodes_texture(profiles, self.rings)
+        nodes = self._nodes(profiles)
         cube = self.ctx.texture_cube((size, size), 4, dtype="f4")
         cube.build_mipmaps(0, SPLIT_SUM_LEVELS - 1)
         cube.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
@@ -138,7 +142,7 @@ class PrefilteredMaps:
             self._write_cube_levels(cube, levels)
         else:
             shader = self.programs.compute("prefilter_cube.comp")
-            self._bind_source(shader, nodes_texture)
+            nodes_texture = self._bind_source(shader, nodes)
             for level in range(SPLIT_SUM_LEVELS):
                 face = max(size >> level, 1)
                 cube.bind_to_image(0, read=False, write=True, level=level, format=GL_RGBA32F)
@@ -147,11 +151,11 @@ class PrefilteredMaps:
                 shader["u_rings"] = 1 if level == 0 else self.rings
                 shader.run((face + 7) // 8, (face + 7) // 8, 6)
             self.ctx.finish()
+            nodes_texture.release()
             if cache is not None:
                 cache.parent.mkdir(parents=True, exist_ok=True)
                 levels = self._read_cube_levels(cube, size)
                 np.savez(cache, **{f"level{i}": v for i, v in enumerate(levels)})
-        nodes_texture.release()
         self._split_sum[kind] = cube
         texels = sum(6 * max(size >> level, 1) ** 2 for level in range(SPLIT_SUM_LEVELS))
         self.memory[f"split-sum {kind}"] = texels * 16
@@ -203,10 +207,9 @@ class PrefilteredMaps:
         shape of view elevation s (one slice for the 2D and Phong modes)."""
         height = lobe_map_height(fit)
         width = 2 * height
-        nodes_texture, nodes = self._nodes_texture(fit.profiles, self.rings)
+        nodes = self._nodes(fit.profiles)
         key = (nodes.tobytes(), width)
         if key in self._lobe_maps:
-            nodes_texture.release()
             return self._lobe_maps[key]
         t0 = time.perf_counter()
         depth = len(fit.profiles)
@@ -217,7 +220,7 @@ class PrefilteredMaps:
         else:
             tex = self.ctx.texture3d((width, height, depth), 4, dtype="f4")
             shader = self.programs.compute("prefilter_latlong.comp")
-            self._bind_source(shader, nodes_texture)
+            nodes_texture = self._bind_source(shader, nodes)
             shader["u_rings"] = self.rings
             shader["u_size"] = (width, height)
             tex.bind_to_image(0, read=False, write=True, level=0, format=GL_RGBA32F)
@@ -225,10 +228,10 @@ class PrefilteredMaps:
                 shader["u_slice"] = s
                 shader.run((width + 7) // 8, (height + 7) // 8, 1)
                 self.ctx.finish()
+            nodes_texture.release()
             if cache is not None:
                 cache.parent.mkdir(parents=True, exist_ok=True)
                 np.savez(cache, texels=np.frombuffer(tex.read(), dtype=np.float32).reshape(depth, height, width, 4))
-        nodes_texture.release()
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         tex.repeat_x = True
         tex.repeat_y = False

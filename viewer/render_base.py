@@ -31,7 +31,7 @@ PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong")
 
 @dataclass(frozen=True)
 class Method:
-    kind: str  # 'lobe', 'fis', 'mc', 'reference'
+    kind: str  # 'lobe', 'fis', 'mc', 'reference', 'prefiltered'
     samples: int  # N per lobe (reference: per pass)
     normalize: bool = False  # lobe-N: energy normalisation by the lobe's albedo table
     mode: str = ""  # prefiltered: one of PREFILTER_MODES
@@ -129,6 +129,7 @@ class RendererBase:
         self.sobol_count = len(sobol)
         self._vaos: dict = {}
         self._albedo_textures: dict = {}
+        self._dummy_textures: dict = {}
         self.targets: list = []
         self.resize(size)
 
@@ -233,14 +234,13 @@ class RendererBase:
 
     def _dummy_texture(self, kind: str):
         """A 1-texel black texture for sampler slots a material does not use."""
-        key = ("dummy", kind)
-        if key not in self._albedo_textures:
+        if kind not in self._dummy_textures:
             if kind == "cube":
                 tex = self.ctx.texture_cube((1, 1), 4, b"\0" * 16 * 6, dtype="f4")
             else:
                 tex = self.ctx.texture3d((1, 1, 1), 4, b"\0" * 16, dtype="f4")
-            self._albedo_textures[key] = (tex, None)
-        return self._albedo_textures[key][0]
+            self._dummy_textures[kind] = tex
+        return self._dummy_textures[kind]
 
     def draw_background(self, cube: RadianceCube, view_proj: np.ndarray) -> None:
         """Environment behind everything (depth test off, so it writes no depth)."""
@@ -256,6 +256,8 @@ class RendererBase:
 
     def release(self):
         for tex, _ in self._albedo_textures.values():
+            tex.release()
+        for tex in self._dummy_textures.values():
             tex.release()
         for vao in self._vaos.values():
             vao.release()
