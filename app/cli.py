@@ -1,7 +1,7 @@
 """The ``lobeview`` command line.
 
-Implemented so far: ``lobeview material list|show|plot``, ``lobeview shot`` (scenes, the demo,
-object preview) and ``lobeview bake``. The window and bench commands arrive with their issues.
+``lobeview material list|show|plot``, ``lobeview shot`` (scenes, the demo, object preview),
+``lobeview view`` (the window), ``lobeview bench`` and ``lobeview bake``.
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ import sys
 import numpy as np
 
 from lobeview import __version__
+from lobeview.app.bench import BenchError
 from lobeview.app.shot import ShotError
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import MaterialError, build_bsdf, load_material
@@ -110,7 +111,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("material", help="preset name, JSON file or inline JSON object")
     p.add_argument("-o", "--output", default="lobe.png", help="output PNG (default: lobe.png)")
     p.set_defaults(func=cmd_material_plot)
-    from lobeview.app import bake, shot, view
+    from lobeview.app import bake, bench, shot, view
 
     p = sub.add_parser("shot", help="render a headless screenshot of a scene or an object preview")
     shot.add_arguments(p)
@@ -118,6 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("view", help="open the interactive walkthrough window")
     view.add_arguments(p)
     p.set_defaults(func=view.run)
+    p = sub.add_parser("bench", help="time against error for every method (--quick: a few minutes); --stress")
+    bench.add_arguments(p)
+    p.set_defaults(func=bench.run)
     p = sub.add_parser("bake", help="bake lightmaps for a glTF scene")
     bake.add_arguments(p)
     p.set_defaults(func=bake.run)
@@ -131,6 +135,7 @@ def main(argv: list[str] | None = None) -> int:
     except (
         MaterialError,
         ShotError,
+        BenchError,
         HDRImageError,
         MeshError,
         HeadlessContextError,

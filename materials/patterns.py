@@ -234,8 +234,11 @@ ALBEDO_PHI = 16  # azimuth samples for anisotropic lobes (isotropic lobes repeat
 class AlbedoTable:
     """Directional albedo of one lobe over (cos theta_o, phi_o): values (ALBEDO_PHI + 1, ALBEDO_MU,
     3), row ALBEDO_PHI repeating row 0 so bilinear interpolation wraps in phi. Sample points are
-    texel centres, mu_i = (i + 0.5) / ALBEDO_MU and phi_j = 2 pi j / ALBEDO_PHI, i.e. exactly what
-    a linearly filtered texture with clamp in mu returns (shaders/integrate.glsl)."""
+    texel centres in sqrt(cos theta_o), sqrt(mu_i) = (i + 0.5) / ALBEDO_MU, and phi_j = 2 pi j /
+    ALBEDO_PHI, i.e. exactly what a linearly filtered texture with clamp returns at
+    (sqrt(wo.z), phi) (shaders/integrate.glsl). The square root puts samples where the albedo
+    changes fastest, near grazing: the stress suite's worst furnace excess of a rough isotropic
+    lobe (m = 1, alpha = 1) fell from 33 % (linear in mu) to 5 %."""
 
     values: np.ndarray
 
@@ -244,7 +247,7 @@ class AlbedoTable:
         single = BSDF([lobe])
         d = lobe.distribution
         isotropic = d.alpha_x == d.alpha_y
-        mus = (np.arange(ALBEDO_MU) + 0.5) / ALBEDO_MU
+        mus = ((np.arange(ALBEDO_MU) + 0.5) / ALBEDO_MU) ** 2
         phis = np.arange(ALBEDO_PHI) / ALBEDO_PHI * 2 * np.pi
         values = np.zeros((ALBEDO_PHI + 1, ALBEDO_MU, 3))
         for j, phi in enumerate(phis[:1] if isotropic else phis):
@@ -258,7 +261,7 @@ class AlbedoTable:
         return cls(values)
 
     def lookup(self, wo: np.ndarray) -> np.ndarray:
-        x = np.clip(wo[2] * ALBEDO_MU - 0.5, 0.0, ALBEDO_MU - 1.0)
+        x = np.clip(np.sqrt(max(wo[2], 0.0)) * ALBEDO_MU - 0.5, 0.0, ALBEDO_MU - 1.0)
         y = (np.arctan2(wo[1], wo[0]) / (2 * np.pi)) % 1.0 * ALBEDO_PHI
         x0, y0 = int(np.floor(x)), int(np.floor(y))
         x1, y1 = min(x0 + 1, ALBEDO_MU - 1), min(y0 + 1, ALBEDO_PHI)

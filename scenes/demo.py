@@ -23,7 +23,7 @@ from lobeview.materials.spec import validate
 
 from .baker import bake_lightmap
 from .builtin_env import load_environment
-from .meshes import Mesh, uv_sphere, vertex_normals, vertex_tangents
+from .meshes import Mesh, quad, uv_sphere, vertex_normals, vertex_tangents
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
 DEMO_VERSION = 2  # bump when the geometry, materials or baker change (invalidates caches)
@@ -42,25 +42,6 @@ def cache_dir() -> Path:
 
 def _diffuse(kd) -> dict:
     return validate({"model": "thesis", "kd": kd, "lobes": []})
-
-
-def _quad(corner, edge_u, edge_v, uv_scale=1.0) -> Mesh:
-    """A rectangle corner + s edge_u + t edge_v; front face (normal edge_u x edge_v)."""
-    c, eu, ev = (np.asarray(x, dtype=np.float64) for x in (corner, edge_u, edge_v))
-    pos = np.array([c, c + eu, c + eu + ev, c + ev])
-    n = np.cross(eu, ev)
-    n /= np.linalg.norm(n)
-    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64) * uv_scale
-    idx = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.uint32)
-    t = eu / np.linalg.norm(eu)
-    tangents = np.concatenate([np.tile(t, (4, 1)), np.ones((4, 1))], axis=1)
-    return Mesh(
-        pos.astype(np.float32),
-        np.tile(n, (4, 1)).astype(np.float32),
-        tangents.astype(np.float32),
-        uv.astype(np.float32),
-        idx,
-    )
 
 
 def _merge(meshes: list[Mesh], name: str) -> Mesh:
@@ -95,7 +76,7 @@ def _box(center, size, rotation_y_deg: float = 0.0) -> Mesh:
             if np.dot(np.cross(eu, ev), n) < 0:
                 eu, ev = ev, eu
             corner = n * half - eu / 2 - ev / 2
-            faces.append(_quad(corner, eu, ev))
+            faces.append(quad(corner, eu, ev))
     mesh = _merge(faces, "box")
     a = np.radians(rotation_y_deg)
     rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
@@ -176,27 +157,27 @@ def demo_geometry() -> Scene:
     W, H, D = 3.0, 3.0, 3.0  # half width, height, half depth
     x0, x1, y0, y1, z0 = -1.4, 1.4, 0.9, 2.4, -D  # window opening in the back wall
     back = [
-        _quad([-W, 0, z0], [2 * W, 0, 0], [0, y0, 0]),
-        _quad([-W, y1, z0], [2 * W, 0, 0], [0, H - y1, 0]),
-        _quad([-W, y0, z0], [x0 + W, 0, 0], [0, y1 - y0, 0]),
-        _quad([x1, y0, z0], [W - x1, 0, 0], [0, y1 - y0, 0]),
+        quad([-W, 0, z0], [2 * W, 0, 0], [0, y0, 0]),
+        quad([-W, y1, z0], [2 * W, 0, 0], [0, H - y1, 0]),
+        quad([-W, y0, z0], [x0 + W, 0, 0], [0, y1 - y0, 0]),
+        quad([x1, y0, z0], [W - x1, 0, 0], [0, y1 - y0, 0]),
     ]
     walls = back + [
-        _quad([-W, 0, D], [0, H, 0], [2 * W, 0, 0]),  # front wall, facing -Z
-        _quad([-W, 0, -D], [0, H, 0], [0, 0, 2 * D]),  # left wall (x = -W), facing +X
-        _quad([W, 0, -D], [0, 0, 2 * D], [0, H, 0]),  # right wall, facing -X
+        quad([-W, 0, D], [0, H, 0], [2 * W, 0, 0]),  # front wall, facing -Z
+        quad([-W, 0, -D], [0, H, 0], [0, 0, 2 * D]),  # left wall (x = -W), facing +X
+        quad([W, 0, -D], [0, 0, 2 * D], [0, H, 0]),  # right wall, facing -X
     ]
     # Window reveal (the wall's thickness around the opening, 0.2 m), facing into the opening.
     t = 0.2
     walls += [
-        _quad([x0, y0, z0 - t], [0, 0, t], [0, y1 - y0, 0]),
-        _quad([x1, y0, z0 - t], [0, y1 - y0, 0], [0, 0, t]),
-        _quad([x0, y0, z0 - t], [x1 - x0, 0, 0], [0, 0, t]),
-        _quad([x0, y1, z0 - t], [0, 0, t], [x1 - x0, 0, 0]),
+        quad([x0, y0, z0 - t], [0, 0, t], [0, y1 - y0, 0]),
+        quad([x1, y0, z0 - t], [0, y1 - y0, 0], [0, 0, t]),
+        quad([x0, y0, z0 - t], [x1 - x0, 0, 0], [0, 0, t]),
+        quad([x0, y1, z0 - t], [0, 0, t], [x1 - x0, 0, 0]),
     ]
-    floor = _quad([-W, 0, D], [2 * W, 0, 0], [0, 0, -2 * D], uv_scale=4.0)
-    ceiling = _quad([-W, H, -D], [2 * W, 0, 0], [0, 0, 2 * D])
-    light = _quad([-0.6, H - 0.01, -0.6 - 0.6], [1.2, 0, 0], [0, 0, 1.2])
+    floor = quad([-W, 0, D], [2 * W, 0, 0], [0, 0, -2 * D], uv_scale=4.0)
+    ceiling = quad([-W, H, -D], [2 * W, 0, 0], [0, 0, 2 * D])
+    light = quad([-0.6, H - 0.01, -0.6 - 0.6], [1.2, 0, 0], [0, 0, 1.2])
     table_top = _box([0.0, 0.735, -0.6], [1.8, 0.05, 1.0])
     legs = [_box([sx * 0.82, 0.355, -0.6 + sz * 0.42], [0.06, 0.71, 0.06]) for sx in (-1, 1) for sz in (-1, 1)]
     objects = [

@@ -60,6 +60,25 @@ def uv_sphere(radius: float = 1.0, rings: int = 96, segments: int = 192) -> Mesh
     )
 
 
+def quad(corner, edge_u, edge_v, uv_scale=1.0) -> Mesh:
+    """A rectangle (two triangles): corner + s edge_u + t edge_v; front face (normal edge_u x edge_v)."""
+    c, eu, ev = (np.asarray(x, dtype=np.float64) for x in (corner, edge_u, edge_v))
+    pos = np.array([c, c + eu, c + eu + ev, c + ev])
+    n = np.cross(eu, ev)
+    n /= np.linalg.norm(n)
+    uv = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=np.float64) * uv_scale
+    idx = np.array([[0, 1, 2], [0, 2, 3]], dtype=np.uint32)
+    t = eu / np.linalg.norm(eu)
+    tangents = np.concatenate([np.tile(t, (4, 1)), np.ones((4, 1))], axis=1)
+    return Mesh(
+        pos.astype(np.float32),
+        np.tile(n, (4, 1)).astype(np.float32),
+        tangents.astype(np.float32),
+        uv.astype(np.float32),
+        idx,
+    )
+
+
 def vertex_normals(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals; vertices of degenerate-only triangles get +Y (warned)."""
     p = positions.astype(np.float64)

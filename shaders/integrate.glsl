@@ -129,7 +129,8 @@ vec3 lobe_albedo(int lobe_index, vec3 wo) {
     float phi = atan(wo.y, wo.x) / (2.0 * PI);
     phi = phi - floor(phi);
     float row = float(lobe_index * ALBEDO_ROWS) + phi * float(ALBEDO_PHI) + 0.5;
-    return texture(u_albedo, vec2(wo.z, row / float(MAX_LOBES * ALBEDO_ROWS))).rgb;
+    // Columns are uniform in sqrt(cos theta_o) (AlbedoTable: dense near grazing).
+    return texture(u_albedo, vec2(sqrt(max(wo.z, 0.0)), row / float(MAX_LOBES * ALBEDO_ROWS))).rgb;
 }
 #endif
 

@@ -137,7 +137,7 @@ def test_albedo_table_and_normalised_quadrature():
     table = AlbedoTable.build(lobe)
     spec = BSDF([lobe])
     for i, j in ((0, 0), (10, 3), (31, 8)):
-        mu, phi = (i + 0.5) / ALBEDO_MU, 2 * np.pi * j / 16
+        mu, phi = ((i + 0.5) / ALBEDO_MU) ** 2, 2 * np.pi * j / 16  # texel centres in sqrt(mu)
         wo = np.array([np.sqrt(1 - mu * mu) * np.cos(phi), np.sqrt(1 - mu * mu) * np.sin(phi), mu])
         np.testing.assert_allclose(table.lookup(wo), sum(spec.albedo(wo, order=48)), rtol=1e-9)
     assert not np.allclose(table.values[0], table.values[4])

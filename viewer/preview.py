@@ -91,9 +91,16 @@ class PreviewRenderer(RendererBase):
             self.fbo.use()
             self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             self.ctx.enable(moderngl.DEPTH_TEST)
-            vao.render(moderngl.TRIANGLES)
+            timer = self.gpu_timer()
+            if timer is None:
+                vao.render(moderngl.TRIANGLES)
+            else:
+                with timer:
+                    vao.render(moderngl.TRIANGLES)
             self.ctx.finish()
             timings["shade"] += time.perf_counter() - t0
+            if timer is not None:
+                timings["gpu shade"] = timings.get("gpu shade", 0.0) + timer.elapsed * 1e-9
             radiance = self.read(0)
             accumulated += radiance[..., :3]
             invalid |= radiance[..., 3] < 0.0

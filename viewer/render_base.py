@@ -108,8 +108,9 @@ class RenderResult:
     tangent: np.ndarray  # (H, W, 3)
     mask: np.ndarray  # (H, W) object pixels
     invalid: np.ndarray  # (H, W) pixels whose shading produced NaN/Inf (written as 0)
-    timings: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)  # seconds; 'gpu shade' from a GL timer query
     samples_per_pixel: int = 0
+    object_id: np.ndarray | None = None  # (H, W) scene object index, -1 = background (scenes only)
 
 
 def set_uniform(program, name: str, value) -> None:
@@ -130,6 +131,7 @@ class RendererBase:
         self._vaos: dict = {}
         self._albedo_textures: dict = {}
         self._dummy_textures: dict = {}
+        self._timer = None
         self.targets: list = []
         self.resize(size)
 
@@ -140,6 +142,16 @@ class RendererBase:
         self.targets = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(4)]
         self.depth = self.ctx.depth_renderbuffer(self.size)
         self.fbo = self.ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
+
+    def gpu_timer(self):
+        """A GL_TIME_ELAPSED query (``with timer: draw``; ``timer.elapsed`` in ns), or None where
+        the driver has none: callers then report wall-clock time only."""
+        if self._timer is None:
+            try:
+                self._timer = self.ctx.query(time=True)
+            except moderngl.Error:
+                self._timer = False
+        return self._timer or None
 
     def read(self, attachment: int, fbo=None, size=None) -> np.ndarray:
         """Row 0 at the top (OpenGL rows start at the bottom)."""
@@ -232,6 +244,37 @@ class RendererBase:
             if name in program:
                 program[name].write(np.ascontiguousarray(values).tobytes())
 
+    def method_memory(self, cube: RadianceCube, material: PackedMaterial, method: Method) -> dict[str, int]:
+        """Bytes of the GPU resources that shading ``material`` with ``method`` reads from one
+        cube (the bench's memory column): the radiance cube with its MIP chain, plus the
+        importance tables (reference), the albedo table (normalised lobe-N) or the prefiltered
+        maps (prefiltered)."""
+        from .prefiltered import DFG_SIZE, lobe_map_height
+
+        def cube_bytes(face: int, levels: int, texel: int = 16) -> int:
+            return sum(6 * max(face >> level, 1) ** 2 * texel for level in range(levels))
+
+        face = cube.face_size
+        memory = {"radiance cube": cube_bytes(face, int(np.log2(face)) + 1)}
+        if method.kind == "reference":
+            memory["importance tables"] = cube.env_cdf.width * cube.env_cdf.height * 4 + cube_bytes(
+                cube.importance.size, 1, 4
+            )
+        if method.kind == "lobe" and method.normalize:
+            memory["albedo table"] = int(albedo_texture_data(material).size * 4)
+        if method.kind == "prefiltered":
+            plan = prefilter_plan(material, method.mode)
+            for i, kind in enumerate(plan):
+                if kind == "splitsum":
+                    distribution = material.lobe_distributions[i].kind
+                    memory[f"split-sum {distribution}"] = cube_bytes(face, SPLIT_SUM_LEVELS)
+                    memory["DFG table"] = DFG_SIZE * DFG_SIZE * 16
+                else:
+                    fit = fit_lobe_map(material.lobe_components[i], kind)
+                    height = lobe_map_height(fit)
+                    memory[f"lobe map {i}"] = 2 * height * height * len(fit.profiles) * 16
+        return memory
+
     def _dummy_texture(self, kind: str):
         """A 1-texel black texture for sampler slots a material does not use."""
         if kind not in self._dummy_textures:
@@ -261,6 +304,7 @@ class RendererBase:
             tex.release()
         for vao in self._vaos.values():
             vao.release()
+        self._timer = None  # moderngl 5 queries have no release(); freed with the context
         for t in self.targets:
             t.release()
         self.depth.release()

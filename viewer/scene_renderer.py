@@ -363,12 +363,20 @@ class SceneRenderer(RendererBase):
         accumulated = np.zeros((height, width, 3))
         invalid = np.zeros((height, width), dtype=bool)
         t_shade = 0.0
+        t_gpu = 0.0
+        timer = self.gpu_timer()
         g_buffers = None
         for p in range(passes):
             t0 = time.perf_counter()
-            self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
+            if timer is None:
+                self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
+            else:
+                with timer:
+                    self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
             self.ctx.finish()
             t_shade += time.perf_counter() - t0
+            if timer is not None:
+                t_gpu += timer.elapsed * 1e-9
             radiance = self.read(0)
             accumulated += radiance[..., :3]
             invalid |= radiance[..., 3] < 0.0
@@ -381,8 +389,9 @@ class SceneRenderer(RendererBase):
             tangent=g_buffers[2][..., :3],
             mask=g_buffers[0][..., 3] > 0.5,
             invalid=invalid,
-            timings={**self.timings, "shade": t_shade},
+            timings={**self.timings, "shade": t_shade, **({"gpu shade": t_gpu} if timer is not None else {})},
             samples_per_pixel=passes * method.samples,
+            object_id=np.rint(g_buffers[1][..., 3]).astype(np.int32) - 1,
         )
 
     def release(self):

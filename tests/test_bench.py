@@ -1,0 +1,156 @@
+"""``lobeview bench``: the metrics and helpers against independent computations, and the command
+end to end on a tiny matrix (its numbers are checked for sense, never for speed)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lobeview.app import bench
+from lobeview.app.cli import main
+from lobeview.viewer.render_base import RenderResult
+
+
+def test_pareto_front_keeps_only_undominated_points():
+    times = [1.0, 2.0, 3.0, 2.5, 4.0]
+    errors = [0.5, 0.3, 0.1, 0.4, 0.1]
+    # (2.5, 0.4) is beaten by (2.0, 0.3); (4.0, 0.1) by (3.0, 0.1).
+    assert bench.pareto_front(times, errors) == [True, True, True, False, False]
+
+
+def test_log_interpolation_and_first_crossing():
+    xs, ys = [8, 16, 32, 64], [20.0, 23.0, 26.0, 29.0]  # +3 dB per doubling
+    assert bench.interpolate_log(np.sqrt(8 * 16), xs, ys) == pytest.approx(21.5)
+    assert np.isnan(bench.interpolate_log(4, xs, ys))
+    assert bench.first_crossing(24.5, xs, ys) == pytest.approx(np.sqrt(16 * 32))
+    assert np.isnan(bench.first_crossing(30.0, xs, ys))
+    assert bench.first_crossing(10.0, xs, ys) == 8  # reached at the first point already
+
+
+def test_psnr_and_relative_rmse_closed_forms():
+    a = np.full((10, 10, 3), 0.5)
+    b = a + 10 / 255  # exactly ten 8-bit steps everywhere
+    assert bench.psnr_8bit(a, b) == pytest.approx(20 * np.log10(255 / 10), abs=1e-9)
+    assert bench.relative_rmse(a * 1.1, a) == pytest.approx(0.1)
+
+
+def test_reference_noise_floor_matches_the_true_error_of_the_reference():
+    """Two noisy half references of a known image: the floor estimated from their difference is
+    the actual error of their mean against the truth."""
+    rng = np.random.default_rng(0)
+    truth = 0.2 + rng.random((80, 80, 3))
+    sigma = 0.05
+
+    def render(method, spp=1, seed=0, lod_bias=None):
+        noise = np.random.default_rng(seed + 1).normal(0.0, sigma, truth.shape)
+        z = np.zeros((80, 80, 3))
+        return RenderResult(truth + noise, z, z, z, np.ones((80, 80), bool), np.zeros((80, 80), bool))
+
+    reference = bench.make_reference(render, lambda r: r.mask, 64)
+    actual = bench.relative_rmse(reference.radiance, truth)
+    assert reference.rel_rmse_floor == pytest.approx(actual, rel=0.05)
+    exact = bench.Reference(
+        truth, reference.mask, reference.exposure, np.clip(bench_tonemap(truth, reference.exposure), 0, 1), 0, 0, 0, 0
+    )
+    assert reference.psnr_floor == pytest.approx(exact.errors(reference.radiance)["psnr"], abs=0.5)
+
+
+def bench_tonemap(radiance, exposure):
+    from lobeview.viewer.tonemap import tonemap
+
+    return tonemap(radiance, "aces", exposure)
+
+
+def test_flip_is_zero_for_identical_images_and_grows_with_the_difference():
+    rng = np.random.default_rng(1)
+    image = rng.random((48, 48, 3)).astype(np.float32)
+    mask = np.ones((48, 48), bool)
+    assert bench.flip_error(image, image, mask) == pytest.approx(0.0, abs=1e-6)
+    small = bench.flip_error(np.clip(image + 0.02, 0, 1), image, mask)
+    large = bench.flip_error(np.clip(image + 0.2, 0, 1), image, mask)
+    assert 0.0 < small < large
+
+
+def test_software_renderers_are_timed_by_the_wall_clock():
+    assert not bench.gpu_timer_meaningful("llvmpipe (LLVM 15.0.6, 256 bits) (Mesa/X.org), OpenGL 4.5")
+    assert bench.gpu_timer_meaningful("NVIDIA H100 80GB HBM3/PCIe/SSE2, OpenGL 4.6")
+
+
+def test_bench_command_end_to_end(tmp_path, capsys):
+    rc = main(
+        [
+            "bench",
+            "--views",
+            "sphere/builtin:studio",
+            "--materials",
+            "alanod-2000gs-1lobe",
+            "--methods",
+            "lobe-3",
+            "lobe-11",
+            "fis-4",
+            "fis-32",
+            "prefiltered",
+            "--resolutions",
+            "96x60",
+            "--reference-spp",
+            "256",
+            "--sweep-methods",
+            "lobe-7",
+            "--sweep-biases",
+            "-1",
+            "0",
+            "--fps-size",
+            "64x40",
+            "--repeats",
+            "1",
+            "--out",
+            str(tmp_path),
+        ]
+    )
+    assert rc == 0
+    md = next(tmp_path.glob("bench-*.md"))
+    data = json.loads(next(tmp_path.glob("bench-*.json")).read_text())
+    assert len(list(tmp_path.glob("bench-*-pareto-96x60.png"))) == 1
+    assert len(list(tmp_path.glob("bench-*-lod-bias.png"))) == 1
+    cells = {c["method"]: c for c in data["cells"]}
+    assert set(cells) == {"lobe-3", "lobe-11", "fis-4", "fis-32", "prefiltered"}
+    for c in cells.values():
+        assert c["ms"] > 0 and np.isfinite(c["psnr"]) and 0 <= c["flip"] <= 1 and c["memory_mb"] > 0
+        assert c["invalid_pixels"] == 0
+    # More samples, less error: the measurement sees what the methods do.
+    assert cells["fis-32"]["rel_rmse"] < cells["fis-4"]["rel_rmse"]
+    assert cells["lobe-11"]["rel_rmse"] < cells["lobe-3"]["rel_rmse"]
+    # Prefiltered maps cost memory beyond the radiance cube.
+    assert cells["prefiltered"]["memory_mb"] > cells["lobe-3"]["memory_mb"]
+    assert {r["bias"] for r in data["sweep"]} == {-1.0, 0.0}
+    assert [r["samples"] for r in data["fps"]] == list(bench.FPS_SAMPLES)
+    assert data["fps"][0]["full"]["fraction"] == pytest.approx(1.0)
+    assert data["fps"][0]["half"]["fraction"] == pytest.approx(0.5, abs=0.03)
+    text = md.read_text()
+    for heading in ("Fastest method reaching a PSNR target", "lobe-N against fis-N", "MIP level bias", "Frame rate"):
+        assert heading in text
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--views", "cube/x"], "sphere/ENV or demo/CAMERA"),
+        (["--sweep-methods", "mc-8"], "only lobe-N and fis-N"),
+        (["--methods", "lobe-0"], "N must be"),
+        (["--repeats", "0"], "at least 1"),
+    ],
+)
+def test_bench_rejects_bad_options(argv, message, capsys):
+    assert main(["bench", *argv]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_stress_command_reports_every_check(tmp_path, capsys):
+    rc = main(["bench", "--stress", "--quick", "--methods", "lobe-7+norm", "--out", str(tmp_path)])
+    text = next(tmp_path.glob("stress-*.md")).read_text()
+    assert rc == 0, capsys.readouterr().out
+    assert "0 failures" in text
+    assert "plane seen 89.9 deg from its normal" in text
+    assert "environment with NaN/Inf/negative texels" in text
