@@ -7,7 +7,7 @@ tested against.
 
 Steps, with the thesis equations:
   1. Lobe extent: theta_thresh(phi) = arctan(sqrt(T(xi_border) / A(phi))) (Eq. 4.10) with
-     xi_border = 0.01, T(xi) = -ln(xi) for Beckmann ((1 - xi)/xi for GGX) and
+     xi_border = 0.01, T(xi) = -ln(xi) for Beckmann and for GGX too (its core, see theta_thresh) and
      A(phi) = cos^2(phi)/mx^2 + sin^2(phi)/my^2.
   2. Uniformity-preserving map of pattern coordinates (xi1, xi2) to half vectors:
      phi_h = arctan(my/mx tan(2 pi xi2)) (Eq. 4.12), theta_h = (1 - xi1) theta_thresh (Eq. 4.13),
@@ -40,6 +40,9 @@ from .microfacet import MicrofacetDistribution
 from .vec import dot, mirror_z, reflect, spherical_direction
 
 XI_BORDER = 0.01  # Eq. 4.10: empirical lobe border of the thesis
+# MIP level bias of each sample's lookup (lod = 0.5 log2(area / texel) + bias): -1, measured by
+# `lobeview bench` (the thesis uses 0; see viewer/render_base.py DEFAULT_LOBE_LOD_BIAS).
+LOBE_LOD_BIAS = -1.0
 RING_XI1 = 0.6  # single ring at 40 % of the lobe radius (thesis 4.4.3)
 ANISOTROPY_LINE_RATIO = 3.0  # max/min roughness at which the line pattern replaces the ring
 MULTI_RING_SAMPLES_PER_RING = 3  # thesis 4.5.3 / Fig. 4.34: rings of three samples
@@ -96,8 +99,14 @@ def pattern_xi(n: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def theta_thresh(distribution: MicrofacetDistribution, phi: np.ndarray, xi_border: float = XI_BORDER):
-    """Eq. 4.10: the half-vector angle that bounds the sampled part of the lobe at azimuth phi."""
-    return np.arctan(np.sqrt(distribution.tan2_theta_from_xi(np.asarray(xi_border, float), phi)))
+    """Eq. 4.10: the half-vector angle that bounds the sampled part of the lobe at azimuth phi,
+    tan^2 theta = -ln(xi_border) / A(phi) for both distributions. For Beckmann this is the 99 %
+    border of the thesis; GGX's heavy tail would put its 99 % border at tan theta = 9.95 alpha
+    (4.6x wider: a gold alpha = 0.15 lobe spread its 3 samples 45 deg off the mirror direction at
+    the coarsest MIP levels, 9.7 dB), so GGX lobes use the same core width (tan theta = 2.15
+    alpha, 82 % of their half-vector mass); Eq. 4.25 weights the samples by the BRDF either way."""
+    border = -np.log(np.asarray(xi_border, float))
+    return np.arctan(np.sqrt(border / distribution.inv_alpha2(phi)))
 
 
 def pattern_half_vectors(
@@ -153,6 +162,7 @@ def lobe_samples(
     frame: np.ndarray | None = None,
     kind: str | None = None,
     xi_border: float = XI_BORDER,
+    lod_bias: float = LOBE_LOD_BIAS,
 ) -> LobeSamples:
     dist = lobe.distribution
     kind = kind or choose_pattern(dist.alpha_x, dist.alpha_y)
@@ -166,7 +176,7 @@ def lobe_samples(
         wi = mirror_z(wi)
     area = lobe_sample_area(dist, wo, n, xi_border)
     world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
-    return LobeSamples(wi=wi, valid=valid, lod=cube_map_lod(world, area, face_size), kind=kind)
+    return LobeSamples(wi=wi, valid=valid, lod=cube_map_lod(world, area, face_size) + lod_bias, kind=kind)
 
 
 RadianceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]

@@ -232,7 +232,13 @@ vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
 const float XI_BORDER = 0.01;
 const float MAX_ELLIPSE_ANGLE = 1.3962634015954636;  // 80 degrees
 
-float theta_thresh(Lobe l, float phi) { return atan(sqrt(tan2_theta_from_xi(l, XI_BORDER, phi))); }
+// Eq. 4.10 with Beckmann's border for both distributions (GGX: its core; patterns.theta_thresh).
+float theta_thresh(Lobe l, float phi) {
+    float c = cos(phi);
+    float s = sin(phi);
+    float inv_alpha2 = c * c / (l.ax * l.ax) + s * s / (l.ay * l.ay);
+    return atan(sqrt(-log(XI_BORDER) / inv_alpha2));
+}
 
 vec3 pattern_half_vector(Lobe l, vec2 xi) {
     float phi = phi_from_xi(l, xi.y);

@@ -12,6 +12,7 @@ from scipy.stats import qmc
 
 from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_map
+from lobeview.materials.patterns import LOBE_LOD_BIAS
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
 
 from .cubemap import RadianceCube
@@ -21,8 +22,14 @@ from .shaders import ProgramCache
 SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
 SOBOL_SEED = 20100501
 REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
-DEFAULT_FIS_LOD_BIAS = 1.0  # Colbert & Krivanek's +1; measured in bench/ (issue 7)
-DEFAULT_LOBE_LOD_BIAS = 0.0
+# MIP level bias b in lod = 0.5 log2(Omega_s / Omega_p) + b, chosen by `lobeview bench`'s sweep
+# (geometric mean of relRMSE over 6 material classes x 2 HDR environments, b in -2..2):
+# fis-N is best at b = 0, not Colbert & Krivanek's +1 (fis-16: 0.135 vs 0.208); lobe-N at -1,
+# not the thesis' 0 (lobe-7: 0.172 vs 0.283; lobe-19 is flat between -1 and -0.5): Eq. 4.14's
+# area spreads each sample over the lobe to its 99 % border, twice the solid angle that the
+# samples, concentrated in the core, should be filtered over.
+DEFAULT_FIS_LOD_BIAS = 0.0
+DEFAULT_LOBE_LOD_BIAS = LOBE_LOD_BIAS  # -1 (materials/patterns.py, shared with the numpy reference)
 
 _METHOD = re.compile(r"^(lobe|fis|mc)-(\d+)$|^(reference)$|^prefiltered(?:-(splitsum|lobe|lobe2d|phong))?$")
 #: prefiltered sub-modes: auto = split-sum for microfacet/glTF lobes, lobe maps for the rest
