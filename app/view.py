@@ -68,6 +68,12 @@ def add_arguments(p) -> None:
     p.add_argument("--view", help="start at this scene camera (name or index)")
     p.add_argument("--no-vsync", action="store_true", help="disable vsync")
     p.add_argument("--face-size", type=int, default=256, help="cube-map face resolution (default 256)")
+    p.add_argument(
+        "--reflection-proxy",
+        choices=("scene", "none", "floor", "room"),
+        default="scene",
+        help="cube-map lookup correction for every glossy object (see lobeview shot --help)",
+    )
     p.add_argument("--cache", help="cache folder (default ~/.cache/lobeview or $LOBEVIEW_CACHE)")
     p.add_argument("--screenshot-dir", default=".", help="where F12 writes screenshots (default .)")
     p.add_argument("--materials", help="load edited materials from this JSON file at start")
@@ -274,9 +280,10 @@ def run(args) -> int:
 
     import moderngl_window as mglw
 
-    from lobeview.app.shot import load_scene_and_environment
+    from lobeview.app.shot import apply_reflection_proxy, load_scene_and_environment
 
     scene_path, scene, environment, cache = load_scene_and_environment(args.scene, args.env, args.cache)
+    apply_reflection_proxy(scene, args.reflection_proxy)
     script = json.loads(Path(args.script).read_text()) if args.script else []
 
     config = _window_class(scene, scene_path, environment, args, method, cache, script)

@@ -25,6 +25,7 @@ class ObjectNeeds:
     diffuse: bool
     emissive: bool
     has_lightmap: bool
+    reflection_proxy: str = "-"  # the cube-map lookup correction (scenes/reflection_proxy.py)
 
     @property
     def needs_cube_map(self) -> bool:
@@ -56,13 +57,12 @@ class SceneAnalysis:
         return bool(self.cube_mapped)
 
     def report(self) -> str:
-        lines = [f"{'object':<24} {'needs':<38} cube map  lightmap"]
+        lines = [f"{'object':<24} {'needs':<38} cube map  {'lightmap':<14} reflection proxy"]
         for o in self.objects:
             lobes = f"{o.kind} ({o.specular_lobes} refl, {o.transmission_lobes} trans)" if o.needs_cube_map else o.kind
-            lines.append(
-                f"{o.name:<24} {lobes:<38} {'yes' if o.needs_cube_map else 'no':<9} "
-                + ("yes" if o.has_lightmap else "NO (fallback)")
-            )
+            lightmap = "yes" if o.has_lightmap else "NO (fallback)"
+            proxy = o.reflection_proxy if o.needs_cube_map else "-"
+            lines.append(f"{o.name:<24} {lobes:<38} {'yes' if o.needs_cube_map else 'no':<9} {lightmap:<14} {proxy}")
         return "\n".join(lines)
 
 
@@ -90,6 +90,15 @@ def analyse(scene: Scene) -> SceneAnalysis:
                 diffuse,
                 bool(max(mat.emission) > 0),
                 has_lightmap,
+                _describe_proxy(obj.reflection_proxy),
             )
         )
     return SceneAnalysis(needs)
+
+
+def _describe_proxy(proxy) -> str:
+    if proxy is None:
+        return "none (distant lookup)"
+    if proxy.kind == "planes":
+        return f"{len(proxy.planes)} bounding plane(s)"
+    return "box " + " .. ".join("(" + ", ".join(f"{v:.2f}" for v in b) + ")" for b in (proxy.box_min, proxy.box_max))

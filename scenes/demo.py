@@ -26,7 +26,7 @@ from .builtin_env import load_environment
 from .meshes import Mesh, quad, uv_sphere, vertex_normals, vertex_tangents
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
-DEMO_VERSION = 2  # bump when the geometry, materials or baker change (invalidates caches)
+DEMO_VERSION = 3  # bump when the geometry, materials or baker change (invalidates caches)
 DEMO_ENVIRONMENT = "builtin:overcast"
 DEFAULT_RESOLUTION = 512
 DEFAULT_RAYS = 128
@@ -236,6 +236,21 @@ def demo_geometry() -> Scene:
             42.0,
         ),
     ]
+    # Reflected-geometry correction (thesis 4.4.1): what stands on the table intersects its
+    # secondary rays with the table top, the ceiling and the four walls (the nearest hit wins);
+    # everything else is box-projected to the room.
+    from .reflection_proxy import ReflectionProxy
+
+    room = ReflectionProxy.from_box([-W, 0.0, -D], [W, H, D])
+    table_top_height = 0.76
+    on_table = ReflectionProxy.from_planes(
+        [[0, 1, 0, -table_top_height], [0, -1, 0, H], [1, 0, 0, W], [-1, 0, 0, W], [0, 0, 1, D], [0, 0, -1, D]]
+    )
+    for obj in objects:
+        if obj.name in ("chrome sphere", "gold torus", "porcelain vase"):
+            obj.reflection_proxy = on_table
+        elif obj.name not in ("walls", "floor", "ceiling", "light"):
+            obj.reflection_proxy = room
     return Scene(objects, materials, cameras, "lobeview demo")
 
 

@@ -315,6 +315,7 @@ def load_gltf(path: str | Path) -> Scene:
 
     objects: list[SceneObject] = []
     cameras: list[SceneCamera] = []
+    node_extras: list = []  # (object, node extras) for the reflection proxies, resolved with the bounds
     scene_index = gltf.scene if gltf.scene is not None else 0
     if not gltf.scenes:
         raise GltfError(f"{path}: contains no scene")
@@ -335,6 +336,7 @@ def load_gltf(path: str | Path) -> Scene:
                     if obj.material < 0:
                         obj.material = default_material
                     objects.append(obj)
+                    node_extras.append((obj, node.extras))
         if node.camera is not None:
             cam = gltf.cameras[node.camera]
             if cam.type == "perspective" and cam.perspective is not None:
@@ -364,7 +366,18 @@ def load_gltf(path: str | Path) -> Scene:
                 scene_warnings,
                 f"{path}: object {obj.name!r} uses a lightmap but has no TEXCOORD_1; {FALLBACKS['missing lightmap']}",
             )
-    return Scene(objects, materials, cameras, str(path), scene_warnings)
+    scene = Scene(objects, materials, cameras, str(path), scene_warnings)
+    if objects:
+        from .reflection_proxy import object_proxy
+
+        bounds = scene.bounds
+        for obj, extras in node_extras:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                obj.reflection_proxy = object_proxy(extras, bounds, obj.name)
+            for w in caught:
+                _warn(scene_warnings, f"{path}: {w.message}")
+    return scene
 
 
 def _primitive(reader: _Reader, prim, world: np.ndarray, name: str, scene_warnings: list) -> SceneObject | None:

@@ -62,7 +62,10 @@ def write_glb(
                 primitives=[pygltflib.Primitive(attributes=attrs, indices=indices, material=obj.material)],
             )
         )
-        nodes.append(pygltflib.Node(name=obj.name, mesh=len(meshes) - 1))
+        extras = {}
+        if obj.reflection_proxy is not None:
+            extras = {"lobeview": {"reflection_proxy": obj.reflection_proxy.to_description()}}
+        nodes.append(pygltflib.Node(name=obj.name, mesh=len(meshes) - 1, extras=extras))
 
     textures, images, samplers = [], [], []
     if lightmap is not None:

@@ -39,6 +39,7 @@ class SceneObject:
     mesh: Mesh  # world space
     material: int
     uv1: np.ndarray | None = None  # (V, 2) lightmap coordinates
+    reflection_proxy: object | None = None  # scenes.reflection_proxy.ReflectionProxy (None: plain lookup)
 
 
 @dataclass

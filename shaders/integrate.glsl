@@ -86,7 +86,63 @@ float power_heuristic(float a, float b) {
 }
 #endif
 
+#if defined(PARALLAX)
+// Reflected-geometry correction (thesis 4.4.1; scenes/reflection_proxy.py): the secondary ray
+// from the shading point is intersected with the object's proxy (bounding planes or a box seen
+// from inside) and the cube map is read toward the hit point as seen from its centre.
+const int MAX_PROXY_PLANES = 6;
+uniform vec3 u_cube_centre;
+uniform int u_proxy_kind;                       // 1: planes, 2: box
+uniform int u_proxy_plane_count;
+uniform vec4 u_proxy_planes[MAX_PROXY_PLANES];  // unit normal n, d: n.x + d = 0
+uniform vec3 u_proxy_box_min;
+uniform vec3 u_proxy_box_max;
+vec3 g_shading_position;                        // world position, set by the fragment shader
+
+float proxy_hit_distance(vec3 o, vec3 d) {
+    float t = 1e38;
+    if (u_proxy_kind == 1) {
+        for (int k = 0; k < u_proxy_plane_count; ++k) {
+            float denom = dot(u_proxy_planes[k].xyz, d);
+            if (abs(denom) <= 1e-12) continue;
+            float tk = -(dot(u_proxy_planes[k].xyz, o) + u_proxy_planes[k].w) / denom;
+            if (tk > 1e-6) t = min(t, tk);
+        }
+    } else {
+        for (int a = 0; a < 3; ++a) {
+            if (d[a] > 0.0) t = min(t, (u_proxy_box_max[a] - o[a]) / d[a]);
+            else if (d[a] < 0.0) t = min(t, (u_proxy_box_min[a] - o[a]) / d[a]);
+        }
+        if (t <= 1e-6) t = 1e38;
+    }
+    return t;
+}
+
+// Lookup direction toward the proxy hit; lod_offset = log2(|H - P| / |H - C|), the change of a
+// footprint's solid angle seen from the cube's centre instead of the shading point.
+vec3 proxy_direction(vec3 dir_world, out float lod_offset) {
+    lod_offset = 0.0;
+    vec3 d = normalize(dir_world);
+    float t = proxy_hit_distance(g_shading_position, d);
+    if (t >= 1e37) return d;
+    vec3 to_hit = g_shading_position + t * d - u_cube_centre;
+    float len = length(to_hit);
+    if (len <= 1e-9) return d;
+    lod_offset = log2(max(t, 1e-9) / len);
+    return to_hit / len;
+}
+
+vec3 lookup(vec3 dir_world, float lod) {
+    float lod_offset;
+    vec3 d = proxy_direction(dir_world, lod_offset);
+#if !defined(METHOD_MC)
+    lod += lod_offset;  // filtered methods only; mc-N and the reference read level 0
+#endif
+    return textureLod(u_radiance, d, max(lod, 0.0)).rgb;
+}
+#else
 vec3 lookup(vec3 dir_world, float lod) { return textureLod(u_radiance, dir_world, max(lod, 0.0)).rgb; }
+#endif
 
 vec3 diffuse_eval(vec3 wi, vec3 wo) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
@@ -187,6 +243,10 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     if (wo.z <= 0.0) return vec3(0.0);
     if (u_lobe_map_mode[lobe_index] == 0) {
         vec3 r = tbn * vec3(-wo.xy, wo.z);
+#if defined(PARALLAX)
+        float unused_offset;
+        r = proxy_direction(r, unused_offset);
+#endif
         float roughness = sqrt(sqrt(l.ax * l.ay));
         vec3 radiance = textureLod(u_split_sum[l.dist], r, roughness * u_split_sum_max_level).rgb;
         vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
@@ -205,6 +265,10 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     float len_xy = length(wo.xy);
     vec2 mirror_azimuth = len_xy > 1e-7 ? -wo.xy / len_xy : vec2(1.0, 0.0);
     vec3 axis = tbn * vec3(sin(t) * mirror_azimuth, cos(t));
+#if defined(PARALLAX)
+    float unused_offset;
+    axis = proxy_direction(axis, unused_offset);
+#endif
     float z = u_lobe_map_depth[lobe_index] > 1 ? (s + 0.5) / float(LOBE_SLICES) : 0.5;
     return texture(u_lobe_maps[lobe_index], vec3(direction_to_latlong(axis), z)).rgb * energy;
 }

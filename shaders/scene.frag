@@ -26,6 +26,9 @@ layout(location = 2) out vec4 out_normal;
 layout(location = 3) out vec4 out_tangent;
 
 void main() {
+#if defined(PARALLAX)
+    g_shading_position = v_position;
+#endif
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));
     mat3 tbn = shading_frame(v_normal, v_tangent, geometric_normal);
     vec3 wo = view_in_frame(tbn, normalize(u_camera_position - v_position));

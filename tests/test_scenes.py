@@ -14,10 +14,11 @@ from conftest import SHARED_ASSETS
 from lobeview.materials.spec import validate
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.baker import bake_lightmap
-from lobeview.scenes.demo import _box, _quad, build_demo_scene
+from lobeview.scenes.demo import _box, build_demo_scene
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.gltf_loader import GltfError, GltfWarning, load_gltf
 from lobeview.scenes.gltf_writer import write_glb
+from lobeview.scenes.meshes import quad
 from lobeview.scenes.scene import Lightmap, Scene, SceneCamera, SceneMaterial, SceneObject
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context
@@ -29,7 +30,7 @@ def _diffuse(kd):
 
 
 def _small_scene() -> Scene:
-    floor = _quad([-1, 0, 1], [2, 0, 0], [0, 0, -2])
+    floor = quad([-1, 0, 1], [2, 0, 0], [0, 0, -2])
     floor.name = "floor"
     obj = SceneObject("floor", floor, 0, uv1=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32))
     box = _box([0, 0.25, 0], [0.5, 0.5, 0.5])
@@ -50,12 +51,12 @@ def _small_scene() -> Scene:
 def _closed_box(kd: float, emission: float) -> Scene:
     """A unit cube seen from inside (normals inward), every wall emitting and reflecting."""
     faces = [
-        _quad([0, 0, 0], [0, 0, 1], [1, 0, 0]),  # floor y=0, normal +y
-        _quad([0, 1, 0], [1, 0, 0], [0, 0, 1]),  # ceiling, normal -y
-        _quad([0, 0, 0], [1, 0, 0], [0, 1, 0]),  # z=0, normal +z
-        _quad([0, 0, 1], [0, 1, 0], [1, 0, 0]),  # z=1, normal -z
-        _quad([0, 0, 0], [0, 1, 0], [0, 0, 1]),  # x=0, normal +x
-        _quad([1, 0, 0], [0, 0, 1], [0, 1, 0]),  # x=1, normal -x
+        quad([0, 0, 0], [0, 0, 1], [1, 0, 0]),  # floor y=0, normal +y
+        quad([0, 1, 0], [1, 0, 0], [0, 0, 1]),  # ceiling, normal -y
+        quad([0, 0, 0], [1, 0, 0], [0, 1, 0]),  # z=0, normal +z
+        quad([0, 0, 1], [0, 1, 0], [1, 0, 0]),  # z=1, normal -z
+        quad([0, 0, 0], [0, 1, 0], [0, 0, 1]),  # x=0, normal +x
+        quad([1, 0, 0], [0, 0, 1], [0, 1, 0]),  # x=1, normal -x
     ]
     objects = []
     for i, f in enumerate(faces):
@@ -88,10 +89,18 @@ def test_loads_the_sample_models():
 
 
 def test_write_and_load_round_trip(tmp_path):
+    from lobeview.scenes.analysis import analyse
+    from lobeview.scenes.reflection_proxy import ReflectionProxy
+
     scene = _small_scene()
+    scene.objects[1].reflection_proxy = ReflectionProxy.from_planes([[0, 1, 0, 0], [0, -1, 0, 3]])
     lightmap = np.full((8, 8, 3), 2.0, np.float32)
     path = write_glb(scene, tmp_path / "s.glb", lightmap)
     back = load_gltf(path)
+    assert back.objects[0].reflection_proxy is None
+    np.testing.assert_allclose(back.objects[1].reflection_proxy.planes, scene.objects[1].reflection_proxy.planes)
+    if analyse(back).objects[1].needs_cube_map:
+        assert "2 bounding plane(s)" in analyse(back).report()
     assert [o.name for o in back.objects] == ["floor", "box"]
     np.testing.assert_allclose(back.objects[0].mesh.positions, scene.objects[0].mesh.positions, atol=1e-6)
     np.testing.assert_allclose(back.objects[0].uv1, scene.objects[0].uv1)
@@ -238,12 +247,12 @@ def test_cube_faces_point_where_the_layout_says(ctx):
     """Six coloured walls around the eye: face i of a rendered cube map must show the wall in
     the direction of that face (scenes/cube_layout.py), exercising face_view end to end."""
     walls = [
-        _quad([1, -1, 1], [0, 0, -2], [0, 2, 0]),  # +X wall, normal -x
-        _quad([-1, -1, -1], [0, 0, 2], [0, 2, 0]),  # -X
-        _quad([-1, 1, -1], [0, 0, 2], [2, 0, 0]),  # +Y
-        _quad([-1, -1, -1], [2, 0, 0], [0, 0, 2]),  # -Y
-        _quad([-1, -1, 1], [0, 2, 0], [2, 0, 0]),  # +Z
-        _quad([-1, -1, -1], [2, 0, 0], [0, 2, 0]),  # -Z
+        quad([1, -1, 1], [0, 0, -2], [0, 2, 0]),  # +X wall, normal -x
+        quad([-1, -1, -1], [0, 0, 2], [0, 2, 0]),  # -X
+        quad([-1, 1, -1], [0, 0, 2], [2, 0, 0]),  # +Y
+        quad([-1, -1, -1], [2, 0, 0], [0, 0, 2]),  # -Y
+        quad([-1, -1, 1], [0, 2, 0], [2, 0, 0]),  # +Z
+        quad([-1, -1, -1], [2, 0, 0], [0, 2, 0]),  # -Z
     ]
     colours = np.eye(6, 3) + np.array([[0, 0, 0], [0, 1, 1], [0, 0, 0], [1, 0, 1], [0, 0, 0], [1, 1, 0]])
     materials = [SceneMaterial(f"m{i}", _diffuse(0.0), emission=colours[i]) for i in range(6)]

@@ -217,13 +217,32 @@ class SceneRenderer(RendererBase):
         return faces
 
     # -- drawing -----------------------------------------------------------------------------
-    def _program(self, method: Method, specular: bool):
+    def _program(self, method: Method, specular: bool, parallax: bool = False):
         defines = (
             {**method.defines(), "SPECULAR": specular}
             if specular
             else {"MAX_LOBES": MAX_LOBES, "MAX_PATTERN": MAX_PATTERN, "METHOD_LOBE": True}
         )
+        if specular and parallax:
+            # The cube's importance map samples directions seen from its centre, which the proxy
+            # remaps: the reference then samples the BSDF only (still unbiased).
+            defines.update(PARALLAX=True, ENV_SAMPLING=False)
         return self.programs.program("scene.vert", "scene.frag", defines)
+
+    def set_reflection_proxy(self, index: int, proxy) -> None:
+        """Reflected-geometry correction for object ``index`` (scenes/reflection_proxy.py; None:
+        the plain lookup). Takes effect on the next frame; the cube map itself is unchanged."""
+        self.scene.objects[index].reflection_proxy = proxy
+
+    def _bind_proxy(self, program, obj: _GpuObject, proxy) -> None:
+        set_uniform(program, "u_cube_centre", tuple(float(x) for x in obj.centre))
+        for name, value in proxy.uniforms().items():
+            if name not in program:
+                continue
+            if isinstance(value, np.ndarray):
+                program[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes())
+            else:
+                program[name].value = value
 
     def _vao(self, program, obj: _GpuObject):
         key = (id(program), obj.index)
@@ -265,7 +284,8 @@ class SceneRenderer(RendererBase):
             use_specular = specular and obj.cube is not None
             # Per-object real-time method (the panel's override); the reference ignores it.
             obj_method = method if method.kind == "reference" else self.object_methods.get(obj.index, method)
-            program = self._program(obj_method, use_specular)
+            proxy = self.scene.objects[obj.index].reflection_proxy if use_specular else None
+            program = self._program(obj_method, use_specular, proxy is not None)
             mat = self.scene.materials[self.scene.objects[obj.index].material]
             set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
             set_uniform(program, "u_camera_position", tuple(float(x) for x in eye))
@@ -293,6 +313,8 @@ class SceneRenderer(RendererBase):
                 set_uniform(program, "u_has_base_color", 0)
             if use_specular:
                 self.bind_cube(program, obj.cube, obj_method, obj.material)
+                if proxy is not None:
+                    self._bind_proxy(program, obj, proxy)
             self._vao(program, obj).render(moderngl.TRIANGLES)
 
     def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:

@@ -25,6 +25,7 @@ KNOWN_DEFINES = {
     "LOBE_NORMALIZE",
     "HAS_DIFFUSE",
     "SPECULAR",
+    "PARALLAX",
     "DEBUG_VIEW",
 }
 
