@@ -446,6 +446,7 @@ def run(args) -> int:
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "device": device,
         "quick": bool(args.quick),
+        "command": "lobeview " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("lobeview") else "",
         "settings": {k: v for k, v in settings.items()},
     }
     data = {"meta": meta, "cells": cells, "sweep": sweep, "references": references, "fps": fps_rows}
@@ -764,6 +765,7 @@ def write_markdown(path: Path, data: dict, plots: list[Path]) -> None:
         "",
         f"- date: {meta['date']}",
         f"- device: {meta['device']}",
+        *([f"- command: `{meta['command']}`"] if meta.get("command") else []),
         f"- time: median of {s['repeats']} frames after a warm-up; {timer}; both clocks are in the JSON",
         f"- reference: `reference` (MIS), {s['reference_spp']} samples per lobe as two independent halves; "
         "'floor' is the PSNR its own noise allows (PSNR of the halves + 6 dB)",
