@@ -437,7 +437,9 @@ def run(args) -> int:
     device = renderer_description(ctx)
     settings["timer"] = "gpu" if gpu_timer_meaningful(device) else "wall"
     print(f"lobeview bench on {device} (timing: {settings['timer']} clock)", file=sys.stderr, flush=True)
-    cells, sweep, references = run_matrix(ctx, settings, args.cache)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    checkpoint = out_dir / f"bench-{stamp}.partial.json"
+    cells, sweep, references = run_matrix(ctx, settings, args.cache, checkpoint)
     fps_rows = run_fps_table(ctx, settings) if settings["fps_size"] else []
     ctx.release()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -453,6 +455,7 @@ def run(args) -> int:
     base.with_suffix(".json").write_text(json.dumps(data, indent=1, default=float))
     plots = write_plots(base, cells, sweep, references)
     write_markdown(base.with_suffix(".md"), data, plots)
+    checkpoint.unlink(missing_ok=True)
     print(f"wrote {base.with_suffix('.md')}, {base.with_suffix('.json')} and {len(plots)} plots", flush=True)
     return 0
 
@@ -464,7 +467,7 @@ def _targets(ctx, view: str, size, settings, cache):
     return DemoTarget(ctx, name, size, settings["face_size"], cache), ["scene"]
 
 
-def run_matrix(ctx, settings, cache):
+def run_matrix(ctx, settings, cache, checkpoint: Path | None = None):
     n_views_materials = sum(len(settings["materials"]) if v.startswith("sphere") else 1 for v in settings["views"])
     per_cell = len(settings["methods"]) + 1
     sweep_cells = len(settings["sweep_methods"]) * len(settings["sweep_biases"])
@@ -525,6 +528,7 @@ def run_matrix(ctx, settings, cache):
                         cell.update(reference.errors(result.radiance))
                         cell["invalid_pixels"] = int(result.invalid.sum())
                     cells.append(cell)
+                    _checkpoint(checkpoint, cells, sweep, references)
                     err = f" PSNR {cell['psnr']:.2f} dB relRMSE {cell['rel_rmse']:.4f}" if reference else ""
                     progress.step(f"{view} {material} {label} {text}: {cell['ms']:.1f} ms{err}")
                 if reference is not None and size == sweep_resolution and view.startswith("sphere"):
@@ -535,10 +539,18 @@ def run_matrix(ctx, settings, cache):
                             row = {"view": view, "material": material, "method": text, "bias": bias}
                             row.update(reference.errors(result.radiance))
                             sweep.append(row)
+                            _checkpoint(checkpoint, cells, sweep, references)
                             progress.step(f"sweep {view} {material} {text} bias {bias:+.1f}: PSNR {row['psnr']:.2f} dB")
         if target is not None:
             target.release()
     return cells, sweep, references
+
+
+def _checkpoint(path: Path | None, cells, sweep, references) -> None:
+    """Everything measured so far, rewritten after every cell: a long run that fails late (a
+    driver crash, a killed job) keeps its numbers."""
+    if path is not None:
+        path.write_text(json.dumps({"cells": cells, "sweep": sweep, "references": references}, default=float))
 
 
 def run_fps_table(ctx, settings) -> list[dict]:
@@ -739,16 +751,16 @@ def _geomean(values) -> float:
 
 
 def sweep_winners(sweep) -> dict:
-    """method -> (best bias, geometric-mean relRMSE at it, at the default bias)."""
+    """method -> (best bias by mean PSNR, {bias: mean PSNR}, {bias: geometric-mean relRMSE}).
+    PSNR of the tonemapped image decides (what a viewer sees, and what the targets of the
+    report are stated in); relRMSE weighs the brightest texels and is listed beside it."""
     winners = {}
     for method in sorted({r["method"] for r in sweep}):
         biases = sorted({r["bias"] for r in sweep if r["method"] == method})
-        scores = {
-            b: _geomean([r["rel_rmse"] for r in sweep if r["method"] == method and r["bias"] == b]) for b in biases
-        }
-        best = min(scores, key=scores.get)
-        default = DEFAULT_FIS_LOD_BIAS if method.startswith("fis") else DEFAULT_LOBE_LOD_BIAS
-        winners[method] = (best, scores[best], scores.get(default, float("nan")), scores)
+        rows = {b: [r for r in sweep if r["method"] == method and r["bias"] == b] for b in biases}
+        psnr = {b: float(np.mean([r["psnr"] for r in rows[b]])) for b in biases}
+        rel = {b: _geomean([r["rel_rmse"] for r in rows[b]]) for b in biases}
+        winners[method] = (max(psnr, key=psnr.get), psnr, rel)
     return winners
 
 
@@ -839,13 +851,17 @@ def write_markdown(path: Path, data: dict, plots: list[Path]) -> None:
         lines += [
             "## MIP level bias (lod = 0.5 log2(Omega_s / Omega_p) + b)",
             "",
-            "Geometric mean of relRMSE over the sphere views and materials at the error resolution.",
+            "Mean PSNR (dB) / geometric-mean relRMSE over the sphere views and materials at the error resolution;"
+            " the best bias by PSNR is marked.",
             "",
             "| method | " + " | ".join(f"b = {b:+g}" for b in sorted({r["bias"] for r in sweep})) + " | best b |",
             "|---|" + "---|" * (len({r["bias"] for r in sweep}) + 1),
         ]
-        for method, (best, _, _, scores) in winners.items():
-            values = " | ".join(f"{scores[b]:.4f}" for b in sorted(scores))
+        for method, (best, psnr, rel) in winners.items():
+            values = " | ".join(
+                (f"**{psnr[b]:.2f}** / {rel[b]:.4f}" if b == best else f"{psnr[b]:.2f} / {rel[b]:.4f}")
+                for b in sorted(psnr)
+            )
             lines.append(f"| {method} | {values} | {best:+g} |")
         lines.append("")
 

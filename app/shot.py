@@ -88,7 +88,7 @@ def add_arguments(p) -> None:
         "--lod-bias",
         type=float,
         default=None,
-        help="MIP level bias (default: 0 for fis-N, -1 for lobe-N, measured by lobeview bench)",
+        help="MIP level bias (default: -0.5 for fis-N and lobe-N, measured by lobeview bench)",
     )
     a(
         "--lobe-normalize",
