@@ -103,6 +103,7 @@ def add_arguments(p) -> None:
     a("--fps-size", help="fps table resolution (default 1680x1050; --quick 640x400); 'none' skips it")
     a("--face-size", type=int, default=256, help="cube-map face resolution (default 256)")
     a("--cache", help="cache folder for the demo scene and cube maps (default ~/.cache/lobeview)")
+    a("--report", metavar="JSON", help="rewrite the Markdown and plots of an earlier run from its JSON (no rendering)")
     a("--out", help="output folder (default bench/results); files are timestamped, never overwritten")
 
 
@@ -432,6 +433,18 @@ def run(args) -> int:
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
     if args.stress:
         return run_stress(args, out_dir, stamp)
+    if args.report:
+        source = Path(args.report)
+        try:
+            data = json.loads(source.read_text())
+            data["meta"]["settings"]
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise BenchError(f"--report: {source} is not a lobeview bench JSON ({exc})") from None
+        base = source.with_suffix("")
+        plots = write_plots(base, data["cells"], data["sweep"], data["references"])
+        write_markdown(base.with_suffix(".md"), data, plots)
+        print(f"wrote {base.with_suffix('.md')} and {len(plots)} plots")
+        return 0
     settings = _settings(args)
     ctx = create_headless_context()
     device = renderer_description(ctx)
@@ -769,8 +782,9 @@ def write_markdown(path: Path, data: dict, plots: list[Path]) -> None:
     s = meta["settings"]
     timer = (
         "GPU timer query (GL_TIME_ELAPSED) around the shading pass"
-        if any(c.get("gpu_ms") is not None for c in cells)
-        else "wall clock around the shading pass + glFinish"
+        if s.get("timer") == "gpu"
+        else "wall clock around the shading pass + glFinish (a software renderer: its timer queries do not "
+        "cover rasterisation)"
     )
     lines = [
         f"# lobeview bench{' (--quick)' if meta['quick'] else ''}",

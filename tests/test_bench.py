@@ -131,6 +131,12 @@ def test_bench_command_end_to_end(tmp_path, capsys):
     text = md.read_text()
     for heading in ("Fastest method reaching a PSNR target", "lobe-N against fis-N", "MIP level bias", "Frame rate"):
         assert heading in text
+    assert "wall clock" in text  # llvmpipe: its timer query does not cover rasterisation
+    assert not list(tmp_path.glob("*.partial.json"))  # the checkpoint goes once the report is written
+    # The report can be rewritten from the JSON alone.
+    md.unlink()
+    assert main(["bench", "--report", str(next(tmp_path.glob("bench-*.json")))]) == 0
+    assert md.read_text() == text
 
 
 @pytest.mark.parametrize(
@@ -140,6 +146,7 @@ def test_bench_command_end_to_end(tmp_path, capsys):
         (["--sweep-methods", "mc-8"], "only lobe-N and fis-N"),
         (["--methods", "lobe-0"], "N must be"),
         (["--repeats", "0"], "at least 1"),
+        (["--report", "/nonexistent/bench.json"], "not a lobeview bench JSON"),
     ],
 )
 def test_bench_rejects_bad_options(argv, message, capsys):
