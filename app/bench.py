@@ -794,7 +794,9 @@ def write_markdown(path: Path, data: dict, plots: list[Path]) -> None:
         *([f"- command: `{meta['command']}`"] if meta.get("command") else []),
         f"- time: median of {s['repeats']} frames after a warm-up; {timer}; both clocks are in the JSON",
         f"- reference: `reference` (MIS), {s['reference_spp']} samples per lobe as two independent halves; "
-        "'floor' is the PSNR its own noise allows (PSNR of the halves + 6 dB)",
+        "'floor' is the PSNR its own noise allows (PSNR of the halves + 6 dB)"
+        if references
+        else "- errors: none measured (a timing-only run, --error-resolutions none)",
         "- errors on the view-dependent pixels (sphere: the object; demo: objects with cube maps): relRMSE of "
         "linear radiance, PSNR of the 8-bit sRGB image after ACES with the reference's median luminance at "
         "0.18, mean LDR-FLIP (flip-evaluator, 67 ppd) of the same tonemapped image",

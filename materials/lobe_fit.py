@@ -193,8 +193,10 @@ def _fit(component: Component, mode: str, slices: int) -> LobeMapFit:
         wo = _wo(c)
         t = find_peak(comp, wo)
         peaks.append(t)
-        shapes.append(RadialProfile.from_values(_PSI, mean_profile_values(comp, wo, _in_plane(t))))
+        values = mean_profile_values(comp, wo, _in_plane(t))
+        shapes.append(RadialProfile.from_values(_PSI, values) if np.any(values > 0) else None)
         energies.append(directional_energy(component, wo))
+    shapes = _fill_empty_slices(shapes)
     peaks = np.array(peaks)
     energies = np.array(energies)
     exponent = None
@@ -215,6 +217,18 @@ def _fit(component: Component, mode: str, slices: int) -> LobeMapFit:
             relative_rms(comp, wo, lambda d, shape=shape, axis=axis, scale=scale: scale * shape.of_cosine(d @ axis))
         )
     return LobeMapFit(mode, cosines, peaks, shapes, energies, np.array(errors), anisotropic, exponent)
+
+
+def _fill_empty_slices(shapes: list) -> list:
+    """Slices where the lobe vanishes (r0 = 0 at normal incidence, or a spike narrower than the
+    radial grid) have no shape: they take the nearest slice's (their energy is ~0 anyway); if no
+    slice has one, the narrowest profile the grid holds. Found by `lobeview bench --stress`
+    (m = 1e-4, r0 = 0 raised and stopped the renderer)."""
+    valid = [i for i, p in enumerate(shapes) if p is not None]
+    if not valid:
+        narrowest = RadialProfile.from_values(_PSI, (_PSI <= _PSI[1]).astype(float))
+        return [narrowest] * len(shapes)
+    return [p if p is not None else shapes[min(valid, key=lambda j, i=i: abs(j - i))] for i, p in enumerate(shapes)]
 
 
 def component_key(component: Component) -> str:
