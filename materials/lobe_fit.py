@@ -42,7 +42,16 @@ _BETA = (np.arange(64) + 0.5) / 64 * 2.0 * np.pi
 
 
 def slice_cosines(slices: int = LOBE_SLICES) -> np.ndarray:
-    return np.linspace(0.0, 1.0, slices)
+    """View elevations of the slices: uniform in sqrt(cos theta_o), dense near grazing where the
+    albedo (the slices' energy, interpolated linearly between them) changes fastest. Linear
+    spacing overshot the white furnace 37x at grazing pixels (m = 1e-4, alpha = 1, r0 = 0;
+    found by `lobeview bench --stress`)."""
+    return np.linspace(0.0, 1.0, slices) ** 2
+
+
+def slice_coordinate(cos_theta_o, slices: int = LOBE_SLICES):
+    """Continuous slice index of a view elevation (shaders/integrate.glsl does the same)."""
+    return np.sqrt(np.clip(cos_theta_o, 0.0, 1.0)) * (slices - 1)
 
 
 def is_isotropic(component: Component) -> bool:

@@ -255,7 +255,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         vec3 scale = l.type == LOBE_GLTF_SPECULAR ? vec3(1.0) : l.k;
         return radiance * (f0 * ab.x + ab.y) * scale;
     }
-    float s = clamp(wo.z, 0.0, 1.0) * float(LOBE_SLICES - 1);
+    float s = sqrt(clamp(wo.z, 0.0, 1.0)) * float(LOBE_SLICES - 1);  // lobe_fit.slice_coordinate
     int s0 = min(int(floor(s)), LOBE_SLICES - 2);
     float f = s - float(s0);
     int base = lobe_index * LOBE_SLICES;

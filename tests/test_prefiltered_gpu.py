@@ -11,7 +11,7 @@ from test_render_vs_numpy import CAMERA, SIZE, _frame, _pixels, smooth_sky
 from lobeview.materials import prefilter as pf
 from lobeview.materials.bsdf import CosineSampled
 from lobeview.materials.fresnel import conductor_f0
-from lobeview.materials.lobe_fit import LUMINANCE, fit_lobe_map, slice_cosines
+from lobeview.materials.lobe_fit import LUMINANCE, fit_lobe_map, slice_coordinate, slice_cosines
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.envmap import EnvironmentMap, equirect_direction
 from lobeview.scenes.meshes import uv_sphere
@@ -111,7 +111,7 @@ def test_lobe_map_render_matches_brute_force_prefiltering(gl):
     slices = len(slice_cosines())
     for y, x in _pixels(result, count=12, seed=3):
         frame, wo = _frame(result, y, x)
-        s = wo[2] * (slices - 1)
+        s = slice_coordinate(wo[2], slices)
         s0 = min(int(np.floor(s)), slices - 2)
         f = s - s0
         t = (1 - f) * fit.peak_theta[s0] + f * fit.peak_theta[s0 + 1]

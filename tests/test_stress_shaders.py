@@ -66,6 +66,7 @@ EXTREMES = [
     dict(m=1.0, alpha=0.5, transmission=True),
     dict(m=1.0, ratio=1000.0, alpha=1.0, r0=0.0),  # found by `lobeview bench --stress` (albedo table)
     dict(m=1e-4, r0=0.0),  # found by `lobeview bench --stress` (lobe fit of a vanishing slice raised)
+    dict(m=1e-4, alpha=1.0, r0=0.0),  # found by `lobeview bench --stress` (lobe-map slices near grazing)
 ]
 
 
