@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import functools
 import json
 import statistics
 import sys
@@ -22,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.viewer.context import gpu_timer_meaningful
 from lobeview.viewer.render_base import DEFAULT_FIS_LOD_BIAS, DEFAULT_LOBE_LOD_BIAS, Method
 
 #: material classes of the issue -> presets
@@ -253,9 +255,8 @@ def resolve_environment(name: str):
 class SphereTarget:
     """The preview sphere under a distant environment (no lightmaps)."""
 
-    camera_spec = ((0.0, 0.35, 3.2), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0)
-
     def __init__(self, ctx, env_name: str, size, face_size: int):
+        from lobeview.app.shot import PREVIEW_CAMERA
         from lobeview.scenes.meshes import uv_sphere
         from lobeview.viewer.camera import Camera
         from lobeview.viewer.preview import PreviewRenderer
@@ -265,7 +266,7 @@ class SphereTarget:
             env = resolve_environment(env_name)
         self.env_label = Path(env.name).name
         self.renderer = PreviewRenderer(ctx, env, uv_sphere(), size=size, face_size=face_size)
-        position, target, up, fov = self.camera_spec
+        position, target, up, fov = PREVIEW_CAMERA  # the camera of `lobeview shot --object`
         self.camera = Camera(position=position, target=target, up=up, fov_y=fov)
         self.bsdf = None
         self.packed = None
@@ -332,27 +333,21 @@ class DemoTarget:
         self.renderer.release()
 
 
-SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swiftshader", "lavapipe")
-
-
-def gpu_timer_meaningful(device: str) -> bool:
-    """GL_TIME_ELAPSED measures the GPU's work on hardware; Mesa's llvmpipe rasterises on worker
-    threads after the query has ended (measured: 0.4-2 ms by the query against 42-150 ms wall
-    for lobe-3..19 at 640x400), so software renderers are timed by the wall clock."""
-    return not any(name in device.lower() for name in SOFTWARE_RENDERERS)
-
-
-def time_frames(target, method: Method, repeats: int, lod_bias=None):
-    """(last result, median GPU ms or None, median wall ms) after one warm-up frame."""
-    target.render(method, lod_bias=lod_bias)  # compiles the variant, builds maps
+def time_frames(render, repeats: int, timer: str):
+    """Call ``render()`` once as a warm-up (compiles the variant, builds maps), then ``repeats``
+    times: (last result, ms by the ``timer`` in use ('gpu' or 'wall'), median GPU-timer ms or
+    None, median wall ms)."""
+    render()
     gpu, wall = [], []
     result = None
     for _ in range(max(repeats, 1)):
-        result = target.render(method, lod_bias=lod_bias)
+        result = render()
         wall.append(result.timings["shade"] * 1e3)
         if "gpu shade" in result.timings:
             gpu.append(result.timings["gpu shade"] * 1e3)
-    return result, (statistics.median(gpu) if gpu else None), statistics.median(wall)
+    gpu_ms = statistics.median(gpu) if gpu else None
+    wall_ms = statistics.median(wall)
+    return result, (gpu_ms if timer == "gpu" and gpu_ms is not None else wall_ms), gpu_ms, wall_ms
 
 
 # -- the run -------------------------------------------------------------------------------------------
@@ -455,14 +450,13 @@ def run(args) -> int:
     cells, sweep, references = run_matrix(ctx, settings, args.cache, checkpoint)
     fps_rows = run_fps_table(ctx, settings) if settings["fps_size"] else []
     ctx.release()
-    out_dir.mkdir(parents=True, exist_ok=True)
     base = out_dir / f"bench-{stamp}"
     meta = {
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "device": device,
         "quick": bool(args.quick),
         "command": "lobeview " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("lobeview") else "",
-        "settings": {k: v for k, v in settings.items()},
+        "settings": dict(settings),
     }
     data = {"meta": meta, "cells": cells, "sweep": sweep, "references": references, "fps": fps_rows}
     base.with_suffix(".json").write_text(json.dumps(data, indent=1, default=float))
@@ -525,13 +519,15 @@ def run_matrix(ctx, settings, cache, checkpoint: Path | None = None):
                     progress.step(f"{view} {material} {label}: timing only")
                 for text in settings["methods"]:
                     method = parse_method(text)
-                    result, gpu_ms, wall_ms = time_frames(target, method, settings["repeats"])
+                    result, ms, gpu_ms, wall_ms = time_frames(
+                        functools.partial(target.render, method), settings["repeats"], settings["timer"]
+                    )
                     cell = {
                         "view": view,
                         "material": material,
                         "resolution": label,
                         "method": text,
-                        "ms": gpu_ms if settings["timer"] == "gpu" and gpu_ms is not None else wall_ms,
+                        "ms": ms,
                         "gpu_ms": gpu_ms,
                         "wall_ms": wall_ms,
                         "memory_mb": target.memory(method) / 2**20,
@@ -591,16 +587,12 @@ def run_fps_table(ctx, settings) -> list[dict]:
         renderer = PreviewRenderer(ctx, env, mesh, size=size, face_size=settings["face_size"])
         for n in settings["fps_samples"]:
             method = Method("lobe", n)
-            renderer.render(camera, bsdf, method, background=False)
-            gpu, wall = [], []
-            result = None
-            for _ in range(settings["repeats"]):
-                result = renderer.render(camera, bsdf, method, background=False)
-                wall.append(result.timings["shade"] * 1e3)
-                if "gpu shade" in result.timings:
-                    gpu.append(result.timings["gpu shade"] * 1e3)
-            ms = statistics.median(gpu) if gpu and settings["timer"] == "gpu" else statistics.median(wall)
-            rows[n][coverage] = {"ms": ms, "wall_ms": statistics.median(wall), "fraction": float(result.mask.mean())}
+            result, ms, _, wall_ms = time_frames(
+                functools.partial(renderer.render, camera, bsdf, method, background=False),
+                settings["repeats"],
+                settings["timer"],
+            )
+            rows[n][coverage] = {"ms": ms, "wall_ms": wall_ms, "fraction": float(result.mask.mean())}
             print(f"[fps] {coverage} lobe-{n}: {ms:.1f} ms ({1000 / ms:.1f} fps)", file=sys.stderr, flush=True)
         renderer.release()
     return list(rows.values())

@@ -21,6 +21,7 @@ from lobeview.scenes.builtin_env import load_environment
 from lobeview.scenes.hdrio import write_hdr_image
 from lobeview.scenes.meshes import load_mesh_file, uv_sphere
 from lobeview.viewer.camera import Camera
+from lobeview.viewer.context import gpu_timer_meaningful
 from lobeview.viewer.render_base import Method
 from lobeview.viewer.tonemap import TONEMAPS, to_uint8, tonemap
 
@@ -191,12 +192,6 @@ def run(args) -> int:
     return _run_scene(args, out, method, size, stages, t0, create_headless_context, renderer_description)
 
 
-def _gpu_timer_meaningful(device: str) -> bool:
-    from lobeview.app.bench import gpu_timer_meaningful
-
-    return gpu_timer_meaningful(device)
-
-
 def _finish(result, out: Path, args, stages: dict) -> None:
     # The GL timer is reported only where it measures the GPU's work (not on llvmpipe).
     stages.update({k: v for k, v in result.timings.items() if k != "gpu shade" or args.gpu_timer})
@@ -239,7 +234,7 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
     stages["load"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     ctx = create_context()
-    args.gpu_timer = _gpu_timer_meaningful(describe(ctx))
+    args.gpu_timer = gpu_timer_meaningful(describe(ctx))
     renderer = PreviewRenderer(ctx, env, mesh, size=size, face_size=args.face_size)
     stages["cube maps"] = time.perf_counter() - t0
     result = renderer.render(
@@ -302,7 +297,7 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
     camera = _camera_from_args(args, _scene_view(scene, args.view))
     stages["load"] = time.perf_counter() - t0
     ctx = create_context()
-    args.gpu_timer = _gpu_timer_meaningful(describe(ctx))
+    args.gpu_timer = gpu_timer_meaningful(describe(ctx))
     renderer = SceneRenderer(ctx, scene, env, size=size, cube_face_size=args.face_size, cache_dir=cache / "cubes")
     print(renderer.analysis.report())
     result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias)

@@ -66,6 +66,17 @@ def lobe_map_height(fit: LobeMapFit) -> int:
     return int(np.clip(-(-rows // 8) * 8, LOBE_MAP_MIN_HEIGHT, LOBE_MAP_MAX_HEIGHT))
 
 
+def cube_bytes(face: int, levels: int, texel_bytes: int = 16) -> int:
+    """GPU bytes of a cube map with ``levels`` MIP levels of a ``face``^2 level 0."""
+    return sum(6 * max(face >> level, 1) ** 2 * texel_bytes for level in range(levels))
+
+
+def lobe_map_shape(fit: LobeMapFit) -> tuple[int, int, int]:
+    """(width, height, depth) of the RGBA32F 3D texture of one fitted lobe."""
+    height = lobe_map_height(fit)
+    return 2 * height, height, len(fit.profiles)
+
+
 class PrefilteredMaps:
     def __init__(
         self,
@@ -157,8 +168,7 @@ class PrefilteredMaps:
                 levels = self._read_cube_levels(cube, size)
                 np.savez(cache, **{f"level{i}": v for i, v in enumerate(levels)})
         self._split_sum[kind] = cube
-        texels = sum(6 * max(size >> level, 1) ** 2 for level in range(SPLIT_SUM_LEVELS))
-        self.memory[f"split-sum {kind}"] = texels * 16
+        self.memory[f"split-sum {kind}"] = cube_bytes(size, SPLIT_SUM_LEVELS)
         self.seconds[f"split-sum {kind}"] = time.perf_counter() - t0
         return cube
 
@@ -205,14 +215,12 @@ class PrefilteredMaps:
     def lobe_map(self, fit: LobeMapFit, name: str = "lobe") -> moderngl.Texture3D:
         """3D map of one fitted lobe: slice s holds the environment convolved with the unit-mass
         shape of view elevation s (one slice for the 2D and Phong modes)."""
-        height = lobe_map_height(fit)
-        width = 2 * height
+        width, height, depth = lobe_map_shape(fit)
         nodes = self._nodes(fit.profiles)
         key = (nodes.tobytes(), width)
         if key in self._lobe_maps:
             return self._lobe_maps[key]
         t0 = time.perf_counter()
-        depth = len(fit.profiles)
         cache = self._cache_file("lobemap", nodes, f"{width}x{height}")
         if cache is not None and cache.exists():
             data = np.load(cache)["texels"]

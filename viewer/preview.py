@@ -7,6 +7,7 @@ tangent per pixel) is returned so tests can evaluate the numpy reference at the 
 
 from __future__ import annotations
 
+import contextlib
 import time
 
 import moderngl
@@ -92,11 +93,8 @@ class PreviewRenderer(RendererBase):
             self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
             self.ctx.enable(moderngl.DEPTH_TEST)
             timer = self.gpu_timer()
-            if timer is None:
+            with timer or contextlib.nullcontext():
                 vao.render(moderngl.TRIANGLES)
-            else:
-                with timer:
-                    vao.render(moderngl.TRIANGLES)
             self.ctx.finish()
             timings["shade"] += time.perf_counter() - t0
             if timer is not None:

@@ -257,10 +257,7 @@ class RendererBase:
         cube (the bench's memory column): the radiance cube with its MIP chain, plus the
         importance tables (reference), the albedo table (normalised lobe-N) or the prefiltered
         maps (prefiltered)."""
-        from .prefiltered import DFG_SIZE, lobe_map_height
-
-        def cube_bytes(face: int, levels: int, texel: int = 16) -> int:
-            return sum(6 * max(face >> level, 1) ** 2 * texel for level in range(levels))
+        from .prefiltered import DFG_SIZE, cube_bytes, lobe_map_shape
 
         face = cube.face_size
         memory = {"radiance cube": cube_bytes(face, int(np.log2(face)) + 1)}
@@ -278,9 +275,8 @@ class RendererBase:
                     memory[f"split-sum {distribution}"] = cube_bytes(face, SPLIT_SUM_LEVELS)
                     memory["DFG table"] = DFG_SIZE * DFG_SIZE * 16
                 else:
-                    fit = fit_lobe_map(material.lobe_components[i], kind)
-                    height = lobe_map_height(fit)
-                    memory[f"lobe map {i}"] = 2 * height * height * len(fit.profiles) * 16
+                    width, height, depth = lobe_map_shape(fit_lobe_map(material.lobe_components[i], kind))
+                    memory[f"lobe map {i}"] = width * height * depth * 16
         return memory
 
     def _dummy_texture(self, kind: str):

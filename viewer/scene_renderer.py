@@ -10,6 +10,7 @@ content, the environment, the face size and the renderer version.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import sys
 import time
@@ -390,11 +391,8 @@ class SceneRenderer(RendererBase):
         g_buffers = None
         for p in range(passes):
             t0 = time.perf_counter()
-            if timer is None:
+            with timer or contextlib.nullcontext():
                 self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
-            else:
-                with timer:
-                    self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
             self.ctx.finish()
             t_shade += time.perf_counter() - t0
             if timer is not None:
