@@ -622,8 +622,10 @@ def run_stress(args, out_dir: Path, stamp: str) -> int:
         f"- device: {device}",
         f"- methods: {', '.join(methods)}",
         f"- {len(rows)} checks: {len(failures)} failures, {len(known)} known defects"
-        " (plain lobe-N overshoots the white furnace for roughness > 0.2: Eq. 4.25 cannot see the"
-        " lobe mass its pattern misses; normalised lobe-N is exact)",
+        " (plain lobe-N, Eq. 4.25 as printed, overshoots the white furnace for roughness > 0.2 and"
+        " for horizon-cut lobes whose albedo climbs steeply toward grazing: a weighted mean over the"
+        " pattern cannot see the lobe mass it misses; counted as known where normalised lobe-N,"
+        " the viewer's default, passes the same material)",
         "- white furnace: value / directional albedo at 20 random pixels of a 40x40 sphere; tolerances"
         " in lobeview/viewer/stress.py (furnace_tolerance)",
         "",

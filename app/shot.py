@@ -9,6 +9,7 @@ Two modes:
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import sys
 import time
@@ -93,8 +94,10 @@ def add_arguments(p) -> None:
     )
     a(
         "--lobe-normalize",
-        action="store_true",
-        help="lobe-N: rescale Eq. 4.25 by each lobe's directional albedo (exact under uniform light)",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="lobe-N: rescale Eq. 4.25 by each lobe's directional albedo, exact under uniform light"
+        " (default on; --no-lobe-normalize: Eq. 4.25 as printed)",
     )
     a("--face-size", type=int, default=256, help="cube-map face resolution (default 256)")
     a(
@@ -177,8 +180,8 @@ def run(args) -> int:
     if args.object is not None and args.scene is not None:
         raise ShotError("give either a SCENE or --object, not both")
     method = Method.parse(args.method)
-    if args.lobe_normalize:
-        method = dataclasses.replace(method, normalize=True)
+    if method.kind == "lobe":
+        method = dataclasses.replace(method, normalize=args.lobe_normalize)
     if args.spp < 1:
         raise ShotError("--spp must be at least 1")
     if not 8 <= args.face_size <= 2048 or args.face_size & (args.face_size - 1):

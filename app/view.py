@@ -15,6 +15,7 @@ that reproduce the camera, Esc quits.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import math
@@ -64,7 +65,12 @@ def add_arguments(p) -> None:
     p.add_argument("--env", help="environment outside the scene (default builtin:overcast)")
     p.add_argument("--size", default="1280x800", help="window size WxH (default 1280x800)")
     p.add_argument("--method", default="lobe-11", help="real-time method while moving (default lobe-11)")
-    p.add_argument("--lobe-normalize", action="store_true", help="lobe-N: energy normalisation by each lobe's albedo")
+    p.add_argument(
+        "--lobe-normalize",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="lobe-N: energy normalisation by each lobe's albedo (default on; --no-lobe-normalize: Eq. 4.25)",
+    )
     p.add_argument("--view", help="start at this scene camera (name or index)")
     p.add_argument("--no-vsync", action="store_true", help="disable vsync")
     p.add_argument("--face-size", type=int, default=256, help="cube-map face resolution (default 256)")
@@ -271,8 +277,8 @@ def run(args) -> int:
 
     width, height = parse_size(args.size)
     method = Method.parse(args.method)
-    if args.lobe_normalize:
-        method = dataclasses.replace(method, normalize=True)
+    if method.kind == "lobe":
+        method = dataclasses.replace(method, normalize=args.lobe_normalize)
     if method.kind == "reference":
         raise ValueError(
             "--method must be a real-time method (lobe-N, fis-N, mc-N, prefiltered[-MODE]); refinement is automatic"
@@ -326,6 +332,8 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
             position, target, up, fov = _scene_view(scene, args.view)
             self.walk = WalkCamera.from_camera(Camera(position, target, up, fov))
             self.method = initial_method
+            # kept apart from the method so switching to fis-N and back keeps the choice
+            self.lobe_normalize = args.lobe_normalize
             self.exposure = 0.0
             self.tonemap = "aces"
             self.progressive = True
@@ -474,6 +482,8 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                     self.message = self.editor.apply(self.selected, desc) or ""
                 elif action == "method":
                     self.method = Method.parse(step["value"])
+                    if self.method.kind == "lobe":
+                        self.method = dataclasses.replace(self.method, normalize=self.lobe_normalize)
                 elif action == "screenshot":
                     self.save_screenshot(step["name"])
                 elif action == "save_materials":
@@ -564,9 +574,9 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                 kinds = list(METHOD_CHOICES)
                 c, k = imgui.combo("method", kinds.index(method_choice(self.method)), kinds)
                 c2, n = imgui.slider_int("samples N", self.method.samples, 1, 32 if self.method.kind == "lobe" else 256)
-                c3, normalize = imgui.checkbox("lobe-N energy normalisation", self.method.normalize)
+                c3, self.lobe_normalize = imgui.checkbox("lobe-N energy normalisation", self.lobe_normalize)
                 if c or c2 or c3:
-                    self.method = method_from_choice(kinds[k], n, normalize)
+                    self.method = method_from_choice(kinds[k], n, self.lobe_normalize)
                     self.dirty = True
                 _, self.progressive = imgui.checkbox("refine when still", self.progressive)
                 if scene.cameras:

@@ -67,7 +67,11 @@ EXTREMES = [
     dict(m=1.0, ratio=1000.0, alpha=1.0, r0=0.0),  # found by `lobeview bench --stress` (albedo table)
     dict(m=1e-4, r0=0.0),  # found by `lobeview bench --stress` (lobe fit of a vanishing slice raised)
     dict(m=1e-4, alpha=1.0, r0=0.0),  # found by `lobeview bench --stress` (lobe-map slices near grazing)
+    dict(m=0.05, alpha=1.0, r0=0.0),  # found by `lobeview bench --stress` (plain Eq. 4.25, horizon-cut lobe)
 ]
+# Plain lobe-N (Eq. 4.25 as printed) misses the furnace bound here; the normalised variant, the
+# viewer's default, passes (test_normalised_lobe_method_is_exact_in_the_white_furnace).
+PLAIN_LOBE_KNOWN_DEFECTS = [dict(m=0.05, alpha=1.0, r0=0.0)]
 
 
 @pytest.mark.parametrize("params", EXTREMES, ids=[str(p) for p in EXTREMES])
@@ -76,8 +80,8 @@ def test_extreme_parameters_stay_finite_and_obey_the_white_furnace(furnace, para
     """Tolerances per method: lobeview.viewer.stress.furnace_tolerance."""
     check = furnace_check(furnace, thesis(**params), method, anisotropic=params.get("ratio", 1.0) > 1.0)
     assert check.clean, f"{params} {method}: NaN/Inf/negative pixels"
-    if method.startswith("lobe") and params["m"] > LOBE_METHOD_MAX_ROUGHNESS:
-        return  # known defect, pinned by test_lobe_method_overshoots_the_furnace_for_very_rough_lobes
+    if method.startswith("lobe") and (params["m"] > LOBE_METHOD_MAX_ROUGHNESS or params in PLAIN_LOBE_KNOWN_DEFECTS):
+        return  # known defect, pinned by test_lobe_method_overshoots_the_furnace_*
     assert check.passed, (params, method, check.rule, check.got[:, 0], check.albedo[:, 0])
 
 
@@ -91,6 +95,16 @@ def test_lobe_method_overshoots_the_furnace_for_very_rough_lobes(furnace):
     centre = result.radiance[SIZE[1] // 2 - 1 : SIZE[1] // 2 + 1, SIZE[0] // 2 - 1 : SIZE[0] // 2 + 1]
     # Measured: ~0.37 against an albedo of ~0.16 (2.2x).
     assert np.all(centre <= albedo_at_normal * 1.1)
+
+
+@pytest.mark.xfail(
+    strict=True, reason="lobe-N (Eq. 4.25) is biased for horizon-cut lobes whose albedo climbs toward grazing"
+)
+@pytest.mark.parametrize("params", PLAIN_LOBE_KNOWN_DEFECTS, ids=[str(p) for p in PLAIN_LOBE_KNOWN_DEFECTS])
+def test_lobe_method_overshoots_the_furnace_for_horizon_cut_lobes(furnace, params):
+    # Measured by the stress grid: 1.27x (lobe-7) and 1.36x (lobe-19) the albedo near grazing.
+    check = furnace_check(furnace, thesis(**params), "lobe-7")
+    assert check.clean and check.passed, check.worst_ratio
 
 
 @pytest.mark.parametrize("params", EXTREMES, ids=[str(p) for p in EXTREMES])
