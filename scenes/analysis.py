@@ -11,6 +11,7 @@ from lobeview.materials.bsdf import diffuse_albedo
 from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf
 
+from .planar_mirror import reflector_decision
 from .scene import Scene
 
 ANISOTROPY_RATIO = 1.5  # a lobe counts as anisotropic above this max/min roughness ratio
@@ -26,6 +27,8 @@ class ObjectNeeds:
     emissive: bool
     has_lightmap: bool
     reflection_proxy: str = "-"  # the cube-map lookup correction (scenes/reflection_proxy.py)
+    mirror: str = "-"  # planar reflector decision (scenes/planar_mirror.py)
+    reflector: object | None = None  # scenes.planar_mirror.PlanarReflector when it gets a mirror pass
 
     @property
     def needs_cube_map(self) -> bool:
@@ -53,21 +56,29 @@ class SceneAnalysis:
         return [i for i, o in enumerate(self.objects) if o.needs_cube_map]
 
     @property
+    def reflectors(self) -> dict:
+        """Object index -> PlanarReflector for every object that gets a mirror pass."""
+        return {i: o.reflector for i, o in enumerate(self.objects) if o.reflector is not None}
+
+    @property
     def needs_specular_variant(self) -> bool:
         return bool(self.cube_mapped)
 
     def report(self) -> str:
-        lines = [f"{'object':<24} {'needs':<38} cube map  {'lightmap':<14} reflection proxy"]
+        lines = [f"{'object':<24} {'needs':<38} cube map  {'lightmap':<14} {'reflection proxy':<24} planar mirror"]
         for o in self.objects:
             lobes = f"{o.kind} ({o.specular_lobes} refl, {o.transmission_lobes} trans)" if o.needs_cube_map else o.kind
             lightmap = "yes" if o.has_lightmap else "NO (fallback)"
-            proxy = o.reflection_proxy if o.needs_cube_map else "-"
-            lines.append(f"{o.name:<24} {lobes:<38} {'yes' if o.needs_cube_map else 'no':<9} {lightmap:<14} {proxy}")
+            proxy = o.reflection_proxy if o.needs_cube_map and o.reflector is None else "-"
+            cube = "yes" if o.needs_cube_map else "no"
+            lines.append(f"{o.name:<24} {lobes:<38} {cube:<9} {lightmap:<14} {proxy:<24} {o.mirror}")
         return "\n".join(lines)
 
 
 def analyse(scene: Scene) -> SceneAnalysis:
     needs = []
+    low, high = scene.bounds if scene.objects else (np.zeros(3), np.zeros(3))
+    scene_diagonal = float(np.linalg.norm(high - low))
     for obj in scene.objects:
         mat = scene.materials[obj.material]
         bsdf = build_bsdf(mat.desc)
@@ -81,6 +92,7 @@ def analyse(scene: Scene) -> SceneAnalysis:
         )
         diffuse = bool(np.any(diffuse_albedo(bsdf) > 0))
         has_lightmap = mat.lightmap is not None and (mat.lightmap.tex_coord != 1 or obj.uv1 is not None)
+        reflector, mirror = reflector_decision(obj.mesh, lobes, scene_diagonal, obj.planar_reflector)
         needs.append(
             ObjectNeeds(
                 obj.name,
@@ -91,6 +103,8 @@ def analyse(scene: Scene) -> SceneAnalysis:
                 bool(max(mat.emission) > 0),
                 has_lightmap,
                 _describe_proxy(obj.reflection_proxy),
+                mirror,
+                reflector,
             )
         )
     return SceneAnalysis(needs)

@@ -23,7 +23,7 @@ from lobeview.materials.spec import validate
 
 from .baker import bake_lightmap
 from .builtin_env import load_environment
-from .meshes import Mesh, quad, uv_sphere, vertex_normals, vertex_tangents
+from .meshes import Mesh, box_mesh, merge_meshes, quad, uv_sphere, vertex_normals, vertex_tangents
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
 DEMO_VERSION = 3  # bump when the geometry, materials or baker change (invalidates caches)
@@ -42,48 +42,6 @@ def cache_dir() -> Path:
 
 def _diffuse(kd) -> dict:
     return validate({"model": "thesis", "kd": kd, "lobes": []})
-
-
-def _merge(meshes: list[Mesh], name: str) -> Mesh:
-    offsets = np.cumsum([0] + [len(m.positions) for m in meshes])
-    return Mesh(
-        np.concatenate([m.positions for m in meshes]),
-        np.concatenate([m.normals for m in meshes]),
-        np.concatenate([m.tangents for m in meshes]),
-        np.concatenate([m.uvs for m in meshes]),
-        np.concatenate([m.indices + off for m, off in zip(meshes, offsets[:-1], strict=True)]).astype(np.uint32),
-        name,
-    )
-
-
-def _box(center, size, rotation_y_deg: float = 0.0) -> Mesh:
-    """Axis-aligned box (optionally rotated about +Y) with flat faces, outward normals and planar
-    UVs whose tangent follows the face's first edge."""
-    cx, cy, cz = center
-    hx, hy, hz = np.asarray(size) / 2
-    faces = []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            n = np.zeros(3)
-            n[axis] = sign
-            u_axis = (axis + 1) % 3
-            v_axis = (axis + 2) % 3
-            half = np.array([hx, hy, hz])
-            eu = np.zeros(3)
-            ev = np.zeros(3)
-            eu[u_axis] = 2 * half[u_axis]
-            ev[v_axis] = 2 * half[v_axis]
-            if np.dot(np.cross(eu, ev), n) < 0:
-                eu, ev = ev, eu
-            corner = n * half - eu / 2 - ev / 2
-            faces.append(quad(corner, eu, ev))
-    mesh = _merge(faces, "box")
-    a = np.radians(rotation_y_deg)
-    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    mesh.positions = (mesh.positions @ rot.T + [cx, cy, cz]).astype(np.float32)
-    mesh.normals = (mesh.normals @ rot.T).astype(np.float32)
-    mesh.tangents[:, :3] = mesh.tangents[:, :3] @ rot.T
-    return mesh
 
 
 def _from_trimesh(tm, name: str) -> Mesh:
@@ -178,14 +136,14 @@ def demo_geometry() -> Scene:
     floor = quad([-W, 0, D], [2 * W, 0, 0], [0, 0, -2 * D], uv_scale=4.0)
     ceiling = quad([-W, H, -D], [2 * W, 0, 0], [0, 0, 2 * D])
     light = quad([-0.6, H - 0.01, -0.6 - 0.6], [1.2, 0, 0], [0, 0, 1.2])
-    table_top = _box([0.0, 0.735, -0.6], [1.8, 0.05, 1.0])
-    legs = [_box([sx * 0.82, 0.355, -0.6 + sz * 0.42], [0.06, 0.71, 0.06]) for sx in (-1, 1) for sz in (-1, 1)]
+    table_top = box_mesh([0.0, 0.735, -0.6], [1.8, 0.05, 1.0])
+    legs = [box_mesh([sx * 0.82, 0.355, -0.6 + sz * 0.42], [0.06, 0.71, 0.06]) for sx in (-1, 1) for sz in (-1, 1)]
     objects = [
-        SceneObject("walls", _merge(walls, "walls"), 0),
+        SceneObject("walls", merge_meshes(walls, "walls"), 0),
         SceneObject("floor", floor, 1),
         SceneObject("ceiling", ceiling, 2),
         SceneObject("light", light, 3),
-        SceneObject("table", _merge([table_top, *legs], "table"), 4),
+        SceneObject("table", merge_meshes([table_top, *legs], "table"), 4),
         SceneObject(
             "chrome sphere",
             _translated(uv_sphere(0.16, 48, 96), [-0.55, 0.92, -0.65], "chrome sphere"),
@@ -211,14 +169,14 @@ def demo_geometry() -> Scene:
             _translated(uv_sphere(0.22, 48, 96), [-1.55, 0.22, 0.55], "plastic sphere"),
             index["plastic"],
         ),
-        SceneObject("lacquer box", _box([-1.9, 0.212, -1.7], [0.55, 0.42, 0.55], 25.0), index["lacquer"]),
-        SceneObject("brushed panel", _box([-2.985, 1.45, 0.3], [0.02, 0.8, 1.3]), index["miro5-2lobe"]),
+        SceneObject("lacquer box", box_mesh([-1.9, 0.212, -1.7], [0.55, 0.42, 0.55], 25.0), index["lacquer"]),
+        SceneObject("brushed panel", box_mesh([-2.985, 1.45, 0.3], [0.02, 0.8, 1.3]), index["miro5-2lobe"]),
         SceneObject(
             "frosted pane",
-            _box([1.35, 0.66, -1.7], [0.9, 1.3, 0.02], -20.0),
+            box_mesh([1.35, 0.66, -1.7], [0.9, 1.3, 0.02], -20.0),
             index["frosted-glass"],
         ),
-        SceneObject("clear pane", _box([2.1, 0.56, -0.5], [0.8, 1.1, 0.02], -60.0), index["clear-glass"]),
+        SceneObject("clear pane", box_mesh([2.1, 0.56, -0.5], [0.8, 1.1, 0.02], -60.0), index["clear-glass"]),
     ]
     cameras = [
         SceneCamera(
@@ -241,7 +199,7 @@ def demo_geometry() -> Scene:
     # everything else is box-projected to the room.
     from .reflection_proxy import ReflectionProxy
 
-    room = ReflectionProxy.from_box([-W, 0.0, -D], [W, H, D])
+    room = ReflectionProxy.frombox_mesh([-W, 0.0, -D], [W, H, D])
     table_top_height = 0.76
     on_table = ReflectionProxy.from_planes(
         [[0, 1, 0, -table_top_height], [0, -1, 0, H], [1, 0, 0, W], [-1, 0, 0, W], [0, 0, 1, D], [0, 0, -1, D]]

@@ -368,6 +368,7 @@ def load_gltf(path: str | Path) -> Scene:
             )
     scene = Scene(objects, materials, cameras, str(path), scene_warnings)
     if objects:
+        from .planar_mirror import reflector_mode
         from .reflection_proxy import object_proxy
 
         bounds = scene.bounds
@@ -375,6 +376,7 @@ def load_gltf(path: str | Path) -> Scene:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 obj.reflection_proxy = object_proxy(extras, bounds, obj.name)
+                obj.planar_reflector = reflector_mode(extras, obj.name)
             for w in caught:
                 _warn(scene_warnings, f"{path}: {w.message}")
     return scene

@@ -62,9 +62,12 @@ def write_glb(
                 primitives=[pygltflib.Primitive(attributes=attrs, indices=indices, material=obj.material)],
             )
         )
-        extras = {}
+        custom = {}
         if obj.reflection_proxy is not None:
-            extras = {"lobeview": {"reflection_proxy": obj.reflection_proxy.to_description()}}
+            custom["reflection_proxy"] = obj.reflection_proxy.to_description()
+        if obj.planar_reflector != "auto":
+            custom["planar_reflector"] = obj.planar_reflector
+        extras = {"lobeview": custom} if custom else {}
         nodes.append(pygltflib.Node(name=obj.name, mesh=len(meshes) - 1, extras=extras))
 
     textures, images, samplers = [], [], []

@@ -79,6 +79,48 @@ def quad(corner, edge_u, edge_v, uv_scale=1.0) -> Mesh:
     )
 
 
+def merge_meshes(meshes: list[Mesh], name: str) -> Mesh:
+    offsets = np.cumsum([0] + [len(m.positions) for m in meshes])
+    return Mesh(
+        np.concatenate([m.positions for m in meshes]),
+        np.concatenate([m.normals for m in meshes]),
+        np.concatenate([m.tangents for m in meshes]),
+        np.concatenate([m.uvs for m in meshes]),
+        np.concatenate([m.indices + off for m, off in zip(meshes, offsets[:-1], strict=True)]).astype(np.uint32),
+        name,
+    )
+
+
+def box_mesh(center, size, rotation_y_deg: float = 0.0) -> Mesh:
+    """Axis-aligned box (optionally rotated about +Y) with flat faces, outward normals and planar
+    UVs whose tangent follows the face's first edge."""
+    cx, cy, cz = center
+    hx, hy, hz = np.asarray(size) / 2
+    faces = []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            n = np.zeros(3)
+            n[axis] = sign
+            u_axis = (axis + 1) % 3
+            v_axis = (axis + 2) % 3
+            half = np.array([hx, hy, hz])
+            eu = np.zeros(3)
+            ev = np.zeros(3)
+            eu[u_axis] = 2 * half[u_axis]
+            ev[v_axis] = 2 * half[v_axis]
+            if np.dot(np.cross(eu, ev), n) < 0:
+                eu, ev = ev, eu
+            corner = n * half - eu / 2 - ev / 2
+            faces.append(quad(corner, eu, ev))
+    mesh = merge_meshes(faces, "box")
+    a = np.radians(rotation_y_deg)
+    rot = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    mesh.positions = (mesh.positions @ rot.T + [cx, cy, cz]).astype(np.float32)
+    mesh.normals = (mesh.normals @ rot.T).astype(np.float32)
+    mesh.tangents[:, :3] = mesh.tangents[:, :3] @ rot.T
+    return mesh
+
+
 def vertex_normals(positions: np.ndarray, indices: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals; vertices of degenerate-only triangles get +Y (warned)."""
     p = positions.astype(np.float64)

@@ -40,6 +40,7 @@ class SceneObject:
     material: int
     uv1: np.ndarray | None = None  # (V, 2) lightmap coordinates
     reflection_proxy: object | None = None  # scenes.reflection_proxy.ReflectionProxy (None: plain lookup)
+    planar_reflector: bool | str = "auto"  # mirror pass: True, False or "auto" (scenes/planar_mirror.py)
 
 
 @dataclass

@@ -86,6 +86,10 @@ float power_heuristic(float a, float b) {
 }
 #endif
 
+#if defined(PARALLAX) || defined(MIRROR)
+vec3 g_shading_position;                        // world position, set by the fragment shader
+#endif
+
 #if defined(PARALLAX)
 // Reflected-geometry correction (thesis 4.4.1; scenes/reflection_proxy.py): the secondary ray
 // from the shading point is intersected with the object's proxy (bounding planes or a box seen
@@ -97,7 +101,6 @@ uniform int u_proxy_plane_count;
 uniform vec4 u_proxy_planes[MAX_PROXY_PLANES];  // unit normal n, d: n.x + d = 0
 uniform vec3 u_proxy_box_min;
 uniform vec3 u_proxy_box_max;
-vec3 g_shading_position;                        // world position, set by the fragment shader
 
 float proxy_hit_distance(vec3 o, vec3 d) {
     float t = 1e38;
@@ -143,6 +146,73 @@ vec3 lookup(vec3 dir_world, float lod) {
 #else
 vec3 lookup(vec3 dir_world, float lod) { return textureLod(u_radiance, dir_world, max(lod, 0.0)).rgb; }
 #endif
+
+#if defined(MIRROR)
+// Planar reflector (thesis 4.5; numpy reference scenes/planar_mirror.py): incident light from the
+// mirror buffer rendered this frame from the mirrored camera, each direction mapped into it by the
+// two-step tangent-plane projection of 4.5.2 and filtered by its share of the lobe (4.5.3).
+uniform sampler2D u_mirror_radiance;   // MIP chain rebuilt every frame
+uniform sampler2D u_mirror_position;   // xyz world, w: 1 geometry, 0 environment
+uniform sampler2D u_mirror_normal;
+uniform mat4 u_mirror_view;            // world -> mirror eye (camera view x reflection)
+uniform mat4 u_mirror_view_projection; // with the plain (not oblique) projection: x, y, w rows
+uniform vec3 u_mirror_eye;             // mirrored camera position C'
+uniform float u_mirror_focal_px;       // (H / 2) / tan(fov_y / 2) of the buffer
+
+vec2 mirror_uv(vec4 point) {
+    vec4 clip = u_mirror_view_projection * point;
+    return clamp(clip.xy / max(clip.w, 1e-6) * 0.5 + 0.5, 0.0, 1.0);
+}
+
+ivec2 mirror_texel(vec2 uv) {
+    ivec2 size = textureSize(u_mirror_position, 0);
+    return clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1);
+}
+
+// Hit of p + t wi with the tangent plane stored at `texel` (homogeneous; w = 0: the environment).
+vec4 mirror_tangent_hit(vec3 p, vec3 wi, ivec2 texel, out vec3 normal) {
+    vec4 surface = texelFetch(u_mirror_position, texel, 0);
+    normal = texelFetch(u_mirror_normal, texel, 0).xyz;
+    float denom = dot(wi, normal);
+    if (surface.w < 0.5 || abs(denom) < 1e-6) return vec4(wi, 0.0);
+    float t = dot(surface.xyz - p, normal) / denom;
+    return t > 0.0 ? vec4(p + t * wi, 1.0) : vec4(wi, 0.0);
+}
+
+vec3 mirror_incident(vec3 wi, float solid_angle) {
+    vec3 p = g_shading_position;
+    vec3 normal;
+    vec4 hit = mirror_tangent_hit(p, wi, mirror_texel(mirror_uv(vec4(p, 1.0))), normal);  // P_R's plane
+    vec2 uv = mirror_uv(hit);
+    hit = mirror_tangent_hit(p, wi, mirror_texel(uv), normal);  // second step: the plane seen there
+    uv = mirror_uv(hit);
+    float lod = 0.0;
+    if (solid_angle > 0.0) {
+        // The sample's solid angle in buffer pixels through the tangent plane (planar_mirror.py).
+        vec4 eye = u_mirror_view * hit;
+        float distance = length(eye.xyz);
+        float cos_alpha = max(-eye.z / max(distance, 1e-30), 1e-3);
+        float pixels = solid_angle * u_mirror_focal_px * u_mirror_focal_px / (cos_alpha * cos_alpha * cos_alpha);
+        if (hit.w > 0.5) {
+            float t = length(hit.xyz - p);
+            vec3 to_hit = (hit.xyz - u_mirror_eye) / max(distance, 1e-30);
+            pixels *= t * t / max(abs(dot(normal, wi)), 1e-3) * abs(dot(normal, to_hit)) / max(distance * distance, 1e-30);
+        }
+        lod = 0.5 * log2(max(pixels, 1e-30)) + u_lod_bias;
+    }
+    return textureLod(u_mirror_radiance, uv, max(lod, 0.0)).rgb;
+}
+#endif
+
+// Incident radiance from world direction `dir` for a sample covering `solid_angle` sr
+// (0: no filtering, the unbiased methods).
+vec3 incident(vec3 dir, float solid_angle) {
+#if defined(MIRROR)
+    return mirror_incident(normalize(dir), solid_angle);
+#else
+    return lookup(dir, solid_angle > 0.0 ? cube_lod(dir, solid_angle, u_face_size) + u_lod_bias : 0.0);
+#endif
+}
 
 vec3 diffuse_eval(vec3 wi, vec3 wo) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
@@ -206,7 +276,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         float p = lobe_half_pdf(l, wi, wo);
         if (p <= 0.0) continue;
         float c = abs(wi.z);
-        vec3 li = lookup(world, cube_lod(world, area, u_face_size) + u_lod_bias);
+        vec3 li = incident(world, area);
         // Eq. 4.25: sum L c^2 f^2 / p / sum f c, written as (f c / p) (f c) to stay in range.
         vec3 fc = f * c;
         num += li * (fc / p) * fc;
@@ -318,11 +388,11 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         vec3 world = tbn * wi;
 #if defined(METHOD_FIS)
         // omega_s = 1 / (N p); texel solid angle omega_p = 4 max|w|^3 / face^2 (cube_lod).
-        float lod = cube_lod(world, 1.0 / (float(n) * p), u_face_size) + u_lod_bias;
+        float solid_angle = 1.0 / (float(n) * p);
 #else
-        float lod = 0.0;
+        float solid_angle = 0.0;
 #endif
-        sum += lookup(world, lod) * lobe_eval(l, wi, wo) * (abs(wi.z) / p);
+        sum += incident(world, solid_angle) * lobe_eval(l, wi, wo) * (abs(wi.z) / p);
     }
     return sum / float(n);
 }

@@ -26,7 +26,7 @@ layout(location = 2) out vec4 out_normal;
 layout(location = 3) out vec4 out_tangent;
 
 void main() {
-#if defined(PARALLAX)
+#if defined(PARALLAX) || defined(MIRROR)
     g_shading_position = v_position;
 #endif
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));

@@ -14,11 +14,11 @@ from conftest import SHARED_ASSETS
 from lobeview.materials.spec import validate
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.baker import bake_lightmap
-from lobeview.scenes.demo import _box, build_demo_scene
+from lobeview.scenes.demo import build_demo_scene
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.gltf_loader import GltfError, GltfWarning, load_gltf
 from lobeview.scenes.gltf_writer import write_glb
-from lobeview.scenes.meshes import quad
+from lobeview.scenes.meshes import box_mesh, quad
 from lobeview.scenes.scene import Lightmap, Scene, SceneCamera, SceneMaterial, SceneObject
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context
@@ -33,7 +33,7 @@ def _small_scene() -> Scene:
     floor = quad([-1, 0, 1], [2, 0, 0], [0, 0, -2])
     floor.name = "floor"
     obj = SceneObject("floor", floor, 0, uv1=np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32))
-    box = _box([0, 0.25, 0], [0.5, 0.5, 0.5])
+    box = box_mesh([0, 0.25, 0], [0.5, 0.5, 0.5])
     box.name = "box"
     materials = [
         SceneMaterial("floor", _diffuse(0.5)),
@@ -297,7 +297,7 @@ def test_chrome_box_in_a_uniform_room_reflects_the_room(ctx):
         {"model": "thesis", "kd": 0.0, "lobes": [{"ks": 1.0, "mx": 0.05, "my": 0.05, "r0": 0.9, "alpha": 0.0}]}
     )
     room.materials.append(SceneMaterial("chrome", chrome))
-    room.objects.append(SceneObject("box", _box([0, 0, 0], [1, 1, 1]), 1))
+    room.objects.append(SceneObject("box", box_mesh([0, 0, 0], [1, 1, 1]), 1))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         renderer = SceneRenderer(

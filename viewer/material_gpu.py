@@ -120,13 +120,14 @@ def albedo_table_for(comp) -> AlbedoTable:
     return _ALBEDO_CACHE[key]
 
 
-def pack_patterns(material: PackedMaterial, n: int) -> np.ndarray:
+def pack_patterns(material: PackedMaterial, n: int, planar: bool = False) -> np.ndarray:
     """(MAX_LOBES * MAX_PATTERN, 2) pattern coordinates, each lobe's pattern chosen by
-    :func:`lobeview.materials.patterns.choose_pattern`."""
+    :func:`lobeview.materials.patterns.choose_pattern` (``planar``: the multi-ring pattern of
+    thesis 4.5.3 for objects shaded from a mirror buffer)."""
     if not 1 <= n <= MAX_PATTERN:
         raise ValueError(f"lobe-N supports 1 <= N <= {MAX_PATTERN}, got {n}")
     out = np.zeros((MAX_LOBES * MAX_PATTERN, 2), dtype=np.float32)
     for i, d in enumerate(material.lobe_distributions):
-        xi1, xi2 = pattern_xi(n, choose_pattern(d.alpha_x, d.alpha_y))
+        xi1, xi2 = pattern_xi(n, choose_pattern(d.alpha_x, d.alpha_y, planar))
         out[i * MAX_PATTERN : i * MAX_PATTERN + n] = np.stack([xi1, xi2], -1)
     return out

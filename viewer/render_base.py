@@ -169,13 +169,13 @@ class RendererBase:
         return np.frombuffer(data, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
 
     def set_material(
-        self, program, material: PackedMaterial, method: Method, lod_bias: float | None, seed: int
+        self, program, material: PackedMaterial, method: Method, lod_bias: float | None, seed: int, planar=False
     ) -> None:
         set_uniform(program, "u_lobe_count", material.lobe_count)
         if "u_lobes" in program:
             program["u_lobes"].write(material.lobes.tobytes())
         if method.kind == "lobe" and "u_pattern" in program:
-            program["u_pattern"].write(pack_patterns(material, method.samples).tobytes())
+            program["u_pattern"].write(pack_patterns(material, method.samples, planar).tobytes())
         set_uniform(program, "u_kd", tuple(float(x) for x in material.kd))
         set_uniform(program, "u_gltf_diffuse", 1.0 if material.gltf_diffuse else 0.0)
         set_uniform(program, "u_samples", method.samples)

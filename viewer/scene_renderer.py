@@ -32,6 +32,7 @@ from .render_base import Method, RendererBase, RenderResult, set_uniform
 
 CUBE_CACHE_VERSION = 3
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
+MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # ... inside mirror buffers (every frame: cheap)
 FALLBACK_IRRADIANCE = 1.0  # E for objects whose lightmap is missing (warned), i.e. kd/pi shading
 
 
@@ -71,6 +72,33 @@ class _GpuObject:
             self.cube.release()
 
 
+MIRROR_UNITS = (24, 25, 26)  # texture units of the mirror buffer: radiance, position, normal
+
+
+class _MirrorTargets:
+    """One reflector's mirror buffer (thesis 4.5.1): radiance with a MIP chain, world position
+    (w = 1 geometry, 0 environment), normal, depth."""
+
+    def __init__(self, ctx, size):
+        self.size = size
+        self.radiance = ctx.texture(size, 4, dtype="f4")
+        self.radiance.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.radiance.repeat_x = self.radiance.repeat_y = False
+        self.position = ctx.texture(size, 4, dtype="f4")
+        self.normal = ctx.texture(size, 4, dtype="f4")
+        for tex in (self.position, self.normal):
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.depth = ctx.depth_renderbuffer(size)
+        self.fbo = ctx.framebuffer(
+            color_attachments=[self.radiance, self.position, self.normal], depth_attachment=self.depth
+        )
+        self.camera = None  # scenes.planar_mirror.MirrorCamera of the last pass
+
+    def release(self):
+        for item in (self.fbo, self.radiance, self.position, self.normal, self.depth):
+            item.release()
+
+
 class SceneRenderer(RendererBase):
     def __init__(
         self,
@@ -82,8 +110,23 @@ class SceneRenderer(RendererBase):
         cache_dir: Path | None = None,
         progress: bool = True,
         cube_bounces: int = 2,
+        mirror_scale: float = 1.0,
+        mirror_specular: bool = True,
     ):
         super().__init__(ctx, size)
+        if not 0.05 <= float(mirror_scale) <= 2.0:
+            raise ValueError(f"mirror_scale must be in [0.05, 2], got {mirror_scale}")
+        # Planar reflectors (thesis 4.5): one mirror pass per visible reflector per frame, at
+        # mirror_scale times the frame's resolution; mirror_specular shades the glossy objects seen
+        # in it from their cube maps (lobe-3) instead of the thesis' diffuse-only mirror pass.
+        self.mirror_scale = float(mirror_scale)
+        self.mirror_specular = bool(mirror_specular)
+        self.mirrors_enabled = True
+        self.enabled_reflectors: set | None = None  # None: every reflector of the analysis
+        self._mirror_targets: dict[int, _MirrorTargets] = {}
+        self._mirror_key = None
+        self._mirror_generation = 0
+        self.mirror_report: list[str] = []  # what the last frame's mirror passes did
         self.scene = scene
         self.analysis = analyse(scene)
         self.progress = progress
@@ -218,17 +261,115 @@ class SceneRenderer(RendererBase):
         return faces
 
     # -- drawing -----------------------------------------------------------------------------
-    def _program(self, method: Method, specular: bool, parallax: bool = False):
+    def _program(self, method: Method, specular: bool, parallax: bool = False, mirror: bool = False):
         defines = (
             {**method.defines(), "SPECULAR": specular}
             if specular
             else {"MAX_LOBES": MAX_LOBES, "MAX_PATTERN": MAX_PATTERN, "METHOD_LOBE": True}
         )
-        if specular and parallax:
+        if specular and mirror:
+            # Incident light from the mirror buffer; the cube's importance map does not apply, so
+            # the reference samples the BSDF only (still unbiased for what the buffer holds).
+            defines.update(MIRROR=True, ENV_SAMPLING=False)
+        elif specular and parallax:
             # The cube's importance map samples directions seen from its centre, which the proxy
             # remaps: the reference then samples the BSDF only (still unbiased).
             defines.update(PARALLAX=True, ENV_SAMPLING=False)
         return self.programs.program("scene.vert", "scene.frag", defines)
+
+    # -- planar mirror passes (thesis 4.5) --------------------------------------------------------
+    def mirror_size(self) -> tuple[int, int]:
+        width, height = self.size
+        return max(1, round(width * self.mirror_scale)), max(1, round(height * self.mirror_scale))
+
+    def reflectors(self) -> dict:
+        """Object index -> PlanarReflector of the reflectors in use (analysis, minus disabled)."""
+        found = self.analysis.reflectors
+        if not self.mirrors_enabled:
+            return {}
+        if self.enabled_reflectors is not None:
+            found = {i: r for i, r in found.items() if i in self.enabled_reflectors}
+        return found
+
+    @staticmethod
+    def mirror_skip_reason(reflector, camera: Camera, view_proj: np.ndarray) -> str | None:
+        """Why a reflector needs no mirror pass this frame (None: it needs one): the camera is
+        behind its plane, or its bounding box lies outside the view frustum."""
+        if reflector.side(np.asarray(camera.position, dtype=np.float64)) <= 1e-6:
+            return "seen from behind"
+        clip = np.c_[reflector.corners(), np.ones(8)] @ view_proj.T
+        w = clip[:, 3:4]
+        for axis in range(3):
+            if np.all(clip[:, axis : axis + 1] > w) or np.all(clip[:, axis : axis + 1] < -w):
+                return "outside the view"
+        return None
+
+    def render_mirror_passes(self, camera: Camera) -> dict:
+        """Mirror buffers of the reflectors that need one for ``camera`` (index -> targets);
+        reused while the camera, the size and the materials stay the same (refinement passes)."""
+        from lobeview.scenes.planar_mirror import mirror_camera
+
+        width, height = self.size
+        view_proj = camera.view_projection(width / height)
+        reflectors = self.reflectors()
+        key = (
+            tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y, camera.near, camera.far,
+            self.size, self.mirror_scale, self.mirror_specular, tuple(sorted(reflectors)), self._mirror_generation,
+        )  # fmt: skip
+        if key == self._mirror_key:
+            return {i: self._mirror_targets[i] for i in self._active_mirrors}
+        report, active = [], []
+        size = self.mirror_size()
+        projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
+        for index, reflector in reflectors.items():
+            name = self.objects[index].name
+            reason = self.mirror_skip_reason(reflector, camera, view_proj)
+            if reason is not None:
+                report.append(f"{name}: no mirror pass ({reason})")
+                continue
+            targets = self._mirror_targets.get(index)
+            if targets is None or targets.size != size:
+                if targets is not None:
+                    targets.release()
+                targets = self._mirror_targets[index] = _MirrorTargets(self.ctx, size)
+            mirror = mirror_camera(camera.view(), projection, reflector, size)
+            targets.fbo.use()
+            self.ctx.viewport = (0, 0, *size)
+            targets.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.draw_background(self.environment, mirror.plain_projection @ mirror.view)
+            self._draw_objects(
+                mirror.view_projection,
+                mirror.position,
+                MIRROR_BOUNCE_METHOD,
+                specular=self.mirror_specular,
+                exclude=index,
+            )
+            targets.radiance.build_mipmaps()
+            targets.camera = mirror
+            active.append(index)
+            report.append(f"{name}: mirror pass {size[0]}x{size[1]}")
+        self.ctx.viewport = (0, 0, width, height)
+        self._mirror_key, self._active_mirrors, self.mirror_report = key, active, report
+        return {i: self._mirror_targets[i] for i in active}
+
+    def _bind_mirror(self, program, targets: _MirrorTargets) -> None:
+        mirror = targets.camera
+        for unit, (name, tex) in zip(
+            MIRROR_UNITS,
+            (
+                ("u_mirror_radiance", targets.radiance),
+                ("u_mirror_position", targets.position),
+                ("u_mirror_normal", targets.normal),
+            ),
+            strict=True,
+        ):
+            tex.use(unit)
+            set_uniform(program, name, unit)
+        set_uniform(program, "u_mirror_view", tuple(mirror.view.T.astype("f4").ravel()))
+        plain = mirror.plain_projection @ mirror.view
+        set_uniform(program, "u_mirror_view_projection", tuple(plain.T.astype("f4").ravel()))
+        set_uniform(program, "u_mirror_eye", tuple(float(x) for x in mirror.position))
+        set_uniform(program, "u_mirror_focal_px", float(mirror.focal_pixels))
 
     def set_reflection_proxy(self, index: int, proxy) -> None:
         """Reflected-geometry correction for object ``index`` (scenes/reflection_proxy.py; None:
@@ -275,8 +416,10 @@ class SceneRenderer(RendererBase):
         lod_bias=None,
         sample_offset=0,
         seed=0,
+        mirrors: dict | None = None,
     ):
         self.ctx.enable(moderngl.DEPTH_TEST)
+        mirrors = mirrors or {}
         for obj in self.objects:
             if obj.index == exclude or (not specular and self.analysis.objects[obj.index].transmission_lobes):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
@@ -285,12 +428,13 @@ class SceneRenderer(RendererBase):
             use_specular = specular and obj.cube is not None
             # Per-object real-time method (the panel's override); the reference ignores it.
             obj_method = method if method.kind == "reference" else self.object_methods.get(obj.index, method)
-            proxy = self.scene.objects[obj.index].reflection_proxy if use_specular else None
-            program = self._program(obj_method, use_specular, proxy is not None)
+            mirror = mirrors.get(obj.index) if use_specular else None
+            proxy = self.scene.objects[obj.index].reflection_proxy if use_specular and mirror is None else None
+            program = self._program(obj_method, use_specular, proxy is not None, mirror is not None)
             mat = self.scene.materials[self.scene.objects[obj.index].material]
             set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
             set_uniform(program, "u_camera_position", tuple(float(x) for x in eye))
-            self.set_material(program, obj.material, obj_method, lod_bias, seed)
+            self.set_material(program, obj.material, obj_method, lod_bias, seed, planar=mirror is not None)
             set_uniform(program, "u_sample_offset", int(sample_offset))
             set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
             set_uniform(program, "u_object_id", float(obj.index))
@@ -316,6 +460,8 @@ class SceneRenderer(RendererBase):
                 self.bind_cube(program, obj.cube, obj_method, obj.material)
                 if proxy is not None:
                     self._bind_proxy(program, obj, proxy)
+                if mirror is not None:
+                    self._bind_mirror(program, mirror)
             self._vao(program, obj).render(moderngl.TRIANGLES)
 
     def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:
@@ -323,11 +469,16 @@ class SceneRenderer(RendererBase):
         back: what the interactive viewer calls every frame."""
         width, height = self.size
         view_proj = camera.view_projection(width / height)
+        # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
+        # lookup per lobe, so there they keep their cube maps and no mirror pass is drawn.
+        mirrors = self.render_mirror_passes(camera) if method.kind != "prefiltered" else {}
+        if method.kind == "prefiltered":
+            self.mirror_report = [f"{self.objects[i].name}: cube map (prefiltered method)" for i in self.reflectors()]
         self.fbo.use()
         self.ctx.viewport = (0, 0, width, height)
         self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         self.draw_background(self.environment, view_proj)
-        self._draw_objects(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed)
+        self._draw_objects(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors)
 
     def pick(self, x: int, y: int) -> int | None:
         """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
@@ -344,6 +495,7 @@ class SceneRenderer(RendererBase):
         from lobeview.materials.spec import validate
 
         desc = validate(desc)
+        self._mirror_generation += 1  # what the mirror buffers show changed
         material_index = self.scene.objects[index].material
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
@@ -416,6 +568,8 @@ class SceneRenderer(RendererBase):
 
     def release(self):
         super().release()
+        for targets in self._mirror_targets.values():
+            targets.release()
         for obj in self.objects:
             obj.release()
         for tex in self.textures.values():

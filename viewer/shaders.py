@@ -26,6 +26,7 @@ KNOWN_DEFINES = {
     "HAS_DIFFUSE",
     "SPECULAR",
     "PARALLAX",
+    "MIRROR",
     "DEBUG_VIEW",
 }
 

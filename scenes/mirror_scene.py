@@ -1,0 +1,61 @@
+"""A test scene for planar mirror passes (thesis 4.5): boxes on a reflective floor, lit by a
+constant lightmap (E = pi, so a diffuse surface's radiance is its albedo times its texture), so
+a ray tracer can compute exactly what the floor should reflect. Shared by tests/test_planar_mirror.py,
+the bench's mirror-pass timing and the convergence image pair (bench/mirror_figure.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lobeview.materials.spec import validate
+
+from .meshes import box_mesh, quad
+from .scene import Lightmap, Scene, SceneCamera, SceneMaterial, SceneObject
+
+FLOOR_HALF = 4.0
+TILE_TEXELS = 16  # checker tiles: 2 x 2 per box face (uv 0..1 per face)
+#: (centre, size, albedo): a cube on the floor, a tall pillar, and a box floating 0.6 m above the
+#: floor (its reflection blurs more on a glossy floor: the lobe widens with distance, Fig. 4.32)
+BOXES = (
+    ((-0.8, 0.25, -0.4), (0.5, 0.5, 0.5), (0.85, 0.65, 0.15)),
+    ((0.7, 0.75, -1.1), (0.3, 1.5, 0.3), (0.2, 0.45, 0.85)),
+    ((-0.1, 0.9, -2.2), (0.7, 0.6, 0.5), (0.8, 0.2, 0.2)),
+)
+CAMERA = SceneCamera("mirror floor", np.array([0.0, 1.1, 2.2]), np.array([0.0, 0.35, -0.9]), np.array([0, 1.0, 0]), 50.0)
+
+
+def checker(albedo) -> np.ndarray:
+    """A 2 x 2 checker between the albedo and 35 % of it (texture: multiplies kd = 1)."""
+    n = 2 * TILE_TEXELS
+    parity = (np.arange(n)[:, None] // TILE_TEXELS + np.arange(n)[None] // TILE_TEXELS) % 2
+    bright = np.asarray(albedo, np.float32)
+    return np.where(parity[..., None] == 1, bright, 0.35 * bright).astype(np.float32)
+
+
+def floor_material(roughness: float, r0: float = 1.0) -> dict:
+    """The floor: one thesis lobe (ks = 1, kd = 0) of Beckmann roughness ``roughness``."""
+    lobe = {"ks": 1.0, "mx": roughness, "my": roughness, "r0": r0, "alpha": 0.0}
+    return validate({"model": "thesis", "kd": 0.0, "lobes": [lobe]})
+
+
+def mirror_floor_scene(roughness: float = 0.002, extra_reflector: bool = False) -> Scene:
+    """Boxes on a floor of the given roughness (a planar reflector by automatic detection).
+    ``extra_reflector`` adds a glossy back wall as a second reflector (the bench's 2-reflector
+    case)."""
+    lightmap = Lightmap(np.full((4, 4, 3), np.pi, np.float32))
+    floor = quad([-FLOOR_HALF, 0.0, FLOOR_HALF], [2 * FLOOR_HALF, 0.0, 0.0], [0.0, 0.0, -2 * FLOOR_HALF])
+    materials = [SceneMaterial("floor", floor_material(roughness), lightmap=lightmap)]
+    objects = [SceneObject("floor", floor, 0, floor.uvs.copy())]
+    for k, (centre, size, albedo) in enumerate(BOXES):
+        mesh = box_mesh(centre, size)
+        diffuse = validate({"model": "thesis", "kd": 1.0, "lobes": []})
+        materials.append(SceneMaterial(f"box {k}", diffuse, checker(albedo), lightmap=lightmap))
+        objects.append(SceneObject(f"box {k}", mesh, len(materials) - 1, mesh.uvs.copy()))
+    if extra_reflector:
+        wall = quad([-FLOOR_HALF, 0.0, -3.0], [2 * FLOOR_HALF, 0.0, 0.0], [0.0, 3.0, 0.0])
+        glossy = validate(
+            {"model": "thesis", "kd": 0.3, "lobes": [{"ks": 0.5, "mx": 0.05, "my": 0.05, "r0": 0.05, "alpha": 0.0}]}
+        )
+        materials.append(SceneMaterial("glossy wall", glossy, lightmap=lightmap))
+        objects.append(SceneObject("glossy wall", wall, len(materials) - 1, wall.uvs.copy()))
+    return Scene(objects, materials, [CAMERA], "mirror floor")

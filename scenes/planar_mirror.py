@@ -1,0 +1,301 @@
+"""Planar reflectors and the mirror pass (thesis 4.5): the numpy reference of what
+viewer/scene_renderer.py and shaders/integrate.glsl (``MIRROR``) do on the GPU.
+
+A large glossy plane (floor, table top, wall) cannot use one cube map: what it reflects changes
+across it (Fig. 4.25). Each frame the scene is rendered from the camera mirrored about the plane
+(Diefenbach et al. 1997) into a *mirror buffer* holding radiance (with a MIP chain built every
+frame), world position and normal. A surface point P of the plane finds the radiance arriving
+from its mirror direction w_r at its own screen position in that buffer (Fig. 4.26); other
+directions w_i of its lobes are mapped into the buffer by the two-step tangent-plane projection
+of 4.5.2:
+
+  1. intersect the ray P + t w_i with the tangent plane of P_R, the surface point the buffer
+     shows at P's own position (a point at infinity, i.e. the environment, if the buffer shows
+     the environment there or the plane is missed);
+  2. project that point P_I into the mirror camera;
+  3. intersect the ray again with the tangent plane of what the buffer shows *there*, project
+     the new P_I and read the radiance at that position (the second step removes the
+     discontinuities of Fig. 4.30-4.31 at depth edges).
+
+Filtering (4.5.3): each sample reads the radiance MIP level whose texels cover its share of the
+lobe. lobeview maps that share, the solid angle Omega_s of Eq. 4.14 / N, through the tangent
+plane found for the sample into buffer pixels (the local Jacobian of the projection; the thesis
+projects the lobe's extreme directions to an ellipse once per pixel and divides its area by N):
+
+  pixels = Omega_s * (t^2 / |n . w_i|) * (|n . v'| / r'^2) * f^2 / cos^3(alpha)
+
+with t the distance P -> P_I, n the tangent-plane normal, v' and r' the direction and distance
+from the mirror camera to P_I, f the focal length in pixels and alpha the angle of v' off the
+mirror camera's axis (Omega_s * f^2 / cos^3 alpha for the environment at infinity); lod =
+0.5 log2(pixels) + bias.
+
+The mirror camera uses an oblique near plane (Lengyel 2005) equal to the reflector's plane, so
+nothing behind the reflector leaks into the buffer.
+
+Which objects are planar reflectors: node ``extras.lobeview.planar_reflector`` = true (force:
+any planar mesh with a reflection lobe), false (never) or "auto" (default): the mesh lies in a
+plane within PLANAR_TOLERANCE of the scene size, has reflection lobes and no transmission, spans
+at least MIN_REFLECTOR_FRACTION of the scene's diagonal, and its lobes are no wider than
+MAX_MIRROR_ROUGHNESS (wider lobes reach geometry the mirror camera does not see, Fig. 4.27: such
+an object keeps its cube map and the scene analysis says why).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+PLANAR_TOLERANCE = 1e-4  # max distance of a vertex from the fitted plane / scene diagonal
+MIN_REFLECTOR_FRACTION = 0.2  # reflector diagonal / scene diagonal for automatic detection
+MAX_MIRROR_ROUGHNESS = 0.3  # Beckmann m / GGX alpha (larger of the two axes) of the widest lobe
+
+
+class ReflectorError(ValueError):
+    pass
+
+
+@dataclass(frozen=True)
+class PlanarReflector:
+    """A planar reflector: its plane n.x + d = 0 with n toward the side it is seen from (the
+    mean of the mesh normals), and its bounding box for frustum culling."""
+
+    plane: np.ndarray  # (4,)
+    box_min: np.ndarray
+    box_max: np.ndarray
+
+    @property
+    def normal(self) -> np.ndarray:
+        return self.plane[:3]
+
+    def side(self, points) -> np.ndarray:
+        """Signed distance of points (..., 3) from the plane (> 0 on the front side)."""
+        return np.asarray(points, dtype=np.float64) @ self.plane[:3] + self.plane[3]
+
+    def reflection_matrix(self) -> np.ndarray:
+        return reflection_matrix(self.plane)
+
+    def corners(self) -> np.ndarray:
+        lo, hi = self.box_min, self.box_max
+        return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+def fit_plane(positions: np.ndarray) -> tuple[np.ndarray, float]:
+    """Least-squares plane through points: (plane (4,), max |distance|). The normal is the
+    singular vector of the smallest singular value of the centred points."""
+    p = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    if len(p) < 3:
+        raise ReflectorError("a plane needs at least three vertices")
+    centre = p.mean(axis=0)
+    _, s, vt = np.linalg.svd(p - centre, full_matrices=False)
+    if s[1] <= 1e-12 * max(s[0], 1e-300):
+        raise ReflectorError("degenerate mesh: its vertices are collinear")
+    n = vt[2]
+    plane = np.append(n, -n @ centre)
+    return plane, float(np.max(np.abs(p @ n + plane[3])))
+
+
+def planar_reflector(mesh, scene_diagonal: float) -> PlanarReflector | None:
+    """The reflector of a mesh if it lies in a plane (within PLANAR_TOLERANCE * scene_diagonal),
+    else None. The normal faces where the mesh normals point on average."""
+    try:
+        plane, deviation = fit_plane(mesh.positions)
+    except ReflectorError:
+        return None
+    if deviation > PLANAR_TOLERANCE * max(scene_diagonal, 1e-9):
+        return None
+    mean_normal = np.asarray(mesh.normals, dtype=np.float64).mean(axis=0)
+    if mean_normal @ plane[:3] < 0.0:
+        plane = -plane
+    positions = np.asarray(mesh.positions, dtype=np.float64)
+    return PlanarReflector(plane, positions.min(axis=0), positions.max(axis=0))
+
+
+def reflector_mode(extras, name: str):
+    """The node's ``extras.lobeview.planar_reflector``: 'auto' (default), True or False; anything
+    else is warned about and treated as 'auto'."""
+    if not isinstance(extras, dict) or not isinstance(extras.get("lobeview"), dict):
+        return "auto"
+    value = extras["lobeview"].get("planar_reflector", "auto")
+    if isinstance(value, bool) or value == "auto":
+        return value
+    warnings.warn(
+        f'node {name!r}: planar_reflector must be true, false or "auto", got {value!r}; using "auto"',
+        stacklevel=2,
+    )
+    return "auto"
+
+
+def reflector_decision(mesh, lobes, scene_diagonal: float, mode="auto") -> tuple[PlanarReflector | None, str]:
+    """(reflector or None, the reason the scene analysis prints). ``lobes`` are the object's
+    view-dependent lobes (materials.patterns.specular_lobes)."""
+    if mode is False:
+        return None, "off (extras)"
+    reflection = [lobe for lobe in lobes if not getattr(lobe, "transmission", False)]
+    if not reflection:
+        return None, "-"
+    if len(reflection) < len(lobes):
+        return None, "no: transmission lobes need the cube map"
+    reflector = planar_reflector(mesh, scene_diagonal)
+    if reflector is None:
+        return None, "no: not planar" if mode is True else "-"
+    if mode is True:
+        return reflector, "mirror pass (extras)"
+    diagonal = float(np.linalg.norm(reflector.box_max - reflector.box_min))
+    if diagonal < MIN_REFLECTOR_FRACTION * scene_diagonal:
+        return None, f"no: small plane ({diagonal:.2f} m < {MIN_REFLECTOR_FRACTION:g} x scene)"
+    widest = max(max(lobe.distribution.alpha_x, lobe.distribution.alpha_y) for lobe in reflection)
+    if widest > MAX_MIRROR_ROUGHNESS:
+        return None, f"cube map: lobes too wide for a mirror pass (roughness {widest:.2f} > {MAX_MIRROR_ROUGHNESS:g})"
+    return reflector, "mirror pass"
+
+
+# -- the mirror camera ---------------------------------------------------------------------------
+def reflection_matrix(plane) -> np.ndarray:
+    """4x4 reflection about the plane n.x + d = 0 (n unit): x' = x - 2 (n.x + d) n."""
+    plane = np.asarray(plane, dtype=np.float64)
+    n, d = plane[:3], plane[3]
+    m = np.eye(4)
+    m[:3, :3] -= 2.0 * np.outer(n, n)
+    m[:3, 3] = -2.0 * d * n
+    return m
+
+
+def oblique_projection(projection: np.ndarray, clip_plane_eye: np.ndarray) -> np.ndarray:
+    """Lengyel's oblique near plane: ``projection`` with its near plane replaced by the plane
+    (a, b, c, d) given in eye space (the camera on its negative side); everything on the
+    negative side then falls outside the depth range. Only the third row changes, so pixel
+    positions are those of the plain projection."""
+    c = np.asarray(clip_plane_eye, dtype=np.float64)
+    p = np.array(projection, dtype=np.float64)
+    q = np.linalg.inv(p) @ np.array([np.sign(c[0]), np.sign(c[1]), 1.0, 1.0])
+    scaled = c * (2.0 / (c @ q))
+    p[2] = scaled - p[3]
+    return p
+
+
+@dataclass(frozen=True)
+class MirrorCamera:
+    """The mirrored camera of one frame: ``view`` = camera view @ reflection (world -> mirror
+    eye), ``projection`` (oblique), ``plain_projection`` (for the environment background) and the
+    buffer ``size`` (W, H)."""
+
+    view: np.ndarray
+    projection: np.ndarray
+    plain_projection: np.ndarray
+    size: tuple[int, int]
+    position: np.ndarray  # C', the mirrored camera position
+
+    @property
+    def view_projection(self) -> np.ndarray:
+        return self.projection @ self.view
+
+    @property
+    def focal_pixels(self) -> float:
+        """Pixels per unit of tan(angle) at the image centre (vertical)."""
+        return 0.5 * self.size[1] * float(self.plain_projection[1, 1])
+
+    def uv(self, points_h: np.ndarray) -> np.ndarray:
+        """Buffer coordinates in [0, 1]^2 (v up, OpenGL) of homogeneous world points (..., 4)
+        (w = 0: directions, i.e. points at infinity), clamped to the buffer."""
+        clip = np.asarray(points_h, dtype=np.float64) @ (self.plain_projection @ self.view).T
+        w = np.maximum(clip[..., 3], 1e-6)
+        return np.clip(clip[..., :2] / w[..., None] * 0.5 + 0.5, 0.0, 1.0)
+
+
+def mirror_camera(view: np.ndarray, projection: np.ndarray, reflector: PlanarReflector, size) -> MirrorCamera:
+    r = reflector.reflection_matrix()
+    mirror_view = np.asarray(view, dtype=np.float64) @ r
+    # The reflector's plane in the mirror eye space, oriented so the mirror camera (behind the
+    # plane) is on its negative side: plane_eye = inverse(view)^T plane_world.
+    plane_eye = np.linalg.inv(mirror_view).T @ reflector.plane
+    if plane_eye[3] > 0.0:
+        plane_eye = -plane_eye
+    eye = np.linalg.inv(mirror_view)[:3, 3]
+    return MirrorCamera(mirror_view, oblique_projection(projection, plane_eye), np.array(projection), tuple(size), eye)
+
+
+# -- sampling the buffer (4.5.2-4.5.3) -----------------------------------------------------------
+@dataclass
+class MirrorBuffers:
+    """What one mirror pass produced, rows in OpenGL order (row 0 = v 0, the bottom)."""
+
+    camera: MirrorCamera
+    radiance: np.ndarray  # (H, W, 3)
+    position: np.ndarray  # (H, W, 4): world xyz, w = 1 geometry, 0 environment
+    normal: np.ndarray  # (H, W, 3)
+
+    def texel(self, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        width, height = self.camera.size
+        x = np.clip((uv[..., 0] * width).astype(int), 0, width - 1)
+        y = np.clip((uv[..., 1] * height).astype(int), 0, height - 1)
+        return y, x
+
+    def radiance_bilinear(self, uv: np.ndarray) -> np.ndarray:
+        """Level-0 bilinear lookup with clamp-to-edge, as a linearly filtered texture."""
+        height, width = self.radiance.shape[:2]
+        x = uv[..., 0] * width - 0.5
+        y = uv[..., 1] * height - 0.5
+        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+        fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+        xs = np.clip([x0, x0 + 1], 0, width - 1)
+        ys = np.clip([y0, y0 + 1], 0, height - 1)
+        img = self.radiance
+        top = img[ys[0], xs[0]] * (1 - fx) + img[ys[0], xs[1]] * fx
+        bottom = img[ys[1], xs[0]] * (1 - fx) + img[ys[1], xs[1]] * fx
+        return top * (1 - fy) + bottom * fy
+
+
+def intersect_tangent_plane(p: np.ndarray, wi: np.ndarray, surface: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Homogeneous hit (..., 4) of rays p + t wi with the planes through surface[..., :3] with
+    ``normal``; a direction (w = 0) where the buffer shows the environment (surface w < 0.5),
+    the ray is parallel to the plane or the hit lies behind p."""
+    p = np.broadcast_to(p, wi.shape)
+    denom = np.sum(wi * normal, axis=-1)
+    safe = np.where(np.abs(denom) < 1e-6, 1.0, denom)
+    t = np.sum((surface[..., :3] - p) * normal, axis=-1) / safe
+    ok = (surface[..., 3] >= 0.5) & (np.abs(denom) >= 1e-6) & (t > 0.0)
+    hit = np.concatenate([p + t[..., None] * wi, np.ones(wi.shape[:-1] + (1,))], axis=-1)
+    direction = np.concatenate([wi, np.zeros(wi.shape[:-1] + (1,))], axis=-1)
+    return np.where(ok[..., None], hit, direction)
+
+
+def project_samples(buffers: MirrorBuffers, p: np.ndarray, wi: np.ndarray, second_step: bool = True):
+    """The two-step projection of 4.5.2 for sample directions ``wi`` (..., 3, unit, world) at the
+    plane point ``p``: (uv (..., 2), hit (..., 4), tangent-plane normal (..., 3))."""
+    p = np.asarray(p, dtype=np.float64)
+    wi = np.asarray(wi, dtype=np.float64)
+    own = buffers.camera.uv(np.append(p, 1.0))
+    y, x = buffers.texel(own)
+    surface = np.broadcast_to(buffers.position[y, x], wi.shape[:-1] + (4,))
+    normal = np.broadcast_to(buffers.normal[y, x], wi.shape)
+    hit = intersect_tangent_plane(p, wi, surface, normal)
+    uv = buffers.camera.uv(hit)
+    if second_step:
+        y, x = buffers.texel(uv)
+        surface, normal = buffers.position[y, x], buffers.normal[y, x]
+        hit = intersect_tangent_plane(p, wi, surface, normal)
+        uv = buffers.camera.uv(hit)
+    return uv, hit, normal
+
+
+def sample_pixels(camera: MirrorCamera, p, wi, hit, normal, solid_angle) -> np.ndarray:
+    """Buffer pixels covered by a sample of ``solid_angle`` around ``wi`` that hit the tangent
+    plane (``normal``) at ``hit`` (w = 0: the environment), by the Jacobian in the docstring."""
+    p = np.asarray(p, dtype=np.float64)
+    eye = hit @ camera.view.T  # mirror eye space (w = 0 stays a direction)
+    distance = np.linalg.norm(eye[..., :3], axis=-1)
+    cos_alpha = np.maximum(-eye[..., 2] / np.maximum(distance, 1e-30), 1e-3)
+    angular = solid_angle * camera.focal_pixels**2 / cos_alpha**3
+    at_infinity = hit[..., 3] < 0.5
+    t = np.linalg.norm(hit[..., :3] - p, axis=-1)
+    to_hit = (hit[..., :3] - camera.position) / np.maximum(distance, 1e-30)[..., None]
+    cos_in = np.maximum(np.abs(np.sum(normal * wi, axis=-1)), 1e-3)
+    cos_out = np.abs(np.sum(normal * to_hit, axis=-1))
+    scale = np.where(at_infinity, 1.0, t * t / cos_in * cos_out / np.maximum(distance, 1e-30) ** 2)
+    return angular * scale
+
+
+def mirror_lod(camera: MirrorCamera, p, wi, hit, normal, solid_angle, bias: float) -> np.ndarray:
+    return 0.5 * np.log2(np.maximum(sample_pixels(camera, p, wi, hit, normal, solid_angle), 1e-30)) + bias
