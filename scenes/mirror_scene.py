@@ -21,7 +21,9 @@ BOXES = (
     ((0.7, 0.75, -1.1), (0.3, 1.5, 0.3), (0.2, 0.45, 0.85)),
     ((-0.1, 0.9, -2.2), (0.7, 0.6, 0.5), (0.8, 0.2, 0.2)),
 )
-CAMERA = SceneCamera("mirror floor", np.array([0.0, 1.1, 2.2]), np.array([0.0, 0.35, -0.9]), np.array([0, 1.0, 0]), 50.0)
+CAMERA = SceneCamera(
+    "mirror floor", np.array([0.0, 1.1, 2.2]), np.array([0.0, 0.35, -0.9]), np.array([0, 1.0, 0]), 50.0
+)
 
 
 def checker(albedo) -> np.ndarray:
