@@ -109,6 +109,19 @@ def add_arguments(p) -> None:
         "default 'scene': what each node's extras say (none if unset)",
     )
     a(
+        "--mirrors",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="planar mirror passes for the reflectors the scene analysis lists (thesis 4.5; default on;"
+        " --no-mirrors: cube maps for every object)",
+    )
+    a(
+        "--mirror-scale",
+        type=float,
+        default=1.0,
+        help="mirror-buffer resolution relative to the frame, 0.05..2 (default 1)",
+    )
+    a(
         "--cache",
         help="cache folder for the demo scene and cube maps (default ~/.cache/lobeview or $LOBEVIEW_CACHE)",
     )
@@ -301,9 +314,22 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
     stages["load"] = time.perf_counter() - t0
     ctx = create_context()
     args.gpu_timer = gpu_timer_meaningful(describe(ctx))
-    renderer = SceneRenderer(ctx, scene, env, size=size, cube_face_size=args.face_size, cache_dir=cache / "cubes")
+    if not 0.05 <= args.mirror_scale <= 2.0:
+        raise ShotError(f"--mirror-scale must be in [0.05, 2], got {args.mirror_scale}")
+    renderer = SceneRenderer(
+        ctx,
+        scene,
+        env,
+        size=size,
+        cube_face_size=args.face_size,
+        cache_dir=cache / "cubes",
+        mirror_scale=args.mirror_scale,
+    )
+    renderer.mirrors_enabled = args.mirrors
     print(renderer.analysis.report())
     result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias)
+    for line in renderer.mirror_report:
+        print(f"[mirror] {line}")
     _finish(result, out, args, stages)
     what = f"{'the demo scene' if args.scene is None else path.name} under {env.name}"
     _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe)

@@ -80,6 +80,19 @@ def add_arguments(p) -> None:
         default="scene",
         help="cube-map lookup correction for every glossy object (see lobeview shot --help)",
     )
+    p.add_argument(
+        "--mirrors",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="planar mirror passes for the reflectors the scene analysis lists (thesis 4.5; default on;"
+        " --no-mirrors: cube maps for every object)",
+    )
+    p.add_argument(
+        "--mirror-scale",
+        type=float,
+        default=1.0,
+        help="mirror-buffer resolution relative to the frame, 0.05..2 (default 1)",
+    )
     p.add_argument("--cache", help="cache folder (default ~/.cache/lobeview or $LOBEVIEW_CACHE)")
     p.add_argument("--screenshot-dir", default=".", help="where F12 writes screenshots (default .)")
     p.add_argument("--materials", help="load edited materials from this JSON file at start")
@@ -279,6 +292,8 @@ def run(args) -> int:
     method = Method.parse(args.method)
     if method.kind == "lobe":
         method = dataclasses.replace(method, normalize=args.lobe_normalize)
+    if not 0.05 <= args.mirror_scale <= 2.0:
+        raise ValueError(f"--mirror-scale must be in [0.05, 2], got {args.mirror_scale}")
     if method.kind == "reference":
         raise ValueError(
             "--method must be a real-time method (lobe-N, fis-N, mc-N, prefiltered[-MODE]); refinement is automatic"
@@ -324,8 +339,15 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
             self.imgui = ModernglWindowRenderer(self.wnd)
             size = self.wnd.buffer_size
             self.renderer = SceneRenderer(
-                self.ctx, scene, environment, size=size, cube_face_size=args.face_size, cache_dir=cache / "cubes"
+                self.ctx,
+                scene,
+                environment,
+                size=size,
+                cube_face_size=args.face_size,
+                cache_dir=cache / "cubes",
+                mirror_scale=args.mirror_scale,
             )
+            self.renderer.mirrors_enabled = args.mirrors
             self.accumulator = Accumulator(self.ctx, self.renderer.programs, size)  # refinement
             self.realtime = Accumulator(self.ctx, self.renderer.programs, size)  # last moving frame
             self.pending_screenshots: list[str] = []
@@ -579,6 +601,13 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
                     self.method = method_from_choice(kinds[k], n, self.lobe_normalize)
                     self.dirty = True
                 _, self.progressive = imgui.checkbox("refine when still", self.progressive)
+                c4, mirrors = imgui.checkbox("planar mirror passes", self.renderer.mirrors_enabled)
+                c5, scale = imgui.slider_float("mirror resolution", self.renderer.mirror_scale, 0.1, 1.0)
+                if c4 or c5:
+                    self.renderer.mirrors_enabled, self.renderer.mirror_scale = mirrors, scale
+                    self.dirty = True
+                for line in self.renderer.mirror_report:
+                    imgui.text(line)
                 if scene.cameras:
                     names = [c.name for c in scene.cameras]
                     c, pick = imgui.combo("scene camera", -1 if self.camera_index is None else self.camera_index, names)

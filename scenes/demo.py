@@ -26,7 +26,7 @@ from .builtin_env import load_environment
 from .meshes import Mesh, box_mesh, merge_meshes, quad, uv_sphere, vertex_normals, vertex_tangents
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
-DEMO_VERSION = 3  # bump when the geometry, materials or baker change (invalidates caches)
+DEMO_VERSION = 4  # bump when the geometry, materials or baker change (invalidates caches)
 DEMO_ENVIRONMENT = "builtin:overcast"
 DEFAULT_RESOLUTION = 512
 DEFAULT_RAYS = 128
@@ -42,6 +42,23 @@ def cache_dir() -> Path:
 
 def _diffuse(kd) -> dict:
     return validate({"model": "thesis", "kd": kd, "lobes": []})
+
+
+def _without_top_face(mesh: Mesh) -> Mesh:
+    """The mesh minus its triangles facing +Y (and the vertices only they used)."""
+    tris = np.asarray(mesh.indices).reshape(-1, 3)
+    keep = tris[mesh.normals[tris[:, 0], 1] < 0.5]
+    used = np.unique(keep)
+    remap = np.full(len(mesh.positions), -1)
+    remap[used] = np.arange(len(used))
+    return Mesh(
+        mesh.positions[used],
+        mesh.normals[used],
+        mesh.tangents[used],
+        mesh.uvs[used],
+        remap[keep].astype(np.uint32),
+        mesh.name,
+    )
 
 
 def _from_trimesh(tm, name: str) -> Mesh:
@@ -82,7 +99,17 @@ def demo_geometry() -> Scene:
     """The demo room with materials, no lightmap UVs yet."""
     materials = [
         SceneMaterial("walls", _diffuse([0.75, 0.74, 0.72])),
-        SceneMaterial("floor", _diffuse([0.42, 0.33, 0.24])),
+        # Varnished wood: a narrow Fresnel lobe over the diffuse base, shaded by a mirror pass.
+        SceneMaterial(
+            "floor",
+            validate(
+                {
+                    "model": "thesis",
+                    "kd": [0.42, 0.33, 0.24],
+                    "lobes": [{"ks": 1.0, "mx": 0.05, "my": 0.05, "r0": 0.05, "alpha": 0.0}],
+                }
+            ),
+        ),
         SceneMaterial("ceiling", _diffuse(0.8)),
         SceneMaterial("light", _diffuse(0.8), emission=np.array([14.0, 13.2, 12.0])),
         SceneMaterial(
@@ -136,14 +163,17 @@ def demo_geometry() -> Scene:
     floor = quad([-W, 0, D], [2 * W, 0, 0], [0, 0, -2 * D], uv_scale=4.0)
     ceiling = quad([-W, H, -D], [2 * W, 0, 0], [0, 0, 2 * D])
     light = quad([-0.6, H - 0.01, -0.6 - 0.6], [1.2, 0, 0], [0, 0, 1.2])
-    table_top = box_mesh([0.0, 0.735, -0.6], [1.8, 0.05, 1.0])
+    # The slab without its top face, and the top as its own quad: a planar reflector (mirror pass).
+    table_slab = _without_top_face(box_mesh([0.0, 0.735, -0.6], [1.8, 0.05, 1.0]))
+    table_top = quad([-0.9, 0.76, -0.1], [1.8, 0, 0], [0, 0, -1.0])
     legs = [box_mesh([sx * 0.82, 0.355, -0.6 + sz * 0.42], [0.06, 0.71, 0.06]) for sx in (-1, 1) for sz in (-1, 1)]
     objects = [
         SceneObject("walls", merge_meshes(walls, "walls"), 0),
         SceneObject("floor", floor, 1),
         SceneObject("ceiling", ceiling, 2),
         SceneObject("light", light, 3),
-        SceneObject("table", merge_meshes([table_top, *legs], "table"), 4),
+        SceneObject("table", merge_meshes([table_slab, *legs], "table"), 4),
+        SceneObject("table top", table_top, 4),
         SceneObject(
             "chrome sphere",
             _translated(uv_sphere(0.16, 48, 96), [-0.55, 0.92, -0.65], "chrome sphere"),
@@ -199,7 +229,7 @@ def demo_geometry() -> Scene:
     # everything else is box-projected to the room.
     from .reflection_proxy import ReflectionProxy
 
-    room = ReflectionProxy.frombox_mesh([-W, 0.0, -D], [W, H, D])
+    room = ReflectionProxy.from_box([-W, 0.0, -D], [W, H, D])
     table_top_height = 0.76
     on_table = ReflectionProxy.from_planes(
         [[0, 1, 0, -table_top_height], [0, -1, 0, H], [1, 0, 0, W], [-1, 0, 0, W], [0, 0, 1, D], [0, 0, -1, D]]

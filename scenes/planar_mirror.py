@@ -135,11 +135,11 @@ def reflector_decision(mesh, lobes, scene_diagonal: float, mode="auto") -> tuple
     reflection = [lobe for lobe in lobes if not getattr(lobe, "transmission", False)]
     if not reflection:
         return None, "-"
-    if len(reflection) < len(lobes):
-        return None, "no: transmission lobes need the cube map"
     reflector = planar_reflector(mesh, scene_diagonal)
     if reflector is None:
         return None, "no: not planar" if mode is True else "-"
+    if len(reflection) < len(lobes):
+        return None, "no: transmission lobes need the cube map"
     if mode is True:
         return reflector, "mirror pass (extras)"
     diagonal = float(np.linalg.norm(reflector.box_max - reflector.box_min))
