@@ -84,6 +84,12 @@ def add_arguments(p) -> None:
     a = p.add_argument
     a("--quick", action="store_true", help="a small subset that runs in a few minutes on a 2-core CPU")
     a("--stress", action="store_true", help="run the numerical stress suite instead of the timing matrix")
+    a(
+        "--mirrors",
+        action="store_true",
+        help="time planar mirror passes (0/1/2 reflectors x --resolutions) instead of the matrix",
+    )
+    a("--mirror-samples", nargs="+", type=int, help="lobe-N sample counts of --mirrors (default 3 7 11 15 19)")
     a("--methods", nargs="*", help="methods (lobe-N, lobe-N+norm, fis-N, mc-N, prefiltered[-MODE])")
     a("--materials", nargs="+", help=f"presets (default: one per class: {', '.join(MATERIAL_CLASSES.values())})")
     a(
@@ -428,6 +434,19 @@ def run(args) -> int:
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
     if args.stress:
         return run_stress(args, out_dir, stamp)
+    if args.mirrors:
+        from lobeview.app.shot import parse_size
+
+        from .bench_mirror import MIRROR_SAMPLES, run_mirror_bench
+
+        default_sizes = ["320x200"] if args.quick else ["640x400", "1680x1050"]
+        sizes = [parse_size(text) for text in (args.resolutions or default_sizes)]
+        ctx = create_headless_context()
+        samples = args.mirror_samples or ([3, 7] if args.quick else list(MIRROR_SAMPLES))
+        spp = args.reference_spp or (128 if args.quick else 512)
+        run_mirror_bench(ctx, renderer_description(ctx), out_dir, stamp, sizes, samples, args.repeats, spp)
+        ctx.release()
+        return 0
     if args.report:
         source = Path(args.report)
         try:

@@ -163,3 +163,21 @@ def test_stress_command_reports_every_check(tmp_path, capsys):
     assert "0 failures" in text
     assert "plane seen 89.9 deg from its normal" in text
     assert "environment with NaN/Inf/negative texels" in text
+
+
+def test_mirror_bench_times_0_1_2_reflectors_and_writes_the_figure(tmp_path):
+    from PIL import Image
+
+    argv = ["bench", "--mirrors", "--quick", "--mirror-samples", "3", "--repeats", "1", "--reference-spp", "16"]
+    assert main([*argv, "--out", str(tmp_path)]) == 0
+    text = next(tmp_path.glob("mirrors-*.md")).read_text()
+    rows = [line for line in text.splitlines() if line.startswith("| 320x200 |")]
+    assert [row.split("|")[2].strip() for row in rows] == ["0", "1", "2"]
+    # No mirror pass without reflectors; one or two passes cost something.
+    mirror_ms = [float(row.split("|")[3]) for row in rows]
+    assert mirror_ms[0] < mirror_ms[1] and mirror_ms[0] < mirror_ms[2]
+    assert "| lobe-3 |" in text and " dB |" in text
+    figure = Image.open(next(tmp_path.glob("mirrors-*.png")))
+    assert figure.size == (3 * 320 + 8, 200)
+    pixels = np.asarray(figure, dtype=np.float64)
+    assert pixels.std() > 10.0  # an image, not a flat fill

@@ -323,8 +323,10 @@ def test_demo_scene_builds_renders_and_is_cached(ctx, tmp_path):
     analysis = analyse(scene)
     names = {o.name for o in analysis.objects if o.needs_cube_map}
     assert {"chrome sphere", "gold torus", "frosted pane", "clear pane", "brushed panel"} <= names
-    assert {"walls", "floor", "ceiling"}.isdisjoint(names)
+    assert {"walls", "ceiling"}.isdisjoint(names)
     assert all(o.has_lightmap for o in analysis.objects)
+    # The varnished floor and the table top are planar reflectors (mirror passes), the rest not.
+    assert sorted(analysis.objects[i].name for i in analysis.reflectors) == ["floor", "table top"]
     renderer = SceneRenderer(
         ctx,
         scene,
@@ -338,6 +340,7 @@ def test_demo_scene_builds_renders_and_is_cached(ctx, tmp_path):
     result = renderer.render(Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y), "lobe-5")
     assert not result.invalid.any() and np.all(np.isfinite(result.radiance)) and result.radiance.min() >= 0
     assert result.radiance.mean() > 0.05
+    assert renderer.mirror_report == ["floor: mirror pass 64x40", "table top: mirror pass 64x40"]
     assert list((tmp_path / "cubes").glob("cubes-*.npz"))
     renderer.release()
 

@@ -352,6 +352,10 @@ class SceneRenderer(RendererBase):
         self._mirror_key, self._active_mirrors, self.mirror_report = key, active, report
         return {i: self._mirror_targets[i] for i in active}
 
+    def invalidate_mirrors(self) -> None:
+        """Draw the mirror buffers again on the next frame even if nothing changed (benchmarks)."""
+        self._mirror_key = None
+
     def _bind_mirror(self, program, targets: _MirrorTargets) -> None:
         mirror = targets.camera
         for unit, (name, tex) in zip(
