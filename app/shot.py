@@ -294,6 +294,23 @@ def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache
     return path, load_gltf(path), load_environment(env_name), cache
 
 
+def scene_renderer_from_args(ctx, scene, env, size, cache, args):
+    """The SceneRenderer of ``shot`` and ``view``: cube-map size, cache and mirror-pass options."""
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    renderer = SceneRenderer(
+        ctx,
+        scene,
+        env,
+        size=size,
+        cube_face_size=args.face_size,
+        cache_dir=cache / "cubes",
+        mirror_scale=args.mirror_scale,
+    )
+    renderer.mirrors_enabled = args.mirrors
+    return renderer
+
+
 def apply_reflection_proxy(scene, choice: str) -> None:
     """``--reflection-proxy``: override every object's proxy unless the choice is 'scene'."""
     from lobeview.scenes.reflection_proxy import ReflectionProxy
@@ -306,8 +323,6 @@ def apply_reflection_proxy(scene, choice: str) -> None:
 
 
 def _run_scene(args, out, method, size, stages, t0, create_context, describe) -> int:
-    from lobeview.viewer.scene_renderer import SceneRenderer
-
     path, scene, env, cache = load_scene_and_environment(args.scene, args.env, args.cache)
     apply_reflection_proxy(scene, args.reflection_proxy)
     camera = _camera_from_args(args, _scene_view(scene, args.view))
@@ -316,16 +331,7 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
     args.gpu_timer = gpu_timer_meaningful(describe(ctx))
     if not 0.05 <= args.mirror_scale <= 2.0:
         raise ShotError(f"--mirror-scale must be in [0.05, 2], got {args.mirror_scale}")
-    renderer = SceneRenderer(
-        ctx,
-        scene,
-        env,
-        size=size,
-        cube_face_size=args.face_size,
-        cache_dir=cache / "cubes",
-        mirror_scale=args.mirror_scale,
-    )
-    renderer.mirrors_enabled = args.mirrors
+    renderer = scene_renderer_from_args(ctx, scene, env, size, cache, args)
     print(renderer.analysis.report())
     result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias)
     for line in renderer.mirror_report:

@@ -319,11 +319,10 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
     from imgui_bundle import imgui, implot
     from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
 
-    from lobeview.app.shot import _scene_view
+    from lobeview.app.shot import _scene_view, scene_renderer_from_args
     from lobeview.scenes.hdrio import write_hdr_image
     from lobeview.viewer.display import Accumulator
     from lobeview.viewer.render_base import Method
-    from lobeview.viewer.scene_renderer import SceneRenderer
     from lobeview.viewer.tonemap import TONEMAPS, to_uint8, tonemap
 
     class LobeviewWindow(mglw.WindowConfig):
@@ -338,16 +337,7 @@ def _window_class(scene, scene_path, environment, args, initial_method, cache, s
             implot.create_context()
             self.imgui = ModernglWindowRenderer(self.wnd)
             size = self.wnd.buffer_size
-            self.renderer = SceneRenderer(
-                self.ctx,
-                scene,
-                environment,
-                size=size,
-                cube_face_size=args.face_size,
-                cache_dir=cache / "cubes",
-                mirror_scale=args.mirror_scale,
-            )
-            self.renderer.mirrors_enabled = args.mirrors
+            self.renderer = scene_renderer_from_args(self.ctx, scene, environment, size, cache, args)
             self.accumulator = Accumulator(self.ctx, self.renderer.programs, size)  # refinement
             self.realtime = Accumulator(self.ctx, self.renderer.programs, size)  # last moving frame
             self.pending_screenshots: list[str] = []
