@@ -65,10 +65,6 @@ class PlanarReflector:
     box_min: np.ndarray
     box_max: np.ndarray
 
-    @property
-    def normal(self) -> np.ndarray:
-        return self.plane[:3]
-
     def side(self, points) -> np.ndarray:
         """Signed distance of points (..., 3) from the plane (> 0 on the front side)."""
         return np.asarray(points, dtype=np.float64) @ self.plane[:3] + self.plane[3]
@@ -192,6 +188,12 @@ class MirrorCamera:
         return self.projection @ self.view
 
     @property
+    def plain_view_projection(self) -> np.ndarray:
+        """World -> clip with the plain projection: buffer positions (same x, y, w rows as the
+        oblique one) and the environment background."""
+        return self.plain_projection @ self.view
+
+    @property
     def focal_pixels(self) -> float:
         """Pixels per unit of tan(angle) at the image centre (vertical)."""
         return 0.5 * self.size[1] * float(self.plain_projection[1, 1])
@@ -199,7 +201,7 @@ class MirrorCamera:
     def uv(self, points_h: np.ndarray) -> np.ndarray:
         """Buffer coordinates in [0, 1]^2 (v up, OpenGL) of homogeneous world points (..., 4)
         (w = 0: directions, i.e. points at infinity), clamped to the buffer."""
-        clip = np.asarray(points_h, dtype=np.float64) @ (self.plain_projection @ self.view).T
+        clip = np.asarray(points_h, dtype=np.float64) @ self.plain_view_projection.T
         w = np.maximum(clip[..., 3], 1e-6)
         return np.clip(clip[..., :2] / w[..., None] * 0.5 + 0.5, 0.0, 1.0)
 
@@ -295,7 +297,3 @@ def sample_pixels(camera: MirrorCamera, p, wi, hit, normal, solid_angle) -> np.n
     cos_out = np.abs(np.sum(normal * to_hit, axis=-1))
     scale = np.where(at_infinity, 1.0, t * t / cos_in * cos_out / np.maximum(distance, 1e-30) ** 2)
     return angular * scale
-
-
-def mirror_lod(camera: MirrorCamera, p, wi, hit, normal, solid_angle, bias: float) -> np.ndarray:
-    return 0.5 * np.log2(np.maximum(sample_pixels(camera, p, wi, hit, normal, solid_angle), 1e-30)) + bias

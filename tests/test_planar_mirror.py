@@ -65,7 +65,7 @@ def test_oblique_projection_clips_at_the_reflector_and_keeps_pixels():
     points = rng.uniform([-3, -2, -6], [3, 3, 1], size=(4000, 3))
     h = np.c_[points, np.ones(len(points))]
     oblique = h @ mirror.view_projection.T
-    plain = h @ (mirror.plain_projection @ mirror.view).T
+    plain = h @ mirror.plain_view_projection.T
     visible = plain[:, 3] > 0
     # Same pixel positions as the plain projection.
     np.testing.assert_allclose(oblique[visible, :2] / oblique[visible, 3:], plain[visible, :2] / plain[visible, 3:])
@@ -168,12 +168,9 @@ def _buffers(renderer, index=0) -> MirrorBuffers:
 
 
 def _box_meshes():
-    return trimesh.util.concatenate(
-        [
-            trimesh.Trimesh(box_mesh(c, s).positions, box_mesh(c, s).indices.reshape(-1, 3), process=False)
-            for c, s, _ in BOXES
-        ]
-    )
+    """The test scene's boxes: (scene meshes, one trimesh of them for ray casting)."""
+    meshes = [box_mesh(c, s) for c, s, _ in BOXES]
+    return meshes, trimesh.util.concatenate([trimesh.Trimesh(m.positions, m.indices, process=False) for m in meshes])
 
 
 @pytest.fixture(scope="module")
@@ -191,7 +188,7 @@ def test_two_step_projection_finds_the_ray_cast_hit_on_planar_geometry(glossy_fl
     buffers = _buffers(renderer)
     rng = np.random.default_rng(2)
     floor = np.argwhere(result.object_id == 0)
-    boxes = _box_meshes()
+    _, boxes = _box_meshes()
     checked = candidates = own_plane_hits = 0
     for y, x in floor[rng.choice(len(floor), 300, replace=False)]:
         p = result.position[y, x].astype(np.float64)
@@ -261,7 +258,7 @@ def test_filter_footprint_matches_the_projected_cone_area(glossy_floor):
             rim_hit = intersect_tangent_plane(p, rim, surface, np.broadcast_to(normal[0], (64, 3)))
         else:
             rim_hit = np.c_[rim, np.zeros(64)]
-        clip = rim_hit @ (camera.plain_projection @ camera.view).T
+        clip = rim_hit @ camera.plain_view_projection.T
         px = clip[:, :2] / clip[:, 3:] * 0.5 * [width, height]
         area = 0.5 * abs(np.dot(px[:, 0], np.roll(px[:, 1], 1)) - np.dot(px[:, 1], np.roll(px[:, 0], 1)))
         solid_angle = 2 * np.pi * (1 - np.cos(eps))
@@ -323,12 +320,9 @@ def test_sharp_mirror_floor_matches_a_ray_traced_reflection(ctx):
     v = np.asarray(CAMERA.position) - p
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     r = v * [-1, 1, -1]
-    meshes = [box_mesh(c, s) for c, s, _ in BOXES]
-    boxes = trimesh.util.concatenate(
-        [trimesh.Trimesh(m.positions, m.indices.reshape(-1, 3), process=False) for m in meshes]
-    )
+    meshes, boxes = _box_meshes()
     uvs = np.concatenate([m.uvs for m in meshes])
-    faces_per_box = len(meshes[0].indices) // 3 if meshes[0].indices.ndim == 1 else len(meshes[0].indices)
+    faces_per_box = len(meshes[0].indices)
     locations, index_ray, index_tri = boxes.ray.intersects_location(p + 1e-5 * r, r, multiple_hits=False)
     traced = np.full((len(p), 3), GREY)
     edge = np.zeros(len(p), bool)
@@ -363,9 +357,7 @@ def test_sharp_mirror_floor_matches_a_ray_traced_reflection(ctx):
 
 def test_nothing_below_the_reflector_leaks_into_the_mirror_buffer(ctx):
     scene = mirror_floor_scene(0.05)
-    lightmap = scene.materials[1].lightmap
     half_sunk = box_mesh([0.0, 0.0, -0.5], [0.6, 1.0, 0.6])  # half above, half below the floor
-    scene.materials[1].lightmap = lightmap
     scene.objects.append(SceneObject("sunk box", half_sunk, 1, half_sunk.uvs.copy()))
     renderer = _renderer(ctx, scene)
     renderer.render(_camera(), "lobe-3")

@@ -125,6 +125,7 @@ class SceneRenderer(RendererBase):
         self.enabled_reflectors: set | None = None  # None: every reflector of the analysis
         self._mirror_targets: dict[int, _MirrorTargets] = {}
         self._mirror_key = None
+        self._active_mirrors: list[int] = []  # reflectors drawn for _mirror_key
         self._mirror_generation = 0
         self.mirror_report: list[str] = []  # what the last frame's mirror passes did
         self.scene = scene
@@ -336,7 +337,7 @@ class SceneRenderer(RendererBase):
             targets.fbo.use()
             self.ctx.viewport = (0, 0, *size)
             targets.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.draw_background(self.environment, mirror.plain_projection @ mirror.view)
+            self.draw_background(self.environment, mirror.plain_view_projection)
             self._draw_objects(
                 mirror.view_projection,
                 mirror.position,
@@ -370,8 +371,7 @@ class SceneRenderer(RendererBase):
             tex.use(unit)
             set_uniform(program, name, unit)
         set_uniform(program, "u_mirror_view", tuple(mirror.view.T.astype("f4").ravel()))
-        plain = mirror.plain_projection @ mirror.view
-        set_uniform(program, "u_mirror_view_projection", tuple(plain.T.astype("f4").ravel()))
+        set_uniform(program, "u_mirror_view_projection", tuple(mirror.plain_view_projection.T.astype("f4").ravel()))
         set_uniform(program, "u_mirror_eye", tuple(float(x) for x in mirror.position))
         set_uniform(program, "u_mirror_focal_px", float(mirror.focal_pixels))
 
