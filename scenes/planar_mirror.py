@@ -43,7 +43,7 @@ an object keeps its cube map and the scene analysis says why).
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -280,6 +280,66 @@ def project_samples(buffers: MirrorBuffers, p: np.ndarray, wi: np.ndarray, secon
         hit = intersect_tangent_plane(p, wi, surface, normal)
         uv = buffers.camera.uv(hit)
     return uv, hit, normal
+
+
+@dataclass
+class TangentPlaneAverage:
+    """The averaged tangent plane of Fig. 4.46b at one pixel during progressive refinement: the
+    running sums of the hit points and plane normals that the pixel's samples found so far (the
+    shader keeps them in two float targets across passes). The first step of the next sample
+    intersects this plane instead of P_R's, so the projection changes smoothly from pixel to pixel
+    across depth edges instead of jumping with P_R, and blur edges fade softly."""
+
+    point_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    normal_sum: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    count: int = 0
+
+    def plane(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """(point, unit normal) of the averaged plane, None before the first geometry hit or where
+        the normals cancel."""
+        length = np.linalg.norm(self.normal_sum)
+        if self.count == 0 or length < 1e-6:
+            return None
+        return self.point_sum / self.count, self.normal_sum / length
+
+    def add(self, hit: np.ndarray, normal: np.ndarray) -> None:
+        if hit[3] > 0.5:  # the environment has no plane
+            self.point_sum = self.point_sum + hit[:3]
+            self.normal_sum = self.normal_sum + normal
+            self.count += 1
+
+
+def project_samples_averaged(buffers: MirrorBuffers, p: np.ndarray, wi: np.ndarray, average: TangentPlaneAverage):
+    """Progressive refinement's projection (Fig. 4.46b): directions ``wi`` (K, 3) in the order they
+    are taken; the first step of each uses ``average``'s plane (P_R's before the first geometry
+    hit, or where the ray misses it), followed by the second step of project_samples and one more
+    such step, and the plane found last is added to ``average``. The averaged plane lies further
+    from the true hit than P_R's near depth edges; measured against a ray tracer (``lobeview bench
+    --mirrors``), averaging lowers the error of rough floors only with the third step. Returns
+    (uv (K, 2), hit (K, 4), normal (K, 3))."""
+    p = np.asarray(p, dtype=np.float64)
+    wi = np.asarray(wi, dtype=np.float64).reshape(-1, 3)
+    own_y, own_x = buffers.texel(buffers.camera.uv(np.append(p, 1.0)))
+    uvs, hits, normals = [], [], []
+    for direction in wi:
+        hit = None
+        plane = average.plane()
+        if plane is not None:
+            point, normal = plane
+            hit = intersect_tangent_plane(p, direction, np.append(point, 1.0), normal)
+            if hit[3] < 0.5:
+                hit = None  # parallel or behind: P_R's plane as without averaging
+        if hit is None:
+            hit = intersect_tangent_plane(p, direction, buffers.position[own_y, own_x], buffers.normal[own_y, own_x])
+        for _ in range(2):  # the second step of project_samples, then a third (see the docstring)
+            y, x = buffers.texel(buffers.camera.uv(hit))
+            normal = buffers.normal[y, x]
+            hit = intersect_tangent_plane(p, direction, buffers.position[y, x], normal)
+        average.add(hit, normal)
+        uvs.append(buffers.camera.uv(hit))
+        hits.append(hit)
+        normals.append(normal)
+    return np.array(uvs), np.array(hits), np.array(normals)
 
 
 def sample_pixels(camera: MirrorCamera, p, wi, hit, normal, solid_angle) -> np.ndarray:

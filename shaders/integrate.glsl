@@ -169,23 +169,64 @@ ivec2 mirror_texel(vec2 uv) {
     return clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1);
 }
 
+// Hit of p + t wi with the plane through `point` with `normal` (homogeneous; w = 0: missed).
+vec4 plane_hit(vec3 p, vec3 wi, vec3 point, vec3 normal) {
+    float denom = dot(wi, normal);
+    if (abs(denom) < 1e-6) return vec4(wi, 0.0);
+    float t = dot(point - p, normal) / denom;
+    return t > 0.0 ? vec4(p + t * wi, 1.0) : vec4(wi, 0.0);
+}
+
 // Hit of p + t wi with the tangent plane stored at `texel` (homogeneous; w = 0: the environment).
 vec4 mirror_tangent_hit(vec3 p, vec3 wi, ivec2 texel, out vec3 normal) {
     vec4 surface = texelFetch(u_mirror_position, texel, 0);
     normal = texelFetch(u_mirror_normal, texel, 0).xyz;
-    float denom = dot(wi, normal);
-    if (surface.w < 0.5 || abs(denom) < 1e-6) return vec4(wi, 0.0);
-    float t = dot(surface.xyz - p, normal) / denom;
-    return t > 0.0 ? vec4(p + t * wi, 1.0) : vec4(wi, 0.0);
+    return surface.w < 0.5 ? vec4(wi, 0.0) : plane_hit(p, wi, surface.xyz, normal);
 }
+
+#if defined(PLANE_AVERAGE)
+// Progressive refinement (Fig. 4.46b; planar_mirror.TangentPlaneAverage): the hit points and
+// plane normals found by all earlier samples of this pixel are summed, across passes through two
+// float targets, and the next sample's first step intersects their average plane instead of P_R's.
+uniform sampler2D u_plane_point_state;   // the previous pass: sum of hit points (xyz), count (w)
+uniform sampler2D u_plane_normal_state;  // the previous pass: sum of plane normals (xyz)
+vec4 g_plane_point_sum = vec4(0.0);
+vec3 g_plane_normal_sum = vec3(0.0);
+
+void plane_average_load() {
+    if (u_sample_offset > 0) {  // the first pass starts afresh
+        ivec2 pixel = ivec2(gl_FragCoord.xy);
+        g_plane_point_sum = texelFetch(u_plane_point_state, pixel, 0);
+        g_plane_normal_sum = texelFetch(u_plane_normal_state, pixel, 0).xyz;
+    }
+}
+#endif
 
 vec3 mirror_incident(vec3 wi, float solid_angle) {
     vec3 p = g_shading_position;
     vec3 normal;
-    vec4 hit = mirror_tangent_hit(p, wi, mirror_texel(mirror_uv(vec4(p, 1.0))), normal);  // P_R's plane
+    vec4 hit = vec4(0.0);
+#if defined(PLANE_AVERAGE)
+    float normal_length = length(g_plane_normal_sum);
+    if (g_plane_point_sum.w > 0.5 && normal_length >= 1e-6)
+        hit = plane_hit(p, wi, g_plane_point_sum.xyz / g_plane_point_sum.w, g_plane_normal_sum / normal_length);
+#endif
+    if (hit.w < 0.5) hit = mirror_tangent_hit(p, wi, mirror_texel(mirror_uv(vec4(p, 1.0))), normal);  // P_R's plane
     vec2 uv = mirror_uv(hit);
     hit = mirror_tangent_hit(p, wi, mirror_texel(uv), normal);  // second step: the plane seen there
     uv = mirror_uv(hit);
+#if defined(PLANE_AVERAGE)
+    // A third step: the averaged plane lands further from the true hit than P_R's near depth edges;
+    // measured against a ray tracer (bench --mirrors) averaging helps only with this step.
+    hit = mirror_tangent_hit(p, wi, mirror_texel(uv), normal);
+    uv = mirror_uv(hit);
+#endif
+#if defined(PLANE_AVERAGE)
+    if (hit.w > 0.5) {
+        g_plane_point_sum += vec4(hit.xyz, 1.0);
+        g_plane_normal_sum += normal;
+    }
+#endif
     float lod = 0.0;
     if (solid_angle > 0.0) {
         // The sample's solid angle in buffer pixels through the tangent plane (planar_mirror.py).

@@ -24,10 +24,17 @@ layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_position;
 layout(location = 2) out vec4 out_normal;
 layout(location = 3) out vec4 out_tangent;
+#if defined(PLANE_AVERAGE)
+layout(location = 4) out vec4 out_plane_point;   // averaged tangent plane state (integrate.glsl)
+layout(location = 5) out vec4 out_plane_normal;
+#endif
 
 void main() {
 #if defined(PARALLAX) || defined(MIRROR)
     g_shading_position = v_position;
+#endif
+#if defined(PLANE_AVERAGE)
+    plane_average_load();
 #endif
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));
     mat3 tbn = shading_frame(v_normal, v_tangent, geometric_normal);
@@ -51,4 +58,8 @@ void main() {
     out_position = vec4(v_position, 1.0);
     out_normal = vec4(tbn[2], u_object_id + 1.0);
     out_tangent = vec4(tbn[0], 1.0);
+#if defined(PLANE_AVERAGE)
+    out_plane_point = g_plane_point_sum;
+    out_plane_normal = vec4(g_plane_normal_sum, 0.0);
+#endif
 }

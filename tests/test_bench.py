@@ -177,7 +177,13 @@ def test_mirror_bench_times_0_1_2_reflectors_and_writes_the_figure(tmp_path):
     mirror_ms = [float(row.split("|")[3]) for row in rows]
     assert mirror_ms[0] < mirror_ms[1] and mirror_ms[0] < mirror_ms[2]
     assert "| lobe-3 |" in text and " dB |" in text
-    figure = Image.open(next(tmp_path.glob("mirrors-*.png")))
+    # Refinement against the ray tracer: one row per floor roughness, errors finite and positive.
+    refinement = [line.split("|") for line in text.splitlines() if line.startswith(("| 0.05 |", "| 0.15 |", "| 0.3 |"))]
+    assert len(refinement) == 3
+    assert all(0.0 < float(cell) < 1.0 for row in refinement for cell in row[2:5]), refinement
+    pair = Image.open(next(tmp_path.glob("mirrors-*-refinement.png")))
+    assert pair.size == (3 * 160 + 8, 100)
+    figure = Image.open(next(p for p in tmp_path.glob("mirrors-*.png") if "refinement" not in p.name))
     assert figure.size == (3 * 320 + 8, 200)
     pixels = np.asarray(figure, dtype=np.float64)
     assert pixels.std() > 10.0  # an image, not a flat fill

@@ -73,6 +73,7 @@ class _GpuObject:
 
 
 MIRROR_UNITS = (24, 25, 26)  # texture units of the mirror buffer: radiance, position, normal
+PLANE_STATE_UNITS = (27, 28)  # the previous pass's averaged-tangent-plane sums (points, normals)
 
 
 class _MirrorTargets:
@@ -121,6 +122,9 @@ class SceneRenderer(RendererBase):
         # in it from their cube maps (lobe-3) instead of the thesis' diffuse-only mirror pass.
         self.mirror_scale = float(mirror_scale)
         self.mirror_specular = bool(mirror_specular)
+        # Refinement (mc-N, reference) on reflectors averages the tangent planes its samples found
+        # at each pixel (Fig. 4.46b); False gives the plain two-step projection (for comparison).
+        self.mirror_plane_average = True
         self.mirrors_enabled = True
         self.enabled_reflectors: set | None = None  # None: every reflector of the analysis
         self._mirror_targets: dict[int, _MirrorTargets] = {}
@@ -165,6 +169,23 @@ class SceneRenderer(RendererBase):
         self.timings["cube maps"] = time.perf_counter() - t0
 
     # -- resources -------------------------------------------------------------------------
+    def resize(self, size):
+        """The frame targets of RendererBase plus two pairs of averaged-tangent-plane state targets
+        (Fig. 4.46b) and one framebuffer per pair: each pass writes one pair and reads the pair the
+        previous pass wrote (draw_frame alternates ``self.fbo``)."""
+        for item in getattr(self, "_frame_fbos", []) + getattr(self, "_plane_states", []):
+            item.release()
+        super().resize(size)
+        self.fbo.release()
+        self._plane_states = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(4)]
+        self._frame_fbos = [
+            self.ctx.framebuffer(color_attachments=[*self.targets, *self._plane_states[2 * k : 2 * k + 2]],
+                                 depth_attachment=self.depth)
+            for k in range(2)
+        ]  # fmt: skip
+        self._frame_parity = 0
+        self.fbo = self._frame_fbos[0]
+
     def _texture(self, image: np.ndarray) -> moderngl.Texture:
         key = id(image)
         if key not in self.textures:
@@ -271,7 +292,8 @@ class SceneRenderer(RendererBase):
         if specular and mirror:
             # Incident light from the mirror buffer; the cube's importance map does not apply, so
             # the reference samples the BSDF only (still unbiased for what the buffer holds).
-            defines.update(MIRROR=True, ENV_SAMPLING=False)
+            refinement = method.kind in ("mc", "reference") and self.mirror_plane_average
+            defines.update(MIRROR=True, ENV_SAMPLING=False, PLANE_AVERAGE=refinement)
         elif specular and parallax:
             # The cube's importance map samples directions seen from its centre, which the proxy
             # remaps: the reference then samples the BSDF only (still unbiased).
@@ -374,6 +396,13 @@ class SceneRenderer(RendererBase):
         set_uniform(program, "u_mirror_view_projection", tuple(mirror.plain_view_projection.T.astype("f4").ravel()))
         set_uniform(program, "u_mirror_eye", tuple(float(x) for x in mirror.position))
         set_uniform(program, "u_mirror_focal_px", float(mirror.focal_pixels))
+        if "u_plane_point_state" in program:
+            previous = self._plane_states[2 * (1 - self._frame_parity) : 2 * (1 - self._frame_parity) + 2]
+            for unit, name, tex in zip(
+                PLANE_STATE_UNITS, ("u_plane_point_state", "u_plane_normal_state"), previous, strict=True
+            ):
+                tex.use(unit)
+                set_uniform(program, name, unit)
 
     def set_reflection_proxy(self, index: int, proxy) -> None:
         """Reflected-geometry correction for object ``index`` (scenes/reflection_proxy.py; None:
@@ -478,6 +507,9 @@ class SceneRenderer(RendererBase):
         mirrors = self.render_mirror_passes(camera) if method.kind != "prefiltered" else {}
         if method.kind == "prefiltered":
             self.mirror_report = [f"{self.objects[i].name}: cube map (prefiltered method)" for i in self.reflectors()]
+        # Alternate the framebuffers: this pass writes the plane-state pair the next one reads.
+        self._frame_parity = 1 - self._frame_parity
+        self.fbo = self._frame_fbos[self._frame_parity]
         self.fbo.use()
         self.ctx.viewport = (0, 0, width, height)
         self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -574,6 +606,8 @@ class SceneRenderer(RendererBase):
         super().release()
         for targets in self._mirror_targets.values():
             targets.release()
+        for item in self._plane_states + [f for f in self._frame_fbos if f is not self.fbo]:
+            item.release()  # RendererBase released self.fbo
         for obj in self.objects:
             obj.release()
         for tex in self.textures.values():
