@@ -63,6 +63,33 @@ def mirror_floor_scene(roughness: float = 0.002, extra_reflector: bool = False) 
     return Scene(objects, materials, [CAMERA], "mirror floor")
 
 
+PANE_Z = 0.6  # the glass pane of pane_scene: a vertical quad between the camera and the boxes
+
+
+def pane_material(roughness: float, r0: float = 0.0, reflection: bool = False) -> dict:
+    """A thin pane: one thesis transmission lobe (kt = 1) of Beckmann roughness ``roughness``,
+    optionally with the matching reflection lobe."""
+    lobe = {"mx": roughness, "my": roughness, "r0": r0, "alpha": 0.0}
+    desc = {"model": "thesis", "kd": 0.0, "lobes": [], "transmission_lobes": [{"kt": 1.0, **lobe}]}
+    if reflection:
+        desc["lobes"] = [{"ks": 1.0, **lobe}]
+    return validate(desc)
+
+
+def pane_scene(roughness: float = 0.002, reflection: bool = False) -> Scene:
+    """The boxes on a diffuse floor behind a vertical glass pane (3 m x 2 m at z = PANE_Z, a
+    planar reflector with a see-through pass by automatic detection)."""
+    scene = mirror_floor_scene()
+    scene.materials[0].desc = validate({"model": "thesis", "kd": 0.6, "lobes": []})
+    pane = quad([-1.5, 0.0, PANE_Z], [3.0, 0.0, 0.0], [0.0, 2.0, 0.0])
+    lightmap = scene.materials[0].lightmap
+    scene.materials.append(SceneMaterial("pane", pane_material(roughness, reflection=reflection), lightmap=lightmap,
+                                         double_sided=True))  # fmt: skip
+    scene.objects.append(SceneObject("pane", pane, len(scene.materials) - 1, pane.uvs.copy()))
+    scene.name = "glass pane"
+    return scene
+
+
 def trace_boxes(origins: np.ndarray, directions: np.ndarray, background: float) -> np.ndarray:
     """Ray-traced radiance of the scene's boxes (trimesh, Embree where installed): the light-mapped
     radiance of the face hit (kd 1 x checker texel, E = pi), ``background`` where a ray misses

@@ -33,17 +33,24 @@ The mirror camera uses an oblique near plane (Lengyel 2005) equal to the reflect
 nothing behind the reflector leaks into the buffer.
 
 Which objects are planar reflectors: node ``extras.lobeview.planar_reflector`` = true (force:
-any planar mesh with a reflection lobe), false (never) or "auto" (default): the mesh lies in a
-plane within PLANAR_TOLERANCE of the scene size, has reflection lobes and no transmission, spans
+any planar mesh with view-dependent lobes), false (never) or "auto" (default): the mesh lies in a
+plane within PLANAR_TOLERANCE of the scene size, spans
 at least MIN_REFLECTOR_FRACTION of the scene's diagonal, and its lobes are no wider than
 MAX_MIRROR_ROUGHNESS (wider lobes reach geometry the mirror camera does not see, Fig. 4.27: such
 an object keeps its cube map and the scene analysis says why).
+
+Transmission lobes of a thin pane (the thesis' Kurt transmission, Eq. 3.5: the transmitted
+direction is the reflected one mirrored through the plane) read a second, *see-through* buffer:
+the scene behind the plane rendered from the camera itself with the same oblique near plane. The
+straight-through direction of P then reads P's own pixel, and other directions go through the same
+two-step projection. The thesis renders only reflections this way; this is the same construction
+with the identity in place of the reflection.
 """
 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -59,11 +66,20 @@ class ReflectorError(ValueError):
 @dataclass(frozen=True)
 class PlanarReflector:
     """A planar reflector: its plane n.x + d = 0 with n toward the side it is seen from (the
-    mean of the mesh normals), and its bounding box for frustum culling."""
+    mean of the mesh normals), its bounding box for frustum culling, and which buffers its lobes
+    read: the mirror buffer (reflection lobes) and the see-through buffer (transmission lobes of
+    a thin pane: the scene behind the plane, rendered from the camera itself)."""
 
     plane: np.ndarray  # (4,)
     box_min: np.ndarray
     box_max: np.ndarray
+    reflection: bool = True
+    transmission: bool = False
+
+    @property
+    def passes(self) -> tuple[str, ...]:
+        """The buffers drawn for it each frame: 'mirror' and/or 'see-through'."""
+        return ("mirror",) * self.reflection + ("see-through",) * self.transmission
 
     def side(self, points) -> np.ndarray:
         """Signed distance of points (..., 3) from the plane (> 0 on the front side)."""
@@ -128,23 +144,25 @@ def reflector_decision(mesh, lobes, scene_diagonal: float, mode="auto") -> tuple
     view-dependent lobes (materials.patterns.specular_lobes)."""
     if mode is False:
         return None, "off (extras)"
-    reflection = [lobe for lobe in lobes if not getattr(lobe, "transmission", False)]
-    if not reflection:
+    if not lobes:
         return None, "-"
     reflector = planar_reflector(mesh, scene_diagonal)
     if reflector is None:
         return None, "no: not planar" if mode is True else "-"
-    if len(reflection) < len(lobes):
-        return None, "no: transmission lobes need the cube map"
+    transmission = any(getattr(lobe, "transmission", False) for lobe in lobes)
+    reflector = replace(
+        reflector, reflection=any(not getattr(lobe, "transmission", False) for lobe in lobes), transmission=transmission
+    )
+    what = " + ".join(f"{name} pass" for name in reflector.passes)
     if mode is True:
-        return reflector, "mirror pass (extras)"
+        return reflector, f"{what} (extras)"
     diagonal = float(np.linalg.norm(reflector.box_max - reflector.box_min))
     if diagonal < MIN_REFLECTOR_FRACTION * scene_diagonal:
         return None, f"no: small plane ({diagonal:.2f} m < {MIN_REFLECTOR_FRACTION:g} x scene)"
-    widest = max(max(lobe.distribution.alpha_x, lobe.distribution.alpha_y) for lobe in reflection)
+    widest = max(max(lobe.distribution.alpha_x, lobe.distribution.alpha_y) for lobe in lobes)
     if widest > MAX_MIRROR_ROUGHNESS:
         return None, f"cube map: lobes too wide for a mirror pass (roughness {widest:.2f} > {MAX_MIRROR_ROUGHNESS:g})"
-    return reflector, "mirror pass"
+    return reflector, what
 
 
 # -- the mirror camera ---------------------------------------------------------------------------
@@ -206,11 +224,18 @@ class MirrorCamera:
         return np.clip(clip[..., :2] / w[..., None] * 0.5 + 0.5, 0.0, 1.0)
 
 
-def mirror_camera(view: np.ndarray, projection: np.ndarray, reflector: PlanarReflector, size) -> MirrorCamera:
-    r = reflector.reflection_matrix()
+def mirror_camera(
+    view: np.ndarray, projection: np.ndarray, reflector: PlanarReflector, size, see_through: bool = False
+) -> MirrorCamera:
+    """The mirrored camera of the reflector, or with ``see_through`` the camera itself: the
+    see-through buffer of a transmitting pane holds the scene behind the plane as the camera sees
+    it, so a thin pane's straight-through direction reads the pixel under P, as the mirror direction
+    does in the mirror buffer. Either way the plane is the oblique near plane, oriented so that the
+    camera's side of it is cut away."""
+    r = np.eye(4) if see_through else reflector.reflection_matrix()
     mirror_view = np.asarray(view, dtype=np.float64) @ r
-    # The reflector's plane in the mirror eye space, oriented so the mirror camera (behind the
-    # plane) is on its negative side: plane_eye = inverse(view)^T plane_world.
+    # The reflector's plane in the buffer camera's eye space, oriented so that camera is on its
+    # negative side: plane_eye = inverse(view)^T plane_world.
     plane_eye = np.linalg.inv(mirror_view).T @ reflector.plane
     if plane_eye[3] > 0.0:
         plane_eye = -plane_eye

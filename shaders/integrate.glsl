@@ -148,9 +148,13 @@ vec3 lookup(vec3 dir_world, float lod) { return textureLod(u_radiance, dir_world
 #endif
 
 #if defined(MIRROR)
-// Planar reflector (thesis 4.5; numpy reference scenes/planar_mirror.py): incident light from the
-// mirror buffer rendered this frame from the mirrored camera, each direction mapped into it by the
-// two-step tangent-plane projection of 4.5.2 and filtered by its share of the lobe (4.5.3).
+// Planar reflector (thesis 4.5; numpy reference scenes/planar_mirror.py): incident light from
+// buffers rendered this frame, the mirror buffer (from the mirrored camera: reflection lobes) and
+// the see-through buffer (from the camera itself, the scene behind the plane: transmission lobes
+// of a thin pane). Each direction is mapped into its buffer by the two-step tangent-plane
+// projection of 4.5.2 and filtered by its share of the lobe (4.5.3).
+uniform vec3 u_mirror_front;           // the plane's normal on the camera's side
+uniform int u_mirror_sides;            // bit 0: mirror buffer bound, bit 1: see-through buffer bound
 uniform sampler2D u_mirror_radiance;   // MIP chain rebuilt every frame
 uniform sampler2D u_mirror_position;   // xyz world, w: 1 geometry, 0 environment
 uniform sampler2D u_mirror_normal;
@@ -158,14 +162,21 @@ uniform mat4 u_mirror_view;            // world -> mirror eye (camera view x ref
 uniform mat4 u_mirror_view_projection; // with the plain (not oblique) projection: x, y, w rows
 uniform vec3 u_mirror_eye;             // mirrored camera position C'
 uniform float u_mirror_focal_px;       // (H / 2) / tan(fov_y / 2) of the buffer
+uniform sampler2D u_through_radiance;  // the see-through buffer, same layout
+uniform sampler2D u_through_position;
+uniform sampler2D u_through_normal;
+uniform mat4 u_through_view;
+uniform mat4 u_through_view_projection;
+uniform vec3 u_through_eye;
+uniform float u_through_focal_px;
 
-vec2 mirror_uv(vec4 point) {
-    vec4 clip = u_mirror_view_projection * point;
+vec2 buffer_uv(mat4 view_projection, vec4 point) {
+    vec4 clip = view_projection * point;
     return clamp(clip.xy / max(clip.w, 1e-6) * 0.5 + 0.5, 0.0, 1.0);
 }
 
-ivec2 mirror_texel(vec2 uv) {
-    ivec2 size = textureSize(u_mirror_position, 0);
+ivec2 buffer_texel(sampler2D position_tex, vec2 uv) {
+    ivec2 size = textureSize(position_tex, 0);
     return clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1);
 }
 
@@ -178,70 +189,88 @@ vec4 plane_hit(vec3 p, vec3 wi, vec3 point, vec3 normal) {
 }
 
 // Hit of p + t wi with the tangent plane stored at `texel` (homogeneous; w = 0: the environment).
-vec4 mirror_tangent_hit(vec3 p, vec3 wi, ivec2 texel, out vec3 normal) {
-    vec4 surface = texelFetch(u_mirror_position, texel, 0);
-    normal = texelFetch(u_mirror_normal, texel, 0).xyz;
+vec4 buffer_tangent_hit(sampler2D position_tex, sampler2D normal_tex, vec3 p, vec3 wi, ivec2 texel, out vec3 normal) {
+    vec4 surface = texelFetch(position_tex, texel, 0);
+    normal = texelFetch(normal_tex, texel, 0).xyz;
     return surface.w < 0.5 ? vec4(wi, 0.0) : plane_hit(p, wi, surface.xyz, normal);
 }
 
+// Running sums of the planes found at this pixel, per buffer (0 mirror, 1 see-through).
+vec4 g_plane_point_sum[2] = vec4[2](vec4(0.0), vec4(0.0));
+vec3 g_plane_normal_sum[2] = vec3[2](vec3(0.0), vec3(0.0));
+
 #if defined(PLANE_AVERAGE)
 // Progressive refinement (Fig. 4.46b; planar_mirror.TangentPlaneAverage): the hit points and
-// plane normals found by all earlier samples of this pixel are summed, across passes through two
+// plane normals found by all earlier samples of this pixel are summed, across passes through four
 // float targets, and the next sample's first step intersects their average plane instead of P_R's.
-uniform sampler2D u_plane_point_state;   // the previous pass: sum of hit points (xyz), count (w)
-uniform sampler2D u_plane_normal_state;  // the previous pass: sum of plane normals (xyz)
-vec4 g_plane_point_sum = vec4(0.0);
-vec3 g_plane_normal_sum = vec3(0.0);
+uniform sampler2D u_plane_point_state[2];   // the previous pass: sum of hit points (xyz), count (w)
+uniform sampler2D u_plane_normal_state[2];  // the previous pass: sum of plane normals (xyz)
 
 void plane_average_load() {
     if (u_sample_offset > 0) {  // the first pass starts afresh
         ivec2 pixel = ivec2(gl_FragCoord.xy);
-        g_plane_point_sum = texelFetch(u_plane_point_state, pixel, 0);
-        g_plane_normal_sum = texelFetch(u_plane_normal_state, pixel, 0).xyz;
+        for (int side = 0; side < 2; ++side) {
+            g_plane_point_sum[side] = texelFetch(u_plane_point_state[side], pixel, 0);
+            g_plane_normal_sum[side] = texelFetch(u_plane_normal_state[side], pixel, 0).xyz;
+        }
     }
 }
 #endif
 
-vec3 mirror_incident(vec3 wi, float solid_angle) {
+vec3 buffer_incident(sampler2D radiance_tex, sampler2D position_tex, sampler2D normal_tex, mat4 view,
+                     mat4 view_projection, vec3 eye, float focal_px, int side, vec3 wi, float solid_angle) {
     vec3 p = g_shading_position;
     vec3 normal;
     vec4 hit = vec4(0.0);
 #if defined(PLANE_AVERAGE)
-    float normal_length = length(g_plane_normal_sum);
-    if (g_plane_point_sum.w > 0.5 && normal_length >= 1e-6)
-        hit = plane_hit(p, wi, g_plane_point_sum.xyz / g_plane_point_sum.w, g_plane_normal_sum / normal_length);
+    float normal_length = length(g_plane_normal_sum[side]);
+    if (g_plane_point_sum[side].w > 0.5 && normal_length >= 1e-6)
+        hit = plane_hit(p, wi, g_plane_point_sum[side].xyz / g_plane_point_sum[side].w,
+                        g_plane_normal_sum[side] / normal_length);
 #endif
-    if (hit.w < 0.5) hit = mirror_tangent_hit(p, wi, mirror_texel(mirror_uv(vec4(p, 1.0))), normal);  // P_R's plane
-    vec2 uv = mirror_uv(hit);
-    hit = mirror_tangent_hit(p, wi, mirror_texel(uv), normal);  // second step: the plane seen there
-    uv = mirror_uv(hit);
+    if (hit.w < 0.5)  // P_R's plane: what the buffer shows at P's own position
+        hit = buffer_tangent_hit(position_tex, normal_tex, p, wi,
+                                 buffer_texel(position_tex, buffer_uv(view_projection, vec4(p, 1.0))), normal);
+    vec2 uv = buffer_uv(view_projection, hit);
+    // Second step: the plane seen there.
+    hit = buffer_tangent_hit(position_tex, normal_tex, p, wi, buffer_texel(position_tex, uv), normal);
+    uv = buffer_uv(view_projection, hit);
 #if defined(PLANE_AVERAGE)
     // A third step: the averaged plane lands further from the true hit than P_R's near depth edges;
     // measured against a ray tracer (bench --mirrors) averaging helps only with this step.
-    hit = mirror_tangent_hit(p, wi, mirror_texel(uv), normal);
-    uv = mirror_uv(hit);
-#endif
-#if defined(PLANE_AVERAGE)
+    hit = buffer_tangent_hit(position_tex, normal_tex, p, wi, buffer_texel(position_tex, uv), normal);
+    uv = buffer_uv(view_projection, hit);
     if (hit.w > 0.5) {
-        g_plane_point_sum += vec4(hit.xyz, 1.0);
-        g_plane_normal_sum += normal;
+        g_plane_point_sum[side] += vec4(hit.xyz, 1.0);
+        g_plane_normal_sum[side] += normal;
     }
 #endif
     float lod = 0.0;
     if (solid_angle > 0.0) {
         // The sample's solid angle in buffer pixels through the tangent plane (planar_mirror.py).
-        vec4 eye = u_mirror_view * hit;
-        float distance = length(eye.xyz);
-        float cos_alpha = max(-eye.z / max(distance, 1e-30), 1e-3);
-        float pixels = solid_angle * u_mirror_focal_px * u_mirror_focal_px / (cos_alpha * cos_alpha * cos_alpha);
+        vec4 eye_point = view * hit;
+        float distance = length(eye_point.xyz);
+        float cos_alpha = max(-eye_point.z / max(distance, 1e-30), 1e-3);
+        float pixels = solid_angle * focal_px * focal_px / (cos_alpha * cos_alpha * cos_alpha);
         if (hit.w > 0.5) {
             float t = length(hit.xyz - p);
-            vec3 to_hit = (hit.xyz - u_mirror_eye) / max(distance, 1e-30);
+            vec3 to_hit = (hit.xyz - eye) / max(distance, 1e-30);
             pixels *= t * t / max(abs(dot(normal, wi)), 1e-3) * abs(dot(normal, to_hit)) / max(distance * distance, 1e-30);
         }
         lod = 0.5 * log2(max(pixels, 1e-30)) + u_lod_bias;
     }
-    return textureLod(u_mirror_radiance, uv, max(lod, 0.0)).rgb;
+    return textureLod(radiance_tex, uv, max(lod, 0.0)).rgb;
+}
+
+vec3 mirror_incident(vec3 wi, float solid_angle) {
+    if (dot(wi, u_mirror_front) >= 0.0) {
+        if ((u_mirror_sides & 1) == 0) return vec3(0.0);
+        return buffer_incident(u_mirror_radiance, u_mirror_position, u_mirror_normal, u_mirror_view,
+                               u_mirror_view_projection, u_mirror_eye, u_mirror_focal_px, 0, wi, solid_angle);
+    }
+    if ((u_mirror_sides & 2) == 0) return vec3(0.0);
+    return buffer_incident(u_through_radiance, u_through_position, u_through_normal, u_through_view,
+                           u_through_view_projection, u_through_eye, u_through_focal_px, 1, wi, solid_angle);
 }
 #endif
 

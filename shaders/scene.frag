@@ -25,8 +25,8 @@ layout(location = 1) out vec4 out_position;
 layout(location = 2) out vec4 out_normal;
 layout(location = 3) out vec4 out_tangent;
 #if defined(PLANE_AVERAGE)
-layout(location = 4) out vec4 out_plane_point;   // averaged tangent plane state (integrate.glsl)
-layout(location = 5) out vec4 out_plane_normal;
+layout(location = 4) out vec4 out_plane_point[2];   // averaged tangent planes (integrate.glsl), 4-5
+layout(location = 6) out vec4 out_plane_normal[2];  // 6-7
 #endif
 
 void main() {
@@ -59,7 +59,9 @@ void main() {
     out_normal = vec4(tbn[2], u_object_id + 1.0);
     out_tangent = vec4(tbn[0], 1.0);
 #if defined(PLANE_AVERAGE)
-    out_plane_point = g_plane_point_sum;
-    out_plane_normal = vec4(g_plane_normal_sum, 0.0);
+    for (int side = 0; side < 2; ++side) {
+        out_plane_point[side] = g_plane_point_sum[side];
+        out_plane_normal[side] = vec4(g_plane_normal_sum[side], 0.0);
+    }
 #endif
 }

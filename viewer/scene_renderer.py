@@ -72,8 +72,10 @@ class _GpuObject:
             self.cube.release()
 
 
-MIRROR_UNITS = (24, 25, 26)  # texture units of the mirror buffer: radiance, position, normal
-PLANE_STATE_UNITS = (27, 28)  # the previous pass's averaged-tangent-plane sums (points, normals)
+# Texture units of the mirror and see-through buffers (radiance, position, normal) and of the
+# previous pass's averaged-tangent-plane sums (points and normals per buffer).
+BUFFER_UNITS = {"mirror": (24, 25, 26), "see-through": (27, 28, 29)}
+PLANE_STATE_UNITS = (30, 31, 32, 33)
 
 
 class _MirrorTargets:
@@ -129,7 +131,7 @@ class SceneRenderer(RendererBase):
         self.enabled_reflectors: set | None = None  # None: every reflector of the analysis
         self._mirror_targets: dict[int, _MirrorTargets] = {}
         self._mirror_key = None
-        self._active_mirrors: list[int] = []  # reflectors drawn for _mirror_key
+        self._active_mirrors: dict = {}  # index -> {kind: targets} drawn for _mirror_key
         self._mirror_generation = 0
         self.mirror_report: list[str] = []  # what the last frame's mirror passes did
         self.scene = scene
@@ -170,16 +172,17 @@ class SceneRenderer(RendererBase):
 
     # -- resources -------------------------------------------------------------------------
     def resize(self, size):
-        """The frame targets of RendererBase plus two pairs of averaged-tangent-plane state targets
-        (Fig. 4.46b) and one framebuffer per pair: each pass writes one pair and reads the pair the
+        """The frame targets of RendererBase plus two sets of averaged-tangent-plane state targets
+        (Fig. 4.46b) and one framebuffer per set: each pass writes one set and reads the set the
         previous pass wrote (draw_frame alternates ``self.fbo``)."""
         for item in getattr(self, "_frame_fbos", []) + getattr(self, "_plane_states", []):
             item.release()
         super().resize(size)
         self.fbo.release()
-        self._plane_states = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(4)]
+        # Per set: point sums (mirror, see-through), normal sums (mirror, see-through): locations 4-7.
+        self._plane_states = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(8)]
         self._frame_fbos = [
-            self.ctx.framebuffer(color_attachments=[*self.targets, *self._plane_states[2 * k : 2 * k + 2]],
+            self.ctx.framebuffer(color_attachments=[*self.targets, *self._plane_states[4 * k : 4 * k + 4]],
                                  depth_attachment=self.depth)
             for k in range(2)
         ]  # fmt: skip
@@ -316,9 +319,10 @@ class SceneRenderer(RendererBase):
 
     @staticmethod
     def mirror_skip_reason(reflector, camera: Camera, view_proj: np.ndarray) -> str | None:
-        """Why a reflector needs no mirror pass this frame (None: it needs one): the camera is
-        behind its plane, or its bounding box lies outside the view frustum."""
-        if reflector.side(np.asarray(camera.position, dtype=np.float64)) <= 1e-6:
+        """Why a reflector needs no buffers this frame (None: it needs them): the camera is behind
+        its plane (a reflector that transmits is seen from both sides), or its bounding box lies
+        outside the view frustum."""
+        if not reflector.transmission and reflector.side(np.asarray(camera.position, dtype=np.float64)) <= 1e-6:
             return "seen from behind"
         clip = np.c_[reflector.corners(), np.ones(8)] @ view_proj.T
         w = clip[:, 3:4]
@@ -328,8 +332,9 @@ class SceneRenderer(RendererBase):
         return None
 
     def render_mirror_passes(self, camera: Camera) -> dict:
-        """Mirror buffers of the reflectors that need one for ``camera`` (index -> targets);
-        reused while the camera, the size and the materials stay the same (refinement passes)."""
+        """The buffers of the reflectors that need them for ``camera`` (index -> {'mirror' and/or
+        'see-through': targets}); reused while the camera, the size and the materials stay the same
+        (refinement passes)."""
         from lobeview.scenes.planar_mirror import mirror_camera
 
         width, height = self.size
@@ -340,8 +345,8 @@ class SceneRenderer(RendererBase):
             self.size, self.mirror_scale, self.mirror_specular, tuple(sorted(reflectors)), self._mirror_generation,
         )  # fmt: skip
         if key == self._mirror_key:
-            return {i: self._mirror_targets[i] for i in self._active_mirrors}
-        report, active = [], []
+            return self._active_mirrors
+        report, active = [], {}
         size = self.mirror_size()
         projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
         for index, reflector in reflectors.items():
@@ -350,59 +355,65 @@ class SceneRenderer(RendererBase):
             if reason is not None:
                 report.append(f"{name}: no mirror pass ({reason})")
                 continue
-            targets = self._mirror_targets.get(index)
-            if targets is None or targets.size != size:
-                if targets is not None:
-                    targets.release()
-                targets = self._mirror_targets[index] = _MirrorTargets(self.ctx, size)
-            mirror = mirror_camera(camera.view(), projection, reflector, size)
-            targets.fbo.use()
-            self.ctx.viewport = (0, 0, *size)
-            targets.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-            self.draw_background(self.environment, mirror.plain_view_projection)
-            self._draw_objects(
-                mirror.view_projection,
-                mirror.position,
-                MIRROR_BOUNCE_METHOD,
-                specular=self.mirror_specular,
-                exclude=index,
-            )
-            targets.radiance.build_mipmaps()
-            targets.camera = mirror
-            active.append(index)
-            report.append(f"{name}: mirror pass {size[0]}x{size[1]}")
+            active[index] = {}
+            for kind in reflector.passes:
+                targets = self._mirror_targets.get((index, kind))
+                if targets is None or targets.size != size:
+                    if targets is not None:
+                        targets.release()
+                    targets = self._mirror_targets[(index, kind)] = _MirrorTargets(self.ctx, size)
+                buffer_camera = mirror_camera(camera.view(), projection, reflector, size, see_through=kind != "mirror")
+                targets.fbo.use()
+                self.ctx.viewport = (0, 0, *size)
+                targets.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                self.draw_background(self.environment, buffer_camera.plain_view_projection)
+                self._draw_objects(
+                    buffer_camera.view_projection,
+                    buffer_camera.position,
+                    MIRROR_BOUNCE_METHOD,
+                    specular=self.mirror_specular,
+                    exclude=index,
+                )
+                targets.radiance.build_mipmaps()
+                targets.camera = buffer_camera
+                active[index][kind] = targets
+                report.append(f"{name}: {kind} pass {size[0]}x{size[1]}")
         self.ctx.viewport = (0, 0, width, height)
         self._mirror_key, self._active_mirrors, self.mirror_report = key, active, report
-        return {i: self._mirror_targets[i] for i in active}
+        return active
 
     def invalidate_mirrors(self) -> None:
         """Draw the mirror buffers again on the next frame even if nothing changed (benchmarks)."""
         self._mirror_key = None
 
-    def _bind_mirror(self, program, targets: _MirrorTargets) -> None:
-        mirror = targets.camera
-        for unit, (name, tex) in zip(
-            MIRROR_UNITS,
-            (
-                ("u_mirror_radiance", targets.radiance),
-                ("u_mirror_position", targets.position),
-                ("u_mirror_normal", targets.normal),
-            ),
-            strict=True,
-        ):
-            tex.use(unit)
-            set_uniform(program, name, unit)
-        set_uniform(program, "u_mirror_view", tuple(mirror.view.T.astype("f4").ravel()))
-        set_uniform(program, "u_mirror_view_projection", tuple(mirror.plain_view_projection.T.astype("f4").ravel()))
-        set_uniform(program, "u_mirror_eye", tuple(float(x) for x in mirror.position))
-        set_uniform(program, "u_mirror_focal_px", float(mirror.focal_pixels))
-        if "u_plane_point_state" in program:
-            previous = self._plane_states[2 * (1 - self._frame_parity) : 2 * (1 - self._frame_parity) + 2]
-            for unit, name, tex in zip(
-                PLANE_STATE_UNITS, ("u_plane_point_state", "u_plane_normal_state"), previous, strict=True
-            ):
+    def _bind_mirror(self, program, index: int, buffers: dict, eye) -> None:
+        """The reflector's buffers (a 1-texel dummy for a kind it does not have, flagged off in
+        u_mirror_sides), its plane's normal on the camera's side and the plane-state targets."""
+        plane = self.analysis.reflectors[index].plane
+        front = plane[:3] if float(np.dot(plane[:3], eye) + plane[3]) >= 0.0 else -plane[:3]
+        set_uniform(program, "u_mirror_front", tuple(float(x) for x in front))
+        set_uniform(program, "u_mirror_sides", int("mirror" in buffers) | 2 * int("see-through" in buffers))
+        for kind, prefix in (("mirror", "u_mirror"), ("see-through", "u_through")):
+            targets = buffers.get(kind)
+            textures = (targets.radiance, targets.position, targets.normal) if targets else (self._white,) * 3
+            for unit, name, tex in zip(BUFFER_UNITS[kind], ("radiance", "position", "normal"), textures, strict=True):
                 tex.use(unit)
-                set_uniform(program, name, unit)
+                set_uniform(program, f"{prefix}_{name}", unit)
+            if targets is None:
+                continue
+            camera = targets.camera
+            set_uniform(program, f"{prefix}_view", tuple(camera.view.T.astype("f4").ravel()))
+            set_uniform(
+                program, f"{prefix}_view_projection", tuple(camera.plain_view_projection.T.astype("f4").ravel())
+            )
+            set_uniform(program, f"{prefix}_eye", tuple(float(x) for x in camera.position))
+            set_uniform(program, f"{prefix}_focal_px", float(camera.focal_pixels))
+        if "u_plane_point_state" in program:
+            previous = self._plane_states[4 * (1 - self._frame_parity) : 4 * (1 - self._frame_parity) + 4]
+            for unit, tex in zip(PLANE_STATE_UNITS, previous, strict=True):
+                tex.use(unit)
+            set_uniform(program, "u_plane_point_state", list(PLANE_STATE_UNITS[:2]))
+            set_uniform(program, "u_plane_normal_state", list(PLANE_STATE_UNITS[2:]))
 
     def set_reflection_proxy(self, index: int, proxy) -> None:
         """Reflected-geometry correction for object ``index`` (scenes/reflection_proxy.py; None:
@@ -494,7 +505,7 @@ class SceneRenderer(RendererBase):
                 if proxy is not None:
                     self._bind_proxy(program, obj, proxy)
                 if mirror is not None:
-                    self._bind_mirror(program, mirror)
+                    self._bind_mirror(program, obj.index, mirror, eye)
             self._vao(program, obj).render(moderngl.TRIANGLES)
 
     def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:
