@@ -34,19 +34,24 @@ def checker(albedo) -> np.ndarray:
     return np.where(parity[..., None] == 1, bright, 0.35 * bright).astype(np.float32)
 
 
-def floor_material(roughness: float, r0: float = 1.0) -> dict:
-    """The floor: one thesis lobe (ks = 1, kd = 0) of Beckmann roughness ``roughness``."""
-    lobe = {"ks": 1.0, "mx": roughness, "my": roughness, "r0": r0, "alpha": 0.0}
+def floor_material(roughness: float, r0: float = 1.0, roughness_y: float | None = None) -> dict:
+    """The floor: one thesis lobe (ks = 1, kd = 0) of Beckmann roughness ``roughness`` (along
+    the tangent; ``roughness_y`` along the bitangent for an anisotropic floor)."""
+    my = roughness if roughness_y is None else roughness_y
+    lobe = {"ks": 1.0, "mx": roughness, "my": my, "r0": r0, "alpha": 0.0}
     return validate({"model": "thesis", "kd": 0.0, "lobes": [lobe]})
 
 
-def mirror_floor_scene(roughness: float = 0.002, extra_reflector: bool = False) -> Scene:
-    """Boxes on a floor of the given roughness (a planar reflector by automatic detection).
+def mirror_floor_scene(
+    roughness: float = 0.002, extra_reflector: bool = False, roughness_y: float | None = None
+) -> Scene:
+    """Boxes on a floor of the given roughness (a planar reflector by automatic detection;
+    ``roughness_y``: anisotropic, see floor_material).
     ``extra_reflector`` adds a glossy back wall as a second reflector (the bench's 2-reflector
     case)."""
     lightmap = Lightmap(np.full((4, 4, 3), np.pi, np.float32))
     floor = quad([-FLOOR_HALF, 0.0, FLOOR_HALF], [2 * FLOOR_HALF, 0.0, 0.0], [0.0, 0.0, -2 * FLOOR_HALF])
-    materials = [SceneMaterial("floor", floor_material(roughness), lightmap=lightmap)]
+    materials = [SceneMaterial("floor", floor_material(roughness, roughness_y=roughness_y), lightmap=lightmap)]
     objects = [SceneObject("floor", floor, 0, floor.uvs.copy())]
     for k, (centre, size, albedo) in enumerate(BOXES):
         mesh = box_mesh(centre, size)

@@ -270,15 +270,22 @@ def test_filter_footprint_matches_the_projected_cone_area(glossy_floor):
     assert np.median(np.abs(ratios - 1.0)) < 0.005 and np.percentile(np.abs(ratios - 1.0), 95) < 0.01, ratios
 
 
-def test_glsl_lobe_method_matches_the_numpy_reference_through_the_mirror_buffer(glossy_floor):
-    """lobe-7 (multi-ring, Eq. 4.25) at MIP level 0 (bias -20): the shader's two-step projection and
-    weighting against integrate_lobe fed by project_samples + bilinear reads of the same buffer."""
+@pytest.mark.parametrize("anisotropic", [False, True], ids=["isotropic", "anisotropic"])
+def test_glsl_lobe_method_matches_the_numpy_reference_through_the_mirror_buffer(ctx, glossy_floor, anisotropic):
+    """lobe-7 at MIP level 0 (bias -20) on the m = 0.05 floor (multi-ring pattern) and on an
+    anisotropic floor (m = 0.01 x 0.2: the line pattern of 4.4.3, as for cube maps): the shader's
+    two-step projection and weighting against integrate_lobe fed by project_samples + bilinear
+    reads of the same buffer."""
+    from lobeview.materials.patterns import choose_pattern
     from lobeview.viewer.render_base import Method
 
-    renderer = glossy_floor
+    renderer = _renderer(ctx, mirror_floor_scene(0.01, roughness_y=0.2)) if anisotropic else glossy_floor
     result = renderer.render(_camera(), Method("lobe", 7), lod_bias=-20.0)
+    assert renderer.mirror_report == ["floor: mirror pass 240x160"]
     buffers = _buffers(renderer)
     lobe = specular_lobes(build_bsdf(renderer.scene.materials[0].desc))[0]
+    kind = choose_pattern(lobe.distribution.alpha_x, lobe.distribution.alpha_y, planar=True)
+    assert kind == ("line_y" if anisotropic else "multi_ring"), kind
     rng = np.random.default_rng(4)
     floor = np.argwhere(result.object_id == 0)
     errors = []
@@ -295,9 +302,11 @@ def test_glsl_lobe_method_matches_the_numpy_reference_through_the_mirror_buffer(
             uv, _, _ = project_samples(buffers, p, world / np.linalg.norm(world, axis=1, keepdims=True))
             return buffers.radiance_bilinear(uv)
 
-        expected = integrate_lobe(lobe, wo, radiance, 7, frame=frame, kind="multi_ring")
+        expected = integrate_lobe(lobe, wo, radiance, 7, frame=frame, kind=kind)
         errors.append(np.abs(result.radiance[y, x] - expected).max() / max(expected.max(), 1e-3))
     errors = np.array(errors)
+    if anisotropic:
+        renderer.release()
     # Measured (llvmpipe): median 1e-7, 90 % 2e-6, max 1e-5; texel choices at depth edges may
     # differ by float rounding on other GPUs, so held on the median and 90 %.
     assert np.median(errors) < 1e-4 and np.percentile(errors, 90) < 1e-3, np.sort(errors)[-10:]
