@@ -168,6 +168,17 @@ def _buffers(renderer, index=0, kind="mirror") -> MirrorBuffers:
     return MirrorBuffers(targets.camera, read(targets.radiance, 3), read(targets.position, 4), read(targets.normal, 3))
 
 
+def _shading_point(result, y, x):
+    """(world position, shading frame (columns t, b, n), local view direction) of pixel (y, x)."""
+    p = result.position[y, x].astype(np.float64)
+    n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
+    t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
+    t /= np.linalg.norm(t)
+    frame = np.stack([t, np.cross(n, t), n], axis=1)
+    v = np.asarray(CAMERA.position) - p
+    return p, frame, frame.T @ (v / np.linalg.norm(v))
+
+
 def _box_meshes():
     """The test scene's boxes: (scene meshes, one trimesh of them for ray casting)."""
     meshes = [box_mesh(c, s) for c, s, _ in BOXES]
@@ -290,13 +301,7 @@ def test_glsl_lobe_method_matches_the_numpy_reference_through_the_mirror_buffer(
     floor = np.argwhere(result.object_id == 0)
     errors = []
     for y, x in floor[rng.choice(len(floor), 150, replace=False)]:
-        p = result.position[y, x].astype(np.float64)
-        n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
-        t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
-        t /= np.linalg.norm(t)
-        frame = np.stack([t, np.cross(n, t), n], axis=1)
-        v = np.asarray(CAMERA.position) - p
-        wo = frame.T @ (v / np.linalg.norm(v))
+        p, frame, wo = _shading_point(result, y, x)
 
         def radiance(world, lod, p=p):
             uv, _, _ = project_samples(buffers, p, world / np.linalg.norm(world, axis=1, keepdims=True))
@@ -354,13 +359,7 @@ def test_refinement_averages_the_tangent_planes_across_passes(glossy_floor):
     rng = np.random.default_rng(5)
     errors, changed = [], 0
     for y, x in np.array(candidates)[rng.choice(len(candidates), 80, replace=False)]:
-        p = result.position[y, x].astype(np.float64)
-        n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
-        t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
-        t /= np.linalg.norm(t)
-        frame = np.stack([t, np.cross(n, t), n], axis=1)
-        v = np.asarray(CAMERA.position) - p
-        wo = frame.T @ (v / np.linalg.norm(v))
+        p, frame, wo = _shading_point(result, y, x)
         u = np.mod(sobol + _pixel_rotation(int(x), int(height - 1 - y), 0), 1.0)
         wi = lobe.sample_wi(u[:, 0], u[:, 1], np.broadcast_to(wo, (len(u), 3)))
         pdf = lobe.pdf(wi, np.broadcast_to(wo, wi.shape))
@@ -556,13 +555,7 @@ def test_glsl_matches_the_numpy_reference_through_both_buffers_of_a_glossy_pane(
     pane = np.argwhere(result.object_id == 4)
     errors = []
     for y, x in pane[rng.choice(len(pane), 120, replace=False)]:
-        p = result.position[y, x].astype(np.float64)
-        n = result.normal[y, x] / np.linalg.norm(result.normal[y, x])
-        t = result.tangent[y, x] - n * (result.tangent[y, x] @ n)
-        t /= np.linalg.norm(t)
-        frame = np.stack([t, np.cross(n, t), n], axis=1)
-        v = np.asarray(CAMERA.position) - p
-        wo = frame.T @ (v / np.linalg.norm(v))
+        p, frame, wo = _shading_point(result, y, x)
 
         def radiance(world, lod, p=p):
             world = world / np.linalg.norm(world, axis=1, keepdims=True)
