@@ -144,6 +144,9 @@ class RendererBase:
         self.resize(size)
 
     def resize(self, size):
+        if self.targets:  # a resize, not the first call: the old framebuffer and depth go too
+            self.fbo.release()
+            self.depth.release()
         for t in self.targets:
             t.release()
         self.size = (int(size[0]), int(size[1]))

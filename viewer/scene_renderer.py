@@ -129,7 +129,7 @@ class SceneRenderer(RendererBase):
         self.mirror_plane_average = True
         self.mirrors_enabled = True
         self.enabled_reflectors: set | None = None  # None: every reflector of the analysis
-        self._mirror_targets: dict[int, _MirrorTargets] = {}
+        self._mirror_targets: dict[tuple[int, str], _MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
         self._mirror_key = None
         self._active_mirrors: dict = {}  # index -> {kind: targets} drawn for _mirror_key
         self._mirror_generation = 0
@@ -172,13 +172,17 @@ class SceneRenderer(RendererBase):
 
     # -- resources -------------------------------------------------------------------------
     def resize(self, size):
-        """The frame targets of RendererBase plus two sets of averaged-tangent-plane state targets
-        (Fig. 4.46b) and one framebuffer per set: each pass writes one set and reads the set the
-        previous pass wrote (draw_frame alternates ``self.fbo``)."""
-        for item in getattr(self, "_frame_fbos", []) + getattr(self, "_plane_states", []):
-            item.release()
+        """The frame targets of RendererBase (``self._plain_fbo``) plus two sets of
+        averaged-tangent-plane state targets (Fig. 4.46b) with one framebuffer each: a refinement
+        pass on a reflector writes one set and reads the set the previous such pass wrote
+        (draw_frame picks ``self.fbo``); every other pass draws into the plain framebuffer, so
+        real-time frames neither clear nor write the state targets."""
+        if self.targets:
+            for item in self._frame_fbos + self._plane_states:
+                item.release()
+            self.fbo = self._plain_fbo  # RendererBase.resize releases it
         super().resize(size)
-        self.fbo.release()
+        self._plain_fbo = self.fbo
         # Per set: point sums (mirror, see-through), normal sums (mirror, see-through): locations 4-7.
         self._plane_states = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(8)]
         self._frame_fbos = [
@@ -187,7 +191,6 @@ class SceneRenderer(RendererBase):
             for k in range(2)
         ]  # fmt: skip
         self._frame_parity = 0
-        self.fbo = self._frame_fbos[0]
 
     def _texture(self, image: np.ndarray) -> moderngl.Texture:
         key = id(image)
@@ -295,13 +298,21 @@ class SceneRenderer(RendererBase):
         if specular and mirror:
             # Incident light from the mirror buffer; the cube's importance map does not apply, so
             # the reference samples the BSDF only (still unbiased for what the buffer holds).
-            refinement = method.kind in ("mc", "reference") and self.mirror_plane_average
-            defines.update(MIRROR=True, ENV_SAMPLING=False, PLANE_AVERAGE=refinement)
+            defines.update(MIRROR=True, ENV_SAMPLING=False, PLANE_AVERAGE=self._averages_planes(method))
         elif specular and parallax:
             # The cube's importance map samples directions seen from its centre, which the proxy
             # remaps: the reference then samples the BSDF only (still unbiased).
             defines.update(PARALLAX=True, ENV_SAMPLING=False)
         return self.programs.program("scene.vert", "scene.frag", defines)
+
+    def _object_method(self, index: int, method: Method) -> Method:
+        """The method object ``index`` is shaded with: the panel's per-object override of a
+        real-time method, never of the reference."""
+        return method if method.kind == "reference" else self.object_methods.get(index, method)
+
+    def _averages_planes(self, method: Method) -> bool:
+        """Whether a reflector shaded with ``method`` averages its tangent planes (refinement)."""
+        return self.mirror_plane_average and method.kind in ("mc", "reference")
 
     # -- planar mirror passes (thesis 4.5) --------------------------------------------------------
     def mirror_size(self) -> tuple[int, int]:
@@ -471,7 +482,7 @@ class SceneRenderer(RendererBase):
                 continue
             use_specular = specular and obj.cube is not None
             # Per-object real-time method (the panel's override); the reference ignores it.
-            obj_method = method if method.kind == "reference" else self.object_methods.get(obj.index, method)
+            obj_method = self._object_method(obj.index, method)
             mirror = mirrors.get(obj.index) if use_specular else None
             proxy = self.scene.objects[obj.index].reflection_proxy if use_specular and mirror is None else None
             program = self._program(obj_method, use_specular, proxy is not None, mirror is not None)
@@ -518,9 +529,12 @@ class SceneRenderer(RendererBase):
         mirrors = self.render_mirror_passes(camera) if method.kind != "prefiltered" else {}
         if method.kind == "prefiltered":
             self.mirror_report = [f"{self.objects[i].name}: cube map (prefiltered method)" for i in self.reflectors()]
-        # Alternate the framebuffers: this pass writes the plane-state pair the next one reads.
-        self._frame_parity = 1 - self._frame_parity
-        self.fbo = self._frame_fbos[self._frame_parity]
+        if any(self._averages_planes(self._object_method(i, method)) for i in mirrors):
+            # Alternate the state framebuffers: this pass writes the set the next one reads.
+            self._frame_parity = 1 - self._frame_parity
+            self.fbo = self._frame_fbos[self._frame_parity]
+        else:
+            self.fbo = self._plain_fbo
         self.fbo.use()
         self.ctx.viewport = (0, 0, width, height)
         self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
@@ -614,11 +628,12 @@ class SceneRenderer(RendererBase):
         )
 
     def release(self):
+        self.fbo = self._plain_fbo  # RendererBase releases it; the state framebuffers go below
         super().release()
         for targets in self._mirror_targets.values():
             targets.release()
-        for item in self._plane_states + [f for f in self._frame_fbos if f is not self.fbo]:
-            item.release()  # RendererBase released self.fbo
+        for item in self._plane_states + self._frame_fbos:
+            item.release()
         for obj in self.objects:
             obj.release()
         for tex in self.textures.values():
