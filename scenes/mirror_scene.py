@@ -95,31 +95,43 @@ def pane_scene(roughness: float = 0.002, reflection: bool = False) -> Scene:
     return scene
 
 
-def trace_boxes(origins: np.ndarray, directions: np.ndarray, background: float) -> np.ndarray:
-    """Ray-traced radiance of the scene's boxes (trimesh, Embree where installed): the light-mapped
-    radiance of the face hit (kd 1 x checker texel, E = pi), ``background`` where a ray misses
-    them (the floor itself is not traced: rays leave it upward). Radiance (K, 3)."""
-    import trimesh
+class BoxTracer:
+    """Ray casting against the scene's boxes (trimesh, Embree where installed) with their
+    light-mapped radiance (kd 1 x checker texel, E = pi): the ground truth of the mirror tests and
+    of the refinement bench. The floor itself is not traced (rays leave it upward)."""
 
-    meshes = [box_mesh(c, s) for c, s, _ in BOXES]
-    offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
-    mesh = trimesh.Trimesh(
-        np.concatenate([m.positions for m in meshes]),
-        np.concatenate([m.indices.reshape(-1, 3) + o for m, o in zip(meshes, offsets, strict=True)]),
-        process=False,
-    )
-    uvs = np.concatenate([m.uvs for m in meshes])
-    faces_per_box = len(meshes[0].indices.reshape(-1, 3))
-    radiance = np.full((len(origins), 3), float(background))
-    locations, index_ray, index_tri = mesh.ray.intersects_location(origins, directions, multiple_hits=False)
-    if len(index_ray):
-        corners = mesh.faces[index_tri]
-        bary = trimesh.triangles.points_to_barycentric(mesh.vertices[corners], locations)
-        texels = np.einsum("ki,kij->kj", bary, uvs[corners]) * 2 * TILE_TEXELS
+    def __init__(self):
+        import trimesh
+
+        meshes = [box_mesh(c, s) for c, s, _ in BOXES]
+        offsets = np.cumsum([0] + [len(m.positions) for m in meshes[:-1]])
+        self.mesh = trimesh.Trimesh(
+            np.concatenate([m.positions for m in meshes]),
+            np.concatenate([m.indices.reshape(-1, 3) + o for m, o in zip(meshes, offsets, strict=True)]),
+            process=False,
+        )
+        self._uvs = np.concatenate([m.uvs for m in meshes])
+        self._faces_per_box = len(meshes[0].indices.reshape(-1, 3))
+        self._images = np.stack([checker(albedo) for _, _, albedo in BOXES])
+
+    def hits(self, origins: np.ndarray, directions: np.ndarray):
+        """First hits: (ray index (H,), box index (H,), texture texel coordinates (H, 2))."""
+        import trimesh
+
+        locations, index_ray, index_tri = self.mesh.ray.intersects_location(origins, directions, multiple_hits=False)
+        corners = self.mesh.faces[index_tri]
+        bary = trimesh.triangles.points_to_barycentric(self.mesh.vertices[corners], locations)
+        texels = np.einsum("ki,kij->kj", bary, self._uvs[corners]) * 2 * TILE_TEXELS
+        return index_ray, index_tri // self._faces_per_box, texels
+
+    def radiance(self, origins: np.ndarray, directions: np.ndarray, background: float) -> np.ndarray:
+        """Radiance (K, 3) along the rays: the box face hit (nearest texel), ``background`` where
+        they miss."""
+        radiance = np.full((len(origins), 3), float(background))
+        index_ray, box, texels = self.hits(origins, directions)
         col, row = np.clip(texels.astype(int), 0, 2 * TILE_TEXELS - 1).T
-        images = np.stack([checker(albedo) for _, _, albedo in BOXES])
-        radiance[index_ray] = images[index_tri // faces_per_box, row, col]
-    return radiance
+        radiance[index_ray] = self._images[box, row, col]
+        return radiance
 
 
 def traced_floor_reflection(points, eye, lobe, samples: int, background: float, seed: int = 0) -> np.ndarray:
@@ -128,11 +140,13 @@ def traced_floor_reflection(points, eye, lobe, samples: int, background: float, 
     random directions per point and ray tracing the boxes: the ground truth the mirror-pass
     refinement converges to where the mirror buffer sees what the rays hit."""
     rng = np.random.default_rng(seed)
+    tracer = BoxTracer()
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     frame = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]).T  # t, b, n (n = +y)
     result = np.zeros((len(points), 3))
-    for start in range(0, len(points), max(1, 200_000 // samples)):
-        p = points[start : start + max(1, 200_000 // samples)]
+    chunk = max(1, 200_000 // samples)  # points per batch of rays
+    for start in range(0, len(points), chunk):
+        p = points[start : start + chunk]
         v = np.asarray(eye, dtype=np.float64) - p
         wo = (v / np.linalg.norm(v, axis=1, keepdims=True)) @ frame
         wo = np.repeat(wo, samples, axis=0)
@@ -144,6 +158,6 @@ def traced_floor_reflection(points, eye, lobe, samples: int, background: float, 
         weight[ok] = lobe.eval(wi[ok], wo[ok]) * (np.abs(wi[ok, 2]) / pdf[ok])[:, None]
         origins = np.repeat(p, samples, axis=0)
         radiance = np.zeros((len(wo), 3))
-        radiance[ok] = trace_boxes(origins[ok] + 1e-5 * frame[:, 2], wi[ok] @ frame.T, background)
+        radiance[ok] = tracer.radiance(origins[ok] + 1e-5 * frame[:, 2], wi[ok] @ frame.T, background)
         result[start : start + len(p)] = (radiance * weight).reshape(len(p), samples, 3).mean(axis=1)
     return result

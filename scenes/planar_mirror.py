@@ -149,10 +149,8 @@ def reflector_decision(mesh, lobes, scene_diagonal: float, mode="auto") -> tuple
     reflector = planar_reflector(mesh, scene_diagonal)
     if reflector is None:
         return None, "no: not planar" if mode is True else "-"
-    transmission = any(getattr(lobe, "transmission", False) for lobe in lobes)
-    reflector = replace(
-        reflector, reflection=any(not getattr(lobe, "transmission", False) for lobe in lobes), transmission=transmission
-    )
+    transmits = [getattr(lobe, "transmission", False) for lobe in lobes]
+    reflector = replace(reflector, reflection=not all(transmits), transmission=any(transmits))
     what = " + ".join(f"{name} pass" for name in reflector.passes)
     if mode is True:
         return reflector, f"{what} (extras)"
@@ -311,7 +309,7 @@ def project_samples(buffers: MirrorBuffers, p: np.ndarray, wi: np.ndarray, secon
 class TangentPlaneAverage:
     """The averaged tangent plane of Fig. 4.46b at one pixel during progressive refinement: the
     running sums of the hit points and plane normals that the pixel's samples found so far (the
-    shader keeps them in two float targets across passes). The first step of the next sample
+    shader keeps them, per buffer, in float targets across passes). The first step of the next sample
     intersects this plane instead of P_R's, so the projection changes smoothly from pixel to pixel
     across depth edges instead of jumping with P_R, and blur edges fade softly."""
 

@@ -7,14 +7,14 @@ import warnings
 
 import numpy as np
 import pytest
-import trimesh
 from scipy import ndimage
 
+from lobeview.materials.bsdf import BSDF
 from lobeview.materials.patterns import AlbedoTable, integrate_lobe, specular_lobes
 from lobeview.materials.spec import build_bsdf, validate
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.meshes import box_mesh, quad, uv_sphere
-from lobeview.scenes.mirror_scene import BOXES, CAMERA, TILE_TEXELS, checker, mirror_floor_scene
+from lobeview.scenes.mirror_scene import CAMERA, TILE_TEXELS, BoxTracer, mirror_floor_scene
 from lobeview.scenes.planar_mirror import (
     MirrorBuffers,
     PlanarReflector,
@@ -179,12 +179,6 @@ def _shading_point(result, y, x):
     return p, frame, frame.T @ (v / np.linalg.norm(v))
 
 
-def _box_meshes():
-    """The test scene's boxes: (scene meshes, one trimesh of them for ray casting)."""
-    meshes = [box_mesh(c, s) for c, s, _ in BOXES]
-    return meshes, trimesh.util.concatenate([trimesh.Trimesh(m.positions, m.indices, process=False) for m in meshes])
-
-
 @pytest.fixture(scope="module")
 def glossy_floor(ctx):
     renderer = _renderer(ctx, mirror_floor_scene(0.05))
@@ -200,7 +194,7 @@ def test_two_step_projection_finds_the_ray_cast_hit_on_planar_geometry(glossy_fl
     buffers = _buffers(renderer)
     rng = np.random.default_rng(2)
     floor = np.argwhere(result.object_id == 0)
-    _, boxes = _box_meshes()
+    boxes = BoxTracer().mesh
     checked = candidates = own_plane_hits = 0
     for y, x in floor[rng.choice(len(floor), 300, replace=False)]:
         p = result.position[y, x].astype(np.float64)
@@ -400,30 +394,17 @@ def test_sharp_mirror_floor_matches_a_ray_traced_reflection(ctx):
     v = np.asarray(CAMERA.position) - p
     v /= np.linalg.norm(v, axis=1, keepdims=True)
     r = v * [-1, 1, -1]
-    meshes, boxes = _box_meshes()
-    uvs = np.concatenate([m.uvs for m in meshes])
-    faces_per_box = len(meshes[0].indices)
-    locations, index_ray, index_tri = boxes.ray.intersects_location(p + 1e-5 * r, r, multiple_hits=False)
-    traced = np.full((len(p), 3), GREY)
+    tracer = BoxTracer()
+    index_ray, box, texels = tracer.hits(p + 1e-5 * r, r)
+    traced = tracer.radiance(p + 1e-5 * r, r, GREY)
+    # Near a tile edge bilinear texture filtering blends the two tiles: excluded.
     edge = np.zeros(len(p), bool)
-    for k, (ray, tri) in enumerate(zip(index_ray, index_tri, strict=True)):
-        corners = boxes.faces[tri]
-        bary = trimesh.triangles.points_to_barycentric(boxes.vertices[corners][None], locations[k][None])[0]
-        uv = bary @ uvs[corners]
-        texels = uv * 2 * TILE_TEXELS
-        # Near a tile edge bilinear texture filtering blends the two tiles: excluded.
-        edge[ray] = np.any(np.abs(texels - np.round(texels / TILE_TEXELS) * TILE_TEXELS) < 1.5)
-        box = tri // faces_per_box
-        image = checker(BOXES[box][2])
-        col, row = np.clip(texels.astype(int), 0, 2 * TILE_TEXELS - 1)
-        traced[ray] = image[row, col]
+    edge[index_ray] = np.any(np.abs(texels - np.round(texels / TILE_TEXELS) * TILE_TEXELS) < 1.5, axis=1)
     traced *= np.array([table.lookup(np.array([0.0, np.sqrt(1 - c * c), c])) for c in v[:, 1]])
     rendered = result.radiance[floor]
     # Box outlines in the reflection (where a pixel straddles two surfaces): excluded, 2 px.
     hit_id = np.full(floor.shape, -1)
-    hit_id[np.flatnonzero(floor)[index_ray] // floor.shape[1], np.flatnonzero(floor)[index_ray] % floor.shape[1]] = (
-        index_tri // faces_per_box
-    )
+    hit_id[np.flatnonzero(floor)[index_ray] // floor.shape[1], np.flatnonzero(floor)[index_ray] % floor.shape[1]] = box
     outline = ndimage.grey_dilation(hit_id, size=5) != ndimage.grey_erosion(hit_id, size=5)
     keep = ~edge & ~outline[floor]
     relative = np.abs(rendered - traced).max(axis=1)[keep] / traced[keep].max(axis=1)
@@ -512,19 +493,11 @@ def test_sharp_pane_shows_the_scene_behind_it_times_its_transmittance(ctx):
     assert lobe.transmission
     v = np.asarray(CAMERA.position) - result.position[pane]
     cos = np.abs(v[:, 2]) / np.linalg.norm(v, axis=1)
-    # The transmittance by importance sampling on a grid of view angles (the lobe is narrow, so
-    # f cos / pdf is nearly constant and 4096 samples give it to 1e-4; AlbedoTable's 32 columns
-    # would be off by up to 3 % near normal incidence, where it clamps).
+    # The transmittance on a grid of view angles by BSDF.albedo's quadrature (AlbedoTable's 32
+    # columns would be off by up to 3 % near normal incidence, where it clamps).
     grid = np.linspace(cos.min(), 1.0, 48)
-    rng = np.random.default_rng(7)
-    transmittance = []
-    for c in grid:
-        wo = np.broadcast_to([np.sqrt(max(1.0 - c * c, 0.0)), 0.0, c], (4096, 3))
-        u = rng.random((4096, 2))
-        wi = lobe.sample_wi(u[:, 0], u[:, 1], wo)
-        pdf = lobe.pdf(wi, wo)
-        ok = pdf > 0
-        transmittance.append((lobe.eval(wi[ok], wo[ok])[:, 0] * np.abs(wi[ok, 2]) / pdf[ok]).sum() / len(wo))
+    single = BSDF([lobe])
+    transmittance = [single.albedo(np.array([np.sqrt(max(1.0 - c * c, 0.0)), 0.0, c]))[1][0] for c in grid]
     expected = behind[pane] * np.interp(cos, grid, transmittance)[:, None]
     luminance = behind.mean(axis=2)
     flat = (ndimage.maximum_filter(luminance, size=5) - ndimage.minimum_filter(luminance, size=5)) < 0.01 * luminance
