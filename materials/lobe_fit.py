@@ -12,8 +12,10 @@ that approximation). Modes:
   albedo); a 2D map, so the sharpening at glancing angles is lost.
 * ``phong``  (Heidrich & Seidel, seed 001 section 4): a cos^n lobe around the mirror direction
   with n matched to the average shape's median angle, weighted by the true albedo.
-* :func:`fit_multi_lobe` (3.3): greedy fitting with minimum profiles, for the error-versus-lobe
-  count study (Figure 7 of the seed); the renderer uses single lobes (see README).
+* ``multi``  (3.3, 5.3): greedy fitting with minimum profiles per elevation
+  (:func:`fit_multi_lobe`), the lobes matched across elevations by their axes (the seed's
+  "consistent and coherent selection"), the sum rescaled to the true albedo; one 3D map per
+  fitted lobe, rendered with one lookup per lobe (:func:`fit_lobe_maps`).
 
 Anisotropic lobes are fitted through their isotropic equivalent (alpha = sqrt(ax ay)) and scaled
 to their own albedo averaged over the view azimuth; the method assumes isotropy (seed 000, 3.1),
@@ -35,7 +37,8 @@ from .prefilter import RadialProfile, phong_profile
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 LOBE_SLICES = 16  # view elevations, uniform in cos(theta_o) from 0 to 1 (the seed used 16)
 MIN_COS_O = 0.02  # the grazing slice is fitted at this cosine (wo on the horizon is degenerate)
-FIT_MODES = ("lobe", "lobe2d", "phong")
+FIT_MODES = ("lobe", "lobe2d", "phong", "multi")
+MAP_LOBES = 4  # fitted lobes per component in the 'multi' mode
 
 _PSI = np.pi * (np.arange(161) / 160.0) ** 2  # radial nodes, dense near the axis
 _BETA = (np.arange(64) + 0.5) / 64 * 2.0 * np.pi
@@ -173,13 +176,20 @@ class LobeMapFit:
     error: np.ndarray  # (S,) relative RMS of the approximation over the slice
     isotropic_approximation: bool  # the component was anisotropic and fitted isotropically
     phong_exponent: float | None = None
+    axes: np.ndarray | None = None  # (S, 3) lobe axes when not in the plane of incidence (multi)
 
     def profile(self, slice_index: int) -> RadialProfile:
         return self.profiles[slice_index if len(self.profiles) > 1 else 0]
 
     def axis(self, slice_index: int) -> np.ndarray:
         """Lobe axis in the local frame for wo in the x-z plane (mirror azimuth = -x)."""
+        if self.axes is not None:
+            return self.axes[slice_index]
         return _in_plane(self.peak_theta[slice_index])
+
+    def local_axes(self) -> np.ndarray:
+        """(S, 3): :meth:`axis` of every slice (what the renderer's lobe table holds)."""
+        return np.stack([self.axis(s) for s in range(len(self.cos_theta_o))])
 
 
 def _interp_profiles(profiles: list) -> RadialProfile:
@@ -245,21 +255,29 @@ def component_key(component: Component) -> str:
     return f"{type(component).__name__}:{sorted(items.items())}"
 
 
-_FITS: dict[str, LobeMapFit] = {}
+_FITS: dict[str, list] = {}
 _MAX_CACHED_FITS = 64
 
 
 def fit_lobe_map(component: Component, mode: str = "lobe", slices: int = LOBE_SLICES) -> LobeMapFit:
-    """Fit one specular component (reflection or transmission lobe) for a prefiltered mode.
-    Fits (~0.25 s each) are cached by the component's parameters, not its identity, so a
-    rebuilt material with the same lobes is not fitted again."""
+    """Fit one specular component (reflection or transmission lobe) for a single-lobe
+    prefiltered mode ('lobe', 'lobe2d', 'phong')."""
+    if mode == "multi":
+        raise ValueError("the 'multi' mode fits several lobes: use fit_lobe_maps")
+    return fit_lobe_maps(component, mode, slices)[0]
+
+
+def fit_lobe_maps(component: Component, mode: str = "lobe", slices: int = LOBE_SLICES) -> list:
+    """The fitted lobes (LobeMapFit each, one 3D map each) of one specular component: one for
+    'lobe', 'lobe2d' and 'phong', MAP_LOBES for 'multi'. Fits (0.25-1 s) are cached by the
+    component's parameters, not its identity, so a rebuilt material is not fitted again."""
     if mode not in FIT_MODES:
         raise ValueError(f"unknown lobe-map mode {mode!r}; use one of {FIT_MODES}")
     key = f"{component_key(component)}|{mode}|{slices}"
     if key not in _FITS:
         if len(_FITS) >= _MAX_CACHED_FITS:
             _FITS.pop(next(iter(_FITS)))  # oldest first
-        _FITS[key] = _fit(component, mode, slices)
+        _FITS[key] = _fit_multi(component, slices) if mode == "multi" else [_fit(component, mode, slices)]
     return _FITS[key]
 
 
@@ -271,10 +289,15 @@ class MultiLobeFit:
     errors: list  # relative RMS after 1, 2, ... lobes
 
 
-def fit_multi_lobe(component: Component, cos_theta_o: float, lobes: int = 8) -> MultiLobeFit:
+def fit_multi_lobe(component: Component, cos_theta_o: float, lobes: int = 8, last_mean: bool = False) -> MultiLobeFit:
     """Greedy fitting with minimum profiles at one view elevation: find the maximum of what is
     left, take around it the smallest profile curve (so the residual never goes negative),
-    subtract, repeat. Lobes may sit anywhere (not only in the plane of incidence)."""
+    subtract, repeat. Lobes may sit anywhere (not only in the plane of incidence).
+
+    ``last_mean``: the last lobe takes the *mean* profile of the residual around its maximum
+    (section 3.1's averaging) instead of the minimum: it carries all the energy the minimum
+    profiles left (the mean over azimuth around any axis keeps the integral), which at grazing
+    views is most of it (4 minimum profiles hold 6-10 % of the albedo at cos theta_o = 0.004)."""
     comp = isotropic_equivalent(component)
     wo = _wo(cos_theta_o)
     search_dirs, _ = polar_grid(_mirror_axis(comp, wo))
@@ -290,12 +313,91 @@ def fit_multi_lobe(component: Component, cos_theta_o: float, lobes: int = 8) -> 
     def residual(d):
         return _luminance(slice_values(comp, wo, d)) - approximation(d)
 
-    for _ in range(lobes):
+    for index in range(lobes):
         r = residual(search_dirs)
         axis = search_dirs[int(np.argmax(r))]
         dirs, _ = polar_grid(axis)
-        minimum_profile = np.maximum(residual(dirs).min(axis=1), 0.0)
+        rings = np.maximum(residual(dirs), 0.0)
         axes.append(axis)
-        profiles.append(minimum_profile)
+        profiles.append(rings.mean(axis=1) if last_mean and index == lobes - 1 else rings.min(axis=1))
         errors.append(relative_rms(comp, wo, approximation))
     return MultiLobeFit(axes, profiles, errors)
+
+
+def _profile_mass(values: np.ndarray) -> float:
+    """Integral over the sphere of a radial profile tabulated on _PSI."""
+    ring = values * 2.0 * np.pi * np.sin(_PSI)
+    return float(np.sum(0.5 * (ring[1:] + ring[:-1]) * np.diff(_PSI)))
+
+
+def _match_lobes(previous: list, axes: list, masses: list) -> list:
+    """Order of this elevation's lobes that follows the previous elevation's (by the angle
+    between axes; a lobe without mass matches anything): the seed's clustering of lobes with
+    similar offsets into one map (Figure 5)."""
+    from scipy.optimize import linear_sum_assignment
+
+    cost = np.zeros((len(previous), len(axes)))
+    for i, a in enumerate(previous):
+        for j, b in enumerate(axes):
+            cost[i, j] = np.arccos(np.clip(a @ b, -1.0, 1.0)) if masses[j] > 0.0 else 0.5
+    rows, cols = linear_sum_assignment(cost)
+    return [int(c) for _, c in sorted(zip(rows, cols, strict=True))]
+
+
+def _fit_multi(component: Component, slices: int, lobes: int = MAP_LOBES) -> list:
+    """'multi' mode: greedy minimum-profile lobes per elevation plus a last lobe with the mean
+    profile of the remainder (fit_multi_lobe(last_mean=True)), matched across elevations from
+    grazing to normal incidence, each elevation's sum rescaled to the
+    true directional albedo (section 3.1's energy rescaling, shared in proportion to the lobes'
+    masses). Returns one LobeMapFit per lobe; every lobe carries the combined error."""
+    anisotropic = not is_isotropic(component)
+    comp = isotropic_equivalent(component)
+    cosines = slice_cosines(slices)
+    per_slice = []  # (axes, profile values, masses) in matched order
+    previous = None
+    for c in cosines:
+        fit = fit_multi_lobe(comp, c, lobes, last_mean=True)
+        masses = [_profile_mass(p) for p in fit.profiles]
+        # The last lobe (the mean profile of the remainder) keeps its block; the minimum-profile
+        # lobes are matched among themselves.
+        order = list(range(lobes))
+        if previous is not None and lobes > 2:
+            order = _match_lobes(previous[:-1], fit.axes[:-1], masses[:-1]) + [lobes - 1]
+        axes = [fit.axes[j] for j in order]
+        per_slice.append((axes, [fit.profiles[j] for j in order], [masses[j] for j in order]))
+        # an empty lobe keeps the previous elevation's axis for the next match
+        previous = [
+            a if m > 0.0 or previous is None else previous[k]
+            for k, (a, m) in enumerate(zip(axes, per_slice[-1][2], strict=True))
+        ]
+    energies = np.array([directional_energy(component, _wo(c)) for c in cosines])
+    fits = []
+    for j in range(lobes):
+        shapes = [
+            RadialProfile.from_values(_PSI, values[j]) if masses[j] > 0.0 else None for _, values, masses in per_slice
+        ]
+        shapes = _fill_empty_slices(shapes)
+        total = np.array([max(sum(masses), 1e-300) for _, _, masses in per_slice])
+        share = np.array([masses[j] for _, _, masses in per_slice]) / total
+        axes = np.array([axes[j] for axes, _, _ in per_slice])
+        fits.append(
+            LobeMapFit(
+                "multi",
+                cosines,
+                np.arccos(np.clip(axes[:, 2], -1, 1)),
+                shapes,
+                energies * share[:, None],
+                np.zeros(len(cosines)),
+                anisotropic,
+                axes=axes,
+            )
+        )
+    errors = []
+    for s, c in enumerate(cosines):
+        terms = [(float(f.energy[s] @ LUMINANCE), f.profiles[s], f.axes[s]) for f in fits]
+        errors.append(
+            relative_rms(comp, _wo(c), lambda d, terms=terms: sum(e * p.of_cosine(d @ a) for e, p, a in terms))
+        )
+    for f in fits:
+        f.error = np.array(errors)
+    return fits

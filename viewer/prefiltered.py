@@ -3,8 +3,11 @@
 * split-sum: a cube map whose MIP level l holds the environment prefiltered with the GGX (or
   Beckmann) split-sum kernel of perceptual roughness l / (levels - 1) (level 0 = the source),
   plus the DFG table (materials/prefilter.py);
-* lobe maps: per fitted lobe (materials/lobe_fit.py) a 3D texture, equirectangular in x-y and
-  cos(theta_o) in z (Kautz & McCool's 3D environment map, seed 000 section 4).
+* lobe maps: per component a 3D texture, equirectangular in x-y and the view elevation in z
+  (Kautz & McCool's 3D environment map, seed 000 section 4), one block of slices per fitted
+  lobe (materials/lobe_fit.py; several in the 'multi' mode);
+* Banks maps (materials/banks.py, seed 001 section 5.3): a 3D texture indexed by the fibre
+  direction (equirectangular) and asin(v.t), prefiltered with Banks' ring kernel around t.
 
 Both are brute force on the GPU (shaders/prefilter*.comp): every target texel integrates its
 kernel with stratified importance samples that are filtered lookups into the source MIP chain.
@@ -21,7 +24,8 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from lobeview.materials.lobe_fit import LobeMapFit
+from lobeview.materials.banks import BanksFit
+from lobeview.materials.lobe_fit import LUMINANCE, LobeMapFit
 from lobeview.materials.prefilter import (
     DFG_SIZE,
     SPLIT_SUM_LEVELS,
@@ -38,6 +42,13 @@ GL_RGBA32F = 0x8814
 SPLIT_SUM_KINDS = ("beckmann", "ggx")  # index = DIST_* in shaders/bsdf.glsl
 LOBE_MAP_MAX_HEIGHT = 256
 LOBE_MAP_MIN_HEIGHT = 16
+MULTI_LOBE_SHARE = 0.1
+MULTI_MAP_MAX_HEIGHT = 128  # 256 x 128 x 64 slices (4 lobes): 33.5 MB
+BANKS_MAP_MAX_HEIGHT = 128  # 256 x 128 x 24 slices: 12.6 MB; narrower rings are blurred to it
+# The Banks kernel is a thin ring: few quantile rings, many azimuths (the golden-ratio offset
+# per ring interleaves them), so that the filtered lookups cover the ring without gaps.
+BANKS_RINGS = 3
+BANKS_AZIMUTHS_PER_RING = 128
 _DFG_CACHE: dict = {}
 
 
@@ -58,12 +69,37 @@ def dfg_texture_data(size: int = DFG_SIZE) -> np.ndarray:
     return _DFG_CACHE[size]
 
 
-def lobe_map_height(fit: LobeMapFit) -> int:
-    """Rows of the equirectangular map: about two texels across the sharpest slice's median
-    angle, between 16 and 256 (multiple of 8)."""
-    median = min(p.median_angle for p in fit.profiles)
-    rows = int(np.ceil(np.pi / max(median / 2.0, 1e-6)))
-    return int(np.clip(-(-rows // 8) * 8, LOBE_MAP_MIN_HEIGHT, LOBE_MAP_MAX_HEIGHT))
+def _rows_for(angle: float, most: int) -> int:
+    """Rows of an equirectangular map with about two texels across ``angle`` (radians),
+    between 16 and ``most`` (multiple of 8)."""
+    rows = int(np.ceil(np.pi / max(angle / 2.0, 1e-6)))
+    return int(np.clip(-(-rows // 8) * 8, LOBE_MAP_MIN_HEIGHT, most))
+
+
+def lobe_map_height(fit: LobeMapFit | list) -> int:
+    """Rows of a lobe map: two texels across the sharpest slice's median angle. With several
+    fitted lobes only lobes carrying at least MULTI_LOBE_SHARE of their slice's energy count
+    (a greedy minimum profile can be a spike of a few mrad with 1 % of the energy: sizing the
+    map for it made 512x256x64 maps, 134 MB and 30 s on llvmpipe); the multi-lobe map is
+    at most MULTI_MAP_MAX_HEIGHT rows."""
+    fits = fit if isinstance(fit, list) else [fit]
+    if len(fits) == 1:
+        return _rows_for(min(p.median_angle for p in fits[0].profiles), LOBE_MAP_MAX_HEIGHT)
+    energy = np.array([[float(e @ LUMINANCE) for e in f.energy] for f in fits])  # (lobes, S)
+    total = energy.sum(axis=0)
+    medians = [
+        f.profile(s).median_angle
+        for j, f in enumerate(fits)
+        for s in range(len(f.energy))
+        if energy[j, s] >= MULTI_LOBE_SHARE * total[s] and total[s] > 0.0
+    ]
+    return _rows_for(min(medians, default=np.pi / 8), MULTI_MAP_MAX_HEIGHT)
+
+
+def banks_map_shape(fit: BanksFit) -> tuple[int, int, int]:
+    """(width, height, depth) of a Banks map: two texels across the ring's half width."""
+    height = _rows_for(float(np.arccos(fit.s)), BANKS_MAP_MAX_HEIGHT)
+    return 2 * height, height, len(fit.profiles)
 
 
 def cube_bytes(face: int, levels: int, texel_bytes: int = 16) -> int:
@@ -71,10 +107,11 @@ def cube_bytes(face: int, levels: int, texel_bytes: int = 16) -> int:
     return sum(6 * max(face >> level, 1) ** 2 * texel_bytes for level in range(levels))
 
 
-def lobe_map_shape(fit: LobeMapFit) -> tuple[int, int, int]:
-    """(width, height, depth) of the RGBA32F 3D texture of one fitted lobe."""
-    height = lobe_map_height(fit)
-    return 2 * height, height, len(fit.profiles)
+def lobe_map_shape(fit: LobeMapFit | list) -> tuple[int, int, int]:
+    """(width, height, depth) of the RGBA32F 3D texture of one component's fitted lobes."""
+    fits = fit if isinstance(fit, list) else [fit]
+    height = lobe_map_height(fits)
+    return 2 * height, height, sum(len(f.profiles) for f in fits)
 
 
 class PrefilteredMaps:
@@ -101,20 +138,21 @@ class PrefilteredMaps:
         self.seconds: dict[str, float] = {}
 
     # -- kernels as quadrature nodes -------------------------------------------------------------
-    def _nodes(self, profiles) -> np.ndarray:
+    def _nodes(self, profiles, rings: int | None = None, azimuths: int | None = None) -> np.ndarray:
         """(psi_k, omega_k) per kernel row and ring: what the prefilter shaders read, and the
         key of a map in the caches."""
-        nodes = np.zeros((len(profiles), self.rings, 2), dtype=np.float32)
+        rings, azimuths = rings or self.rings, azimuths or self.azimuths
+        nodes = np.zeros((len(profiles), rings, 2), dtype=np.float32)
         for row, profile in enumerate(profiles):
             if profile is None:  # the mirror level: one lookup at the centre, finest level
                 nodes[row, 0] = (0.0, 1e-12)
                 continue
-            psi, omega = profile.quadrature(self.rings, self.azimuths)
+            psi, omega = profile.quadrature(rings, azimuths)
             nodes[row, :, 0] = psi
             nodes[row, :, 1] = omega
         return nodes
 
-    def _bind_source(self, shader, nodes: np.ndarray):
+    def _bind_source(self, shader, nodes: np.ndarray, azimuths: int | None = None):
         """Bind the source cube and upload the nodes; returns the nodes texture to release."""
         nodes_texture = self.ctx.texture((nodes.shape[1], nodes.shape[0]), 2, nodes.tobytes(), dtype="f4")
         nodes_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -123,7 +161,7 @@ class PrefilteredMaps:
         shader["u_source"] = 0
         shader["u_nodes"] = 1
         shader["u_source_face"] = float(self.cube.face_size)
-        shader["u_azimuths"] = self.azimuths
+        shader["u_azimuths"] = azimuths or self.azimuths
         # Bias 0: against brute force, +1 (Colbert & Krivanek) blurred light out of bright
         # regions (mean error 5.7 % vs 0.5 %, GGX alpha 0.16, tests/test_prefiltered_gpu.py).
         shader["u_lod_bias"] = 0.0
@@ -211,25 +249,41 @@ class PrefilteredMaps:
             self.seconds["DFG table"] = time.perf_counter() - t0
         return self._dfg
 
-    # -- Kautz-McCool lobe maps ------------------------------------------------------------------
-    def lobe_map(self, fit: LobeMapFit, name: str = "lobe") -> moderngl.Texture3D:
-        """3D map of one fitted lobe: slice s holds the environment convolved with the unit-mass
-        shape of view elevation s (one slice for the 2D and Phong modes)."""
-        width, height, depth = lobe_map_shape(fit)
-        nodes = self._nodes(fit.profiles)
-        key = (nodes.tobytes(), width)
+    # -- Kautz-McCool lobe maps and Banks maps ------------------------------------------------
+    def lobe_map(self, fit: LobeMapFit | list, name: str = "lobe") -> moderngl.Texture3D:
+        """3D map of one component's fitted lobes: slice s of lobe j (z = j S + s) holds the
+        environment convolved with that lobe's unit-mass shape at view elevation s (one slice
+        per lobe for the 2D and Phong modes)."""
+        fits = fit if isinstance(fit, list) else [fit]
+        profiles = [p for f in fits for p in f.profiles]
+        label = f"{name} ({fits[0].mode}{f' x{len(fits)}' if len(fits) > 1 else ''}"
+        return self._latlong_map("lobemap", profiles, lobe_map_shape(fits), label)
+
+    def banks_map(self, fit: BanksFit, name: str = "banks") -> moderngl.Texture3D:
+        """Banks map: slice k holds the environment convolved with the ring kernel of
+        v.t = sin(a_k) around each direction t (materials/banks.py)."""
+        label = f"{name} (banks s={fit.s:.4f}"
+        return self._latlong_map(
+            "banks", fit.profiles, banks_map_shape(fit), label, BANKS_RINGS, BANKS_AZIMUTHS_PER_RING
+        )
+
+    def _latlong_map(self, kind, profiles, shape, label, rings=None, azimuths=None) -> moderngl.Texture3D:
+        width, height, depth = shape
+        rings = rings or self.rings
+        nodes = self._nodes(profiles, rings, azimuths)
+        key = (nodes.tobytes(), width, azimuths)
         if key in self._lobe_maps:
             return self._lobe_maps[key]
         t0 = time.perf_counter()
-        cache = self._cache_file("lobemap", nodes, f"{width}x{height}")
+        cache = self._cache_file(kind, nodes, f"{width}x{height}x{azimuths}")
         if cache is not None and cache.exists():
             data = np.load(cache)["texels"]
             tex = self.ctx.texture3d((width, height, depth), 4, data.tobytes(), dtype="f4")
         else:
             tex = self.ctx.texture3d((width, height, depth), 4, dtype="f4")
             shader = self.programs.compute("prefilter_latlong.comp")
-            nodes_texture = self._bind_source(shader, nodes)
-            shader["u_rings"] = self.rings
+            nodes_texture = self._bind_source(shader, nodes, azimuths)
+            shader["u_rings"] = rings
             shader["u_size"] = (width, height)
             tex.bind_to_image(0, read=False, write=True, level=0, format=GL_RGBA32F)
             for s in range(depth):
@@ -245,7 +299,7 @@ class PrefilteredMaps:
         tex.repeat_y = False
         tex.repeat_z = False
         self._lobe_maps[key] = tex
-        label = f"{name} ({fit.mode}, {width}x{height}x{depth}, {hashlib.sha1(key[0]).hexdigest()[:6]})"
+        label = f"{label}, {width}x{height}x{depth}, {hashlib.sha1(key[0]).hexdigest()[:6]})"
         self.memory[label] = width * height * depth * 16
         self.seconds[label] = time.perf_counter() - t0
         return tex

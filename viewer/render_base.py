@@ -10,8 +10,9 @@ import moderngl
 import numpy as np
 from scipy.stats import qmc
 
+from lobeview.materials.banks import BANKS_AZIMUTHS, fit_banks
 from lobeview.materials.conductor import MicrofacetReflection
-from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_map
+from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES, fit_lobe_maps, is_isotropic
 from lobeview.materials.patterns import LOBE_LOD_BIAS
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
 
@@ -32,9 +33,14 @@ REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
 DEFAULT_FIS_LOD_BIAS = -0.5
 DEFAULT_LOBE_LOD_BIAS = LOBE_LOD_BIAS  # -0.5 (materials/patterns.py, shared with the numpy reference)
 
-_METHOD = re.compile(r"^(lobe|fis|mc)-(\d+)$|^(reference)$|^prefiltered(?:-(splitsum|lobe|lobe2d|phong))?$")
-#: prefiltered sub-modes: auto = split-sum for microfacet/glTF lobes, lobe maps for the rest
-PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong")
+_METHOD = re.compile(r"^(lobe|fis|mc)-(\d+)$|^(reference)$|^prefiltered(?:-(splitsum|lobe|lobe2d|phong|multi|banks))?$")
+#: prefiltered sub-modes: auto = split-sum for microfacet/glTF lobes, lobe maps for the rest;
+#: banks = Banks maps for anisotropic lobes, lobe maps for isotropic ones
+PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong", "multi", "banks")
+# Rows of the lobe table (shaders/integrate.glsl) per component: the fitted lobes of a lobe map,
+# or the view azimuths of a Banks map's albedo table.
+LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)
+LOBE_TABLE_UNIT = 19
 
 
 @dataclass(frozen=True)
@@ -50,7 +56,7 @@ class Method:
         if not m:
             raise ValueError(
                 f"unknown method {text!r}; use lobe-N, fis-N, mc-N, reference or "
-                "prefiltered[-splitsum|-lobe|-lobe2d|-phong]"
+                "prefiltered[-splitsum|-lobe|-lobe2d|-phong|-multi|-banks]"
             )
         if m.group(3):
             return cls("reference", REFERENCE_BATCH)
@@ -80,6 +86,7 @@ class Method:
             "LOBE_NORMALIZE": self.kind == "lobe" and self.normalize,
             "METHOD_PREFILTERED": self.kind == "prefiltered",
             "LOBE_SLICES": LOBE_SLICES,
+            "LOBE_TABLE_ROWS": LOBE_TABLE_ROWS,
         }
 
     def default_lod_bias(self) -> float:
@@ -90,16 +97,48 @@ class Method:
 
 
 def prefilter_plan(material: PackedMaterial, mode: str) -> list[str]:
-    """Per lobe: 'splitsum' or the lobe-map fit mode ('lobe', 'lobe2d', 'phong'). Split-sum needs
-    a microfacet BRDF (its DFG table); the thesis' Kurt lobes always use lobe maps."""
+    """Per lobe: 'splitsum', 'banks' or the lobe-map fit mode ('lobe', 'lobe2d', 'phong',
+    'multi'). Split-sum needs a microfacet BRDF (its DFG table), so the thesis' Kurt lobes use
+    lobe maps; a Banks map needs an anisotropic lobe (a fibre direction), so isotropic lobes
+    use lobe maps under 'banks'."""
     plan = []
     for comp in material.lobe_components:
         microfacet = isinstance(comp, MicrofacetReflection)  # includes glTF specular
         if mode in ("auto", "splitsum"):
             plan.append("splitsum" if microfacet else "lobe")
+        elif mode == "banks":
+            anisotropic = getattr(comp, "distribution", None) is not None and not is_isotropic(comp)
+            plan.append("banks" if anisotropic else "lobe")
         else:
             plan.append(mode)
     return plan
+
+
+def lobe_table(plan: list[str], components: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The lobe-map and Banks parameters the shader reads (shaders/integrate.glsl), as
+    (table, counts, fibres). table: (MAX_LOBES * LOBE_TABLE_ROWS, 2 LOBE_SLICES, 4); component
+    i owns rows i LOBE_TABLE_ROWS + j: for lobe maps, fitted lobe j's axis (local, for wo at
+    azimuth 0) in texels 0..S-1 and its energy in S..2S-1; for a Banks map, the albedo at view
+    azimuth j pi / (2 (BANKS_AZIMUTHS - 1)) from the fibre in texels S..2S-1. counts: fitted
+    lobes per component; fibres: the Banks fibre axis (0 = tangent, 1 = bitangent)."""
+    table = np.zeros((MAX_LOBES * LOBE_TABLE_ROWS, 2 * LOBE_SLICES, 4), dtype=np.float32)
+    counts = np.zeros(MAX_LOBES, dtype=np.int32)
+    fibres = np.zeros(MAX_LOBES, dtype=np.int32)
+    for i, kind in enumerate(plan):
+        if kind == "splitsum":
+            continue
+        base = i * LOBE_TABLE_ROWS
+        if kind == "banks":
+            fit = fit_banks(components[i])
+            table[base : base + BANKS_AZIMUTHS, LOBE_SLICES:, :3] = fit.energy.transpose(1, 0, 2)
+            counts[i], fibres[i] = 1, fit.axis
+            continue
+        fits = fit_lobe_maps(components[i], kind)
+        for j, fit in enumerate(fits):
+            table[base + j, :LOBE_SLICES, :3] = fit.local_axes()
+            table[base + j, LOBE_SLICES:, :3] = fit.energy
+        counts[i] = len(fits)
+    return table, counts, fibres
 
 
 def sobol_points(count: int = SOBOL_SIDE * SOBOL_SIDE, seed: int = SOBOL_SEED) -> np.ndarray:
@@ -139,6 +178,7 @@ class RendererBase:
         self._vaos: dict = {}
         self._albedo_textures: dict = {}
         self._dummy_textures: dict = {}
+        self._lobe_tables: dict = {}
         self._timer = None
         self.targets: list = []
         self.resize(size)
@@ -232,25 +272,32 @@ class RendererBase:
         set_uniform(program, "u_dfg", 10)
         modes = np.zeros(MAX_LOBES, dtype=np.int32)
         depth = np.ones(MAX_LOBES, dtype=np.int32)
-        peaks = np.zeros((MAX_LOBES, LOBE_SLICES), dtype=np.float32)
-        energy = np.zeros((MAX_LOBES, LOBE_SLICES, 3), dtype=np.float32)
         units = list(range(11, 11 + MAX_LOBES))
         for i in range(MAX_LOBES):
             texture = self._dummy_texture("3d")
-            if i < len(plan) and plan[i] != "splitsum":
-                fit = fit_lobe_map(material.lobe_components[i], plan[i])
-                texture = maps.lobe_map(fit, f"lobe {i}")
-                modes[i] = 1
-                depth[i] = len(fit.profiles)
-                peaks[i] = fit.peak_theta
-                energy[i] = fit.energy
+            if i < len(plan) and plan[i] == "banks":
+                fit = fit_banks(material.lobe_components[i])
+                texture = maps.banks_map(fit, f"lobe {i}")
+                modes[i], depth[i] = 2, len(fit.profiles)
+            elif i < len(plan) and plan[i] != "splitsum":
+                fits = fit_lobe_maps(material.lobe_components[i], plan[i])
+                texture = maps.lobe_map(fits, f"lobe {i}")
+                modes[i], depth[i] = 1, len(fits[0].profiles)
             texture.use(units[i])
         set_uniform(program, "u_lobe_maps", units)
+        table, counts, fibres = lobe_table(plan, material.lobe_components)
+        key = table.tobytes()  # one small texture per distinct material (32 KB each)
+        if key not in self._lobe_tables:
+            tex = self.ctx.texture((table.shape[1], table.shape[0]), 4, key, dtype="f4")
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._lobe_tables[key] = tex
+        self._lobe_tables[key].use(LOBE_TABLE_UNIT)
+        set_uniform(program, "u_lobe_table", LOBE_TABLE_UNIT)
         for name, values in (
             ("u_lobe_map_mode", modes),
             ("u_lobe_map_depth", depth),
-            ("u_lobe_peak", peaks),
-            ("u_lobe_energy", energy),
+            ("u_lobe_map_count", counts),
+            ("u_banks_fibre", fibres),
         ):
             if name in program:
                 program[name].write(np.ascontiguousarray(values).tobytes())
@@ -260,7 +307,7 @@ class RendererBase:
         cube (the bench's memory column): the radiance cube with its MIP chain, plus the
         importance tables (reference), the albedo table (normalised lobe-N) or the prefiltered
         maps (prefiltered)."""
-        from .prefiltered import DFG_SIZE, cube_bytes, lobe_map_shape
+        from .prefiltered import DFG_SIZE, banks_map_shape, cube_bytes, lobe_map_shape
 
         face = cube.face_size
         memory = {"radiance cube": cube_bytes(face, int(np.log2(face)) + 1)}
@@ -277,8 +324,11 @@ class RendererBase:
                     distribution = material.lobe_distributions[i].kind
                     memory[f"split-sum {distribution}"] = cube_bytes(face, SPLIT_SUM_LEVELS)
                     memory["DFG table"] = DFG_SIZE * DFG_SIZE * 16
+                elif kind == "banks":
+                    width, height, depth = banks_map_shape(fit_banks(material.lobe_components[i]))
+                    memory[f"Banks map {i}"] = width * height * depth * 16
                 else:
-                    width, height, depth = lobe_map_shape(fit_lobe_map(material.lobe_components[i], kind))
+                    width, height, depth = lobe_map_shape(fit_lobe_maps(material.lobe_components[i], kind))
                     memory[f"lobe map {i}"] = width * height * depth * 16
         return memory
 
@@ -307,7 +357,7 @@ class RendererBase:
     def release(self):
         for tex, _ in self._albedo_textures.values():
             tex.release()
-        for tex in self._dummy_textures.values():
+        for tex in list(self._dummy_textures.values()) + list(self._lobe_tables.values()):
             tex.release()
         for vao in self._vaos.values():
             vao.release()
