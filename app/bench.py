@@ -342,8 +342,10 @@ class DemoTarget:
 def time_frames(render, repeats: int, timer: str):
     """Call ``render()`` once as a warm-up (compiles the variant, builds maps), then ``repeats``
     times: (last result, ms by the ``timer`` in use ('gpu' or 'wall'), median GPU-timer ms or
-    None, median wall ms)."""
+    None, median wall ms, wall seconds of the warm-up frame)."""
+    start = time.perf_counter()
     render()
+    first_s = time.perf_counter() - start
     gpu, wall = [], []
     result = None
     for _ in range(max(repeats, 1)):
@@ -353,7 +355,7 @@ def time_frames(render, repeats: int, timer: str):
             gpu.append(result.timings["gpu shade"] * 1e3)
     gpu_ms = statistics.median(gpu) if gpu else None
     wall_ms = statistics.median(wall)
-    return result, (gpu_ms if timer == "gpu" and gpu_ms is not None else wall_ms), gpu_ms, wall_ms
+    return result, (gpu_ms if timer == "gpu" and gpu_ms is not None else wall_ms), gpu_ms, wall_ms, first_s
 
 
 # -- the run -------------------------------------------------------------------------------------------
@@ -538,7 +540,7 @@ def run_matrix(ctx, settings, cache, checkpoint: Path | None = None):
                     progress.step(f"{view} {material} {label}: timing only")
                 for text in settings["methods"]:
                     method = parse_method(text)
-                    result, ms, gpu_ms, wall_ms = time_frames(
+                    result, ms, gpu_ms, wall_ms, first_s = time_frames(
                         functools.partial(target.render, method), settings["repeats"], settings["timer"]
                     )
                     cell = {
@@ -550,6 +552,9 @@ def run_matrix(ctx, settings, cache, checkpoint: Path | None = None):
                         "gpu_ms": gpu_ms,
                         "wall_ms": wall_ms,
                         "memory_mb": target.memory(method) / 2**20,
+                        # first use: shader compilation, and for prefiltered the fits and maps
+                        # (built, or read from the --cache folder when an earlier run made them)
+                        "first_frame_s": first_s,
                         "lod_bias": method.default_lod_bias() if method.kind in ("lobe", "fis") else None,
                     }
                     if reference is not None:
@@ -606,7 +611,7 @@ def run_fps_table(ctx, settings) -> list[dict]:
         renderer = PreviewRenderer(ctx, env, mesh, size=size, face_size=settings["face_size"])
         for n in settings["fps_samples"]:
             method = Method("lobe", n)
-            result, ms, _, wall_ms = time_frames(
+            result, ms, _, wall_ms, _ = time_frames(
                 functools.partial(renderer.render, camera, bsdf, method, background=False),
                 settings["repeats"],
                 settings["timer"],
@@ -896,14 +901,16 @@ def write_markdown(path: Path, data: dict, plots: list[Path]) -> None:
 
     lines += ["## All cells", ""]
     lines.append(
-        "| view | material | resolution | method | ms / frame | GPU timer ms | PSNR dB | relRMSE | FLIP | memory MiB |"
+        "| view | material | resolution | method | ms / frame | GPU timer ms | first frame s | PSNR dB | relRMSE"
+        " | FLIP | memory MiB |"
     )
-    lines.append("|---|---|---|---|---|---|---|---|---|---|")
+    lines.append("|---|---|---|---|---|---|---|---|---|---|---|")
     for c in cells:
         gpu = _fmt(c.get("gpu_ms"), ".1f")
         lines.append(
             f"| {c['view']} | {c['material']} | {c['resolution']} | {c['method']} | {c['ms']:.1f} | {gpu} | "
-            f"{_fmt(c.get('psnr'), '.2f')} | {_fmt(c.get('rel_rmse'), '.4f')} | {_fmt(c.get('flip'), '.4f')} | "
+            f"{_fmt(c.get('first_frame_s'), '.2f')} | {_fmt(c.get('psnr'), '.2f')} | "
+            f"{_fmt(c.get('rel_rmse'), '.4f')} | {_fmt(c.get('flip'), '.4f')} | "
             f"{c['memory_mb']:.1f} |"
         )
     lines.append("")

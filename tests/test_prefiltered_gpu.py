@@ -9,9 +9,9 @@ import pytest
 from test_render_vs_numpy import CAMERA, SIZE, _frame, _pixels, smooth_sky
 
 from lobeview.materials import prefilter as pf
+from lobeview.materials.banks import fit_banks
 from lobeview.materials.bsdf import CosineSampled
 from lobeview.materials.fresnel import conductor_f0
-from lobeview.materials.banks import fit_banks
 from lobeview.materials.lobe_fit import (
     LUMINANCE,
     MAP_LOBES,
