@@ -37,6 +37,8 @@ PREFILTERED_CHOICES = (
     "prefiltered-lobe",
     "prefiltered-lobe2d",
     "prefiltered-phong",
+    "prefiltered-multi",
+    "prefiltered-banks",
 )
 METHOD_CHOICES = REALTIME_METHODS + PREFILTERED_CHOICES
 

@@ -31,7 +31,15 @@ STRESS_SIZE = (40, 40)
 STRESS_CAMERA = Camera(position=(0.0, 0.3, 2.6), fov_y=50.0)
 #: methods of the CI subset; the full suite adds normalised lobe-N, fis-8 and the Phong maps
 CI_METHODS = ("lobe-7", "fis-16", "mc-8", "reference", "prefiltered", "prefiltered-lobe2d")
-FULL_METHODS = CI_METHODS + ("lobe-7+norm", "lobe-19", "lobe-19+norm", "fis-64", "prefiltered-phong")
+FULL_METHODS = CI_METHODS + (
+    "lobe-7+norm",
+    "lobe-19",
+    "lobe-19+norm",
+    "fis-64",
+    "prefiltered-phong",
+    "prefiltered-multi",
+    "prefiltered-banks",
+)
 
 # The deterministic patterns cover the core of a lobe (theta_h up to 0.4 theta_thresh on the
 # ring); for very rough lobes much of the real lobe lies beyond it and below the horizon, and
