@@ -476,7 +476,9 @@ def run(args) -> int:
         "date": datetime.datetime.now().isoformat(timespec="seconds"),
         "device": device,
         "quick": bool(args.quick),
-        "command": "lobeview " + " ".join(sys.argv[1:]) if sys.argv and sys.argv[0].endswith("lobeview") else "",
+        "command": "lobeview " + " ".join(sys.argv[1:])
+        if sys.argv and sys.argv[0].endswith(("lobeview", "__main__.py"))
+        else "",
         "settings": dict(settings),
     }
     data = {"meta": meta, "cells": cells, "sweep": sweep, "references": references, "fps": fps_rows}
@@ -820,6 +822,9 @@ def write_markdown(path: Path, data: dict, plots: list[Path]) -> None:
         "0.18, mean LDR-FLIP (flip-evaluator, 67 ppd) of the same tonemapped image",
         "- memory: GPU textures the method reads per cube (radiance cube + MIP chain, importance tables, albedo "
         "table or prefiltered maps), summed over the scene's cube maps",
+        "- first frame s: the warm-up frame (shader compilation; for prefiltered methods also the fits and "
+        "maps not yet built: methods run in the order listed per view, so maps an earlier mode built, or "
+        "that the --cache folder holds, cost ~0 here)",
         f"- LOD bias: fis-N {DEFAULT_FIS_LOD_BIAS:+g}, lobe-N {DEFAULT_LOBE_LOD_BIAS:+g} (defaults, see the sweep)",
         f"- cube faces {s['face_size']}^2; views: " + ", ".join(s["views"]),
         "",

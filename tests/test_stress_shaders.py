@@ -85,6 +85,27 @@ def test_extreme_parameters_stay_finite_and_obey_the_white_furnace(furnace, para
     assert check.passed, (params, method, check.rule, check.got[:, 0], check.albedo[:, 0])
 
 
+# The multi-lobe and Banks maps (issue 6) on the extremes most likely to break their fits: a
+# spike narrower than the fitting grid, vanishing slices, full roughness, transmission, and
+# anisotropy ratio 1000 (Banks' s at its bound).
+MAP_EXTREMES = [
+    ("prefiltered-multi", dict(m=1e-4, r0=0.0)),
+    ("prefiltered-multi", dict(m=1e-4, alpha=1.0, r0=0.0)),
+    ("prefiltered-multi", dict(m=1.0, alpha=1.0, r0=1.0)),
+    ("prefiltered-multi", dict(m=0.05, transmission=True)),
+    ("prefiltered-banks", dict(m=0.5, ratio=1000.0)),
+    ("prefiltered-banks", dict(m=1.0, ratio=1000.0, alpha=1.0, r0=0.0)),
+    ("prefiltered-banks", dict(m=1e-4, ratio=1.0)),  # isotropic: lobe map
+]
+
+
+@pytest.mark.parametrize(("method", "params"), MAP_EXTREMES, ids=[f"{m} {p}" for m, p in MAP_EXTREMES])
+def test_multi_lobe_and_banks_maps_stay_finite_and_obey_the_white_furnace(furnace, method, params):
+    check = furnace_check(furnace, thesis(**params), method, anisotropic=params.get("ratio", 1.0) > 1.0)
+    assert check.clean, f"{params} {method}: NaN/Inf/negative pixels"
+    assert check.passed, (params, method, check.rule, check.worst_ratio)
+
+
 @pytest.mark.xfail(
     strict=True, reason="lobe-N (Eq. 4.25) ignores the lobe mass its pattern does not cover; see issue notes"
 )
