@@ -93,16 +93,6 @@ def _albedo(component: Component, wo: np.ndarray) -> np.ndarray:
     return transmission if component.transmission else reflection
 
 
-def banks_shading(dirs: np.ndarray, wo: np.ndarray, axis: int, s: float, energy: np.ndarray) -> np.ndarray:
-    """What a Banks-map pixel integrates against the incident light: energy x the unit-mass
-    kernel (numpy reference of the shader's lookup; dirs (..., 3) local, returns (..., 3))."""
-    t = np.eye(3)[axis]
-    cos_vt = float(wo @ t)
-    profile = banks_profile(abs(cos_vt), s)
-    sign = 1.0 if cos_vt >= 0.0 else -1.0
-    return profile.of_cosine(sign * (dirs @ t))[..., None] * np.asarray(energy)
-
-
 @dataclass
 class BanksFit:
     axis: int  # fibre axis in the shading frame (0 = tangent, 1 = bitangent)

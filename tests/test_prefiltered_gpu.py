@@ -110,6 +110,14 @@ def test_split_sum_render_matches_numpy_twin(gl):
         assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
 
 
+def _slice_position(wo):
+    """(lower slice, interpolation weight) of a view elevation, as the shader computes it."""
+    slices = len(slice_cosines())
+    s = slice_coordinate(wo[2], slices)
+    s0 = min(int(np.floor(s)), slices - 2)
+    return s0, s - s0
+
+
 def test_lobe_map_render_matches_brute_force_prefiltering(gl):
     """End to end: fit -> GPU map -> shader lookup at the fitted axis and elevation, against
     the energy-weighted brute-force convolution of the two neighbouring slices' shapes."""
@@ -118,12 +126,9 @@ def test_lobe_map_render_matches_brute_force_prefiltering(gl):
     result = renderer.render(CAMERA, bsdf, "prefiltered", background=False)
     (comp,) = [c for c in bsdf.components if not isinstance(c, CosineSampled)]
     fit = fit_lobe_map(comp, "lobe")
-    slices = len(slice_cosines())
     for y, x in _pixels(result, count=12, seed=3):
         frame, wo = _frame(result, y, x)
-        s = slice_coordinate(wo[2], slices)
-        s0 = min(int(np.floor(s)), slices - 2)
-        f = s - s0
+        s0, f = _slice_position(wo)
         t = (1 - f) * fit.peak_theta[s0] + f * fit.peak_theta[s0 + 1]
         azimuth = -wo[:2] / np.linalg.norm(wo[:2])
         axis = frame @ np.array([np.sin(t) * azimuth[0], np.sin(t) * azimuth[1], np.cos(t)])
@@ -149,12 +154,9 @@ def test_multi_lobe_render_matches_brute_force_prefiltering(gl):
     (comp,) = [c for c in bsdf.components if not isinstance(c, CosineSampled)]
     fits = fit_lobe_maps(comp, "multi")
     assert len(fits) == MAP_LOBES
-    slices = len(slice_cosines())
     for y, x in _pixels(result, count=10, seed=4):
         frame, wo = _frame(result, y, x)
-        s = slice_coordinate(wo[2], slices)
-        s0 = min(int(np.floor(s)), slices - 2)
-        f = s - s0
+        s0, f = _slice_position(wo)
         u = wo[:2] / np.linalg.norm(wo[:2])
         expected = np.zeros(3)
         for fit in fits:

@@ -41,6 +41,7 @@ PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong", "multi", "bank
 # or the view azimuths of a Banks map's albedo table.
 LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)
 LOBE_TABLE_UNIT = 19
+MAX_LOBE_TABLES = 64
 
 
 @dataclass(frozen=True)
@@ -242,7 +243,8 @@ class RendererBase:
 
     def bind_cube(self, program, cube: RadianceCube, method: Method, material: PackedMaterial | None = None) -> None:
         """Texture units: 0 radiance, 2 Sobol, 3-4 importance (reference only), 8-18
-        prefiltered maps (prefiltered only, built on first use for this cube and material)."""
+        prefiltered maps and 19 the lobe table (prefiltered only, built on first use for this cube
+        and material)."""
         if method.kind == "prefiltered":
             self.bind_prefiltered(program, cube, material, method)
         cube.radiance.use(0)
@@ -288,6 +290,8 @@ class RendererBase:
         table, counts, fibres = lobe_table(plan, material.lobe_components)
         key = table.tobytes()  # one small texture per distinct material (32 KB each)
         if key not in self._lobe_tables:
+            if len(self._lobe_tables) >= MAX_LOBE_TABLES:  # live material edits make new ones
+                self._lobe_tables.pop(next(iter(self._lobe_tables))).release()
             tex = self.ctx.texture((table.shape[1], table.shape[0]), 4, key, dtype="f4")
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
             self._lobe_tables[key] = tex
