@@ -231,3 +231,23 @@ def test_disk_cache_round_trips_split_sum_levels_and_lobe_maps(gl, tmp_path):
     assert map_a.read() == map_b.read()
     built.release()
     loaded.release()
+
+
+def test_per_material_textures_are_made_once_across_frames(gl):
+    """The preview packs its material anew every frame: the albedo table and the lobe table are
+    cached by the lobes' content (an id() key made one new texture per frame, never released),
+    and a map is found by its fits without recomputing quadrature nodes."""
+    import dataclasses
+
+    renderer, _ = gl
+    bsdf = build_bsdf(load_material("plastic"))
+    normalised = dataclasses.replace(Method.parse("lobe-7"), normalize=True)
+    for method in (normalised, Method.parse("prefiltered-multi")):
+        renderer.render(CAMERA, bsdf, method, background=False)
+    textures = len(renderer._material_textures)
+    maps = len(renderer.cubes.prefiltered_maps()._by_fit)
+    for _ in range(2):
+        for method in (normalised, Method.parse("prefiltered-multi")):
+            renderer.render(CAMERA, bsdf, method, background=False)
+    assert len(renderer._material_textures) == textures
+    assert len(renderer.cubes.prefiltered_maps()._by_fit) == maps

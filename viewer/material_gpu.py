@@ -33,6 +33,13 @@ class PackedMaterial:
     def has_diffuse(self) -> bool:
         return bool(np.any(self.kd > 0))
 
+    @property
+    def lobes_key(self) -> tuple:
+        """Everything that determines what is derived from the specular lobes (albedo tables,
+        lobe fits): the key of the renderers' per-material textures. The preview packs its
+        material anew every frame, so an id() key would miss (and grow) on every frame."""
+        return tuple(_lobe_key(comp) for comp in self.lobe_components)
+
 
 def pack_material(bsdf: BSDF) -> PackedMaterial:
     kd = diffuse_albedo(bsdf)

@@ -133,6 +133,7 @@ class PrefilteredMaps:
         self._source_key = hashlib.sha1(np.ascontiguousarray(cube.faces).tobytes()).hexdigest()[:16]
         self._split_sum: dict = {}
         self._lobe_maps: dict = {}
+        self._by_fit: dict = {}
         self._dfg = None
         self.memory: dict[str, int] = {}
         self.seconds: dict[str, float] = {}
@@ -255,17 +256,32 @@ class PrefilteredMaps:
         environment convolved with that lobe's unit-mass shape at view elevation s (one slice
         per lobe for the 2D and Phong modes)."""
         fits = fit if isinstance(fit, list) else [fit]
-        profiles = [p for f in fits for p in f.profiles]
         label = f"{name} ({fits[0].mode}{f' x{len(fits)}' if len(fits) > 1 else ''}"
-        return self._latlong_map("lobemap", profiles, lobe_map_shape(fits), label)
+        return self._fitted_map(
+            tuple(fits),
+            lambda: self._latlong_map("lobemap", [p for f in fits for p in f.profiles], lobe_map_shape(fits), label),
+        )
 
     def banks_map(self, fit: BanksFit, name: str = "banks") -> moderngl.Texture3D:
         """Banks map: slice k holds the environment convolved with the ring kernel of
         v.t = sin(a_k) around each direction t (materials/banks.py)."""
         label = f"{name} (banks s={fit.s:.4f}"
-        return self._latlong_map(
-            "banks", fit.profiles, banks_map_shape(fit), label, BANKS_RINGS, BANKS_AZIMUTHS_PER_RING
+        return self._fitted_map(
+            (fit,),
+            lambda: self._latlong_map(
+                "banks", fit.profiles, banks_map_shape(fit), label, BANKS_RINGS, BANKS_AZIMUTHS_PER_RING
+            ),
         )
+
+    def _fitted_map(self, fits: tuple, build) -> moderngl.Texture3D:
+        """The map of these fit objects, looked up by their identity first: the renderer binds
+        maps every frame, and keying by content means computing every profile's quadrature
+        nodes (64 profiles for a multi-lobe map) per object per frame. The fits are kept in the
+        entry, so their ids stay unique; the content-keyed cache behind still shares equal maps."""
+        key = tuple(id(f) for f in fits)
+        if key not in self._by_fit:
+            self._by_fit[key] = (build(), fits)
+        return self._by_fit[key][0]
 
     def _latlong_map(self, kind, profiles, shape, label, rings=None, azimuths=None) -> moderngl.Texture3D:
         width, height, depth = shape
@@ -314,4 +330,5 @@ class PrefilteredMaps:
             self._dfg.release()
         self._split_sum.clear()
         self._lobe_maps.clear()
+        self._by_fit.clear()
         self._dfg = None

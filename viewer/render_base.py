@@ -41,7 +41,7 @@ PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong", "multi", "bank
 # or the view azimuths of a Banks map's albedo table.
 LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)
 LOBE_TABLE_UNIT = 19
-MAX_LOBE_TABLES = 64
+MAX_MATERIAL_TEXTURES = 64  # per-material textures kept (live material edits make new ones)
 
 
 @dataclass(frozen=True)
@@ -115,31 +115,38 @@ def prefilter_plan(material: PackedMaterial, mode: str) -> list[str]:
     return plan
 
 
-def lobe_table(plan: list[str], components: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def lobe_table(plan: list[str], fitted: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The lobe-map and Banks parameters the shader reads (shaders/integrate.glsl), as
-    (table, counts, fibres). table: (MAX_LOBES * LOBE_TABLE_ROWS, 2 LOBE_SLICES, 4); component
-    i owns rows i LOBE_TABLE_ROWS + j: for lobe maps, fitted lobe j's axis (local, for wo at
-    azimuth 0) in texels 0..S-1 and its energy in S..2S-1; for a Banks map, the albedo at view
-    azimuth j pi / (2 (BANKS_AZIMUTHS - 1)) from the fibre in texels S..2S-1. counts: fitted
-    lobes per component; fibres: the Banks fibre axis (0 = tangent, 1 = bitangent)."""
+    (table, counts, fibres). ``fitted``: per lobe, the BanksFit ('banks'), the list of
+    LobeMapFit (lobe-map modes) or None ('splitsum'). table: (MAX_LOBES * LOBE_TABLE_ROWS,
+    2 LOBE_SLICES, 4); component i owns rows i LOBE_TABLE_ROWS + j: for lobe maps, fitted lobe
+    j's axis (local, for wo at azimuth 0) in texels 0..S-1 and its energy in S..2S-1; for a Banks
+    map, the albedo at view azimuth j pi / (2 (BANKS_AZIMUTHS - 1)) from the fibre in texels
+    S..2S-1. counts: fitted lobes per component; fibres: the Banks fibre axis (0 = tangent,
+    1 = bitangent)."""
     table = np.zeros((MAX_LOBES * LOBE_TABLE_ROWS, 2 * LOBE_SLICES, 4), dtype=np.float32)
     counts = np.zeros(MAX_LOBES, dtype=np.int32)
     fibres = np.zeros(MAX_LOBES, dtype=np.int32)
-    for i, kind in enumerate(plan):
-        if kind == "splitsum":
-            continue
+    for i, (kind, fit) in enumerate(zip(plan, fitted, strict=True)):
         base = i * LOBE_TABLE_ROWS
         if kind == "banks":
-            fit = fit_banks(components[i])
             table[base : base + BANKS_AZIMUTHS, LOBE_SLICES:, :3] = fit.energy.transpose(1, 0, 2)
             counts[i], fibres[i] = 1, fit.axis
-            continue
-        fits = fit_lobe_maps(components[i], kind)
-        for j, fit in enumerate(fits):
-            table[base + j, :LOBE_SLICES, :3] = fit.local_axes()
-            table[base + j, LOBE_SLICES:, :3] = fit.energy
-        counts[i] = len(fits)
+        elif kind != "splitsum":
+            for j, lobe in enumerate(fit):
+                table[base + j, :LOBE_SLICES, :3] = lobe.local_axes()
+                table[base + j, LOBE_SLICES:, :3] = lobe.energy
+            counts[i] = len(fit)
     return table, counts, fibres
+
+
+def fit_plan(plan: list[str], components: list) -> list:
+    """Per lobe what its prefiltered map is built from: a BanksFit, a list of LobeMapFit, or
+    None for split-sum (lobe_table's ``fitted``)."""
+    return [
+        fit_banks(comp) if kind == "banks" else None if kind == "splitsum" else fit_lobe_maps(comp, kind)
+        for kind, comp in zip(plan, components, strict=True)
+    ]
 
 
 def sobol_points(count: int = SOBOL_SIDE * SOBOL_SIDE, seed: int = SOBOL_SEED) -> np.ndarray:
@@ -177,9 +184,8 @@ class RendererBase:
         self.sobol.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.sobol_count = len(sobol)
         self._vaos: dict = {}
-        self._albedo_textures: dict = {}
+        self._material_textures: dict = {}  # (kind, ..., lobes_key) -> (texture, derived data)
         self._dummy_textures: dict = {}
-        self._lobe_tables: dict = {}
         self._timer = None
         self.targets: list = []
         self.resize(size)
@@ -231,15 +237,25 @@ class RendererBase:
         set_uniform(program, "u_sobol_count", self.sobol_count)
         set_uniform(program, "u_seed", int(seed))
         if method.kind == "lobe" and method.normalize and "u_albedo" in program:
-            key = ("albedo", id(material))
-            if key not in self._albedo_textures:
+
+            def albedo_texture():
                 data = albedo_texture_data(material)
                 tex = self.ctx.texture((data.shape[1], data.shape[0]), 3, data.tobytes(), dtype="f4")
                 tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
                 tex.repeat_x = tex.repeat_y = False
-                self._albedo_textures[key] = (tex, material)  # keep the material alive: id() stays unique
-            self._albedo_textures[key][0].use(7)
+                return tex, None
+
+            self._material_texture(("albedo", material.lobes_key), albedo_texture)[0].use(7)
             set_uniform(program, "u_albedo", 7)
+
+    def _material_texture(self, key: tuple, make) -> tuple:
+        """(texture, derived data) of a material, made by ``make()`` on first use and cached by
+        content; the oldest is released beyond MAX_MATERIAL_TEXTURES."""
+        if key not in self._material_textures:
+            if len(self._material_textures) >= MAX_MATERIAL_TEXTURES:
+                self._material_textures.pop(next(iter(self._material_textures)))[0].release()
+            self._material_textures[key] = make()
+        return self._material_textures[key]
 
     def bind_cube(self, program, cube: RadianceCube, method: Method, material: PackedMaterial | None = None) -> None:
         """Texture units: 0 radiance, 2 Sobol, 3-4 importance (reference only), 8-18
@@ -272,31 +288,32 @@ class RendererBase:
         set_uniform(program, "u_split_sum_max_level", float(SPLIT_SUM_LEVELS - 1))
         maps.dfg().use(10)
         set_uniform(program, "u_dfg", 10)
+
+        def lobe_table_texture():
+            fitted = fit_plan(plan, material.lobe_components)
+            table, counts, fibres = lobe_table(plan, fitted)
+            tex = self.ctx.texture((table.shape[1], table.shape[0]), 4, table.tobytes(), dtype="f4")
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            return tex, (fitted, counts, fibres)
+
+        table, (fitted, counts, fibres) = self._material_texture(
+            ("lobe table", method.mode, material.lobes_key), lobe_table_texture
+        )
+        table.use(LOBE_TABLE_UNIT)
+        set_uniform(program, "u_lobe_table", LOBE_TABLE_UNIT)
         modes = np.zeros(MAX_LOBES, dtype=np.int32)
         depth = np.ones(MAX_LOBES, dtype=np.int32)
         units = list(range(11, 11 + MAX_LOBES))
         for i in range(MAX_LOBES):
             texture = self._dummy_texture("3d")
             if i < len(plan) and plan[i] == "banks":
-                fit = fit_banks(material.lobe_components[i])
-                texture = maps.banks_map(fit, f"lobe {i}")
-                modes[i], depth[i] = 2, len(fit.profiles)
+                texture = maps.banks_map(fitted[i], f"lobe {i}")
+                modes[i], depth[i] = 2, len(fitted[i].profiles)
             elif i < len(plan) and plan[i] != "splitsum":
-                fits = fit_lobe_maps(material.lobe_components[i], plan[i])
-                texture = maps.lobe_map(fits, f"lobe {i}")
-                modes[i], depth[i] = 1, len(fits[0].profiles)
+                texture = maps.lobe_map(fitted[i], f"lobe {i}")
+                modes[i], depth[i] = 1, len(fitted[i][0].profiles)
             texture.use(units[i])
         set_uniform(program, "u_lobe_maps", units)
-        table, counts, fibres = lobe_table(plan, material.lobe_components)
-        key = table.tobytes()  # one small texture per distinct material (32 KB each)
-        if key not in self._lobe_tables:
-            if len(self._lobe_tables) >= MAX_LOBE_TABLES:  # live material edits make new ones
-                self._lobe_tables.pop(next(iter(self._lobe_tables))).release()
-            tex = self.ctx.texture((table.shape[1], table.shape[0]), 4, key, dtype="f4")
-            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            self._lobe_tables[key] = tex
-        self._lobe_tables[key].use(LOBE_TABLE_UNIT)
-        set_uniform(program, "u_lobe_table", LOBE_TABLE_UNIT)
         for name, values in (
             ("u_lobe_map_mode", modes),
             ("u_lobe_map_depth", depth),
@@ -359,9 +376,9 @@ class RendererBase:
         self._vaos[key].render(moderngl.TRIANGLES, vertices=3)
 
     def release(self):
-        for tex, _ in self._albedo_textures.values():
+        for tex, _ in self._material_textures.values():
             tex.release()
-        for tex in list(self._dummy_textures.values()) + list(self._lobe_tables.values()):
+        for tex in self._dummy_textures.values():
             tex.release()
         for vao in self._vaos.values():
             vao.release()
