@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from .bsdf import BSDF, Component
-from .lobe_fit import LUMINANCE, component_key, is_isotropic, slice_cosines, slice_values
+from .lobe_fit import LUMINANCE, component_key, is_isotropic, polar_grid, slice_cosines, slice_values
 from .prefilter import RadialProfile
 
 BANKS_SLICES = 24  # map slices over a_v = asin(|v.t|) in [0, pi/2]
@@ -46,6 +46,8 @@ _PSI = np.linspace(0.0, np.pi, 4097)
 # Fit views: elevations and azimuths (from the fibre axis) where the least squares look.
 _FIT_COS = (0.3, 0.55, 0.8, 0.97)
 _FIT_PHI = (0.0, np.pi / 6, np.pi / 3, np.pi / 2)
+_GRID_THETA = (np.arange(256) + 0.5) / 256 * np.pi
+_GRID_PHI = (np.arange(512) + 0.5) / 512 * 2.0 * np.pi
 
 
 def banks_kernel(cos_lt, cos_vt, s: float) -> np.ndarray:
@@ -70,15 +72,6 @@ def fibre_axis(component: Component) -> int:
     """0 (tangent x) or 1 (bitangent y): the axis of the smaller roughness."""
     d = component.distribution
     return 0 if d.alpha_x <= d.alpha_y else 1
-
-
-def _sphere_grid(rows: int = 256):
-    theta = (np.arange(rows) + 0.5) / rows * np.pi
-    phi = (np.arange(2 * rows) + 0.5) / (2 * rows) * 2.0 * np.pi
-    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
-    dirs = np.stack(np.broadcast_arrays(st * np.cos(phi), st * np.sin(phi), ct), axis=-1)
-    weights = np.broadcast_to(st * (np.pi / rows) * (np.pi / rows), dirs.shape[:2])
-    return dirs.reshape(-1, 3), weights.reshape(-1)
 
 
 def view_direction(cos_theta_o: float, phi: float, axis: int) -> np.ndarray:
@@ -120,7 +113,9 @@ class BanksFit:
 def _fit_s(component: Component, axis: int) -> tuple[float, float]:
     """s minimising the summed squared error of E(wo) K(l) against f cos over the fit views,
     relative to the summed squared slice (luminance)."""
-    dirs, weights = _sphere_grid()
+    # A uniform grid over the whole sphere (the ring lies anywhere, not near one axis).
+    dirs, weights = polar_grid(np.array([0.0, 0.0, 1.0]), _GRID_THETA, _GRID_PHI)
+    dirs, weights = dirs.reshape(-1, 3), weights.reshape(-1)
     t = np.eye(3)[axis]
     cases = []
     for c in _FIT_COS:
@@ -145,9 +140,9 @@ def _fit_s(component: Component, axis: int) -> tuple[float, float]:
     return float(1.0 - np.exp(result.x)), float(np.sqrt(result.fun))
 
 
-def energy_table(component: Component, axis: int, rows: int | None = None) -> np.ndarray:
+def energy_table(component: Component, axis: int) -> np.ndarray:
     """Directional albedo over (cos theta_o = slice_cosines(), phi = 0 .. pi/2 from the fibre)."""
-    cosines = slice_cosines(rows) if rows else slice_cosines()
+    cosines = slice_cosines()
     phis = np.linspace(0.0, 0.5 * np.pi, BANKS_AZIMUTHS)
     table = np.zeros((len(cosines), BANKS_AZIMUTHS, 3))
     for i, c in enumerate(cosines):

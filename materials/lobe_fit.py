@@ -32,7 +32,7 @@ from scipy.optimize import minimize_scalar
 
 from .bsdf import BSDF, Component
 from .microfacet import MicrofacetDistribution
-from .prefilter import RadialProfile, phong_profile
+from .prefilter import RadialProfile, cumulative_radial_mass, phong_profile
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 LOBE_SLICES = 16  # view elevations, uniform in cos(theta_o) from 0 to 1 (the seed used 16)
@@ -324,12 +324,6 @@ def fit_multi_lobe(component: Component, cos_theta_o: float, lobes: int = 8, las
     return MultiLobeFit(axes, profiles, errors)
 
 
-def _profile_mass(values: np.ndarray) -> float:
-    """Integral over the sphere of a radial profile tabulated on _PSI."""
-    ring = values * 2.0 * np.pi * np.sin(_PSI)
-    return float(np.sum(0.5 * (ring[1:] + ring[:-1]) * np.diff(_PSI)))
-
-
 def _match_lobes(previous: list, axes: list, masses: list) -> list:
     """Order of this elevation's lobes that follows the previous elevation's (by the angle
     between axes; a lobe without mass matches anything): the seed's clustering of lobes with
@@ -357,7 +351,7 @@ def _fit_multi(component: Component, slices: int, lobes: int = MAP_LOBES) -> lis
     previous = None
     for c in cosines:
         fit = fit_multi_lobe(comp, c, lobes, last_mean=True)
-        masses = [_profile_mass(p) for p in fit.profiles]
+        masses = [float(cumulative_radial_mass(_PSI, p)[-1]) for p in fit.profiles]
         # The last lobe (the mean profile of the remainder) keeps its block; the minimum-profile
         # lobes are matched among themselves.
         order = list(range(lobes))
@@ -371,13 +365,13 @@ def _fit_multi(component: Component, slices: int, lobes: int = MAP_LOBES) -> lis
             for k, (a, m) in enumerate(zip(axes, per_slice[-1][2], strict=True))
         ]
     energies = np.array([directional_energy(component, _wo(c)) for c in cosines])
+    total = np.array([max(sum(masses), 1e-300) for _, _, masses in per_slice])
     fits = []
     for j in range(lobes):
         shapes = [
             RadialProfile.from_values(_PSI, values[j]) if masses[j] > 0.0 else None for _, values, masses in per_slice
         ]
         shapes = _fill_empty_slices(shapes)
-        total = np.array([max(sum(masses), 1e-300) for _, _, masses in per_slice])
         share = np.array([masses[j] for _, _, masses in per_slice]) / total
         axes = np.array([axes[j] for axes, _, _ in per_slice])
         fits.append(

@@ -35,6 +35,13 @@ from .microfacet import ALPHA_MIN, MicrofacetDistribution
 PSI_GRID = np.concatenate([[0.0], np.geomspace(1e-5, np.pi, 1023)])
 
 
+def cumulative_radial_mass(psi: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Integral of a radially symmetric function tabulated on ``psi`` over the caps of angle
+    psi (trapezoid rule on the rings 2 pi sin(psi) dpsi); the last entry is the sphere's."""
+    ring = values * 2.0 * np.pi * np.sin(psi)
+    return np.concatenate([[0.0], np.cumsum(0.5 * (ring[1:] + ring[:-1]) * np.diff(psi))])
+
+
 @dataclass(frozen=True)
 class RadialProfile:
     """A radially symmetric kernel p(psi) per steradian, tabulated on ``psi`` and normalised so
@@ -48,8 +55,7 @@ class RadialProfile:
     def from_values(cls, psi, values) -> RadialProfile:
         psi = np.asarray(psi, dtype=np.float64)
         values = np.nan_to_num(np.maximum(np.asarray(values, dtype=np.float64), 0.0))
-        ring = values * 2.0 * np.pi * np.sin(psi)
-        mass = np.concatenate([[0.0], np.cumsum(0.5 * (ring[1:] + ring[:-1]) * np.diff(psi))])
+        mass = cumulative_radial_mass(psi, values)
         if not mass[-1] > 0.0:
             raise ValueError("a radial profile needs positive values somewhere")
         return cls(psi, values / mass[-1], mass / mass[-1])

@@ -44,6 +44,12 @@ def _diffuse(kd) -> dict:
     return validate({"model": "thesis", "kd": kd, "lobes": []})
 
 
+def _glossy(kd, ks: float, m: float, r0: float, alpha: float) -> dict:
+    """A diffuse base under one isotropic thesis lobe."""
+    lobe = {"ks": ks, "mx": m, "my": m, "r0": r0, "alpha": alpha}
+    return validate({"model": "thesis", "kd": kd, "lobes": [lobe]})
+
+
 def _without_top_face(mesh: Mesh) -> Mesh:
     """The mesh minus its triangles facing +Y (and the vertices only they used)."""
     tris = np.asarray(mesh.indices).reshape(-1, 3)
@@ -100,28 +106,10 @@ def demo_geometry() -> Scene:
     materials = [
         SceneMaterial("walls", _diffuse([0.75, 0.74, 0.72])),
         # Varnished wood: a narrow Fresnel lobe over the diffuse base, shaded by a mirror pass.
-        SceneMaterial(
-            "floor",
-            validate(
-                {
-                    "model": "thesis",
-                    "kd": [0.42, 0.33, 0.24],
-                    "lobes": [{"ks": 1.0, "mx": 0.05, "my": 0.05, "r0": 0.05, "alpha": 0.0}],
-                }
-            ),
-        ),
+        SceneMaterial("floor", _glossy([0.42, 0.33, 0.24], ks=1.0, m=0.05, r0=0.05, alpha=0.0)),
         SceneMaterial("ceiling", _diffuse(0.8)),
         SceneMaterial("light", _diffuse(0.8), emission=np.array([14.0, 13.2, 12.0])),
-        SceneMaterial(
-            "table",
-            validate(
-                {
-                    "model": "thesis",
-                    "kd": [0.3, 0.18, 0.1],
-                    "lobes": [{"ks": 0.6, "mx": 0.12, "my": 0.12, "r0": 0.04, "alpha": 0.2}],
-                }
-            ),
-        ),
+        SceneMaterial("table", _glossy([0.3, 0.18, 0.1], ks=0.6, m=0.12, r0=0.04, alpha=0.2)),
     ]
     preset_materials = [
         "chrome",

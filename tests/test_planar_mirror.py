@@ -168,6 +168,13 @@ def _buffers(renderer, index=0, kind="mirror") -> MirrorBuffers:
     return MirrorBuffers(targets.camera, read(targets.radiance, 3), read(targets.position, 4), read(targets.normal, 3))
 
 
+def _buffer_radiance(buffers, p, directions):
+    """Radiance the two-step projection (4.5.2) reads from a mirror or see-through buffer for
+    unit world directions from the point p."""
+    uv, _, _ = project_samples(buffers, p, directions)
+    return buffers.radiance_bilinear(uv)
+
+
 def _shading_point(result, y, x):
     """(world position, shading frame (columns t, b, n), local view direction) of pixel (y, x)."""
     p = result.position[y, x].astype(np.float64)
@@ -298,8 +305,7 @@ def test_glsl_lobe_method_matches_the_numpy_reference_through_the_mirror_buffer(
         p, frame, wo = _shading_point(result, y, x)
 
         def radiance(world, lod, p=p):
-            uv, _, _ = project_samples(buffers, p, world / np.linalg.norm(world, axis=1, keepdims=True))
-            return buffers.radiance_bilinear(uv)
+            return _buffer_radiance(buffers, p, world / np.linalg.norm(world, axis=1, keepdims=True))
 
         expected = integrate_lobe(lobe, wo, radiance, 7, frame=frame, kind=kind)
         errors.append(np.abs(result.radiance[y, x] - expected).max() / max(expected.max(), 1e-3))
@@ -364,8 +370,7 @@ def test_refinement_averages_the_tangent_planes_across_passes(glossy_floor):
         world = wi @ frame.T
         uv, _, _ = project_samples_averaged(buffers, p, world, TangentPlaneAverage())
         expected = (buffers.radiance_bilinear(uv) * weight).mean(axis=0)
-        plain_uv, _, _ = project_samples(buffers, p, world)
-        plain = (buffers.radiance_bilinear(plain_uv) * weight).mean(axis=0)
+        plain = (_buffer_radiance(buffers, p, world) * weight).mean(axis=0)
         scale = max(expected.max(), 1e-3)
         changed += np.abs(plain - expected).max() / scale > 1e-3
         errors.append(np.abs(result.radiance[y, x] - expected).max() / scale)
@@ -536,8 +541,7 @@ def test_glsl_matches_the_numpy_reference_through_both_buffers_of_a_glossy_pane(
             out = np.zeros_like(world)
             for buffers, side in ((mirror, front), (through, ~front)):
                 if side.any():
-                    uv, _, _ = project_samples(buffers, p, world[side])
-                    out[side] = buffers.radiance_bilinear(uv)
+                    out[side] = _buffer_radiance(buffers, p, world[side])
             return out
 
         expected = sum(integrate_lobe(lobe, wo, radiance, 7, frame=frame, kind="multi_ring") for lobe in lobes)
