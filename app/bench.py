@@ -23,8 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.core.methods import DEFAULT_FIS_LOD_BIAS, DEFAULT_LOBE_LOD_BIAS, Method
+from lobeview.core.paths import bench_results_dir, shared_assets_dir
 from lobeview.viewer.context import gpu_timer_meaningful
-from lobeview.viewer.render_base import DEFAULT_FIS_LOD_BIAS, DEFAULT_LOBE_LOD_BIAS, Method
 
 #: material classes of the issue -> presets
 MATERIAL_CLASSES = {
@@ -67,7 +68,8 @@ QUICK_FPS_SAMPLES = (3, 7, 11, 19)
 #: thesis table 4.1 (cube-map method, GTS 450, 1680x1050): samples -> (full, half) fps
 THESIS_FPS = {3: (70, 95), 5: (52, 75), 7: (41, 60), 9: (35, 52), 11: (30, 43), 13: (26, 40), 15: (24, 35)}
 THESIS_FPS.update({17: (22, 31), 19: (20, 28)})
-SHARED_ENV_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "assets" / "env"
+SHARED_ASSETS = shared_assets_dir()  # None outside a checkout: sphere views fall back to built-in skies
+SHARED_ENV_DIR = SHARED_ASSETS / "env" if SHARED_ASSETS is not None else None
 SPHERE_ENVS = {
     "interior": ("blender_studiolights_1k/interior.exr", "builtin:studio"),
     "courtyard": ("blender_studiolights_1k/courtyard.exr", "builtin:sky"),
@@ -235,10 +237,8 @@ def first_crossing(target: float, xs, ys) -> float:
 
 # -- what is rendered ----------------------------------------------------------------------------------
 def parse_method(text: str) -> Method:
-    from lobeview.viewer.stress import parse_stress_method
-
     try:
-        return parse_stress_method(text)
+        return Method.parse(text)
     except ValueError as exc:
         raise BenchError(f"--methods: {exc}") from None
 
@@ -250,10 +250,11 @@ def resolve_environment(name: str):
 
     if name in SPHERE_ENVS:
         relative, fallback = SPHERE_ENVS[name]
-        path = SHARED_ENV_DIR / relative
-        if path.exists():
+        path = SHARED_ENV_DIR / relative if SHARED_ENV_DIR is not None else None
+        if path is not None and path.exists():
             return load_environment(str(path))
-        warnings.warn(f"{path} not found: sphere/{name} uses {fallback} instead", stacklevel=2)
+        missing = path if path is not None else f"the shared assets ($LOBEVIEW_ASSETS) for sphere/{name}"
+        warnings.warn(f"{missing} not found: sphere/{name} uses {fallback} instead", stacklevel=2)
         return load_environment(fallback)
     return load_environment(name)
 
@@ -262,7 +263,7 @@ class SphereTarget:
     """The preview sphere under a distant environment (no lightmaps)."""
 
     def __init__(self, ctx, env_name: str, size, face_size: int):
-        from lobeview.app.shot import PREVIEW_CAMERA
+        from lobeview.app.shot import PREVIEW_CAMERA  # the camera of `lobeview shot --object`
         from lobeview.scenes.meshes import uv_sphere
         from lobeview.viewer.camera import Camera
         from lobeview.viewer.preview import PreviewRenderer
@@ -304,13 +305,13 @@ class DemoTarget:
     """The built-in demo scene from one of its cameras; its materials are the scene's."""
 
     def __init__(self, ctx, view: str, size, face_size: int, cache):
-        from lobeview.app.shot import _scene_view, load_scene_and_environment
+        from lobeview.app.options import load_scene_and_environment, scene_view
         from lobeview.viewer.camera import Camera
         from lobeview.viewer.scene_renderer import SceneRenderer
 
         _, scene, env, cache = load_scene_and_environment(None, None, cache)
         self.env_label = Path(env.name).name
-        position, target, up, fov = _scene_view(scene, view)
+        position, target, up, fov = scene_view(scene, view)
         self.camera = Camera(position=position, target=target, up=up, fov_y=fov)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -375,7 +376,7 @@ class Progress:
 
 
 def _settings(args) -> dict:
-    from lobeview.app.shot import parse_size
+    from lobeview.app.options import parse_size
 
     quick = args.quick
     methods = list(QUICK_METHODS if quick else FULL_METHODS) if args.methods is None else args.methods
@@ -432,12 +433,12 @@ def _settings(args) -> dict:
 def run(args) -> int:
     from lobeview.viewer.context import create_headless_context, renderer_description
 
-    out_dir = Path(args.out) if args.out else Path(__file__).resolve().parents[1] / "bench" / "results"
+    out_dir = Path(args.out) if args.out else bench_results_dir()
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
     if args.stress:
         return run_stress(args, out_dir, stamp)
     if args.mirrors:
-        from lobeview.app.shot import parse_size
+        from lobeview.app.options import parse_size
 
         from .bench_mirror import MIRROR_SAMPLES, run_mirror_bench
 
@@ -674,9 +675,7 @@ def _time(cell) -> float:
 
 
 def _family(method: str) -> str:
-    if method.endswith("+norm"):
-        return "lobe+norm"
-    return method.split("-")[0]
+    return Method.parse(method).family
 
 
 def _groups(cells):

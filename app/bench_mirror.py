@@ -56,10 +56,10 @@ def _frame_ms(renderer, camera, method, repeats: int) -> tuple[float, float, obj
 
 
 def run_mirror_bench(ctx, device: str, out_dir: Path, stamp: str, resolutions, samples, repeats: int, spp: int) -> Path:
+    from lobeview.core.methods import Method
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.mirror_scene import CAMERA, mirror_floor_scene
     from lobeview.viewer.camera import Camera
-    from lobeview.viewer.render_base import Method
     from lobeview.viewer.scene_renderer import SceneRenderer
     from lobeview.viewer.tonemap import tonemap
 
@@ -180,8 +180,8 @@ def write_convergence_figure(ctx, env, camera, path: Path, size, spp: int) -> Pa
     """Sharp mirror | glossy lobe-11 | glossy reference, tonemapped side by side (PNG)."""
     from PIL import Image
 
+    from lobeview.core.methods import Method
     from lobeview.scenes.mirror_scene import mirror_floor_scene
-    from lobeview.viewer.render_base import Method
     from lobeview.viewer.scene_renderer import SceneRenderer
     from lobeview.viewer.tonemap import tonemap
 

@@ -19,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.core.methods import Method
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.builtin_env import load_environment
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context, renderer_description
-from lobeview.viewer.render_base import Method
 
 
 def main(argv=None) -> int:

@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lobeview.core.methods import DEFAULT_LOBE_LOD_BIAS
+
 from .bsdf import BSDF, HalfVectorLobe
 from .conductor import MicrofacetReflection
 from .microfacet import MicrofacetDistribution
@@ -41,8 +43,8 @@ from .vec import dot, mirror_z, reflect, spherical_direction
 
 XI_BORDER = 0.01  # Eq. 4.10: empirical lobe border of the thesis
 # MIP level bias of each sample's lookup (lod = 0.5 log2(area / texel) + bias): -0.5, measured by
-# `lobeview bench` (the thesis uses 0; see viewer/render_base.py DEFAULT_LOBE_LOD_BIAS).
-LOBE_LOD_BIAS = -0.5
+# `lobeview bench` (the thesis uses 0; core/methods.py says how it was chosen).
+LOBE_LOD_BIAS = DEFAULT_LOBE_LOD_BIAS
 RING_XI1 = 0.6  # single ring at 40 % of the lobe radius (thesis 4.4.3)
 ANISOTROPY_LINE_RATIO = 3.0  # max/min roughness at which the line pattern replaces the ring
 MULTI_RING_SAMPLES_PER_RING = 3  # thesis 4.5.3 / Fig. 4.34: rings of three samples

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from lobeview.scenes.cube_layout import face_directions, face_point_directions, texel_solid_angles
+from lobeview.core.cube_layout import face_directions, face_point_directions, texel_solid_angles
 
 from .conductor import MicrofacetReflection
 from .fresnel import Fresnel

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from lobeview.core.paths import cache_dir
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import validate
 
@@ -31,13 +31,6 @@ DEMO_ENVIRONMENT = "builtin:overcast"
 DEFAULT_RESOLUTION = 512
 DEFAULT_RAYS = 128
 DEFAULT_BOUNCES = 3
-
-
-def cache_dir() -> Path:
-    root = os.environ.get("LOBEVIEW_CACHE")
-    if root:
-        return Path(root)
-    return Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "lobeview"
 
 
 def _diffuse(kd) -> dict:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cube_layout import direction_to_face, face_point_directions, texel_solid_angles
+from lobeview.core.cube_layout import direction_to_face, face_point_directions, texel_solid_angles
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 

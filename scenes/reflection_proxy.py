@@ -127,23 +127,12 @@ class ReflectionProxy:
         offset[idx] = np.log2(np.maximum(t[idx], 1e-9) / length[good])
         return out, offset
 
-    def uniforms(self) -> dict:
-        """What shaders/integrate.glsl (PARALLAX) reads."""
+    def padded_planes(self) -> np.ndarray:
+        """(MAX_PROXY_PLANES, 4) float32: the planes (n, d), zero rows after the last."""
         planes = np.zeros((MAX_PROXY_PLANES, 4), np.float32)
-        count = 0
-        box_min, box_max = np.zeros(3), np.zeros(3)
         if self.kind == "planes":
-            count = len(self.planes)
-            planes[:count] = self.planes
-        else:
-            box_min, box_max = self.box_min, self.box_max
-        return {
-            "u_proxy_kind": 1 if self.kind == "planes" else 2,
-            "u_proxy_plane_count": count,
-            "u_proxy_planes": planes,
-            "u_proxy_box_min": tuple(float(x) for x in box_min),
-            "u_proxy_box_max": tuple(float(x) for x in box_max),
-        }
+            planes[: len(self.planes)] = self.planes
+        return planes
 
 
 def object_proxy(extras, scene_bounds, name: str) -> ReflectionProxy | None:

@@ -6,15 +6,9 @@
 #include "cube.glsl"
 const float COS_EPS = 1e-7;
 
-#define LOBE_KURT_REFLECTION 0
-#define LOBE_KURT_TRANSMISSION 1
-#define LOBE_MICROFACET 2
-#define LOBE_GLTF_SPECULAR 3
-#define DIST_BECKMANN 0
-#define DIST_GGX 1
-#define FRESNEL_NONE 0
-#define FRESNEL_SCHLICK 1
-#define FRESNEL_CONDUCTOR 2
+// The lobe layout (LOBE_ROWS vec4s per lobe), its type codes (LOBE_*, DIST_*, FRESNEL_*) and
+// the shared constants (MAX_LOBES, XI_BORDER, ...) are #defines injected from
+// viewer/interface.py (SHADER_CONSTANTS, LOBE_LAYOUT): one description for both sides.
 
 struct Lobe {
     int type;
@@ -31,14 +25,14 @@ struct Lobe {
 };
 
 uniform int u_lobe_count;
-uniform vec4 u_lobes[MAX_LOBES * 5];
+uniform vec4 u_lobes[MAX_LOBES * LOBE_ROWS];
 
 Lobe get_lobe(int i) {
-    vec4 a = u_lobes[5 * i];
-    vec4 b = u_lobes[5 * i + 1];
-    vec4 c = u_lobes[5 * i + 2];
-    vec4 d = u_lobes[5 * i + 3];
-    vec4 e = u_lobes[5 * i + 4];
+    vec4 a = u_lobes[LOBE_ROWS * i];
+    vec4 b = u_lobes[LOBE_ROWS * i + 1];
+    vec4 c = u_lobes[LOBE_ROWS * i + 2];
+    vec4 d = u_lobes[LOBE_ROWS * i + 3];
+    vec4 e = u_lobes[LOBE_ROWS * i + 4];
     Lobe l;
     l.type = int(a.x + 0.5);
     l.dist = int(a.y + 0.5);
@@ -229,8 +223,7 @@ vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
 
 // ---- deterministic patterns (patterns.py) ---------------------------------------------------
 
-const float XI_BORDER = 0.01;
-const float MAX_ELLIPSE_ANGLE = 1.3962634015954636;  // 80 degrees
+// XI_BORDER (Eq. 4.10) and MAX_ELLIPSE_ANGLE (80 degrees, Eq. 4.15) come from patterns.py.
 
 // Eq. 4.10 with Beckmann's border for both distributions (GGX: its core; patterns.theta_thresh).
 float theta_thresh(Lobe l, float phi) {

@@ -46,12 +46,12 @@ vec2 sobol_point(int index) { return sobol_point4(index).xy; }
 
 #if defined(ENV_SAMPLING)
 // Environment importance sampling (numpy reference: scenes/env_sampling.py).
-uniform sampler2D u_env_cdf;      // cumulative texel probabilities, rows of 1024
+uniform sampler2D u_env_cdf;      // cumulative texel probabilities, rows of CDF_ROW
 uniform int u_env_texels;         // 6 * size^2
 uniform int u_env_size;           // importance face size
 uniform samplerCube u_env_pdf;    // P_t (size/2)^2 per texel, nearest filtering
 
-float env_cdf(int i) { return texelFetch(u_env_cdf, ivec2(i % 1024, i / 1024), 0).r; }
+float env_cdf(int i) { return texelFetch(u_env_cdf, ivec2(i % CDF_ROW, i / CDF_ROW), 0).r; }
 
 float env_pdf(vec3 d) {
     vec3 a = abs(d);
@@ -94,9 +94,8 @@ vec3 g_shading_position;                        // world position, set by the fr
 // Reflected-geometry correction (thesis 4.4.1; scenes/reflection_proxy.py): the secondary ray
 // from the shading point is intersected with the object's proxy (bounding planes or a box seen
 // from inside) and the cube map is read toward the hit point as seen from its centre.
-const int MAX_PROXY_PLANES = 6;
 uniform vec3 u_cube_centre;
-uniform int u_proxy_kind;                       // 1: planes, 2: box
+uniform int u_proxy_kind;                       // PROXY_PLANES or PROXY_BOX
 uniform int u_proxy_plane_count;
 uniform vec4 u_proxy_planes[MAX_PROXY_PLANES];  // unit normal n, d: n.x + d = 0
 uniform vec3 u_proxy_box_min;
@@ -104,7 +103,7 @@ uniform vec3 u_proxy_box_max;
 
 float proxy_hit_distance(vec3 o, vec3 d) {
     float t = 1e38;
-    if (u_proxy_kind == 1) {
+    if (u_proxy_kind == PROXY_PLANES) {
         for (int k = 0; k < u_proxy_plane_count; ++k) {
             float denom = dot(u_proxy_planes[k].xyz, d);
             if (abs(denom) <= 1e-12) continue;
@@ -317,7 +316,6 @@ vec3 cosine_hemisphere(vec2 u) {
 #if defined(LOBE_NORMALIZE)
 // Per-lobe directional albedo over (cos theta_o, phi_o), blocks of ALBEDO_ROWS rows per lobe
 // (materials/patterns.py AlbedoTable); linear filtering between texel centres.
-const int ALBEDO_PHI = 16;
 const int ALBEDO_ROWS = ALBEDO_PHI + 1;
 uniform sampler2D u_albedo;
 
@@ -377,7 +375,7 @@ uniform samplerCube u_split_sum[2];            // by distribution (DIST_BECKMANN
 uniform float u_split_sum_max_level;
 uniform sampler2D u_dfg;                       // rg: Beckmann (A, B), ba: GGX; x = cos, y = roughness
 uniform sampler3D u_lobe_maps[MAX_LOBES];
-uniform int u_lobe_map_mode[MAX_LOBES];        // 0: split-sum, 1: lobe map, 2: Banks map
+uniform int u_lobe_map_mode[MAX_LOBES];        // LOBE_MAP_SPLITSUM, LOBE_MAP_LOBES or LOBE_MAP_BANKS
 uniform int u_lobe_map_depth[MAX_LOBES];       // slices per fitted lobe (LOBE_SLICES or 1), Banks slices
 uniform int u_lobe_map_count[MAX_LOBES];       // fitted lobes in the lobe map
 uniform int u_banks_fibre[MAX_LOBES];          // Banks fibre axis: 0 tangent, 1 bitangent
@@ -412,7 +410,7 @@ vec3 banks_lookup(int lobe_index, vec3 wo, mat3 tbn) {
 
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     if (wo.z <= 0.0) return vec3(0.0);
-    if (u_lobe_map_mode[lobe_index] == 0) {
+    if (u_lobe_map_mode[lobe_index] == LOBE_MAP_SPLITSUM) {
         vec3 r = tbn * vec3(-wo.xy, wo.z);
 #if defined(PARALLAX)
         float unused_offset;
@@ -426,7 +424,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         vec3 scale = l.type == LOBE_GLTF_SPECULAR ? vec3(1.0) : l.k;
         return radiance * (f0 * ab.x + ab.y) * scale;
     }
-    if (u_lobe_map_mode[lobe_index] == 2) return banks_lookup(lobe_index, wo, tbn);
+    if (u_lobe_map_mode[lobe_index] == LOBE_MAP_BANKS) return banks_lookup(lobe_index, wo, tbn);
     float s = sqrt(clamp(wo.z, 0.0, 1.0)) * float(LOBE_SLICES - 1);  // lobe_fit.slice_coordinate
     int s0 = min(int(floor(s)), LOBE_SLICES - 2);
     float f = s - float(s0);

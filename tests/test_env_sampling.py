@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lobeview.core.cube_layout import direction_to_face, face_directions, texel_solid_angles
 from lobeview.scenes.builtin_env import sky, studio
-from lobeview.scenes.cube_layout import direction_to_face, face_directions, texel_solid_angles
 from lobeview.scenes.env_sampling import CubeImportance
 from lobeview.scenes.envmap import EnvironmentMap, direction_to_equirect, equirect_direction
 from lobeview.viewer.cubemap import equirect_to_cube_faces
@@ -76,7 +76,7 @@ def test_environment_pdf_is_a_density_consistent_with_the_sampler(env_fn):
     c = (np.arange(m) + 0.5) / m * 2 - 1
     tc, sc = np.meshgrid(c, c, indexing="ij")
     jac = (2 / m) ** 2 / (1 + sc**2 + tc**2) ** 1.5
-    from lobeview.scenes.cube_layout import face_point_directions
+    from lobeview.core.cube_layout import face_point_directions
 
     total = sum(np.sum(importance.pdf(face_point_directions(f, sc, tc)) * jac) for f in range(6))
     assert total == pytest.approx(1.0, rel=1e-9)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from lobeview.core.methods import Method
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.patterns import AlbedoTable, integrate_lobe, specular_lobes
 from lobeview.materials.spec import build_bsdf, validate
@@ -289,7 +290,6 @@ def test_glsl_lobe_method_matches_the_numpy_reference_through_the_mirror_buffer(
     two-step projection and weighting against integrate_lobe fed by project_samples + bilinear
     reads of the same buffer."""
     from lobeview.materials.patterns import choose_pattern
-    from lobeview.viewer.render_base import Method
 
     renderer = _renderer(ctx, mirror_floor_scene(0.01, roughness_y=0.2)) if anisotropic else glossy_floor
     result = renderer.render(_camera(), Method("lobe", 7), lod_bias=-20.0)
@@ -337,8 +337,9 @@ def test_refinement_averages_the_tangent_planes_across_passes(glossy_floor):
     project_samples_averaged fed with the same Sobol samples, pixel rotations and BSDF sampling.
     Near the boxes' reflections the averaging changes the result, so the test tells the two
     schemes apart."""
+    from lobeview.core.methods import REFERENCE_BATCH
     from lobeview.scenes.planar_mirror import TangentPlaneAverage, project_samples_averaged
-    from lobeview.viewer.render_base import REFERENCE_BATCH, sobol_points
+    from lobeview.viewer.render_base import sobol_points
 
     renderer = glossy_floor
     result = renderer.render(_camera(), "reference", spp=2 * REFERENCE_BATCH)
@@ -438,7 +439,6 @@ def test_nothing_below_the_reflector_leaks_into_the_mirror_buffer(ctx):
 
 
 def test_mirror_passes_are_skipped_where_not_needed(ctx):
-    from lobeview.viewer.render_base import Method
 
     renderer = _renderer(ctx, mirror_floor_scene(0.05, extra_reflector=True))
     assert sorted(renderer.analysis.reflectors) == [0, 4]
@@ -520,7 +520,6 @@ def test_glsl_matches_the_numpy_reference_through_both_buffers_of_a_glossy_pane(
     directions on the camera's side read the mirror buffer, the others the see-through buffer;
     the shader against integrate_lobe fed by project_samples on the matching buffer."""
     from lobeview.scenes.mirror_scene import pane_scene
-    from lobeview.viewer.render_base import Method
 
     scene = pane_scene(0.1, reflection=True)
     renderer = _renderer(ctx, scene)
@@ -549,3 +548,20 @@ def test_glsl_matches_the_numpy_reference_through_both_buffers_of_a_glossy_pane(
     errors = np.array(errors)
     assert np.median(errors) < 1e-4 and np.percentile(errors, 90) < 1e-3, np.sort(errors)[-10:]
     renderer.release()
+
+
+def test_picking_reads_the_object_under_the_pixel_after_every_kind_of_pass(glossy_floor):
+    """pick() after a real-time frame, after refinement passes on a reflector (which draw into the
+    8-target plane-state framebuffers) and after a prefiltered frame: always the object the
+    G-buffer shows at that pixel (the viewer used to select object 80 of 15, or crash)."""
+    renderer = glossy_floor
+    reference = renderer.render(_camera(), "lobe-5")
+    height, width = reference.object_id.shape
+    pixels = [(y, x) for y in range(5, height, 23) for x in range(7, width, 31)]
+    assert {int(reference.object_id[y, x]) for y, x in pixels} >= {-1, 0, 1}  # background, floor, a box
+    for method in ("lobe-5", "mc-8", "reference", "mc-8", "prefiltered"):
+        renderer.draw_frame(_camera(), Method.parse(method))
+        picked = [renderer.pick(x, y) for y, x in pixels]
+        expected = [None if reference.object_id[y, x] < 0 else int(reference.object_id[y, x]) for y, x in pixels]
+        assert picked == expected, method
+    assert renderer.pick(-1, 0) is None and renderer.pick(width, height) is None

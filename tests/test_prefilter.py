@@ -121,7 +121,7 @@ def test_hierarchical_prefilter_does_not_miss_kernels_narrower_than_a_coarse_tex
     # coarse texel centres would return ~0.
     faces = np.zeros((6, 32, 32, 3))
     faces[4, 16, 16] = 1000.0
-    from lobeview.scenes.cube_layout import face_directions
+    from lobeview.core.cube_layout import face_directions
 
     d = face_directions(4, 32)[16, 16]
     kernel = pf.phong_kernel(3000.0)

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lobeview.core.cube_layout import face_directions
 from lobeview.materials.bsdf import BSDF, diffuse_albedo
 from lobeview.materials.patterns import integrate_lobe, specular_lobes
 from lobeview.materials.spec import build_bsdf, load_material
-from lobeview.scenes.cube_layout import face_directions
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.camera import Camera
@@ -113,8 +113,8 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     + [(p, 7, True) for p in ("alanod-2000gs-2lobe", "frosted-glass", "miro5-2lobe", "gold-ggx", "gltf-red-plastic")],
 )
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
+    from lobeview.core.methods import Method
     from lobeview.viewer.material_gpu import albedo_table_for
-    from lobeview.viewer.render_base import Method
 
     renderer, lookup = gl
     bsdf = build_bsdf(load_material(preset))

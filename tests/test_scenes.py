@@ -245,7 +245,7 @@ def ctx():
 
 def test_cube_faces_point_where_the_layout_says(ctx):
     """Six coloured walls around the eye: face i of a rendered cube map must show the wall in
-    the direction of that face (scenes/cube_layout.py), exercising face_view end to end."""
+    the direction of that face (core/cube_layout.py), exercising face_view end to end."""
     walls = [
         quad([1, -1, 1], [0, 0, -2], [0, 2, 0]),  # +X wall, normal -x
         quad([-1, -1, -1], [0, 0, 2], [0, 2, 0]),  # -X

@@ -23,7 +23,7 @@ def test_shot_writes_png_exr_and_npy(tmp_path, capsys):
     ]
     assert main(common + ["--out", str(tmp_path / "a.npy")]) == 0
     out = capsys.readouterr().out
-    assert "method lobe-5" in out and "stages:" in out and "--camera 0,0.35,3.2" in out
+    assert "method lobe-5" in out and "stages:" in out and "--camera=0,0.35,3.2" in out
     radiance = np.load(tmp_path / "a.npy")
     assert radiance.shape == (48, 64, 3) and radiance.dtype == np.float32
     assert np.all(np.isfinite(radiance)) and radiance.min() >= 0 and radiance.max() > 0

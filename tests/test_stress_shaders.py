@@ -132,7 +132,7 @@ def test_lobe_method_overshoots_the_furnace_for_horizon_cut_lobes(furnace, param
 def test_normalised_lobe_method_is_exact_in_the_white_furnace(furnace, params):
     """The fix for the defect above (lobeview's energy normalisation of Eq. 4.25): under
     uniform radiance lobe-N returns the lobe's tabulated directional albedo, for every lobe."""
-    from lobeview.viewer.render_base import Method
+    from lobeview.core.methods import Method
 
     bsdf = thesis(**params)
     result = furnace.render(CAMERA, bsdf, Method("lobe", 7, True), background=False)

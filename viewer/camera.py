@@ -52,9 +52,10 @@ class Camera:
         return perspective(self.fov_y, aspect, self.near, self.far) @ self.view()
 
     def describe(self) -> str:
-        """The ``lobeview shot`` flags that reproduce this camera exactly."""
+        """The ``lobeview shot`` flags that reproduce this camera, as ``--flag=value`` (a vector
+        such as ``-0.01,0.98,-0.18`` after a space would be taken for an option)."""
 
         def fmt(v):
-            return ",".join(f"{x:.6g}" for x in v)
+            return ",".join(f"{x:.9g}" for x in v)
 
-        return f"--camera {fmt(self.position)} --target {fmt(self.target)} --up {fmt(self.up)} --fov {self.fov_y:.6g}"
+        return f"--camera={fmt(self.position)} --target={fmt(self.target)} --up={fmt(self.up)} --fov={self.fov_y:.9g}"

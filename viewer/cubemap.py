@@ -1,6 +1,6 @@
 """Cube maps of incident radiance: conversion from equirectangular maps, upload with a full MIP
 chain, an irradiance cube for the diffuse term, and a GPU lookup used by the numpy reference.
-Face layout: :mod:`lobeview.scenes.cube_layout`.
+Face layout: :mod:`lobeview.core.cube_layout`.
 """
 
 from __future__ import annotations
@@ -8,10 +8,11 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from lobeview.scenes.cube_layout import face_directions
+from lobeview.core.cube_layout import face_directions
 from lobeview.scenes.env_sampling import CubeImportance
 from lobeview.scenes.envmap import EnvironmentMap
 
+from .interface import CDF_ROW
 from .shaders import ProgramCache
 
 GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
@@ -41,9 +42,6 @@ def upload_cube(ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True) 
         cube.filter = (moderngl.LINEAR, moderngl.LINEAR)
     ctx.enable_direct(GL_TEXTURE_CUBE_MAP_SEAMLESS)
     return cube
-
-
-CDF_ROW = 1024  # texels per row of the CDF texture (shaders/integrate.glsl)
 
 
 class RadianceCube:

@@ -7,24 +7,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lobeview.core.cache import BoundedCache
+from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
 from lobeview.materials.bsdf import BSDF, CosineSampled, diffuse_albedo
 from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.gltf import GltfDiffuse, GltfSpecular
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, pattern_xi
 from lobeview.materials.thesis import KurtLobe
 
-MAX_LOBES = 8
-MAX_PATTERN = 32
-LOBE_VEC4S = 5
-_FRESNEL = {"none": 0, "schlick": 1, "conductor": 2}
-_DIST = {"beckmann": 0, "ggx": 1}
+from .interface import DISTRIBUTIONS, FRESNEL_TYPES, LOBE_ROWS, LOBE_TYPES
+
+ALBEDO_TABLES_KEPT = 256  # albedo tables of distinct lobes kept in memory (slider edits make new ones)
 
 
 @dataclass
 class PackedMaterial:
     kd: np.ndarray
     gltf_diffuse: bool
-    lobes: np.ndarray  # (MAX_LOBES * 5, 4) float32
+    lobes: np.ndarray  # (MAX_LOBES * LOBE_ROWS, 4) float32, interface.LOBE_LAYOUT
     lobe_count: int
     lobe_distributions: list
     lobe_components: list
@@ -36,7 +36,8 @@ class PackedMaterial:
     @property
     def lobes_key(self) -> tuple:
         """Everything that determines what is derived from the specular lobes (albedo tables,
-        lobe fits): the key of the renderers' per-material textures. The preview packs its
+        lobe fits): the one lobe-identity key of the renderers' per-material textures and of the
+        albedo tables. The preview packs its
         material anew every frame, so an id() key would miss (and grow) on every frame."""
         return tuple(_lobe_key(comp) for comp in self.lobe_components)
 
@@ -52,17 +53,17 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
             continue
         d = comp.distribution
         if isinstance(comp, KurtLobe):
-            kind = 1 if comp.transmission else 0
+            kind = LOBE_TYPES["kurt transmission" if comp.transmission else "kurt reflection"]
             row = [
-                [kind, _DIST[d.kind], d.alpha_x, d.alpha_y],
+                [kind, DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
                 [*comp.k, comp.alpha],
-                [*comp.r0, _FRESNEL["schlick"]],
+                [*comp.r0, FRESNEL_TYPES["schlick"]],
                 [0, 0, 0, 0],
                 [0, 0, 0, 0],
             ]
         elif isinstance(comp, GltfSpecular):
             row = [
-                [3, _DIST[d.kind], d.alpha_x, d.alpha_y],
+                [LOBE_TYPES["gltf specular"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
                 [1, 1, 1, 0],
                 [*comp.base_color, 0],
                 [0, 0, 0, comp.metallic],
@@ -71,9 +72,9 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
         elif isinstance(comp, MicrofacetReflection):
             fr = comp.fresnel
             row = [
-                [2, _DIST[d.kind], d.alpha_x, d.alpha_y],
+                [LOBE_TYPES["microfacet"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
                 [*comp.scale, 0],
-                [*fr.r0, _FRESNEL[fr.kind]],
+                [*fr.r0, FRESNEL_TYPES[fr.kind]],
                 [*fr.eta, 0],
                 [*fr.k, 0],
             ]
@@ -84,13 +85,13 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
         components.append(comp)
     if len(rows) > MAX_LOBES:
         raise ValueError(f"material has {len(rows)} lobes; the renderer supports {MAX_LOBES}")
-    lobes = np.zeros((MAX_LOBES * LOBE_VEC4S, 4), dtype=np.float32)
+    lobes = np.zeros((MAX_LOBES * LOBE_ROWS, 4), dtype=np.float32)
     if rows:
-        lobes[: len(rows) * LOBE_VEC4S] = np.asarray(rows, dtype=np.float32).reshape(-1, 4)
+        lobes[: len(rows) * LOBE_ROWS] = np.asarray(rows, dtype=np.float32).reshape(-1, 4)
     return PackedMaterial(kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components)
 
 
-_ALBEDO_CACHE: dict = {}
+_ALBEDO_TABLES = BoundedCache(ALBEDO_TABLES_KEPT)
 
 
 def _lobe_key(comp) -> tuple:
@@ -121,10 +122,7 @@ def albedo_texture_data(material: PackedMaterial) -> np.ndarray:
 
 
 def albedo_table_for(comp) -> AlbedoTable:
-    key = _lobe_key(comp)
-    if key not in _ALBEDO_CACHE:
-        _ALBEDO_CACHE[key] = AlbedoTable.build(comp)
-    return _ALBEDO_CACHE[key]
+    return _ALBEDO_TABLES.get(_lobe_key(comp), lambda: AlbedoTable.build(comp))
 
 
 def pack_patterns(material: PackedMaterial, n: int, planar: bool = False) -> np.ndarray:

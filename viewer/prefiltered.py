@@ -24,6 +24,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from lobeview.core.paths import cache_dir
 from lobeview.materials.banks import BanksFit
 from lobeview.materials.lobe_fit import LUMINANCE, LobeMapFit
 from lobeview.materials.prefilter import (
@@ -33,7 +34,6 @@ from lobeview.materials.prefilter import (
     split_sum_alpha,
     split_sum_profile,
 )
-from lobeview.scenes.demo import cache_dir
 
 from .cubemap import RadianceCube
 from .shaders import ProgramCache
@@ -52,20 +52,22 @@ BANKS_AZIMUTHS_PER_RING = 128
 _DFG_CACHE: dict = {}
 
 
-def dfg_texture_data(size: int = DFG_SIZE) -> np.ndarray:
+def dfg_texture_data(size: int = DFG_SIZE, directory: Path | None = None) -> np.ndarray:
     """(size, size, 4): Beckmann (A, B) in rg, GGX (A, B) in ba; rows = roughness. Computed
-    once (~4 s) and kept in the user cache directory."""
+    once (~4 s) and kept in ``directory`` (the renderer's cache folder; default: the user cache
+    folder of core/paths.py)."""
+    path = Path(directory or cache_dir()) / f"dfg-v1-{size}.npy"
     if size not in _DFG_CACHE:
-        path = cache_dir() / f"dfg-v1-{size}.npy"
         try:
             _DFG_CACHE[size] = np.load(path)
         except (OSError, ValueError):
             _DFG_CACHE[size] = np.concatenate([dfg_table(kind, size) for kind in SPLIT_SUM_KINDS], axis=-1)
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                np.save(path, _DFG_CACHE[size])
-            except OSError:
-                pass  # a read-only cache only costs the recomputation
+    if not path.exists():  # this cache folder gets its copy even when the table is in memory
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            np.save(path, _DFG_CACHE[size])
+        except OSError:
+            pass  # a read-only cache only costs the recomputation
     return _DFG_CACHE[size]
 
 
@@ -242,7 +244,7 @@ class PrefilteredMaps:
     def dfg(self) -> moderngl.Texture:
         if self._dfg is None:
             t0 = time.perf_counter()
-            data = dfg_texture_data().astype(np.float32)
+            data = dfg_texture_data(directory=self.cache_dir).astype(np.float32)
             self._dfg = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), dtype="f4")
             self._dfg.filter = (moderngl.LINEAR, moderngl.LINEAR)
             self._dfg.repeat_x = self._dfg.repeat_y = False

@@ -13,16 +13,18 @@ import time
 import moderngl
 import numpy as np
 
+from lobeview.core.methods import Method
 from lobeview.materials.bsdf import BSDF
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import Mesh
 
 from .camera import Camera
 from .cubemap import EnvironmentCubes
+from .interface import bind_sampler, method_defines, set_uniform
 from .material_gpu import pack_material
-from .render_base import Method, RendererBase, RenderResult, set_uniform
+from .render_base import RendererBase, RenderResult
 
-__all__ = ["Method", "PreviewRenderer", "RenderResult"]
+__all__ = ["PreviewRenderer", "RenderResult"]
 
 
 class PreviewRenderer(RendererBase):
@@ -43,7 +45,8 @@ class PreviewRenderer(RendererBase):
         self.ibo = ctx.buffer(np.ascontiguousarray(mesh.indices, dtype=np.uint32).tobytes())
 
     def _program(self, method: Method, has_diffuse: bool):
-        program = self.programs.program("mesh.vert", "preview.frag", {**method.defines(), "HAS_DIFFUSE": has_diffuse})
+        defines = {**method_defines(method), "HAS_DIFFUSE": has_diffuse}
+        program = self.programs.program("mesh.vert", "preview.frag", defines)
         key = id(program)
         if key not in self._vaos:
             self._vaos[key] = self.ctx.vertex_array(
@@ -78,8 +81,7 @@ class PreviewRenderer(RendererBase):
         set_uniform(program, "u_camera_position", tuple(float(x) for x in camera.position))
         self.set_material(program, material, method, lod_bias, seed)
         self.bind_cube(program, self.cubes, method, material)
-        self.cubes.irradiance.use(1)
-        set_uniform(program, "u_irradiance", 1)
+        bind_sampler(program, "u_irradiance", self.cubes.irradiance)
 
         passes = method.passes(spp)
         accumulated = np.zeros((height, width, 3), dtype=np.float64)

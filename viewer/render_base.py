@@ -3,98 +3,27 @@ targets with a G-buffer, material/cube uniforms and the environment background."
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 
 import moderngl
 import numpy as np
 from scipy.stats import qmc
 
+from lobeview.core.cache import BoundedCache
+from lobeview.core.methods import MAX_LOBES, Method
 from lobeview.materials.banks import BANKS_AZIMUTHS, fit_banks
 from lobeview.materials.conductor import MicrofacetReflection
-from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES, fit_lobe_maps, is_isotropic
-from lobeview.materials.patterns import LOBE_LOD_BIAS
+from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_maps, is_isotropic
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
 
 from .cubemap import RadianceCube
-from .material_gpu import MAX_LOBES, MAX_PATTERN, PackedMaterial, albedo_texture_data, pack_patterns
+from .interface import LOBE_MAP_MODES, LOBE_TABLE_ROWS, bind_sampler, set_uniform, unit, write_uniform
+from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
 from .shaders import ProgramCache
 
 SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
 SOBOL_SEED = 20100501
-REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
-# MIP level bias b in lod = 0.5 log2(Omega_s / Omega_p) + b, chosen by `lobeview bench`'s sweep
-# (mean PSNR over 6 material classes x 2 HDR environments at 640x400, b in -1..2; details in
-# bench/results): fis-N is best at -0.5 (fis-16) to 0 (fis-64), not Colbert & Krivanek's +1
-# (fis-16: 31.3 dB vs 25.6 dB); lobe-N at -1 (lobe-7) to -0.5 (lobe-15), not the thesis' 0
-# (lobe-7: 30.8 dB vs 27.3 dB). The best bias grows with N for the ring pattern: its samples sit
-# on one ring, so the filter that closes the gaps shrinks more slowly than the lobe area / N of
-# Eq. 4.14.
-DEFAULT_FIS_LOD_BIAS = -0.5
-DEFAULT_LOBE_LOD_BIAS = LOBE_LOD_BIAS  # -0.5 (materials/patterns.py, shared with the numpy reference)
-
-_METHOD = re.compile(r"^(lobe|fis|mc)-(\d+)$|^(reference)$|^prefiltered(?:-(splitsum|lobe|lobe2d|phong|multi|banks))?$")
-#: prefiltered sub-modes: auto = split-sum for microfacet/glTF lobes, lobe maps for the rest;
-#: banks = Banks maps for anisotropic lobes, lobe maps for isotropic ones
-PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong", "multi", "banks")
-# Rows of the lobe table (shaders/integrate.glsl) per component: the fitted lobes of a lobe map,
-# or the view azimuths of a Banks map's albedo table.
-LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)
-LOBE_TABLE_UNIT = 19
 MAX_MATERIAL_TEXTURES = 64  # per-material textures kept (live material edits make new ones)
-
-
-@dataclass(frozen=True)
-class Method:
-    kind: str  # 'lobe', 'fis', 'mc', 'reference', 'prefiltered'
-    samples: int  # N per lobe (reference: per pass)
-    normalize: bool = False  # lobe-N: energy normalisation by the lobe's albedo table
-    mode: str = ""  # prefiltered: one of PREFILTER_MODES
-
-    @classmethod
-    def parse(cls, text: str) -> Method:
-        m = _METHOD.match(text.strip())
-        if not m:
-            raise ValueError(
-                f"unknown method {text!r}; use lobe-N, fis-N, mc-N, reference or "
-                "prefiltered[-splitsum|-lobe|-lobe2d|-phong|-multi|-banks]"
-            )
-        if m.group(3):
-            return cls("reference", REFERENCE_BATCH)
-        if m.group(1) is None:
-            return cls("prefiltered", 1, mode=m.group(4) or "auto")
-        n = int(m.group(2))
-        limit = MAX_PATTERN if m.group(1) == "lobe" else 4096
-        if not 1 <= n <= limit:
-            raise ValueError(f"{text}: N must be in [1, {limit}]")
-        return cls(m.group(1), n)
-
-    def __str__(self) -> str:
-        if self.kind == "reference":
-            return "reference"
-        if self.kind == "prefiltered":
-            return "prefiltered" if self.mode == "auto" else f"prefiltered-{self.mode}"
-        return f"{self.kind}-{self.samples}" + (" (normalised)" if self.normalize and self.kind == "lobe" else "")
-
-    def defines(self) -> dict:
-        return {
-            "MAX_LOBES": MAX_LOBES,
-            "MAX_PATTERN": MAX_PATTERN,
-            "METHOD_LOBE": self.kind == "lobe",
-            "METHOD_FIS": self.kind == "fis",
-            "METHOD_MC": self.kind in ("mc", "reference"),
-            "ENV_SAMPLING": self.kind == "reference",
-            "LOBE_NORMALIZE": self.kind == "lobe" and self.normalize,
-            "METHOD_PREFILTERED": self.kind == "prefiltered",
-            "LOBE_SLICES": LOBE_SLICES,
-            "LOBE_TABLE_ROWS": LOBE_TABLE_ROWS,
-        }
-
-    def default_lod_bias(self) -> float:
-        return DEFAULT_FIS_LOD_BIAS if self.kind == "fis" else DEFAULT_LOBE_LOD_BIAS
-
-    def passes(self, spp: int) -> int:
-        return max(1, int(np.ceil(spp / self.samples))) if self.kind == "reference" else 1
 
 
 def prefilter_plan(material: PackedMaterial, mode: str) -> list[str]:
@@ -168,11 +97,6 @@ class RenderResult:
     object_id: np.ndarray | None = None  # (H, W) scene object index, -1 = background (scenes only)
 
 
-def set_uniform(program, name: str, value) -> None:
-    if name in program:
-        program[name].value = value
-
-
 class RendererBase:
     """Float RGBA targets (radiance, position, normal, tangent) + depth, the Sobol table."""
 
@@ -184,7 +108,8 @@ class RendererBase:
         self.sobol.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.sobol_count = len(sobol)
         self._vaos: dict = {}
-        self._material_textures: dict = {}  # (kind, ..., lobes_key) -> (texture, derived data)
+        # (kind, ..., lobes_key) -> (texture, derived data); live material edits make new ones
+        self._material_textures = BoundedCache(MAX_MATERIAL_TEXTURES, on_evict=lambda item: item[0].release())
         self._dummy_textures: dict = {}
         self._timer = None
         self.targets: list = []
@@ -222,10 +147,9 @@ class RendererBase:
         self, program, material: PackedMaterial, method: Method, lod_bias: float | None, seed: int, planar=False
     ) -> None:
         set_uniform(program, "u_lobe_count", material.lobe_count)
-        if "u_lobes" in program:
-            program["u_lobes"].write(material.lobes.tobytes())
+        write_uniform(program, "u_lobes", material.lobes)
         if method.kind == "lobe" and "u_pattern" in program:
-            program["u_pattern"].write(pack_patterns(material, method.samples, planar).tobytes())
+            write_uniform(program, "u_pattern", pack_patterns(material, method.samples, planar))
         set_uniform(program, "u_kd", tuple(float(x) for x in material.kd))
         set_uniform(program, "u_gltf_diffuse", 1.0 if material.gltf_diffuse else 0.0)
         set_uniform(program, "u_samples", method.samples)
@@ -245,49 +169,39 @@ class RendererBase:
                 tex.repeat_x = tex.repeat_y = False
                 return tex, None
 
-            self._material_texture(("albedo", material.lobes_key), albedo_texture)[0].use(7)
-            set_uniform(program, "u_albedo", 7)
+            bind_sampler(program, "u_albedo", self._material_texture(("albedo", material.lobes_key), albedo_texture)[0])
 
     def _material_texture(self, key: tuple, make) -> tuple:
         """(texture, derived data) of a material, made by ``make()`` on first use and cached by
-        content; the oldest is released beyond MAX_MATERIAL_TEXTURES."""
-        if key not in self._material_textures:
-            if len(self._material_textures) >= MAX_MATERIAL_TEXTURES:
-                self._material_textures.pop(next(iter(self._material_textures)))[0].release()
-            self._material_textures[key] = make()
-        return self._material_textures[key]
+        content; the least recently used is released beyond MAX_MATERIAL_TEXTURES."""
+        return self._material_textures.get(key, make)
 
     def bind_cube(self, program, cube: RadianceCube, method: Method, material: PackedMaterial | None = None) -> None:
-        """Texture units: 0 radiance, 2 Sobol, 3-4 importance (reference only), 8-18
-        prefiltered maps and 19 the lobe table (prefiltered only, built on first use for this cube
-        and material)."""
+        """The radiance cube and Sobol table; the importance tables (reference only) and the
+        prefiltered maps and lobe table (prefiltered only, built on first use for this cube and
+        material). Units: viewer/interface.py TEXTURE_UNITS."""
         if method.kind == "prefiltered":
             self.bind_prefiltered(program, cube, material, method)
-        cube.radiance.use(0)
-        self.sobol.use(2)
-        set_uniform(program, "u_radiance", 0)
-        set_uniform(program, "u_sobol", 2)
+        bind_sampler(program, "u_radiance", cube.radiance)
+        bind_sampler(program, "u_sobol", self.sobol)
         set_uniform(program, "u_face_size", float(cube.face_size))
         if method.kind == "reference":
-            cube.env_cdf.use(3)
-            cube.env_pdf.use(4)
-            set_uniform(program, "u_env_cdf", 3)
-            set_uniform(program, "u_env_pdf", 4)
+            bind_sampler(program, "u_env_cdf", cube.env_cdf)
+            bind_sampler(program, "u_env_pdf", cube.env_pdf)
             set_uniform(program, "u_env_texels", int(cube.importance.probabilities.size))
             set_uniform(program, "u_env_size", int(cube.importance.size))
 
     def bind_prefiltered(self, program, cube: RadianceCube, material: PackedMaterial, method: Method) -> None:
         maps = cube.prefiltered_maps(self.programs)
         plan = prefilter_plan(material, method.mode)
-        for unit, kind in ((8, "beckmann"), (9, "ggx")):
+        for index, kind in enumerate(("beckmann", "ggx")):  # DIST_BECKMANN, DIST_GGX
             if any(p == "splitsum" and material.lobe_distributions[i].kind == kind for i, p in enumerate(plan)):
-                maps.split_sum(kind).use(unit)
+                maps.split_sum(kind).use(unit("u_split_sum", index))
             else:
-                self._dummy_texture("cube").use(unit)
-        set_uniform(program, "u_split_sum", [8, 9])
+                self._dummy_texture("cube").use(unit("u_split_sum", index))
+        set_uniform(program, "u_split_sum", [unit("u_split_sum", 0), unit("u_split_sum", 1)])
         set_uniform(program, "u_split_sum_max_level", float(SPLIT_SUM_LEVELS - 1))
-        maps.dfg().use(10)
-        set_uniform(program, "u_dfg", 10)
+        bind_sampler(program, "u_dfg", maps.dfg())
 
         def lobe_table_texture():
             fitted = fit_plan(plan, material.lobe_components)
@@ -299,29 +213,26 @@ class RendererBase:
         table, (fitted, counts, fibres) = self._material_texture(
             ("lobe table", method.mode, material.lobes_key), lobe_table_texture
         )
-        table.use(LOBE_TABLE_UNIT)
-        set_uniform(program, "u_lobe_table", LOBE_TABLE_UNIT)
-        modes = np.zeros(MAX_LOBES, dtype=np.int32)
+        bind_sampler(program, "u_lobe_table", table)
+        modes = np.full(MAX_LOBES, LOBE_MAP_MODES["splitsum"], dtype=np.int32)
         depth = np.ones(MAX_LOBES, dtype=np.int32)
-        units = list(range(11, 11 + MAX_LOBES))
         for i in range(MAX_LOBES):
             texture = self._dummy_texture("3d")
             if i < len(plan) and plan[i] == "banks":
                 texture = maps.banks_map(fitted[i], f"lobe {i}")
-                modes[i], depth[i] = 2, len(fitted[i].profiles)
+                modes[i], depth[i] = LOBE_MAP_MODES["banks"], len(fitted[i].profiles)
             elif i < len(plan) and plan[i] != "splitsum":
                 texture = maps.lobe_map(fitted[i], f"lobe {i}")
-                modes[i], depth[i] = 1, len(fitted[i][0].profiles)
-            texture.use(units[i])
-        set_uniform(program, "u_lobe_maps", units)
+                modes[i], depth[i] = LOBE_MAP_MODES["lobes"], len(fitted[i][0].profiles)
+            texture.use(unit("u_lobe_maps", i))
+        set_uniform(program, "u_lobe_maps", [unit("u_lobe_maps", i) for i in range(MAX_LOBES)])
         for name, values in (
             ("u_lobe_map_mode", modes),
             ("u_lobe_map_depth", depth),
             ("u_lobe_map_count", counts),
             ("u_banks_fibre", fibres),
         ):
-            if name in program:
-                program[name].write(np.ascontiguousarray(values).tobytes())
+            write_uniform(program, name, values)
 
     def method_memory(self, cube: RadianceCube, material: PackedMaterial, method: Method) -> dict[str, int]:
         """Bytes of the GPU resources that shading ``material`` with ``method`` reads from one
@@ -369,15 +280,13 @@ class RendererBase:
         key = ("background", id(program))
         if key not in self._vaos:
             self._vaos[key] = self.ctx.vertex_array(program, [])
-        program["u_inverse_view_projection"].value = tuple(np.linalg.inv(view_proj).T.astype("f4").ravel())
-        cube.radiance.use(0)
-        program["u_radiance"].value = 0
+        set_uniform(program, "u_inverse_view_projection", tuple(np.linalg.inv(view_proj).T.astype("f4").ravel()))
+        bind_sampler(program, "u_radiance", cube.radiance)
         self.ctx.disable(moderngl.DEPTH_TEST)
         self._vaos[key].render(moderngl.TRIANGLES, vertices=3)
 
     def release(self):
-        for tex, _ in self._material_textures.values():
-            tex.release()
+        self._material_textures.clear()
         for tex in self._dummy_textures.values():
             tex.release()
         for vao in self._vaos.values():

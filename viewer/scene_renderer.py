@@ -20,6 +20,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from lobeview.core.methods import Method
 from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
@@ -27,8 +28,9 @@ from lobeview.scenes.scene import Scene
 
 from .camera import Camera, perspective
 from .cubemap import RadianceCube, equirect_to_cube_faces
-from .material_gpu import MAX_LOBES, MAX_PATTERN, PackedMaterial, pack_material
-from .render_base import Method, RendererBase, RenderResult, set_uniform
+from .interface import PROXY_KINDS, TEXTURE_UNITS, bind_sampler, method_defines, set_uniform, write_uniform
+from .material_gpu import PackedMaterial, pack_material
+from .render_base import RendererBase, RenderResult
 
 CUBE_CACHE_VERSION = 3
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
@@ -38,8 +40,8 @@ FALLBACK_IRRADIANCE = 1.0  # E for objects whose lightmap is missing (warned), i
 
 def face_view(face: int, eye) -> np.ndarray:
     """View matrix whose image plane maps (x, y) in NDC to (sc, tc) of the cube face, so the
-    framebuffer (row 0 = t = 0) is the face's texel layout (scenes/cube_layout.py)."""
-    from lobeview.scenes.cube_layout import face_point_directions
+    framebuffer (row 0 = t = 0) is the face's texel layout (core/cube_layout.py)."""
+    from lobeview.core.cube_layout import face_point_directions
 
     zero = np.zeros(1)
     f = face_point_directions(face, zero, zero)[0]
@@ -72,10 +74,8 @@ class _GpuObject:
             self.cube.release()
 
 
-# Texture units of the mirror and see-through buffers (radiance, position, normal) and of the
-# previous pass's averaged-tangent-plane sums (points and normals per buffer).
-BUFFER_UNITS = {"mirror": (24, 25, 26), "see-through": (27, 28, 29)}
-PLANE_STATE_UNITS = (30, 31, 32, 33)
+# Sampler-uniform prefixes of the mirror and see-through buffers (units: interface.TEXTURE_UNITS).
+BUFFER_PREFIXES = {"mirror": "u_mirror", "see-through": "u_through"}
 
 
 class _MirrorTargets:
@@ -169,6 +169,44 @@ class SceneRenderer(RendererBase):
             if obj.cube is not None:
                 obj.cube.cache_dir = self.cache_dir  # prefiltered maps are cached beside the cubes
         self.timings["cube maps"] = time.perf_counter() - t0
+
+    # -- options the viewer's panel sets -------------------------------------------------------
+    def set_mirrors(self, enabled: bool, scale: float | None = None) -> None:
+        """Planar mirror passes on/off and their resolution (0.05..2 x the frame)."""
+        if scale is not None:
+            if not 0.05 <= float(scale) <= 2.0:
+                raise ValueError(f"mirror_scale must be in [0.05, 2], got {scale}")
+            self.mirror_scale = float(scale)
+        self.mirrors_enabled = bool(enabled)
+
+    def set_object_method(self, index: int, method: Method | None) -> None:
+        """Shade object ``index`` with its own real-time method (None: the frame's method)."""
+        if method is None:
+            self.object_methods.pop(index, None)
+        elif method.kind == "reference":
+            raise ValueError("the per-object method must be a real-time one; refinement uses the reference")
+        else:
+            self.object_methods[index] = method
+
+    def object_method(self, index: int) -> Method | None:
+        """Object ``index``'s own method, or None when it follows the frame's."""
+        return self.object_methods.get(index)
+
+    @property
+    def radiance_target(self):
+        """The float radiance texture of the last drawn frame."""
+        return self.targets[0]
+
+    @property
+    def stale_cube_count(self) -> int:
+        """Cube maps still waiting to be re-rendered after a material edit."""
+        return len(self.stale_cubes)
+
+    def prefiltered_memory(self, index: int) -> dict[str, int]:
+        """Bytes of each prefiltered map object ``index`` has built so far (empty: none)."""
+        cube = self.objects[index].cube
+        maps = cube.built_prefiltered_maps if cube is not None else None
+        return dict(maps.memory) if maps is not None else {}
 
     # -- resources -------------------------------------------------------------------------
     def resize(self, size):
@@ -290,11 +328,7 @@ class SceneRenderer(RendererBase):
 
     # -- drawing -----------------------------------------------------------------------------
     def _program(self, method: Method, specular: bool, parallax: bool = False, mirror: bool = False):
-        defines = (
-            {**method.defines(), "SPECULAR": specular}
-            if specular
-            else {"MAX_LOBES": MAX_LOBES, "MAX_PATTERN": MAX_PATTERN, "METHOD_LOBE": True}
-        )
+        defines = {**method_defines(method), "SPECULAR": True} if specular else {"METHOD_LOBE": True}
         if specular and mirror:
             # Incident light from the mirror buffer; the cube's importance map does not apply, so
             # the reference samples the BSDF only (still unbiased for what the buffer holds).
@@ -404,12 +438,11 @@ class SceneRenderer(RendererBase):
         front = plane[:3] if float(np.dot(plane[:3], eye) + plane[3]) >= 0.0 else -plane[:3]
         set_uniform(program, "u_mirror_front", tuple(float(x) for x in front))
         set_uniform(program, "u_mirror_sides", int("mirror" in buffers) | 2 * int("see-through" in buffers))
-        for kind, prefix in (("mirror", "u_mirror"), ("see-through", "u_through")):
+        for kind, prefix in BUFFER_PREFIXES.items():
             targets = buffers.get(kind)
             textures = (targets.radiance, targets.position, targets.normal) if targets else (self._white,) * 3
-            for unit, name, tex in zip(BUFFER_UNITS[kind], ("radiance", "position", "normal"), textures, strict=True):
-                tex.use(unit)
-                set_uniform(program, f"{prefix}_{name}", unit)
+            for name, tex in zip(("radiance", "position", "normal"), textures, strict=True):
+                bind_sampler(program, f"{prefix}_{name}", tex)
             if targets is None:
                 continue
             camera = targets.camera
@@ -420,11 +453,13 @@ class SceneRenderer(RendererBase):
             set_uniform(program, f"{prefix}_eye", tuple(float(x) for x in camera.position))
             set_uniform(program, f"{prefix}_focal_px", float(camera.focal_pixels))
         if "u_plane_point_state" in program:
+            # The previous pass's sums, in the order of the state attachments: points (mirror,
+            # see-through), then normals.
             previous = self._plane_states[4 * (1 - self._frame_parity) : 4 * (1 - self._frame_parity) + 4]
-            for unit, tex in zip(PLANE_STATE_UNITS, previous, strict=True):
-                tex.use(unit)
-            set_uniform(program, "u_plane_point_state", list(PLANE_STATE_UNITS[:2]))
-            set_uniform(program, "u_plane_normal_state", list(PLANE_STATE_UNITS[2:]))
+            for k, tex in enumerate(previous):
+                bind_sampler(program, ("u_plane_point_state", "u_plane_normal_state")[k // 2], tex, index=k % 2)
+            for name in ("u_plane_point_state", "u_plane_normal_state"):
+                set_uniform(program, name, list(TEXTURE_UNITS[name]))
 
     def set_reflection_proxy(self, index: int, proxy) -> None:
         """Reflected-geometry correction for object ``index`` (scenes/reflection_proxy.py; None:
@@ -432,14 +467,14 @@ class SceneRenderer(RendererBase):
         self.scene.objects[index].reflection_proxy = proxy
 
     def _bind_proxy(self, program, obj: _GpuObject, proxy) -> None:
+        """The reflection proxy (scenes/reflection_proxy.py) as shaders/integrate.glsl PARALLAX reads it."""
         set_uniform(program, "u_cube_centre", tuple(float(x) for x in obj.centre))
-        for name, value in proxy.uniforms().items():
-            if name not in program:
-                continue
-            if isinstance(value, np.ndarray):
-                program[name].write(np.ascontiguousarray(value, dtype=np.float32).tobytes())
-            else:
-                program[name].value = value
+        set_uniform(program, "u_proxy_kind", PROXY_KINDS[proxy.kind])
+        set_uniform(program, "u_proxy_plane_count", len(proxy.planes) if proxy.kind == "planes" else 0)
+        write_uniform(program, "u_proxy_planes", proxy.padded_planes())
+        box = (proxy.box_min, proxy.box_max) if proxy.kind == "box" else (np.zeros(3), np.zeros(3))
+        set_uniform(program, "u_proxy_box_min", tuple(float(x) for x in box[0]))
+        set_uniform(program, "u_proxy_box_max", tuple(float(x) for x in box[1]))
 
     def _vao(self, program, obj: _GpuObject):
         key = (id(program), obj.index)
@@ -495,22 +530,17 @@ class SceneRenderer(RendererBase):
             set_uniform(program, "u_object_id", float(obj.index))
             lightmap = mat.lightmap
             if lightmap is not None and (lightmap.tex_coord != 1 or self.scene.objects[obj.index].uv1 is not None):
-                self._texture(lightmap.image).use(5)
-                set_uniform(program, "u_lightmap", 5)
+                bind_sampler(program, "u_lightmap", self._texture(lightmap.image))
                 set_uniform(program, "u_lightmap_texcoord", int(lightmap.tex_coord))
                 set_uniform(program, "u_lightmap_intensity", float(lightmap.intensity))
             else:
-                self._white.use(5)
-                set_uniform(program, "u_lightmap", 5)
+                bind_sampler(program, "u_lightmap", self._white)
                 set_uniform(program, "u_lightmap_texcoord", -1)
                 set_uniform(program, "u_fallback_irradiance", (FALLBACK_IRRADIANCE,) * 3)
-            set_uniform(program, "u_base_color", 6)
-            if mat.base_color_texture is not None:
-                self._texture(mat.base_color_texture).use(6)
-                set_uniform(program, "u_has_base_color", 1)
-            else:
-                self._white.use(6)
-                set_uniform(program, "u_has_base_color", 0)
+            has_base_color = mat.base_color_texture is not None
+            base_color = self._texture(mat.base_color_texture) if has_base_color else self._white
+            bind_sampler(program, "u_base_color", base_color)
+            set_uniform(program, "u_has_base_color", int(has_base_color))
             if use_specular:
                 self.bind_cube(program, obj.cube, obj_method, obj.material)
                 if proxy is not None:

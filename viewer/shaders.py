@@ -3,7 +3,9 @@ program variants chosen by ``#define``s, cached by the sorted tuple of defines.
 
 Only defines listed in :data:`KNOWN_DEFINES` are accepted (an unknown name is a typo that would
 silently select the wrong variant); a define with value ``False``/``None`` is left out, any other
-value is emitted as ``#define NAME value`` (``True`` -> ``1``).
+value is emitted as ``#define NAME value`` (``True`` -> ``1``). Every program also gets the
+shared constants of viewer/interface.py (SHADER_CONSTANTS), which a caller cannot override, and
+records the uniforms its sources declare (``program.extra``) for interface.set_uniform's check.
 """
 
 from __future__ import annotations
@@ -13,15 +15,14 @@ from importlib import resources
 
 import moderngl
 
+from .interface import SHADER_CONSTANTS, declared_uniforms
+
+#: the variant switches a caller may set (the shared constants come from interface.py)
 KNOWN_DEFINES = {
-    "MAX_LOBES",
-    "MAX_PATTERN",
     "METHOD_LOBE",
     "METHOD_FIS",
     "METHOD_MC",
     "METHOD_PREFILTERED",
-    "LOBE_SLICES",
-    "LOBE_TABLE_ROWS",
     "ENV_SAMPLING",
     "PLANE_AVERAGE",
     "LOBE_NORMALIZE",
@@ -29,7 +30,6 @@ KNOWN_DEFINES = {
     "SPECULAR",
     "PARALLAX",
     "MIRROR",
-    "DEBUG_VIEW",
 }
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
@@ -59,16 +59,27 @@ def resolve_includes(name: str, _stack: tuple[str, ...] = ()) -> str:
     return _INCLUDE.sub(replace, source)
 
 
+def _literal(value) -> str:
+    if value is True:
+        return "1"
+    if isinstance(value, float):
+        return repr(value) if any(c in repr(value) for c in ".e") else f"{value!r}.0"
+    return str(value)
+
+
 def define_block(defines: dict) -> str:
+    shared = set(defines) & set(SHADER_CONSTANTS)
+    if shared:
+        raise ShaderError(f"shader define(s) {sorted(shared)} are shared constants (viewer/interface.py)")
     unknown = set(defines) - KNOWN_DEFINES
     if unknown:
         raise ShaderError(f"unknown shader define(s) {sorted(unknown)}; known: {sorted(KNOWN_DEFINES)}")
-    lines = []
+    lines = [f"#define {key} {_literal(value)}" for key, value in sorted(SHADER_CONSTANTS.items())]
     for key in sorted(defines):
         value = defines[key]
         if value is False or value is None:
             continue
-        lines.append(f"#define {key} {1 if value is True else value}")
+        lines.append(f"#define {key} {_literal(value)}")
     return "\n".join(lines)
 
 
@@ -91,21 +102,24 @@ class ProgramCache:
         defines = dict(defines or {})
         key = (vertex, fragment, tuple(sorted(defines.items())))
         if key not in self._programs:
+            sources = (assemble(vertex, defines), assemble(fragment, defines))
             try:
-                self._programs[key] = self.ctx.program(
-                    vertex_shader=assemble(vertex, defines),
-                    fragment_shader=assemble(fragment, defines),
-                )
+                program = self.ctx.program(vertex_shader=sources[0], fragment_shader=sources[1])
             except moderngl.Error as exc:
                 raise ShaderError(f"compiling {vertex} + {fragment} with {defines}: {exc}") from None
+            program.extra = {"declared_uniforms": declared_uniforms(*sources), "sources": f"{vertex} + {fragment}"}
+            self._programs[key] = program
         return self._programs[key]
 
     def compute(self, name: str, defines: dict | None = None) -> moderngl.ComputeShader:
         defines = dict(defines or {})
         key = (name, None, tuple(sorted(defines.items())))
         if key not in self._programs:
+            source = assemble(name, defines)
             try:
-                self._programs[key] = self.ctx.compute_shader(assemble(name, defines))
+                shader = self.ctx.compute_shader(source)
             except moderngl.Error as exc:
                 raise ShaderError(f"compiling {name} with {defines}: {exc}") from None
+            shader.extra = {"declared_uniforms": declared_uniforms(source), "sources": name}
+            self._programs[key] = shader
         return self._programs[key]

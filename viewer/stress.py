@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lobeview.core.methods import Method
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf, validate
@@ -25,7 +26,6 @@ from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import Mesh, quad, uv_sphere
 
 from .camera import Camera
-from .render_base import Method
 
 STRESS_SIZE = (40, 40)
 STRESS_CAMERA = Camera(position=(0.0, 0.3, 2.6), fov_y=50.0)
@@ -51,15 +51,6 @@ FULL_METHODS = CI_METHODS + (
 # by the stress grid: m = 0.05, alpha = 1, r0 = 0, 27-36 % at theta_o > 85 deg, albedo 6-28 there):
 # the fix is the normalisation, which is why the viewer and `shot` use it by default.
 LOBE_METHOD_MAX_ROUGHNESS = 0.2
-
-
-def parse_stress_method(text: str) -> Method:
-    """A method name, or ``lobe-N+norm`` for lobe-N with energy normalisation."""
-    import dataclasses
-
-    if text.endswith("+norm"):
-        return dataclasses.replace(Method.parse(text[: -len("+norm")]), normalize=True)
-    return Method.parse(text)
 
 
 def furnace_tolerance(method: str, anisotropic: bool = False) -> tuple[float, str]:
@@ -142,7 +133,7 @@ def furnace_check(
     object pixels with the numpy directional albedo at the same view. Prefiltered maps of an
     anisotropic lobe store the azimuth-averaged albedo (an isotropic map cannot follow the view
     azimuth), so there the bound holds on the mean only."""
-    result = renderer.render(STRESS_CAMERA, bsdf, parse_stress_method(method), spp=spp, background=False)
+    result = renderer.render(STRESS_CAMERA, bsdf, Method.parse(method), spp=spp, background=False)
     tolerance, rule = furnace_tolerance(method, anisotropic)
     if method.startswith("prefiltered") and anisotropic:
         rule = "mean"
@@ -264,7 +255,7 @@ def run_stress(ctx, methods=FULL_METHODS, progress=True, quick: bool = False) ->
         for method in methods:
             clean = True
             for bsdf in materials:
-                result = renderer.render(camera, bsdf, parse_stress_method(method), spp=spp, background=False)
+                result = renderer.render(camera, bsdf, Method.parse(method), spp=spp, background=False)
                 clean &= is_clean(result) and result.mask.mean() > 0.05
             rows.append(StressRow(case, method, clean, "-"))
         say(f"[stress] {case}: {'ok' if all(r.clean for r in rows if r.case == case) else 'FAILED'}")

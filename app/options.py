@@ -1,0 +1,264 @@
+"""What ``lobeview shot`` and ``lobeview view`` share: their common options (declared once), the
+parsing of sizes, vectors and cameras, loading the scene, environment and material edits, the
+SceneRenderer they both build, and :func:`shot_command`, the ``lobeview shot`` line that
+reproduces a view (F12 prints it; tests/test_app_commands.py pastes it back)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+from pathlib import Path
+
+import numpy as np
+
+from lobeview.core.methods import GRAMMAR_HELP, Method, method_cli_flags
+from lobeview.viewer.camera import Camera
+
+SCENE_ENV = "builtin:overcast"
+DEFAULT_FACE_SIZE = 256
+NO_CAMERA_FOV = 50.0  # scenes without a camera: the default view's vertical field of view
+
+
+class OptionError(ValueError):
+    """A bad command-line value: printed as ``lobeview: error: ...`` with exit status 2."""
+
+
+# -- option declarations -------------------------------------------------------------------------
+def add_method_arguments(p, default: str = "lobe-11", what: str = "") -> None:
+    p.add_argument("--method", default=default, help=f"{what}{GRAMMAR_HELP} (default {default})")
+    p.add_argument(
+        "--lobe-normalize",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="lobe-N: rescale Eq. 4.25 by each lobe's directional albedo, exact under uniform light"
+        " (default on, lobe-N+norm; --no-lobe-normalize: Eq. 4.25 as printed)",
+    )
+
+
+def add_scene_arguments(p) -> None:
+    """Options of the scene renderer: cube maps, reflection proxies, mirror passes, cache, edits."""
+    a = p.add_argument
+    a(
+        "--face-size",
+        type=int,
+        default=DEFAULT_FACE_SIZE,
+        help=f"cube-map face resolution (default {DEFAULT_FACE_SIZE})",
+    )
+    a(
+        "--reflection-proxy",
+        choices=("scene", "none", "floor", "room"),
+        default="scene",
+        help="cube-map lookup correction for every glossy object (thesis 4.4.1): floor = bounding plane at "
+        "the scene's lowest point, room = box-projected to the scene bounds, none = distant lookup; "
+        "default 'scene': what each node's extras say (none if unset)",
+    )
+    a(
+        "--mirrors",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="planar mirror passes for the reflectors the scene analysis lists (thesis 4.5; default on;"
+        " --no-mirrors: cube maps for every object)",
+    )
+    a(
+        "--mirror-scale",
+        type=float,
+        default=1.0,
+        help="mirror-buffer resolution relative to the frame, 0.05..2 (default 1)",
+    )
+    a(
+        "--cache",
+        help="cache folder for the demo scene, cube maps, prefiltered maps and tables"
+        " (default ~/.cache/lobeview or $LOBEVIEW_CACHE)",
+    )
+    a("--materials", help="apply edited materials from this JSON file (the viewer's save/F12 writes them)")
+
+
+# -- values ---------------------------------------------------------------------------------------
+def parse_vec3(text: str, name: str) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise OptionError(f"{name}: expected X,Y,Z numbers, got {text!r}") from None
+    if len(values) != 3 or not all(np.isfinite(values)):
+        raise OptionError(f"{name}: expected three finite numbers X,Y,Z, got {text!r}")
+    return values
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise OptionError(f"--size: expected WxH, got {text!r}") from None
+    if not (1 <= w <= 8192 and 1 <= h <= 8192):
+        raise OptionError(f"--size: width and height must be in [1, 8192], got {text!r}")
+    return w, h
+
+
+def check_scene_options(args) -> None:
+    if not 8 <= args.face_size <= 2048 or args.face_size & (args.face_size - 1):
+        raise OptionError(f"--face-size must be a power of two in [8, 2048], got {args.face_size}")
+    if not 0.05 <= args.mirror_scale <= 2.0:
+        raise OptionError(f"--mirror-scale must be in [0.05, 2], got {args.mirror_scale}")
+    if args.materials is not None and not Path(args.materials).is_file():
+        raise OptionError(f"--materials: no such file {args.materials!r}")
+
+
+def scene_view(scene, view: str | None):
+    """(position, target, up, fov) of ``--view`` (name or index; default the first camera), or a
+    view of the whole scene for scenes without cameras."""
+    if not scene.cameras:
+        lo, hi = scene.bounds
+        centre = (lo + hi) / 2
+        eye = centre + np.array([0.0, 0.25, 1.2]) * float(np.max(hi - lo))
+        return (tuple(eye), tuple(centre), (0.0, 1.0, 0.0), NO_CAMERA_FOV)
+    if view is None:
+        cam = scene.cameras[0]
+    elif view.isdigit() and int(view) < len(scene.cameras):
+        cam = scene.cameras[int(view)]
+    else:
+        matches = [c for c in scene.cameras if c.name == view]
+        if not matches:
+            raise OptionError(f"--view: no camera {view!r}; the scene has {[c.name for c in scene.cameras]}")
+        cam = matches[0]
+    return (tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
+
+
+def camera_from_args(args, default) -> Camera:
+    position, target, up, fov = default
+    if args.camera is not None:
+        position = parse_vec3(args.camera, "--camera")
+        target = parse_vec3(args.target, "--target")
+        up = parse_vec3(args.up, "--up")
+    if args.fov is not None:
+        fov = args.fov
+    if not 1.0 <= fov <= 170.0:
+        raise OptionError(f"--fov must be in [1, 170] degrees, got {fov}")
+    camera = Camera(position=tuple(position), target=tuple(target), up=tuple(up), fov_y=fov)
+    camera.view()  # validates position != target and up not parallel
+    return camera
+
+
+# -- scene set-up ---------------------------------------------------------------------------------
+def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache_arg: str | None):
+    """(scene path, Scene, EnvironmentMap, cache folder) for ``shot`` and ``view``: the demo
+    (built and cached on first use) when no scene is given, with the matching default sky."""
+    from lobeview.core.paths import cache_dir
+    from lobeview.scenes.builtin_env import load_environment
+    from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene
+    from lobeview.scenes.gltf_loader import load_gltf
+
+    cache = cache_dir(cache_arg)
+    if scene_arg is None:
+        path = build_demo_scene(directory=cache / "demo")
+        env_name = env_arg or DEMO_ENVIRONMENT
+    else:
+        path = Path(scene_arg)
+        env_name = env_arg or SCENE_ENV
+    return path, load_gltf(path), load_environment(env_name), cache
+
+
+def read_material_edits(path: str | Path) -> dict:
+    """A materials file (material name -> description), as the viewer's save and F12 write it."""
+    try:
+        data = json.loads(Path(path).read_text())
+    except json.JSONDecodeError as exc:
+        raise OptionError(f"--materials {path}: not valid JSON ({exc})") from None
+    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+        raise OptionError(f"--materials {path}: expected an object of material name -> description")
+    return data
+
+
+def apply_material_edits(scene, edits: dict) -> list[str]:
+    """Replace the descriptions of the scene's materials named in ``edits`` (validated); returns
+    the names changed. Names the scene lacks are an error, not silently skipped."""
+    from lobeview.materials.spec import validate
+
+    names = {m.name for m in scene.materials}
+    unknown = sorted(set(edits) - names)
+    if unknown:
+        raise OptionError(f"--materials: the scene has no material(s) {unknown}; it has {sorted(names)}")
+    changed = []
+    for material in scene.materials:
+        if material.name in edits:
+            desc = validate(edits[material.name])
+            if desc != material.desc:
+                material.desc = desc
+                changed.append(material.name)
+    return changed
+
+
+def apply_reflection_proxy(scene, choice: str) -> None:
+    """``--reflection-proxy``: override every object's proxy unless the choice is 'scene'."""
+    from lobeview.scenes.reflection_proxy import ReflectionProxy
+
+    if choice == "scene":
+        return
+    proxy = ReflectionProxy.from_description({"type": choice}, scene.bounds)
+    for obj in scene.objects:
+        obj.reflection_proxy = proxy
+
+
+def scene_renderer_from_args(ctx, scene, env, size, cache, args):
+    """The SceneRenderer of ``shot`` and ``view``: cube-map size, cache and mirror-pass options."""
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    renderer = SceneRenderer(
+        ctx,
+        scene,
+        env,
+        size=size,
+        cube_face_size=args.face_size,
+        cache_dir=cache / "cubes",
+        mirror_scale=args.mirror_scale,
+    )
+    renderer.set_mirrors(args.mirrors)
+    return renderer
+
+
+# -- the reproducing command line ------------------------------------------------------------------
+def shot_command(
+    camera: Camera,
+    size: tuple[int, int],
+    method: Method,
+    out: str | Path,
+    scene: str | None = None,
+    spp: int | None = None,
+    args=None,
+    materials: str | Path | None = None,
+    tonemap: str = "aces",
+    exposure: float = 0.0,
+) -> str:
+    """The ``lobeview shot`` command that renders this view again: every value as
+    ``--flag=value`` (a vector starting with '-' is otherwise taken for an option), paths
+    quoted for the shell, and the scene options of ``args`` (view's) where they differ from the
+    defaults."""
+    parts = ["lobeview", "shot"]
+    if scene is not None:
+        parts.append(shlex.quote(str(scene)))
+    parts.append(camera.describe())
+    parts.append(f"--size={size[0]}x{size[1]}")
+    parts.append(method_cli_flags(method))
+    if method.kind == "reference" and spp is not None:
+        parts.append(f"--spp={int(spp)}")
+    if args is not None:
+        if getattr(args, "env", None):
+            parts.append(f"--env={shlex.quote(str(args.env))}")
+        if args.face_size != DEFAULT_FACE_SIZE:
+            parts.append(f"--face-size={args.face_size}")
+        if args.reflection_proxy != "scene":
+            parts.append(f"--reflection-proxy={args.reflection_proxy}")
+        if not args.mirrors:
+            parts.append("--no-mirrors")
+        if args.mirror_scale != 1.0:
+            parts.append(f"--mirror-scale={args.mirror_scale:g}")
+        if getattr(args, "cache", None):
+            parts.append(f"--cache={shlex.quote(str(args.cache))}")
+    if materials is not None:
+        parts.append(f"--materials={shlex.quote(str(materials))}")
+    if tonemap != "aces":
+        parts.append(f"--tonemap={tonemap}")
+    if exposure != 0.0:
+        parts.append(f"--exposure={exposure:g}")
+    parts.append(f"--out={shlex.quote(str(out))}")
+    return " ".join(parts)

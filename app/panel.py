@@ -1,0 +1,142 @@
+"""The viewer's ImGui panel: timings, the rendering options, the object list with the scene
+analysis' decisions, and the selected object's material editor. Everything it changes goes
+through the window's and the renderer's methods (set_method, select, set_mirrors,
+set_object_method, the MaterialEditor), never their attributes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from imgui_bundle import imgui, implot
+
+from lobeview.app.editor import lobe_plot_values, material_widgets
+from lobeview.app.walk import WalkCamera
+from lobeview.core.methods import MAX_PATTERN, method_choice, method_from_choice, realtime_choices
+from lobeview.viewer.camera import Camera
+from lobeview.viewer.tonemap import TONEMAPS
+
+SAMPLE_SLIDER_MAX = {"lobe": MAX_PATTERN}  # fis-N / mc-N: PANEL_MAX_SAMPLES
+PANEL_MAX_SAMPLES = 256
+
+
+def draw_panel(window) -> None:
+    imgui.new_frame()
+    imgui.set_next_window_pos((10, 10), imgui.Cond_.first_use_ever.value)
+    imgui.set_next_window_size((360, 620), imgui.Cond_.first_use_ever.value)
+    imgui.begin("lobeview")
+    _status(window)
+    if imgui.collapsing_header("Rendering", imgui.TreeNodeFlags_.default_open.value):
+        _rendering(window)
+    if imgui.collapsing_header("Objects", imgui.TreeNodeFlags_.default_open.value):
+        for i, needs in enumerate(window.renderer.analysis.objects):
+            if imgui.selectable(f"{needs.name}  [{needs.kind}]##{i}", window.selected == i)[0]:
+                window.select(i)
+    if window.selected is not None and imgui.collapsing_header("Material", imgui.TreeNodeFlags_.default_open.value):
+        _material(window)
+    if window.message:
+        imgui.text_wrapped(window.message)
+    imgui.end()
+    imgui.render()
+    window.ctx.screen.use()
+    window.imgui.render(imgui.get_draw_data())
+
+
+def _status(window) -> None:
+    imgui.text(f"{window.ctx.info['GL_RENDERER']}")
+    # fps from the measured interval between frames (ImGui's own estimate assumes 60 Hz at first)
+    fps = 1000.0 / window.frame_ms if window.frame_ms > 0 else 0.0
+    imgui.text(f"{fps:.1f} fps, frame {window.frame_ms:.1f} ms")
+    imgui.text(f"shading + accumulation {window.pass_ms:.1f} ms, last cube map {window.cube_ms:.1f} ms")
+    refinement = window.refinement
+    imgui.text(
+        f"refined: {refinement.samples} spp per lobe (batch {refinement.batch})"
+        if refinement.samples
+        else f"moving: {window.method}"
+    )
+
+
+def _sample_slider(label: str, kind: str, samples: int) -> tuple[bool, int]:
+    return imgui.slider_int(label, samples, 1, SAMPLE_SLIDER_MAX.get(kind, PANEL_MAX_SAMPLES))
+
+
+def _rendering(window) -> None:
+    renderer = window.renderer
+    kinds = list(realtime_choices())
+    c, k = imgui.combo("method", kinds.index(method_choice(window.method)), kinds)
+    c2, n = _sample_slider("samples N", window.method.kind, window.method.samples)
+    c3, window.lobe_normalize = imgui.checkbox("lobe-N energy normalisation", window.lobe_normalize)
+    if c or c2 or c3:
+        window.set_method(method_from_choice(kinds[k], n, window.lobe_normalize))
+    _, window.progressive = imgui.checkbox("refine when still", window.progressive)
+    c4, mirrors = imgui.checkbox("planar mirror passes", renderer.mirrors_enabled)
+    c5, scale = imgui.slider_float("mirror resolution", renderer.mirror_scale, 0.1, 1.0)
+    if c4 or c5:
+        renderer.set_mirrors(mirrors, scale)
+        window.dirty = True
+    for line in renderer.mirror_report:
+        imgui.text(line)
+    scene = window.scene
+    if scene.cameras:
+        names = [c.name for c in scene.cameras]
+        c, pick = imgui.combo("scene camera", -1 if window.camera_index is None else window.camera_index, names)
+        if c:
+            window.camera_index = pick
+            cam = scene.cameras[pick]
+            camera = Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
+            window.walk = WalkCamera.from_camera(camera)
+            window.dirty = True
+    c, vsync = imgui.checkbox("vsync", window.vsync)
+    if c:
+        window.vsync = vsync
+        window.wnd.vsync = vsync
+    _, window.exposure = imgui.slider_float("exposure", window.exposure, -6.0, 6.0)
+    c, t = imgui.combo("tonemap", TONEMAPS.index(window.tonemap), list(TONEMAPS))
+    window.tonemap = TONEMAPS[t]
+
+
+def _material(window) -> None:
+    renderer, editor, index = window.renderer, window.editor, window.selected
+    desc = editor.desc(index)
+    imgui.text(f"{window.scene.objects[index].name}: {desc['model']} model")
+    override = renderer.object_method(index)
+    choices = ["global", *realtime_choices()]
+    current = 0 if override is None else choices.index(method_choice(override))
+    c, k = imgui.combo("object method", current, choices)
+    shown = override or window.method
+    c2, n = _sample_slider("object N", shown.kind, shown.samples)
+    if c or c2:
+        # The override keeps the panel's normalisation choice, as the global method does.
+        chosen = None if choices[k] == "global" else method_from_choice(choices[k], n, window.lobe_normalize)
+        renderer.set_object_method(index, chosen)
+        window.dirty = True
+    memory = renderer.prefiltered_memory(index)
+    if memory:
+        imgui.text(f"prefiltered maps: {sum(memory.values()) / 2**20:.1f} MB")
+        for name, size in memory.items():
+            imgui.bullet_text(f"{name}: {size / 2**20:.2f} MB")
+    changed, new = material_widgets(imgui, desc)
+    if changed:
+        window.message = editor.apply(index, new) or ""
+        window.dirty = True
+    key = json.dumps(editor.desc(index), sort_keys=True)
+    if window.plot_cache[0] != key:  # a BSDF build + 181 evaluations: not every frame
+        window.plot_cache = (key, lobe_plot_values(json.loads(key)))
+    x, y = window.plot_cache[1]
+    if implot.begin_plot("lobe, 45 deg view", (-1, 160)):
+        implot.plot_line("(f cos)^1/3", x, y)
+        implot.end_plot()
+    if imgui.button("undo (Ctrl+Z)") and editor.undo_last():
+        window.dirty = True
+    imgui.same_line()
+    sidecar = Path(str(window.session.scene_path) + ".materials.json")
+    if imgui.button("save"):
+        editor.save(sidecar)
+        window.message = f"saved {sidecar}"
+    imgui.same_line()
+    if imgui.button("load"):
+        if sidecar.exists():
+            editor.load(sidecar)
+            window.dirty = True
+        else:
+            window.message = f"no {sidecar} to load"

@@ -1,0 +1,89 @@
+"""Scripted viewer sessions (``lobeview view --script FILE``) for tests and demos.
+
+A script is a JSON list of steps ``{"frame": N, "action": A, ...}``, each run at the start of
+frame N (in order; steps of earlier frames first):
+
+    press / release   key: "W", "S", ... (a real key event through the window's handler)
+    move              direction: [x, y, z] (right, up, forward), seconds (default 0.2)
+    look              dx, dy: mouse pixels
+    select            object: name
+    set               path: into the selected material's description, value
+    method            value: a method name (core/methods.py grammar)
+    screenshot        name: file stem in --screenshot-dir
+    save_materials    path
+    quit
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from lobeview.core.methods import Method
+
+ACTIONS = ("press", "release", "move", "look", "select", "set", "method", "screenshot", "save_materials", "quit")
+# Actions after which the image is unchanged (no reset of the refinement).
+_KEEP_IMAGE = ("screenshot", "save_materials")
+
+
+class ScriptError(ValueError):
+    pass
+
+
+def load_script(path: str | Path) -> list[dict]:
+    """Read and check a script: a clear message for a bad step before the window opens."""
+    try:
+        steps = json.loads(Path(path).read_text())
+    except json.JSONDecodeError as exc:
+        raise ScriptError(f"--script {path}: not valid JSON ({exc})") from None
+    if not isinstance(steps, list) or not all(isinstance(s, dict) for s in steps):
+        raise ScriptError(f"--script {path}: expected a list of steps {{'frame': N, 'action': ...}}")
+    for k, step in enumerate(steps):
+        if step.get("action") not in ACTIONS:
+            raise ScriptError(f"--script {path}: step {k}: action must be one of {', '.join(ACTIONS)}")
+        if not isinstance(step.get("frame", 0), int):
+            raise ScriptError(f"--script {path}: step {k}: frame must be an integer")
+    return sorted(steps, key=lambda s: s.get("frame", 0))
+
+
+def run_due_steps(window, steps: list[dict]) -> None:
+    """Run (and remove) the steps due at ``window.frame``. ``window`` is app/window.py's
+    LobeviewWindow: the actions go through the same methods as keys, mouse and panel."""
+    while steps and steps[0].get("frame", 0) <= window.frame:
+        step = steps.pop(0)
+        action = step["action"]
+        if action in ("press", "release"):
+            keys = window.wnd.keys
+            state = keys.ACTION_PRESS if action == "press" else keys.ACTION_RELEASE
+            window.on_key_event(getattr(keys, step["key"]), state, window.wnd.modifiers)
+        elif action == "move":
+            window.walk.move(np.asarray(step["direction"], float), float(step.get("seconds", 0.2)))
+        elif action == "look":
+            window.walk.look(float(step["dx"]), float(step["dy"]))
+        elif action == "select":
+            names = [o.name for o in window.scene.objects]
+            if step["object"] not in names:
+                raise ScriptError(f"select: no object {step['object']!r}; the scene has {names}")
+            window.select(names.index(step["object"]))
+        elif action == "set":
+            desc = window.editor.desc(window.selected)
+            target = desc
+            for part in step["path"][:-1]:
+                target = target[part]
+            target[step["path"][-1]] = step["value"]
+            window.message = window.editor.apply(window.selected, desc) or ""
+        elif action == "method":
+            method = Method.parse(step["value"])
+            if not method.normalize:  # lobe-N follows the panel's checkbox unless it says +norm
+                method = method.with_normalize(window.lobe_normalize)
+            window.set_method(method)
+        elif action == "screenshot":
+            window.save_screenshot(step["name"])
+        elif action == "save_materials":
+            window.editor.save(Path(step["path"]))
+        elif action == "quit":
+            window.quit_requested = True
+        if action not in _KEEP_IMAGE:
+            window.dirty = True

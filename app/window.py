@@ -1,0 +1,312 @@
+"""The walkthrough window (moderngl-window, pyglet backend): input events, the frame loop, the
+progressive refinement policy and screenshots. The panel is app/panel.py, material editing
+app/editor.py, the camera app/walk.py, scripted sessions app/script.py.
+
+While the camera moves, every frame is rendered with the chosen real-time method; as soon as
+the camera, the materials and the method stay still, each frame adds a batch of unbiased
+quasi-random MIS samples to a float accumulation buffer and the display shows the running mean
+(thesis 4.4.2) once it holds SHOW_REFINED_AFTER samples per lobe. The batch adapts to keep frames
+near TARGET_FRAME_MS.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import moderngl_window as mglw
+import numpy as np
+from imgui_bundle import imgui, implot
+from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
+
+from lobeview.app.editor import MaterialEditor
+from lobeview.app.options import scene_renderer_from_args, scene_view, shot_command
+from lobeview.app.panel import draw_panel
+from lobeview.app.script import run_due_steps
+from lobeview.app.walk import WalkCamera
+from lobeview.core.methods import Method
+from lobeview.scenes.hdrio import write_hdr_image
+from lobeview.viewer.camera import Camera
+from lobeview.viewer.display import Accumulator
+from lobeview.viewer.tonemap import to_uint8, tonemap
+
+TARGET_FRAME_MS = 50.0
+MAX_BATCH = 64
+SHOW_REFINED_AFTER = 32  # spp per lobe before the refined image replaces the real-time one
+FRAME_TIME_SMOOTHING = 0.2  # exponential smoothing of the shown frame interval
+
+
+@dataclass
+class Session:
+    """What the command line gives the window (moderngl-window instantiates the class itself)."""
+
+    scene: object
+    scene_path: Path
+    environment: object
+    args: object
+    method: Method
+    cache: Path
+    script: list
+    original_materials: dict | None = None
+    loaded_materials: list | None = None
+
+
+class Refinement:
+    """Progressive refinement while still: samples accumulated, the adaptive batch size."""
+
+    def __init__(self):
+        self.batch = 4
+        self.samples = 0
+        self.still_frames = 0
+
+    def reset(self) -> None:
+        self.samples = 0
+        self.still_frames = 0
+
+    def adapt(self, pass_ms: float) -> None:
+        """Scale the batch by the measured cost of the last pass (at most x2 / x0.5 a frame)."""
+        ratio = TARGET_FRAME_MS / max(pass_ms, 1e-3)
+        self.batch = int(np.clip(self.batch * np.clip(ratio, 0.5, 2.0), 1, MAX_BATCH))
+
+
+class LobeviewWindow(mglw.WindowConfig):
+    gl_version = (4, 5)
+    title = "lobeview"
+    resizable = True
+    aspect_ratio = None
+    session: Session | None = None  # set by app/view.py before the window opens
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        session = self.session
+        self.scene, self.args = session.scene, session.args
+        self.wnd.title = f"lobeview - {session.scene_path.name}"
+        imgui.create_context()
+        implot.create_context()
+        self.imgui = ModernglWindowRenderer(self.wnd)
+        size = self.wnd.buffer_size
+        self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
+                                                 self.args)  # fmt: skip
+        self.accumulator = Accumulator(self.ctx, self.renderer.programs, size)  # refinement
+        self.realtime = Accumulator(self.ctx, self.renderer.programs, size)  # last moving frame
+        self.pending_screenshots: list[str] = []
+        position, target, up, fov = scene_view(self.scene, self.args.view)
+        self.walk = WalkCamera.from_camera(Camera(position, target, up, fov))
+        self.method = session.method
+        # kept apart from the method so switching to fis-N and back keeps the choice
+        self.lobe_normalize = self.args.lobe_normalize
+        self.exposure = 0.0
+        self.tonemap = "aces"
+        self.progressive = True
+        self.keys: set = set()
+        self.selected: int | None = next(
+            (i for i, o in enumerate(self.renderer.analysis.objects) if o.needs_cube_map), None
+        )
+        self.editor = MaterialEditor(self.renderer, session.original_materials)
+        self.message = ""
+        self.refinement = Refinement()
+        self.frame_ms = 0.0  # smoothed interval between frames (what the fps shows)
+        self.pass_ms = 0.0
+        self.cube_ms = 0.0
+        self._last_frame_start = None
+        self.camera_index = None
+        self.plot_cache = (None, None)
+        self.vsync = not self.args.no_vsync
+        self.frame = 0
+        self.script = list(session.script)
+        self.dirty = True
+        self.closed = False
+        self.quit_requested = False
+        if session.loaded_materials is not None:
+            self.message = f"loaded {', '.join(session.loaded_materials) or 'no changes'}"
+
+    # -- state changes (keys, mouse, panel and scripts all come through here) -------------------
+    def set_method(self, method: Method) -> None:
+        if method.kind == "reference":
+            raise ValueError("the real-time method cannot be 'reference': refinement is automatic when still")
+        self.method = method
+        self.dirty = True
+
+    def select(self, index: int | None) -> None:
+        if index is not None and not 0 <= index < len(self.scene.objects):
+            raise IndexError(f"object {index} does not exist: the scene has {len(self.scene.objects)} objects")
+        self.selected = index
+
+    # -- events ----------------------------------------------------------------------------------
+    def on_key_event(self, key, action, modifiers):
+        self.imgui.key_event(key, action, modifiers)
+        if imgui.get_io().want_capture_keyboard:
+            return
+        keys = self.wnd.keys
+        if action == keys.ACTION_PRESS:
+            self.keys.add(key)
+            if key == keys.F12:
+                self.save_screenshot()
+            elif key == keys.O:
+                self.walk.orbit = not self.walk.orbit
+                self.dirty = True
+            elif key == keys.ESCAPE:
+                self.wnd.close()
+            elif key == keys.Z and modifiers.ctrl:
+                if self.editor.undo_last():
+                    self.dirty = True
+        elif action == keys.ACTION_RELEASE:
+            self.keys.discard(key)
+
+    def on_mouse_position_event(self, x, y, dx, dy):
+        self.imgui.mouse_position_event(x, y, dx, dy)
+
+    def on_mouse_drag_event(self, x, y, dx, dy):
+        self.imgui.mouse_drag_event(x, y, dx, dy)
+        if imgui.get_io().want_capture_mouse:
+            return
+        buttons = self.wnd.mouse_states
+        if buttons.right or (self.walk.orbit and buttons.left):
+            self.walk.look(dx, dy)
+            self.dirty = True
+
+    def on_mouse_scroll_event(self, x_offset, y_offset):
+        self.imgui.mouse_scroll_event(x_offset, y_offset)
+        if not imgui.get_io().want_capture_mouse:
+            self.walk.speed = float(np.clip(self.walk.speed * (1.2**y_offset), 0.05, 50.0))
+
+    def on_mouse_press_event(self, x, y, button):
+        self.imgui.mouse_press_event(x, y, button)
+        if button == 1 and not imgui.get_io().want_capture_mouse:
+            scale = self.wnd.pixel_ratio
+            picked = self.renderer.pick(int(x * scale), int(y * scale))
+            if picked is not None:
+                self.select(picked)
+
+    def on_mouse_release_event(self, x, y, button):
+        self.imgui.mouse_release_event(x, y, button)
+
+    def on_unicode_char_entered(self, char):
+        self.imgui.unicode_char_entered(char)
+
+    def on_resize(self, width, height):
+        self.imgui.resize(width, height)
+        size = self.wnd.buffer_size
+        self.renderer.resize(size)
+        for acc in (self.accumulator, self.realtime):
+            acc.release()
+        self.accumulator = Accumulator(self.ctx, self.renderer.programs, size)
+        self.realtime = Accumulator(self.ctx, self.renderer.programs, size)
+        self.dirty = True
+
+    # -- screenshots -----------------------------------------------------------------------------
+    def displayed(self) -> Accumulator:
+        refined = self.progressive and self.refinement.samples >= SHOW_REFINED_AFTER
+        return self.accumulator if refined else self.realtime
+
+    def save_screenshot(self, name: str | None = None) -> None:
+        """Queued: written after this frame's panel is drawn, so the window capture is complete."""
+        self.pending_screenshots.append(name or time.strftime("lobeview-%Y%m%d-%H%M%S"))
+
+    def _write_screenshot(self, stem: str) -> Path:
+        from PIL import Image
+
+        directory = Path(self.args.screenshot_dir)
+        directory.mkdir(parents=True, exist_ok=True)
+        radiance = self.displayed().radiance()
+        write_hdr_image(directory / f"{stem}.exr", radiance)
+        Image.fromarray(to_uint8(tonemap(radiance, self.tonemap, self.exposure))).save(directory / f"{stem}.png")
+        width, height = self.wnd.buffer_size
+        screen = np.frombuffer(self.ctx.screen.read(components=3), np.uint8).reshape(height, width, 3)[::-1]
+        Image.fromarray(screen).save(directory / f"{stem}-window.png")
+        refined = self.displayed() is self.accumulator
+        method = Method.parse("reference") if refined else self.method
+        materials = None
+        if self.editor.edits():  # the edits travel with the screenshot, so the command reproduces it
+            materials = directory / f"{stem}.materials.json"
+            self.editor.save(materials)
+        command = shot_command(
+            self.walk.camera(),
+            self.renderer.size,
+            method,
+            out=directory / f"{stem}-shot.png",
+            scene=self.args.scene,
+            spp=self.refinement.samples if refined else None,
+            args=self.args,
+            materials=materials,
+            tonemap=self.tonemap,
+            exposure=self.exposure,
+        )
+        note = "" if not self.renderer.object_methods else " (per-object methods are not reproduced)"
+        print(f"screenshot {directory / stem}.exr/.png{note}: {command}", flush=True)
+        return directory / f"{stem}.png"
+
+    # -- frame -----------------------------------------------------------------------------------
+    def _walk_keys(self, frame_time: float) -> None:
+        keys = self.wnd.keys
+        direction = np.zeros(3)
+        for key, vec in (
+            (keys.W, (0, 0, 1)),
+            (keys.S, (0, 0, -1)),
+            (keys.A, (-1, 0, 0)),
+            (keys.D, (1, 0, 0)),
+            (keys.E, (0, 1, 0)),
+            (keys.Q, (0, -1, 0)),
+        ):
+            if key in self.keys:
+                direction += vec
+        if np.any(direction):
+            fast = 4.0 if self.wnd.modifiers.shift else 1.0
+            self.walk.move(direction * fast, min(frame_time, 0.1))
+            self.dirty = True
+
+    def on_render(self, time_s, frame_time):
+        if self.closed:
+            return
+        t_frame = time.perf_counter()
+        if self._last_frame_start is not None:
+            interval = (t_frame - self._last_frame_start) * 1000.0
+            self.frame_ms += FRAME_TIME_SMOOTHING * (interval - self.frame_ms) if self.frame_ms else interval
+        self._last_frame_start = t_frame
+        run_due_steps(self, self.script)
+        self._walk_keys(frame_time)
+
+        camera = self.walk.camera()
+        refinement = self.refinement
+        t0 = time.perf_counter()
+        if self.dirty:
+            self.accumulator.reset()
+            refinement.reset()
+            self.dirty = False
+        if refinement.still_frames == 0 or not self.progressive:
+            self.renderer.draw_frame(camera, self.method)
+            self.realtime.reset()
+            self.realtime.add(self.renderer.radiance_target, 1.0)
+        else:
+            batch = Method("reference", int(refinement.batch))
+            self.renderer.draw_frame(camera, batch, sample_offset=refinement.samples, seed=0)
+            self.accumulator.add(self.renderer.radiance_target, float(batch.samples))
+            refinement.samples += batch.samples
+        self.ctx.finish()
+        self.pass_ms = (time.perf_counter() - t0) * 1000.0
+        t0 = time.perf_counter()
+        refreshed = self.renderer.refresh_one_stale_cube()
+        if refreshed is not None:
+            self.cube_ms = (time.perf_counter() - t0) * 1000.0
+            self.message = f"updated the cube map of {refreshed} ({self.renderer.stale_cube_count} to go)"
+            self.dirty = True
+        if refinement.still_frames > 0 and self.progressive:
+            refinement.adapt(self.pass_ms)
+        refinement.still_frames += 1
+
+        self.ctx.screen.use()
+        self.ctx.screen.clear(0.0, 0.0, 0.0)
+        self.displayed().show(self.ctx.screen, (0, 0, *self.wnd.buffer_size), self.exposure, self.tonemap)
+        draw_panel(self)
+        while self.pending_screenshots:
+            self._write_screenshot(self.pending_screenshots.pop(0))
+        self.frame += 1
+        if self.quit_requested or (self.args.exit_after and self.frame >= self.args.exit_after):
+            self.wnd.close()  # releases GPU objects (on_close): the frame is finished
+
+    def on_close(self):
+        self.closed = True
+        self.realtime.release()
+        self.accumulator.release()
+        self.renderer.release()

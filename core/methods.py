@@ -1,0 +1,174 @@
+"""The method vocabulary of lobeview: one grammar for the command line, the panel, the benchmark
+tables, the scripts and every printed command.
+
+    lobe-N[+norm]   the thesis' deterministic in-lobe pattern, N in [1, MAX_PATTERN]; ``+norm``:
+                    lobeview's energy normalisation of Eq. 4.25 by the lobe's albedo table
+    fis-N           filtered importance sampling (Colbert & Krivanek 2007), N in [1, MAX_SAMPLES]
+    mc-N            plain importance sampling, no filtering
+    reference       converged MIS integration, REFERENCE_BATCH samples per lobe and pass
+    prefiltered[-MODE]  one lookup per lobe into prefiltered maps, MODE in PREFILTER_MODES
+
+``str(Method.parse(text)) == text`` for every canonical name, and ``Method.parse(str(m)) == m``
+for every method (tests/test_core.py). Command lines add one flag: ``--lobe-normalize`` is on by
+default, so ``--method=lobe-11`` normalises unless ``--no-lobe-normalize`` is given;
+:func:`resolve_cli_method` and :func:`method_cli_flags` are the two directions of that rule.
+
+This module is part of lobeview's ground floor (``lobeview.core``): it imports nothing of
+lobeview, so the materials, scenes, renderer and app all read the same constants.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from dataclasses import dataclass
+
+#: the kinds of methods, in the order the panel lists them
+KINDS = ("lobe", "fis", "mc", "reference", "prefiltered")
+#: the kinds the viewer renders while the camera moves (reference is what refinement converges to)
+REALTIME_KINDS = ("lobe", "fis", "mc")
+#: prefiltered sub-modes: auto = split-sum for microfacet/glTF lobes, lobe maps for the rest;
+#: banks = Banks maps for anisotropic lobes, lobe maps for isotropic ones
+PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong", "multi", "banks")
+MAX_LOBES = 8  # specular/transmission lobes per material (spec validation, GPU layout)
+MAX_PATTERN = 32  # lobe-N samples per lobe (the pattern uniform array)
+MAX_SAMPLES = 4096  # fis-N / mc-N samples per lobe and frame
+REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
+NORMALIZE_SUFFIX = "+norm"
+
+# MIP level bias b in lod = 0.5 log2(Omega_s / Omega_p) + b, chosen by `lobeview bench`'s sweep
+# (mean PSNR over 6 material classes x 2 HDR environments at 640x400, b in -1..2; details in
+# bench/results): fis-N is best at -0.5 (fis-16) to 0 (fis-64), not Colbert & Krivanek's +1
+# (fis-16: 31.3 dB vs 25.6 dB); lobe-N at -1 (lobe-7) to -0.5 (lobe-15), not the thesis' 0
+# (lobe-7: 30.8 dB vs 27.3 dB). The best bias grows with N for the ring pattern: its samples sit
+# on one ring, so the filter that closes the gaps shrinks more slowly than the lobe area / N of
+# Eq. 4.14.
+DEFAULT_FIS_LOD_BIAS = -0.5
+DEFAULT_LOBE_LOD_BIAS = -0.5
+
+_GRAMMAR = re.compile(
+    r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?P<norm>\+norm)?"
+    r"|(?P<reference>reference)"
+    r"|prefiltered(?:-(?P<mode>[a-z0-9]+))?)$"
+)
+GRAMMAR_HELP = "lobe-N[+norm], fis-N, mc-N, reference or prefiltered[-" + "|-".join(PREFILTER_MODES[1:]) + "]"
+
+
+class MethodError(ValueError):
+    """A method name outside the grammar, or a sample count outside its limits."""
+
+
+@dataclass(frozen=True)
+class Method:
+    kind: str  # one of KINDS
+    samples: int  # N per lobe (reference: per pass; prefiltered: 1)
+    normalize: bool = False  # lobe-N: energy normalisation by the lobe's albedo table
+    mode: str = ""  # prefiltered: one of PREFILTER_MODES
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise MethodError(f"unknown method kind {self.kind!r}; use one of {', '.join(KINDS)}")
+        if self.kind in ("lobe", "fis", "mc") and not 1 <= self.samples <= sample_limit(self.kind):
+            raise MethodError(f"{self.kind}-{self.samples}: N must be in [1, {sample_limit(self.kind)}]")
+        if self.kind == "reference" and self.samples < 1:
+            raise MethodError(f"reference: samples per pass must be >= 1, got {self.samples}")
+        if self.normalize and self.kind != "lobe":
+            raise MethodError(f"energy normalisation ({NORMALIZE_SUFFIX}) applies to lobe-N only, not {self.kind}")
+        if self.kind == "prefiltered":
+            if self.mode not in PREFILTER_MODES:
+                raise MethodError(f"unknown prefiltered mode {self.mode!r}; use one of {', '.join(PREFILTER_MODES)}")
+        elif self.mode:
+            raise MethodError(f"only prefiltered methods have a mode, not {self.kind}")
+
+    @classmethod
+    def parse(cls, text: str) -> Method:
+        m = _GRAMMAR.match(str(text).strip())
+        if not m:
+            raise MethodError(f"unknown method {text!r}; use {GRAMMAR_HELP}")
+        if m.group("reference"):
+            return cls("reference", REFERENCE_BATCH)
+        if m.group("kind") is None:
+            mode = m.group("mode") or "auto"
+            if mode == "auto" and m.group("mode"):
+                raise MethodError(f"{text!r}: write 'prefiltered' for the automatic mode")
+            if mode not in PREFILTER_MODES:
+                raise MethodError(f"unknown method {text!r}; use {GRAMMAR_HELP}")
+            return cls("prefiltered", 1, mode=mode)
+        kind, norm = m.group("kind"), bool(m.group("norm"))
+        if norm and kind != "lobe":
+            raise MethodError(f"{text!r}: {NORMALIZE_SUFFIX} applies to lobe-N only")
+        return cls(kind, int(m.group("n")), normalize=norm)
+
+    def __str__(self) -> str:
+        if self.kind == "reference":
+            return "reference"
+        if self.kind == "prefiltered":
+            return "prefiltered" if self.mode == "auto" else f"prefiltered-{self.mode}"
+        return f"{self.kind}-{self.samples}" + (NORMALIZE_SUFFIX if self.normalize else "")
+
+    @property
+    def family(self) -> str:
+        """The benchmark's plot family: 'lobe', 'lobe+norm', 'fis', 'mc', 'reference', 'prefiltered'."""
+        return "lobe+norm" if self.normalize else self.kind
+
+    def with_samples(self, samples: int) -> Method:
+        """The same method with another N (clamped to the kind's limit); prefiltered and
+        reference keep theirs."""
+        if self.kind not in ("lobe", "fis", "mc"):
+            return self
+        return dataclasses.replace(self, samples=int(min(max(samples, 1), sample_limit(self.kind))))
+
+    def with_normalize(self, normalize: bool) -> Method:
+        """lobe-N with or without energy normalisation; other methods unchanged."""
+        return dataclasses.replace(self, normalize=bool(normalize)) if self.kind == "lobe" else self
+
+    def default_lod_bias(self) -> float:
+        return DEFAULT_FIS_LOD_BIAS if self.kind == "fis" else DEFAULT_LOBE_LOD_BIAS
+
+    def passes(self, spp: int) -> int:
+        """Passes that accumulate ``spp`` samples per lobe (reference); every other method is one pass."""
+        return max(1, math.ceil(spp / self.samples)) if self.kind == "reference" else 1
+
+
+def sample_limit(kind: str) -> int:
+    return MAX_PATTERN if kind == "lobe" else MAX_SAMPLES
+
+
+def realtime_choices() -> tuple[str, ...]:
+    """The panel's method combo: the sampled kinds (N has its own slider) and every prefiltered mode."""
+    return REALTIME_KINDS + tuple(str(Method("prefiltered", 1, mode=mode)) for mode in PREFILTER_MODES)
+
+
+def method_choice(method: Method) -> str:
+    """The panel's combo entry of a method."""
+    return str(method) if method.kind == "prefiltered" else method.kind
+
+
+def method_from_choice(choice: str, samples: int, normalize: bool) -> Method:
+    """The method a combo entry + sample slider + normalisation checkbox select."""
+    if choice.startswith("prefiltered"):
+        return Method.parse(choice)
+    return Method(choice, 1).with_samples(samples).with_normalize(normalize)
+
+
+def resolve_cli_method(text: str, lobe_normalize: bool | None) -> Method:
+    """``--method`` with ``--lobe-normalize``/``--no-lobe-normalize`` (None: the flag's default,
+    on). ``lobe-N+norm`` is normalised whatever the default; with an explicit
+    ``--no-lobe-normalize`` it is a contradiction and refused."""
+    method = Method.parse(text)
+    if method.kind != "lobe":
+        return method
+    if method.normalize:
+        if lobe_normalize is False:
+            raise MethodError(f"--method {text} asks for normalisation that --no-lobe-normalize turns off")
+        return method
+    return method.with_normalize(True if lobe_normalize is None else lobe_normalize)
+
+
+def method_cli_flags(method: Method) -> str:
+    """The ``lobeview shot`` flags that select ``method`` (:func:`resolve_cli_method`'s inverse),
+    written ``--flag=value`` so that pasting them always works."""
+    if method.kind == "lobe" and not method.normalize:
+        return f"--method={method} --no-lobe-normalize"
+    return f"--method={method}"

@@ -1,0 +1,180 @@
+"""The contract between the Python renderer and the GLSL shaders, written once.
+
+* :data:`SHADER_CONSTANTS`: every number both sides must agree on (array sizes, the lobe layout
+  and its type codes, table sizes, pattern constants). They are injected as ``#define``s into
+  every program (viewer/shaders.py), so the shaders hold no copies; a shader that declares one of
+  them itself fails to compile (redefinition).
+* :data:`LOBE_LAYOUT`: the rows of one packed lobe (``u_lobes``, LOBE_ROWS vec4s per lobe), the
+  field each component holds, and the codes of its type/distribution/Fresnel fields; used by
+  viewer/material_gpu.py to pack and by shaders/bsdf.glsl ``get_lobe`` to unpack.
+* :data:`TEXTURE_UNITS`: the texture unit of every sampler uniform of the shading programs
+  (mesh/scene/preview fragment shaders). Every sampler gets its own unit even when unused: two
+  samplers of different types on one unit make the draw call fail (GL_INVALID_OPERATION).
+* :func:`set_uniform` / :func:`write_uniform`: the only way uniforms are set. A name the program's
+  sources do not declare raises :class:`UniformError` (a typo used to be skipped silently); a
+  declared uniform the compiler optimised away is skipped; a raw write whose byte size differs
+  from the uniform's raises too (a layout mismatch between packer and shader).
+"""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from lobeview.core.methods import MAX_LOBES, MAX_PATTERN, Method
+from lobeview.materials.banks import BANKS_AZIMUTHS
+from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
+from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, MAX_ELLIPSE_ANGLE, XI_BORDER
+from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
+
+
+class UniformError(KeyError):
+    """A uniform name the program does not declare, or a write of the wrong size."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0])
+
+
+# -- the packed lobe ---------------------------------------------------------------------------
+LOBE_TYPES = {"kurt reflection": 0, "kurt transmission": 1, "microfacet": 2, "gltf specular": 3}
+DISTRIBUTIONS = {"beckmann": 0, "ggx": 1}
+FRESNEL_TYPES = {"none": 0, "schlick": 1, "conductor": 2}
+#: (x, y, z, w) of each vec4 row of a packed lobe, as shaders/bsdf.glsl get_lobe reads them
+LOBE_LAYOUT = (
+    ("type", "distribution", "alpha_x", "alpha_y"),
+    ("k.r", "k.g", "k.b", "alpha"),  # ks / kt / scale (glTF: 1), thesis shadowing exponent
+    ("r0.r", "r0.g", "r0.b", "fresnel"),  # Schlick r0, or the glTF base colour
+    ("eta.r", "eta.g", "eta.b", "metallic"),
+    ("kappa.r", "kappa.g", "kappa.b", "unused"),
+)
+LOBE_ROWS = len(LOBE_LAYOUT)
+
+# -- prefiltered lookups -------------------------------------------------------------------------
+#: u_lobe_map_mode codes: how each lobe is looked up by the prefiltered methods
+LOBE_MAP_MODES = {"splitsum": 0, "lobes": 1, "banks": 2}
+# Rows of the lobe table per component: the fitted lobes of a lobe map, or the view azimuths of a
+# Banks map's albedo table (render_base.lobe_table).
+LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)
+CDF_ROW = 1024  # texels per row of the environment CDF texture (viewer/cubemap.py)
+PROXY_KINDS = {"planes": 1, "box": 2}  # u_proxy_kind (scenes/reflection_proxy.py)
+
+
+def _defines_of(prefix: str, codes: dict) -> dict:
+    return {f"{prefix}_{name.upper().replace(' ', '_')}": code for name, code in codes.items()}
+
+
+SHADER_CONSTANTS: dict = {
+    "MAX_LOBES": MAX_LOBES,
+    "MAX_PATTERN": MAX_PATTERN,
+    "LOBE_ROWS": LOBE_ROWS,
+    **_defines_of("LOBE", LOBE_TYPES),
+    **_defines_of("DIST", DISTRIBUTIONS),
+    **_defines_of("FRESNEL", FRESNEL_TYPES),
+    **_defines_of("LOBE_MAP", LOBE_MAP_MODES),
+    **_defines_of("PROXY", PROXY_KINDS),
+    "LOBE_SLICES": LOBE_SLICES,
+    "LOBE_TABLE_ROWS": LOBE_TABLE_ROWS,
+    "ALBEDO_PHI": ALBEDO_PHI,
+    "ALBEDO_MU": ALBEDO_MU,
+    "XI_BORDER": float(XI_BORDER),  # Eq. 4.10
+    "MAX_ELLIPSE_ANGLE": float(MAX_ELLIPSE_ANGLE),  # Eq. 4.15 clamp
+    "CDF_ROW": CDF_ROW,
+    "MAX_PROXY_PLANES": MAX_PROXY_PLANES,
+}
+
+# -- texture units of the shading programs ---------------------------------------------------------
+TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
+    "u_radiance": 0,  # the object's (or the environment's) radiance cube
+    "u_irradiance": 1,  # preview: irradiance cube for the diffuse term
+    "u_sobol": 2,
+    "u_env_cdf": 3,  # reference: environment importance tables
+    "u_env_pdf": 4,
+    "u_lightmap": 5,
+    "u_base_color": 6,
+    "u_albedo": 7,  # normalised lobe-N: the lobes' albedo tables
+    "u_split_sum": (8, 9),  # by distribution (DIST_BECKMANN, DIST_GGX)
+    "u_dfg": 10,
+    "u_lobe_maps": tuple(range(11, 11 + MAX_LOBES)),
+    "u_lobe_table": 19,
+    "u_mirror_radiance": 24,
+    "u_mirror_position": 25,
+    "u_mirror_normal": 26,
+    "u_through_radiance": 27,
+    "u_through_position": 28,
+    "u_through_normal": 29,
+    "u_plane_point_state": (30, 31),  # previous pass: mirror, see-through
+    "u_plane_normal_state": (32, 33),
+}
+
+
+def unit(name: str, index: int = 0) -> int:
+    """Texture unit of sampler uniform ``name`` (element ``index`` of a sampler array)."""
+    units = TEXTURE_UNITS[name]
+    return units[index] if isinstance(units, tuple) else units
+
+
+def method_defines(method: Method) -> dict:
+    """The shader variant of a method (viewer/shaders.py adds SHADER_CONSTANTS to every program)."""
+    return {
+        "METHOD_LOBE": method.kind == "lobe",
+        "METHOD_FIS": method.kind == "fis",
+        "METHOD_MC": method.kind in ("mc", "reference"),
+        "ENV_SAMPLING": method.kind == "reference",
+        "LOBE_NORMALIZE": method.kind == "lobe" and method.normalize,
+        "METHOD_PREFILTERED": method.kind == "prefiltered",
+    }
+
+
+# -- uniforms ------------------------------------------------------------------------------------
+_COMMENTS = re.compile(r"//[^\n]*|/\*.*?\*/", re.DOTALL)
+_UNIFORM = re.compile(r"\buniform\b[^;{}()]*?\b(\w+)\s*(?:\[[^\]]*\])?\s*;")
+
+
+def declared_uniforms(*sources: str) -> frozenset[str]:
+    """Names of the uniforms the GLSL ``sources`` declare (comments ignored)."""
+    names = set()
+    for source in sources:
+        names.update(_UNIFORM.findall(_COMMENTS.sub("", source)))
+    return frozenset(names)
+
+
+def _check_declared(program, name: str) -> None:
+    declared = (program.extra or {}).get("declared_uniforms") if hasattr(program, "extra") else None
+    if declared is None:
+        raise UniformError(f"uniform {name!r}: the program was not built by viewer.shaders.ProgramCache")
+    if name not in declared:
+        shaders = program.extra.get("sources", "?")
+        raise UniformError(f"uniform {name!r} is not declared in {shaders} (misspelt, or a shader lost it)")
+
+
+def set_uniform(program, name: str, value) -> None:
+    """Set a declared uniform; skipped where the compiler optimised it out of this variant."""
+    if name in program:
+        program[name].value = value
+    else:
+        _check_declared(program, name)
+
+
+def write_uniform(program, name: str, data) -> None:
+    """Write raw bytes (arrays of vectors, int arrays): the size must match the declaration."""
+    data = np.ascontiguousarray(data).tobytes() if not isinstance(data, bytes | bytearray) else bytes(data)
+    if name not in program:
+        _check_declared(program, name)
+        return
+    member = program[name]
+    expected = getattr(member, "array_length", 1) * getattr(member, "dimension", 1) * 4
+    if len(data) != expected:
+        raise UniformError(
+            f"uniform {name!r}: {len(data)} bytes written, the shader declares {expected} "
+            f"({member.array_length} x {member.dimension} x 4): the packing and the GLSL layout disagree"
+        )
+    member.write(data)
+
+
+def bind_sampler(program, name: str, texture, index: int | None = None) -> None:
+    """Bind ``texture`` to the unit of sampler ``name`` (of its element ``index``)."""
+    texture.use(unit(name, index or 0))
+    if index is None:
+        units = TEXTURE_UNITS[name]
+        set_uniform(program, name, list(units) if isinstance(units, tuple) else units)
