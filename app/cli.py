@@ -119,7 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("view", help="open the interactive walkthrough window")
     view.add_arguments(p)
     p.set_defaults(func=view.run)
-    p = sub.add_parser("bench", help="time against error for every method (--quick: a few minutes); --stress")
+    p = sub.add_parser(
+        "bench", help="time against error for every method (--quick: a few minutes); stress, mirrors, report"
+    )
     bench.add_arguments(p)
     p.set_defaults(func=bench.run)
     p = sub.add_parser("bake", help="bake lightmaps for a glTF scene")

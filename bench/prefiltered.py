@@ -27,8 +27,8 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from PIL import Image  # noqa: E402
-from preview_accuracy import DEFAULT_ENV, psnr, timed  # noqa: E402
 
+from lobeview.bench.preview_accuracy import DEFAULT_ENV, psnr, timed  # noqa: E402
 from lobeview.materials import prefilter as pf  # noqa: E402
 from lobeview.materials.banks import fit_banks  # noqa: E402
 from lobeview.materials.bsdf import CosineSampled  # noqa: E402

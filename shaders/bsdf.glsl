@@ -221,31 +221,13 @@ vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
     return reflected_wi(l, wr);
 }
 
-// ---- deterministic patterns (patterns.py) ---------------------------------------------------
+// ---- glTF diffuse (gltf.py GltfDiffuse) -------------------------------------------------------
 
-// XI_BORDER (Eq. 4.10) and MAX_ELLIPSE_ANGLE (80 degrees, Eq. 4.15) come from patterns.py.
+uniform float u_gltf_diffuse;  // 1: the material's diffuse is glTF's, under a dielectric layer
 
-// Eq. 4.10 with Beckmann's border for both distributions (GGX: its core; patterns.theta_thresh).
-float theta_thresh(Lobe l, float phi) {
-    float c = cos(phi);
-    float s = sin(phi);
-    float inv_alpha2 = c * c / (l.ax * l.ax) + s * s / (l.ay * l.ay);
-    return atan(sqrt(-log(XI_BORDER) / inv_alpha2));
-}
-
-vec3 pattern_half_vector(Lobe l, vec2 xi) {
-    float phi = phi_from_xi(l, xi.y);
-    return spherical_dir((1.0 - xi.x) * theta_thresh(l, phi), phi);
-}
-
-// Eq. 4.14-4.15 divided by n: area of one sample at unit distance.
-float lobe_sample_area(Lobe l, vec3 wo, int n) {
-    vec3 centre = vec3(-wo.xy, wo.z);
-    vec3 hu = spherical_dir(theta_thresh(l, 0.0), 0.0);
-    vec3 hv = spherical_dir(theta_thresh(l, 0.5 * PI), 0.5 * PI);
-    vec3 wu = 2.0 * dot(wo, hu) * hu - wo;
-    vec3 wv = 2.0 * dot(wo, hv) * hv - wo;
-    float au = min(acos(clamp(dot(wu, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
-    float av = min(acos(clamp(dot(wv, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
-    return PI * tan(au) * tan(av) / float(n);
+// The weight of the diffuse term: glTF's (1 - F_dielectric(V.H)) with F0 = 0.04 (glTF 2.0
+// Appendix B fresnel_mix), 1 for every other model. The estimators that do not sample wi pass
+// V.N, the view-direction approximation.
+vec3 diffuse_weight(float v_dot_h) {
+    return u_gltf_diffuse > 0.5 ? 1.0 - schlick(v_dot_h, vec3(0.04)) : vec3(1.0);
 }

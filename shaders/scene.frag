@@ -48,7 +48,7 @@ void main() {
     vec3 albedo = u_kd;
     if (u_has_base_color == 1) albedo *= texture(u_base_color, v_uv0).rgb;
     vec3 diffuse = albedo / PI * irradiance;
-    if (u_gltf_diffuse > 0.5) diffuse *= 1.0 - schlick(wo.z, vec3(0.04));
+    diffuse *= diffuse_weight(wo.z);
     vec3 radiance = u_emission + diffuse;
 #if defined(SPECULAR)
     for (int i = 0; i < u_lobe_count; ++i) radiance += integrate_lobe(get_lobe(i), i, wo, tbn);

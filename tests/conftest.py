@@ -4,14 +4,10 @@ user's ~/.cache, and the demo scene is built at draft quality so CI stays fast."
 from __future__ import annotations
 
 import os
-import sys
 import tempfile
 from pathlib import Path
 
 os.environ.setdefault("LOBEVIEW_CACHE", tempfile.mkdtemp(prefix="lobeview-test-cache-"))
 os.environ.setdefault("LOBEVIEW_DEMO_QUALITY", "draft")
-
-# tests/ on sys.path for the shared helpers (chi2_util).
-sys.path.insert(0, str(Path(__file__).parent))
 
 SHARED_ASSETS = Path(__file__).resolve().parents[1].parent / "shared" / "assets"

@@ -8,8 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from lobeview.app import bench
 from lobeview.app.cli import main
+from lobeview.bench import matrix_config, metrics
 from lobeview.viewer.render_base import RenderResult
 
 
@@ -17,23 +17,23 @@ def test_pareto_front_keeps_only_undominated_points():
     times = [1.0, 2.0, 3.0, 2.5, 4.0]
     errors = [0.5, 0.3, 0.1, 0.4, 0.1]
     # (2.5, 0.4) is beaten by (2.0, 0.3); (4.0, 0.1) by (3.0, 0.1).
-    assert bench.pareto_front(times, errors) == [True, True, True, False, False]
+    assert metrics.pareto_front(times, errors) == [True, True, True, False, False]
 
 
 def test_log_interpolation_and_first_crossing():
     xs, ys = [8, 16, 32, 64], [20.0, 23.0, 26.0, 29.0]  # +3 dB per doubling
-    assert bench.interpolate_log(np.sqrt(8 * 16), xs, ys) == pytest.approx(21.5)
-    assert np.isnan(bench.interpolate_log(4, xs, ys))
-    assert bench.first_crossing(24.5, xs, ys) == pytest.approx(np.sqrt(16 * 32))
-    assert np.isnan(bench.first_crossing(30.0, xs, ys))
-    assert bench.first_crossing(10.0, xs, ys) == 8  # reached at the first point already
+    assert metrics.interpolate_log(np.sqrt(8 * 16), xs, ys) == pytest.approx(21.5)
+    assert np.isnan(metrics.interpolate_log(4, xs, ys))
+    assert metrics.first_crossing(24.5, xs, ys) == pytest.approx(np.sqrt(16 * 32))
+    assert np.isnan(metrics.first_crossing(30.0, xs, ys))
+    assert metrics.first_crossing(10.0, xs, ys) == 8  # reached at the first point already
 
 
 def test_psnr_and_relative_rmse_closed_forms():
     a = np.full((10, 10, 3), 0.5)
     b = a + 10 / 255  # exactly ten 8-bit steps everywhere
-    assert bench.psnr_8bit(a, b) == pytest.approx(20 * np.log10(255 / 10), abs=1e-9)
-    assert bench.relative_rmse(a * 1.1, a) == pytest.approx(0.1)
+    assert metrics.psnr_8bit(a, b) == pytest.approx(20 * np.log10(255 / 10), abs=1e-9)
+    assert metrics.relative_rmse(a * 1.1, a) == pytest.approx(0.1)
 
 
 def test_reference_noise_floor_matches_the_true_error_of_the_reference():
@@ -48,10 +48,10 @@ def test_reference_noise_floor_matches_the_true_error_of_the_reference():
         z = np.zeros((80, 80, 3))
         return RenderResult(truth + noise, z, z, z, np.ones((80, 80), bool), np.zeros((80, 80), bool))
 
-    reference = bench.make_reference(render, lambda r: r.mask, 64)
-    actual = bench.relative_rmse(reference.radiance, truth)
+    reference = metrics.make_reference(render, lambda r: r.mask, 64)
+    actual = metrics.relative_rmse(reference.radiance, truth)
     assert reference.rel_rmse_floor == pytest.approx(actual, rel=0.05)
-    exact = bench.Reference(
+    exact = metrics.Reference(
         truth, reference.mask, reference.exposure, np.clip(bench_tonemap(truth, reference.exposure), 0, 1), 0, 0, 0, 0
     )
     assert reference.psnr_floor == pytest.approx(exact.errors(reference.radiance)["psnr"], abs=0.5)
@@ -67,9 +67,9 @@ def test_flip_is_zero_for_identical_images_and_grows_with_the_difference():
     rng = np.random.default_rng(1)
     image = rng.random((48, 48, 3)).astype(np.float32)
     mask = np.ones((48, 48), bool)
-    assert bench.flip_error(image, image, mask) == pytest.approx(0.0, abs=1e-6)
-    small = bench.flip_error(np.clip(image + 0.02, 0, 1), image, mask)
-    large = bench.flip_error(np.clip(image + 0.2, 0, 1), image, mask)
+    assert metrics.flip_error(image, image, mask) == pytest.approx(0.0, abs=1e-6)
+    small = metrics.flip_error(np.clip(image + 0.02, 0, 1), image, mask)
+    large = metrics.flip_error(np.clip(image + 0.2, 0, 1), image, mask)
     assert 0.0 < small < large
 
 
@@ -127,7 +127,7 @@ def test_bench_command_end_to_end(tmp_path, capsys):
     # Prefiltered maps cost memory beyond the radiance cube.
     assert cells["prefiltered"]["memory_mb"] > cells["lobe-3"]["memory_mb"]
     assert {r["bias"] for r in data["sweep"]} == {-1.0, 0.0}
-    assert [r["samples"] for r in data["fps"]] == list(bench.FPS_SAMPLES)
+    assert [r["samples"] for r in data["fps"]] == list(matrix_config.FPS_SAMPLES)
     assert data["fps"][0]["full"]["fraction"] == pytest.approx(1.0)
     assert data["fps"][0]["half"]["fraction"] == pytest.approx(0.5, abs=0.03)
     text = md.read_text()
@@ -137,7 +137,7 @@ def test_bench_command_end_to_end(tmp_path, capsys):
     assert not list(tmp_path.glob("*.partial.json"))  # the checkpoint goes once the report is written
     # The report can be rewritten from the JSON alone.
     md.unlink()
-    assert main(["bench", "--report", str(next(tmp_path.glob("bench-*.json")))]) == 0
+    assert main(["bench", "report", str(next(tmp_path.glob("bench-*.json")))]) == 0
     assert md.read_text() == text
 
 
@@ -148,7 +148,10 @@ def test_bench_command_end_to_end(tmp_path, capsys):
         (["--sweep-methods", "mc-8"], "only lobe-N and fis-N"),
         (["--methods", "lobe-0"], "N must be"),
         (["--repeats", "0"], "at least 1"),
-        (["--report", "/nonexistent/bench.json"], "not a lobeview bench JSON"),
+        (["report", "/nonexistent/bench.json"], "not a lobeview bench JSON"),
+        (["--report", "/nonexistent/bench.json"], "not a lobeview bench JSON"),  # the flag of earlier runs
+        (["--stress", "mirrors"], "contradict"),
+        (["report"], "give the JSON"),
     ],
 )
 def test_bench_rejects_bad_options(argv, message, capsys):
@@ -157,7 +160,7 @@ def test_bench_rejects_bad_options(argv, message, capsys):
 
 
 def test_stress_command_reports_every_check(tmp_path, capsys):
-    rc = main(["bench", "--stress", "--quick", "--methods", "lobe-7+norm", "--out", str(tmp_path)])
+    rc = main(["bench", "stress", "--quick", "--methods", "lobe-7+norm", "--out", str(tmp_path)])
     text = next(tmp_path.glob("stress-*.md")).read_text()
     assert rc == 0, capsys.readouterr().out
     assert "0 failures" in text
@@ -168,7 +171,7 @@ def test_stress_command_reports_every_check(tmp_path, capsys):
 def test_mirror_bench_times_0_1_2_reflectors_and_writes_the_figure(tmp_path):
     from PIL import Image
 
-    argv = ["bench", "--mirrors", "--quick", "--mirror-samples", "3", "--repeats", "1", "--reference-spp", "16"]
+    argv = ["bench", "mirrors", "--quick", "--mirror-samples", "3", "--repeats", "1", "--reference-spp", "16"]
     assert main([*argv, "--out", str(tmp_path)]) == 0
     text = next(tmp_path.glob("mirrors-*.md")).read_text()
     rows = [line for line in text.splitlines() if line.startswith("| 320x200 |")]

@@ -33,11 +33,10 @@ SHADER_FILES = sorted(p.name for p in resources.files("lobeview.shaders").iterdi
 
 @pytest.fixture(scope="module")
 def programs():
-    from lobeview.viewer.context import create_headless_context
+    from lobeview.bench.testing import headless_gl
 
-    ctx = create_headless_context()
-    yield ProgramCache(ctx)
-    ctx.release()
+    with headless_gl() as ctx:
+        yield ProgramCache(ctx)
 
 
 def _variants():

@@ -160,7 +160,7 @@ def _renderer(ctx, scene, size=SIZE):
 
 
 def _buffers(renderer, index=0, kind="mirror") -> MirrorBuffers:
-    targets = renderer._mirror_targets[(index, kind)]
+    targets = renderer.mirror_passes.targets[(index, kind)]
 
     def read(tex, components):
         data = np.frombuffer(tex.read(), np.float32).reshape(tex.height, tex.width, 4)

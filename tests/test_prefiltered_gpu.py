@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from test_render_vs_numpy import CAMERA, SIZE, _frame, _pixels, smooth_sky
 
+from lobeview.bench.testing import CubeLookup
 from lobeview.core.methods import Method
 from lobeview.materials import prefilter as pf
 from lobeview.materials.banks import fit_banks
@@ -25,7 +26,6 @@ from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.envmap import EnvironmentMap, equirect_direction
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.context import create_headless_context
-from lobeview.viewer.cubemap import CubeLookup
 from lobeview.viewer.preview import PreviewRenderer
 
 THESIS_GLOSSY = '{"model": "thesis", "kd": 0, "lobes": [{"ks": 0.9, "mx": 0.12, "my": 0.12, "r0": 0.5, "alpha": 0.3}]}'

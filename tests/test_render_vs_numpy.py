@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lobeview.bench.testing import CubeLookup
 from lobeview.core.cube_layout import face_directions
 from lobeview.materials.bsdf import BSDF, diffuse_albedo
 from lobeview.materials.patterns import integrate_lobe, specular_lobes
@@ -15,7 +16,6 @@ from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context
-from lobeview.viewer.cubemap import CubeLookup
 from lobeview.viewer.preview import PreviewRenderer
 
 

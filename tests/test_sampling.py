@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lobeview.bench.chi2 import SphereDomain, chi2_test
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.fresnel import Fresnel
@@ -13,8 +14,6 @@ from lobeview.materials.gltf import gltf_bsdf
 from lobeview.materials.microfacet import MicrofacetDistribution
 from lobeview.materials.thesis import KurtLobe, thesis_bsdf
 from lobeview.materials.vec import direction_from_angles_deg, mirror_z, reflect
-
-from chi2_util import SphereDomain, chi2_test
 
 N_SAMPLES = 400_000
 

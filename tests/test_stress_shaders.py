@@ -11,14 +11,7 @@ import warnings
 import numpy as np
 import pytest
 
-from lobeview.materials.bsdf import BSDF
-from lobeview.materials.patterns import specular_lobes
-from lobeview.scenes.envmap import EnvironmentMap
-from lobeview.scenes.meshes import uv_sphere
-from lobeview.viewer.context import create_headless_context
-from lobeview.viewer.cubemap import CubeLookup
-from lobeview.viewer.preview import PreviewRenderer
-from lobeview.viewer.stress import (
+from lobeview.bench.stress import (
     CI_METHODS,
     LOBE_METHOD_MAX_ROUGHNESS,
     STRESS_CAMERA,
@@ -34,7 +27,14 @@ from lobeview.viewer.stress import (
     sun_environment,
     white_environment,
 )
-from lobeview.viewer.stress import thesis_material as thesis
+from lobeview.bench.stress import thesis_material as thesis
+from lobeview.bench.testing import CubeLookup
+from lobeview.materials.bsdf import BSDF
+from lobeview.materials.patterns import specular_lobes
+from lobeview.scenes.envmap import EnvironmentMap
+from lobeview.scenes.meshes import uv_sphere
+from lobeview.viewer.context import create_headless_context
+from lobeview.viewer.preview import PreviewRenderer
 
 SIZE = STRESS_SIZE
 CAMERA = STRESS_CAMERA
@@ -77,7 +77,7 @@ PLAIN_LOBE_KNOWN_DEFECTS = [dict(m=0.05, alpha=1.0, r0=0.0)]
 @pytest.mark.parametrize("params", EXTREMES, ids=[str(p) for p in EXTREMES])
 @pytest.mark.parametrize("method", METHODS)
 def test_extreme_parameters_stay_finite_and_obey_the_white_furnace(furnace, params, method):
-    """Tolerances per method: lobeview.viewer.stress.furnace_tolerance."""
+    """Tolerances per method: lobeview.bench.stress.furnace_tolerance."""
     check = furnace_check(furnace, thesis(**params), method, anisotropic=params.get("ratio", 1.0) > 1.0)
     assert check.clean, f"{params} {method}: NaN/Inf/negative pixels"
     if method.startswith("lobe") and (params["m"] > LOBE_METHOD_MAX_ROUGHNESS or params in PLAIN_LOBE_KNOWN_DEFECTS):

@@ -91,8 +91,7 @@ class PreviewRenderer(RendererBase):
         for p in range(passes):
             set_uniform(program, "u_sample_offset", p * method.samples)
             t0 = time.perf_counter()
-            self.fbo.use()
-            self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            self.frame.begin()
             self.ctx.enable(moderngl.DEPTH_TEST)
             timer = self.gpu_timer()
             with timer or contextlib.nullcontext():
@@ -110,8 +109,7 @@ class PreviewRenderer(RendererBase):
         mask = g_buffers[0][..., 3] > 0.5
         if background:
             t0 = time.perf_counter()
-            self.fbo.use()
-            self.fbo.clear(0.0, 0.0, 0.0, 0.0)
+            self.frame.begin()
             self.draw_background(self.cubes, view_proj)
             self.ctx.finish()
             radiance = np.where(mask[..., None], radiance, self.read(0)[..., :3])

@@ -17,6 +17,7 @@ from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_maps, is_isotropic
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
 
 from .cubemap import RadianceCube
+from .frame import FrameTargets
 from .interface import LOBE_MAP_MODES, LOBE_TABLE_ROWS, bind_sampler, set_uniform, unit, write_uniform
 from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
 from .shaders import ProgramCache
@@ -98,7 +99,10 @@ class RenderResult:
 
 
 class RendererBase:
-    """Float RGBA targets (radiance, position, normal, tangent) + depth, the Sobol table."""
+    """The frame targets (viewer/frame.py), the Sobol table, material/cube binding and the
+    environment background."""
+
+    PLANE_STATE = False  # whether the frame has the averaged-tangent-plane state targets
 
     def __init__(self, ctx: moderngl.Context, size):
         self.ctx = ctx
@@ -112,19 +116,23 @@ class RendererBase:
         self._material_textures = BoundedCache(MAX_MATERIAL_TEXTURES, on_evict=lambda item: item[0].release())
         self._dummy_textures: dict = {}
         self._timer = None
-        self.targets: list = []
-        self.resize(size)
+        self.frame = FrameTargets(ctx, size, plane_state=self.PLANE_STATE)
 
     def resize(self, size):
-        if self.targets:  # a resize, not the first call: the old framebuffer and depth go too
-            self.fbo.release()
-            self.depth.release()
-        for t in self.targets:
-            t.release()
-        self.size = (int(size[0]), int(size[1]))
-        self.targets = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(4)]
-        self.depth = self.ctx.depth_renderbuffer(self.size)
-        self.fbo = self.ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
+        self.frame.resize(size)
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.frame.size
+
+    @property
+    def targets(self) -> list:
+        return self.frame.targets
+
+    @property
+    def fbo(self):
+        """The framebuffer the last pass drew into."""
+        return self.frame.fbo
 
     def gpu_timer(self):
         """A GL_TIME_ELAPSED query (``with timer: draw``; ``timer.elapsed`` in ns), or None where
@@ -136,12 +144,9 @@ class RendererBase:
                 self._timer = False
         return self._timer or None
 
-    def read(self, attachment: int, fbo=None, size=None) -> np.ndarray:
-        """Row 0 at the top (OpenGL rows start at the bottom)."""
-        fbo = fbo or self.fbo
-        width, height = size or self.size
-        data = fbo.read(components=4, attachment=attachment, dtype="f4")
-        return np.frombuffer(data, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
+    def read(self, attachment: int) -> np.ndarray:
+        """(H, W, 4) of G-buffer target ``attachment``, row 0 at the top."""
+        return self.frame.read(attachment)
 
     def set_material(
         self, program, material: PackedMaterial, method: Method, lod_bias: float | None, seed: int, planar=False
@@ -292,8 +297,5 @@ class RendererBase:
         for vao in self._vaos.values():
             vao.release()
         self._timer = None  # moderngl 5 queries have no release(); freed with the context
-        for t in self.targets:
-            t.release()
-        self.depth.release()
-        self.fbo.release()
+        self.frame.release()
         self.sobol.release()

@@ -1,18 +1,21 @@
 """Light-mapped scene renderer (thesis 4.3-4.4): diffuse from lightmaps, view-dependent lobes
-from a cube map per object.
+from a cube map per object or a planar mirror buffer.
 
-Only what the scene analysis asks for is built: a cube map for each object with specular or
-transmission lobes (rendered from the centre of its bounding box, without the object itself,
-light-mapped diffuse + emission + the environment through openings), and the specular shader
-variant only if some object needs it. Cube maps are cached on disk keyed by a hash of the scene
-content, the environment, the face size and the renderer version.
+SceneRenderer orchestrates the passes and owns the scene's GPU resources:
+- the cube-map pass (viewer/cube_bake.py): a cube map for each object with specular or
+  transmission lobes, bounces, disk cache, the stale-cube queue after material edits;
+- the mirror pass (viewer/mirror_pass.py): buffers for the planar reflectors in view;
+- the shading pass (``_draw_objects`` here): every object with its material, lightmap and the
+  method's shader variant (viewer/interface.py), into the frame targets (viewer/frame.py);
+- accumulation and tonemapping live in viewer/display.py (the window's refinement).
+Only what the scene analysis asks for is built. The window changes options through
+set_mirrors / set_object_method / update_material, never by writing attributes.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
-import sys
 import time
 import warnings
 from pathlib import Path
@@ -20,37 +23,25 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import Method
 from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.scene import Scene
 
-from .camera import Camera, perspective
+from .camera import Camera
+from .cube_bake import CubeBake, scene_content_key
 from .cubemap import RadianceCube, equirect_to_cube_faces
-from .interface import PROXY_KINDS, TEXTURE_UNITS, bind_sampler, method_defines, set_uniform, write_uniform
+from .interface import PROXY_KINDS, bind_sampler, method_defines, set_uniform, write_uniform
 from .material_gpu import PackedMaterial, pack_material
+from .mirror_pass import MirrorPasses
 from .render_base import RendererBase, RenderResult
 
-CUBE_CACHE_VERSION = 3
-CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
-MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # ... inside mirror buffers (every frame: cheap)
+__all__ = ["FALLBACK_IRRADIANCE", "SceneRenderer"]
+
 FALLBACK_IRRADIANCE = 1.0  # E for objects whose lightmap is missing (warned), i.e. kd/pi shading
-
-
-def face_view(face: int, eye) -> np.ndarray:
-    """View matrix whose image plane maps (x, y) in NDC to (sc, tc) of the cube face, so the
-    framebuffer (row 0 = t = 0) is the face's texel layout (core/cube_layout.py)."""
-    from lobeview.core.cube_layout import face_point_directions
-
-    zero = np.zeros(1)
-    f = face_point_directions(face, zero, zero)[0]
-    r = face_point_directions(face, np.ones(1), zero)[0] * np.sqrt(2) - f  # d/dsc
-    u = face_point_directions(face, zero, np.ones(1))[0] * np.sqrt(2) - f  # d/dtc
-    view = np.eye(4)
-    view[0, :3], view[1, :3], view[2, :3] = r, u, -f
-    view[:3, 3] = -view[:3, :3] @ np.asarray(eye, dtype=np.float64)
-    return view
+MAX_SCENE_TEXTURES = 256  # lightmaps and base-colour textures kept on the GPU
 
 
 class _GpuObject:
@@ -74,35 +65,9 @@ class _GpuObject:
             self.cube.release()
 
 
-# Sampler-uniform prefixes of the mirror and see-through buffers (units: interface.TEXTURE_UNITS).
-BUFFER_PREFIXES = {"mirror": "u_mirror", "see-through": "u_through"}
-
-
-class _MirrorTargets:
-    """One reflector's mirror buffer (thesis 4.5.1): radiance with a MIP chain, world position
-    (w = 1 geometry, 0 environment), normal, depth."""
-
-    def __init__(self, ctx, size):
-        self.size = size
-        self.radiance = ctx.texture(size, 4, dtype="f4")
-        self.radiance.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        self.radiance.repeat_x = self.radiance.repeat_y = False
-        self.position = ctx.texture(size, 4, dtype="f4")
-        self.normal = ctx.texture(size, 4, dtype="f4")
-        for tex in (self.position, self.normal):
-            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.depth = ctx.depth_renderbuffer(size)
-        self.fbo = ctx.framebuffer(
-            color_attachments=[self.radiance, self.position, self.normal], depth_attachment=self.depth
-        )
-        self.camera = None  # scenes.planar_mirror.MirrorCamera of the last pass
-
-    def release(self):
-        for item in (self.fbo, self.radiance, self.position, self.normal, self.depth):
-            item.release()
-
-
 class SceneRenderer(RendererBase):
+    PLANE_STATE = True  # refinement on reflectors averages tangent planes across passes
+
     def __init__(
         self,
         ctx: moderngl.Context,
@@ -129,11 +94,6 @@ class SceneRenderer(RendererBase):
         self.mirror_plane_average = True
         self.mirrors_enabled = True
         self.enabled_reflectors: set | None = None  # None: every reflector of the analysis
-        self._mirror_targets: dict[tuple[int, str], _MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
-        self._mirror_key = None
-        self._active_mirrors: dict = {}  # index -> {kind: targets} drawn for _mirror_key
-        self._mirror_generation = 0
-        self.mirror_report: list[str] = []  # what the last frame's mirror passes did
         self.scene = scene
         self.analysis = analyse(scene)
         self.progress = progress
@@ -142,7 +102,9 @@ class SceneRenderer(RendererBase):
         self.environment = RadianceCube(ctx, equirect_to_cube_faces(environment, 256))
         self.environment_name = environment.name
         self._env_hash = hashlib.sha256(environment.image.tobytes()).hexdigest()[:16]
-        self.textures: dict[int, moderngl.Texture] = {}
+        # Lightmaps and base-colour textures by the image they upload; the image is kept with the
+        # texture so that its id() cannot be reused while the entry lives.
+        self.textures = BoundedCache(MAX_SCENE_TEXTURES, on_evict=lambda item: item[1].release())
         # Every sampler uniform gets its own unit and a texture, even when unused: two samplers
         # of different types on one unit make the draw call fail (GL_INVALID_OPERATION).
         self._white = ctx.texture((1, 1), 3, np.ones(3, np.float32).tobytes(), dtype="f4")
@@ -159,16 +121,32 @@ class SceneRenderer(RendererBase):
                 )
         self.timings["upload"] = time.perf_counter() - t0
         t0 = time.perf_counter()
-        self.cube_face_size = cube_face_size
-        self.cube_bounces = max(1, int(cube_bounces))
         self.object_methods: dict[int, Method] = {}
-        self.stale_cubes: list[int] = []
         self.cache_dir = Path(cache_dir) if cache_dir else None
-        self._build_cube_maps(cache_dir)
+        self.mirror_passes = MirrorPasses(ctx, self.environment, self.draw_background, self._draw_pass)
+        extent = float(np.max(scene.bounds[1] - scene.bounds[0]))
+        self.cube_bake = CubeBake(
+            ctx, cube_face_size, cube_bounces, extent, self.environment, self.draw_background, self._draw_pass, progress
+        )
+        key = scene_content_key(scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces)
+        self.cube_bake.build(self.objects, self.analysis.cube_mapped, key, self.cache_dir)
         for obj in self.objects:
             if obj.cube is not None:
                 obj.cube.cache_dir = self.cache_dir  # prefiltered maps are cached beside the cubes
         self.timings["cube maps"] = time.perf_counter() - t0
+
+    @property
+    def cube_face_size(self) -> int:
+        return self.cube_bake.face_size
+
+    @property
+    def cube_bounces(self) -> int:
+        return self.cube_bake.bounces
+
+    @property
+    def mirror_report(self) -> list[str]:
+        """What the last frame's mirror passes did, one line per reflector."""
+        return self.mirror_passes.report
 
     # -- options the viewer's panel sets -------------------------------------------------------
     def set_mirrors(self, enabled: bool, scale: float | None = None) -> None:
@@ -200,7 +178,7 @@ class SceneRenderer(RendererBase):
     @property
     def stale_cube_count(self) -> int:
         """Cube maps still waiting to be re-rendered after a material edit."""
-        return len(self.stale_cubes)
+        return len(self.cube_bake.stale)
 
     def prefiltered_memory(self, index: int) -> dict[str, int]:
         """Bytes of each prefiltered map object ``index`` has built so far (empty: none)."""
@@ -209,122 +187,20 @@ class SceneRenderer(RendererBase):
         return dict(maps.memory) if maps is not None else {}
 
     # -- resources -------------------------------------------------------------------------
-    def resize(self, size):
-        """The frame targets of RendererBase (``self._plain_fbo``) plus two sets of
-        averaged-tangent-plane state targets (Fig. 4.46b) with one framebuffer each: a refinement
-        pass on a reflector writes one set and reads the set the previous such pass wrote
-        (draw_frame picks ``self.fbo``); every other pass draws into the plain framebuffer, so
-        real-time frames neither clear nor write the state targets."""
-        if self.targets:
-            for item in self._frame_fbos + self._plane_states:
-                item.release()
-            self.fbo = self._plain_fbo  # RendererBase.resize releases it
-        super().resize(size)
-        self._plain_fbo = self.fbo
-        # Per set: point sums (mirror, see-through), normal sums (mirror, see-through): locations 4-7.
-        self._plane_states = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(8)]
-        self._frame_fbos = [
-            self.ctx.framebuffer(color_attachments=[*self.targets, *self._plane_states[4 * k : 4 * k + 4]],
-                                 depth_attachment=self.depth)
-            for k in range(2)
-        ]  # fmt: skip
-        self._frame_parity = 0
-
     def _texture(self, image: np.ndarray) -> moderngl.Texture:
-        key = id(image)
-        if key not in self.textures:
+        def upload():
             img = np.ascontiguousarray(image, dtype=np.float32)
             tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype="f4")
             tex.build_mipmaps()
             tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
             tex.repeat_x = tex.repeat_y = True
-            self.textures[key] = tex
-        return self.textures[key]
+            return image, tex
 
-    def _scene_hash(self) -> str:
-        h = hashlib.sha256()
-        h.update(f"v{CUBE_CACHE_VERSION} face{self.cube_face_size} b{self.cube_bounces} env{self._env_hash}".encode())
-        for obj in self.scene.objects:
-            h.update(obj.mesh.positions.tobytes())
-            h.update(obj.mesh.indices.tobytes())
-            if obj.uv1 is not None:
-                h.update(obj.uv1.tobytes())
-        for mat in self.scene.materials:
-            h.update(repr(sorted(mat.desc.items())).encode())
-            h.update(np.asarray(mat.emission, np.float64).tobytes())
-            if mat.lightmap is not None:
-                h.update(hashlib.sha256(mat.lightmap.image.tobytes()).digest())
-            if mat.base_color_texture is not None:
-                h.update(hashlib.sha256(mat.base_color_texture.tobytes()).digest())
-        return h.hexdigest()[:20]
-
-    def _build_cube_maps(self, cache_dir: Path | None):
-        """Cube maps of every object that needs one. Bounce 1 sees the light-mapped diffuse scene
-        (the thesis' cube maps, where metals are black); each further bounce re-renders them with
-        the other objects' lobes shaded from the previous bounce's cube maps, so a chrome sphere
-        shows up in the gold torus and a glass pane is see-through."""
-        wanted = self.analysis.cube_mapped
-        if not wanted:
-            return
-        key = self._scene_hash()
-        cache_file = Path(cache_dir) / f"cubes-{key}.npz" if cache_dir else None
-        if cache_file is not None and cache_file.exists():
-            with np.load(cache_file) as data:
-                if {f"cube_{i}" for i in wanted} <= set(data.files):
-                    for i in wanted:
-                        self.objects[i].cube = RadianceCube(self.ctx, data[f"cube_{i}"].astype(np.float32))
-                    return
-        faces = {}
-        for bounce in range(self.cube_bounces):
-            t0 = time.perf_counter()
-            for i in wanted:
-                faces[i] = self.render_cube_faces(self.objects[i].centre, exclude=i, specular=bounce > 0)
-            for i in wanted:
-                if self.objects[i].cube is not None:
-                    self.objects[i].cube.release()
-                self.objects[i].cube = RadianceCube(self.ctx, faces[i])
-            if self.progress:
-                print(
-                    f"[cube] bounce {bounce + 1}: {len(wanted)} cube maps of {self.cube_face_size}^2 x 6"
-                    f" in {time.perf_counter() - t0:.2f} s",
-                    file=sys.stderr,
-                    flush=True,
-                )
-        if cache_file is not None:
-            cache_file.parent.mkdir(parents=True, exist_ok=True)
-            # float32, not float16: a sun seen through a window exceeds half precision's 65504.
-            np.savez_compressed(cache_file, **{f"cube_{i}": f.astype(np.float32) for i, f in faces.items()})
+        return self.textures.get(id(image), upload)[1]
 
     def render_cube_faces(self, eye, exclude: int | None = None, specular: bool = False) -> np.ndarray:
-        """Six faces of the light-mapped scene seen from ``eye`` (float32, (6, S, S, 3)); with
-        ``specular``, objects that have cube maps are shaded with their lobes too."""
-        size = self.cube_face_size
-        color = self.ctx.texture((size, size), 4, dtype="f4")
-        extra = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(3)]
-        depth = self.ctx.depth_renderbuffer((size, size))
-        fbo = self.ctx.framebuffer(color_attachments=[color, *extra], depth_attachment=depth)
-        extent = float(np.max(self.scene.bounds[1] - self.scene.bounds[0]))
-        proj = perspective(90.0, 1.0, 1e-3 * extent, 4.0 * extent)
-        faces = np.empty((6, size, size, 3), dtype=np.float32)
-        try:
-            for face in range(6):
-                view_proj = proj @ face_view(face, eye)
-                fbo.use()
-                self.ctx.viewport = (0, 0, size, size)
-                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-                self.draw_background(self.environment, view_proj)
-                self._draw_objects(view_proj, eye, CUBE_BOUNCE_METHOD, specular=specular, exclude=exclude)
-                self.ctx.finish()
-                data = np.frombuffer(fbo.read(components=4, attachment=0, dtype="f4"), np.float32)
-                faces[face] = data.reshape(size, size, 4)[..., :3]  # row 0 = t = 0, no flip
-        finally:
-            fbo.release()
-            depth.release()
-            color.release()
-            for t in extra:
-                t.release()
-            self.ctx.viewport = (0, 0, *self.size)
-        return faces
+        """Six faces of the scene seen from ``eye`` (viewer/cube_bake.py CubeBake.render_faces)."""
+        return self.cube_bake.render_faces(eye, exclude, specular)
 
     # -- drawing -----------------------------------------------------------------------------
     def _program(self, method: Method, specular: bool, parallax: bool = False, mirror: bool = False):
@@ -349,10 +225,6 @@ class SceneRenderer(RendererBase):
         return self.mirror_plane_average and method.kind in ("mc", "reference")
 
     # -- planar mirror passes (thesis 4.5) --------------------------------------------------------
-    def mirror_size(self) -> tuple[int, int]:
-        width, height = self.size
-        return max(1, round(width * self.mirror_scale)), max(1, round(height * self.mirror_scale))
-
     def reflectors(self) -> dict:
         """Object index -> PlanarReflector of the reflectors in use (analysis, minus disabled)."""
         found = self.analysis.reflectors
@@ -362,104 +234,16 @@ class SceneRenderer(RendererBase):
             found = {i: r for i, r in found.items() if i in self.enabled_reflectors}
         return found
 
-    @staticmethod
-    def mirror_skip_reason(reflector, camera: Camera, view_proj: np.ndarray) -> str | None:
-        """Why a reflector needs no buffers this frame (None: it needs them): the camera is behind
-        its plane (a reflector that transmits is seen from both sides), or its bounding box lies
-        outside the view frustum."""
-        if not reflector.transmission and reflector.side(np.asarray(camera.position, dtype=np.float64)) <= 1e-6:
-            return "seen from behind"
-        clip = np.c_[reflector.corners(), np.ones(8)] @ view_proj.T
-        w = clip[:, 3:4]
-        for axis in range(3):
-            if np.all(clip[:, axis : axis + 1] > w) or np.all(clip[:, axis : axis + 1] < -w):
-                return "outside the view"
-        return None
-
     def render_mirror_passes(self, camera: Camera) -> dict:
-        """The buffers of the reflectors that need them for ``camera`` (index -> {'mirror' and/or
-        'see-through': targets}); reused while the camera, the size and the materials stay the same
-        (refinement passes)."""
-        from lobeview.scenes.planar_mirror import mirror_camera
-
-        width, height = self.size
-        view_proj = camera.view_projection(width / height)
-        reflectors = self.reflectors()
-        key = (
-            tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y, camera.near, camera.far,
-            self.size, self.mirror_scale, self.mirror_specular, tuple(sorted(reflectors)), self._mirror_generation,
-        )  # fmt: skip
-        if key == self._mirror_key:
-            return self._active_mirrors
-        report, active = [], {}
-        size = self.mirror_size()
-        projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
-        for index, reflector in reflectors.items():
-            name = self.objects[index].name
-            reason = self.mirror_skip_reason(reflector, camera, view_proj)
-            if reason is not None:
-                report.append(f"{name}: no mirror pass ({reason})")
-                continue
-            active[index] = {}
-            for kind in reflector.passes:
-                targets = self._mirror_targets.get((index, kind))
-                if targets is None or targets.size != size:
-                    if targets is not None:
-                        targets.release()
-                    targets = self._mirror_targets[(index, kind)] = _MirrorTargets(self.ctx, size)
-                buffer_camera = mirror_camera(camera.view(), projection, reflector, size, see_through=kind != "mirror")
-                targets.fbo.use()
-                self.ctx.viewport = (0, 0, *size)
-                targets.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
-                self.draw_background(self.environment, buffer_camera.plain_view_projection)
-                self._draw_objects(
-                    buffer_camera.view_projection,
-                    buffer_camera.position,
-                    MIRROR_BOUNCE_METHOD,
-                    specular=self.mirror_specular,
-                    exclude=index,
-                )
-                targets.radiance.build_mipmaps()
-                targets.camera = buffer_camera
-                active[index][kind] = targets
-                report.append(f"{name}: {kind} pass {size[0]}x{size[1]}")
-        self.ctx.viewport = (0, 0, width, height)
-        self._mirror_key, self._active_mirrors, self.mirror_report = key, active, report
-        return active
+        """This frame's mirror and see-through buffers (viewer/mirror_pass.py)."""
+        names = [obj.name for obj in self.objects]
+        return self.mirror_passes.render(
+            camera, self.size, self.reflectors(), names, self.mirror_scale, self.mirror_specular
+        )
 
     def invalidate_mirrors(self) -> None:
         """Draw the mirror buffers again on the next frame even if nothing changed (benchmarks)."""
-        self._mirror_key = None
-
-    def _bind_mirror(self, program, index: int, buffers: dict, eye) -> None:
-        """The reflector's buffers (a 1-texel dummy for a kind it does not have, flagged off in
-        u_mirror_sides), its plane's normal on the camera's side and the plane-state targets."""
-        plane = self.analysis.reflectors[index].plane
-        front = plane[:3] if float(np.dot(plane[:3], eye) + plane[3]) >= 0.0 else -plane[:3]
-        set_uniform(program, "u_mirror_front", tuple(float(x) for x in front))
-        set_uniform(program, "u_mirror_sides", int("mirror" in buffers) | 2 * int("see-through" in buffers))
-        for kind, prefix in BUFFER_PREFIXES.items():
-            targets = buffers.get(kind)
-            textures = (targets.radiance, targets.position, targets.normal) if targets else (self._white,) * 3
-            for name, tex in zip(("radiance", "position", "normal"), textures, strict=True):
-                bind_sampler(program, f"{prefix}_{name}", tex)
-            if targets is None:
-                continue
-            camera = targets.camera
-            set_uniform(program, f"{prefix}_view", tuple(camera.view.T.astype("f4").ravel()))
-            set_uniform(
-                program, f"{prefix}_view_projection", tuple(camera.plain_view_projection.T.astype("f4").ravel())
-            )
-            set_uniform(program, f"{prefix}_eye", tuple(float(x) for x in camera.position))
-            set_uniform(program, f"{prefix}_focal_px", float(camera.focal_pixels))
-        if "u_plane_point_state" in program:
-            # The previous pass's sums, in the order of the state attachments: points (mirror,
-            # see-through), then normals.
-            previous = self._plane_states[4 * (1 - self._frame_parity) : 4 * (1 - self._frame_parity) + 4]
-            for k, tex in enumerate(previous):
-                bind_sampler(program, ("u_plane_point_state", "u_plane_normal_state")[k // 2], tex, index=k % 2)
-            for name in ("u_plane_point_state", "u_plane_normal_state"):
-                set_uniform(program, name, list(TEXTURE_UNITS[name]))
+        self.mirror_passes.invalidate()
 
     def set_reflection_proxy(self, index: int, proxy) -> None:
         """Reflected-geometry correction for object ``index`` (scenes/reflection_proxy.py; None:
@@ -546,8 +330,15 @@ class SceneRenderer(RendererBase):
                 if proxy is not None:
                     self._bind_proxy(program, obj, proxy)
                 if mirror is not None:
-                    self._bind_mirror(program, obj.index, mirror, eye)
+                    self.mirror_passes.bind(
+                        program, self.analysis.reflectors[obj.index], mirror, eye, self._white,
+                        self.frame.previous_plane_states(),
+                    )  # fmt: skip
             self._vao(program, obj).render(moderngl.TRIANGLES)
+
+    def _draw_pass(self, view_proj, eye, method: Method, specular: bool, exclude=None) -> None:
+        """The scene as the cube-map and mirror passes draw it (no per-frame state)."""
+        self._draw_objects(view_proj, eye, method, specular, exclude)
 
     def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:
         """One pass into the renderer's own float targets (radiance in ``targets[0]``), no read
@@ -556,43 +347,37 @@ class SceneRenderer(RendererBase):
         view_proj = camera.view_projection(width / height)
         # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
         # lookup per lobe, so there they keep their cube maps and no mirror pass is drawn.
-        mirrors = self.render_mirror_passes(camera) if method.kind != "prefiltered" else {}
         if method.kind == "prefiltered":
-            self.mirror_report = [f"{self.objects[i].name}: cube map (prefiltered method)" for i in self.reflectors()]
-        if any(self._averages_planes(self._object_method(i, method)) for i in mirrors):
-            # Alternate the state framebuffers: this pass writes the set the next one reads.
-            self._frame_parity = 1 - self._frame_parity
-            self.fbo = self._frame_fbos[self._frame_parity]
+            mirrors = {}
+            self.mirror_passes.report = [
+                f"{self.objects[i].name}: cube map (prefiltered method)" for i in self.reflectors()
+            ]
         else:
-            self.fbo = self._plain_fbo
-        self.fbo.use()
-        self.ctx.viewport = (0, 0, width, height)
-        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+            mirrors = self.render_mirror_passes(camera)
+        self.frame.begin(averages_planes=any(self._averages_planes(self._object_method(i, method)) for i in mirrors))
         self.draw_background(self.environment, view_proj)
         self._draw_objects(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors)
 
     def pick(self, x: int, y: int) -> int | None:
         """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
-        width, height = self.size
-        if not (0 <= x < width and 0 <= y < height):
-            return None
-        data = self.fbo.read(viewport=(int(x), int(height - 1 - y), 1, 1), components=4, attachment=2, dtype="f4")
-        value = float(np.frombuffer(data, dtype=np.float32)[3])
-        return int(round(value)) - 1 if value >= 0.5 else None
+        return self.frame.pick(x, y)
 
     def update_material(self, index: int, desc: dict) -> None:
-        """Replace the material of object ``index`` with a (validated) description. Other
-        objects' cube maps keep the old appearance until :meth:`rebuild_cube_maps`."""
+        """Replace the material of object ``index`` with a (validated) description. The cube
+        maps of the other glossy objects show the old appearance until refresh_one_stale_cube
+        has re-rendered them (one per frame in the viewer)."""
         from lobeview.materials.spec import validate
 
         desc = validate(desc)
-        self._mirror_generation += 1  # what the mirror buffers show changed
+        self.mirror_passes.generation += 1  # what the mirror buffers show changed
         material_index = self.scene.objects[index].material
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
         self.analysis = analyse(self.scene)
         # Everything else that reflects this object now sees an outdated appearance.
-        self.stale_cubes = [i for i in self.analysis.cube_mapped if self.scene.objects[i].material != material_index]
+        self.cube_bake.stale = [
+            i for i in self.analysis.cube_mapped if self.scene.objects[i].material != material_index
+        ]
         for gpu_obj in self.objects:
             if self.scene.objects[gpu_obj.index].material == material_index:
                 gpu_obj.material = packed
@@ -604,16 +389,7 @@ class SceneRenderer(RendererBase):
     def refresh_one_stale_cube(self) -> str | None:
         """Re-render one out-of-date cube map (after a material edit changed what it sees);
         the viewer calls this once per frame so edits never freeze the UI. Returns its name."""
-        while self.stale_cubes:
-            index = self.stale_cubes.pop(0)
-            obj = self.objects[index]
-            if obj.cube is None:
-                continue
-            faces = self.render_cube_faces(obj.centre, exclude=index, specular=self.cube_bounces > 1)
-            obj.cube.release()
-            obj.cube = RadianceCube(self.ctx, faces)
-            return obj.name
-        return None
+        return self.cube_bake.refresh_one(self.objects)
 
     def render(
         self,
@@ -658,15 +434,10 @@ class SceneRenderer(RendererBase):
         )
 
     def release(self):
-        self.fbo = self._plain_fbo  # RendererBase releases it; the state framebuffers go below
         super().release()
-        for targets in self._mirror_targets.values():
-            targets.release()
-        for item in self._plane_states + self._frame_fbos:
-            item.release()
+        self.mirror_passes.release()
         for obj in self.objects:
             obj.release()
-        for tex in self.textures.values():
-            tex.release()
+        self.textures.clear()
         self._white.release()
         self.environment.release()

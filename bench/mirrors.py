@@ -63,7 +63,7 @@ def run_mirror_bench(ctx, device: str, out_dir: Path, stamp: str, resolutions, s
     from lobeview.viewer.scene_renderer import SceneRenderer
     from lobeview.viewer.tonemap import tonemap
 
-    from .bench import psnr_8bit, relative_rmse
+    from .metrics import psnr_8bit, relative_rmse
 
     def say(text):
         print(f"[mirrors] {text}", file=sys.stderr, flush=True)
@@ -209,7 +209,7 @@ def refinement_against_ray_tracing(ctx, camera, size, spp: int, figure_path: Pat
     from lobeview.viewer.scene_renderer import SceneRenderer
     from lobeview.viewer.tonemap import tonemap
 
-    from .bench import relative_rmse
+    from .metrics import relative_rmse
 
     grey = EnvironmentMap.from_function(
         lambda d: np.full(d.shape[:-1] + (3,), REFINEMENT_BACKGROUND), height=16, name="grey"
@@ -251,3 +251,18 @@ def refinement_against_ray_tracing(ctx, camera, size, spp: int, figure_path: Pat
     ldr = [(np.clip(tonemap(p, "aces", 0.0), 0, 1) * 255 + 0.5).astype(np.uint8) for p in panels]
     Image.fromarray(np.concatenate([ldr[0], gap, ldr[1], gap, ldr[2]], axis=1)).save(figure_path)
     return rows, figure_path
+
+
+def run_mirrors_command(args, out_dir: Path, stamp: str) -> int:
+    """``lobeview bench mirrors``: the run above with the command line's sizes, samples and spp."""
+    from lobeview.app.options import parse_size
+    from lobeview.viewer.context import create_headless_context, renderer_description
+
+    default_sizes = ["320x200"] if args.quick else ["640x400", "1680x1050"]
+    sizes = [parse_size(text) for text in (args.resolutions or default_sizes)]
+    ctx = create_headless_context()
+    samples = args.mirror_samples or ([3, 7] if args.quick else list(MIRROR_SAMPLES))
+    spp = args.reference_spp or (128 if args.quick else 512)
+    run_mirror_bench(ctx, renderer_description(ctx), out_dir, stamp, sizes, samples, args.repeats, spp)
+    ctx.release()
+    return 0

@@ -1,0 +1,44 @@
+// GLSL twin of materials/patterns.py: the thesis' deterministic lobe patterns (Eq. 4.10-4.15)
+// and lobeview's per-lobe albedo table for the energy normalisation of Eq. 4.25 (AlbedoTable).
+
+// XI_BORDER (Eq. 4.10) and MAX_ELLIPSE_ANGLE (80 degrees, Eq. 4.15) come from patterns.py.
+
+// Eq. 4.10 with Beckmann's border for both distributions (GGX: its core; patterns.theta_thresh).
+float theta_thresh(Lobe l, float phi) {
+    float c = cos(phi);
+    float s = sin(phi);
+    float inv_alpha2 = c * c / (l.ax * l.ax) + s * s / (l.ay * l.ay);
+    return atan(sqrt(-log(XI_BORDER) / inv_alpha2));
+}
+
+vec3 pattern_half_vector(Lobe l, vec2 xi) {
+    float phi = phi_from_xi(l, xi.y);
+    return spherical_dir((1.0 - xi.x) * theta_thresh(l, phi), phi);
+}
+
+// Eq. 4.14-4.15 divided by n: area of one sample at unit distance.
+float lobe_sample_area(Lobe l, vec3 wo, int n) {
+    vec3 centre = vec3(-wo.xy, wo.z);
+    vec3 hu = spherical_dir(theta_thresh(l, 0.0), 0.0);
+    vec3 hv = spherical_dir(theta_thresh(l, 0.5 * PI), 0.5 * PI);
+    vec3 wu = 2.0 * dot(wo, hu) * hu - wo;
+    vec3 wv = 2.0 * dot(wo, hv) * hv - wo;
+    float au = min(acos(clamp(dot(wu, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
+    float av = min(acos(clamp(dot(wv, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
+    return PI * tan(au) * tan(av) / float(n);
+}
+
+#if defined(LOBE_NORMALIZE)
+// Per-lobe directional albedo over (cos theta_o, phi_o), blocks of ALBEDO_ROWS rows per lobe
+// (materials/patterns.py AlbedoTable); linear filtering between texel centres.
+const int ALBEDO_ROWS = ALBEDO_PHI + 1;
+uniform sampler2D u_albedo;
+
+vec3 lobe_albedo(int lobe_index, vec3 wo) {
+    float phi = atan(wo.y, wo.x) / (2.0 * PI);
+    phi = phi - floor(phi);
+    float row = float(lobe_index * ALBEDO_ROWS) + phi * float(ALBEDO_PHI) + 0.5;
+    // Columns are uniform in sqrt(cos theta_o) (AlbedoTable: dense near grazing).
+    return texture(u_albedo, vec2(sqrt(max(wo.z, 0.0)), row / float(MAX_LOBES * ALBEDO_ROWS))).rgb;
+}
+#endif

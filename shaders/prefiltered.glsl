@@ -1,0 +1,87 @@
+// One lookup per lobe (viewer/prefiltered.py). Split-sum (Karis 2013) for microfacet and glTF
+// lobes: the cube map prefiltered at the lobe's roughness (isotropic alpha = sqrt(ax ay)) times
+// F0 A + B from the DFG table. Kautz-McCool lobe maps (seed 000, section 5) for the rest, or
+// for every lobe when selected: per fitted lobe (several in the multi mode, 5.3) the 3D map at
+// the fitted lobe axis and cos(theta_o), times its share of the true directional albedo of that
+// elevation (the energy rescaling of section 3.1). Banks maps (seed 001, 5.3) for anisotropic
+// lobes when selected: the map at the fibre direction t and asin(|v.t|), times the albedo
+// tabulated over the view elevation and azimuth (materials/banks.py).
+uniform samplerCube u_split_sum[2];            // by distribution (DIST_BECKMANN, DIST_GGX)
+uniform float u_split_sum_max_level;
+uniform sampler2D u_dfg;                       // rg: Beckmann (A, B), ba: GGX; x = cos, y = roughness
+uniform sampler3D u_lobe_maps[MAX_LOBES];
+uniform int u_lobe_map_mode[MAX_LOBES];        // LOBE_MAP_SPLITSUM, LOBE_MAP_LOBES or LOBE_MAP_BANKS
+uniform int u_lobe_map_depth[MAX_LOBES];       // slices per fitted lobe (LOBE_SLICES or 1), Banks slices
+uniform int u_lobe_map_count[MAX_LOBES];       // fitted lobes in the lobe map
+uniform int u_banks_fibre[MAX_LOBES];          // Banks fibre axis: 0 tangent, 1 bitangent
+// render_base.lobe_table: row lobe_index * LOBE_TABLE_ROWS + j; texels 0..S-1 the axis of
+// fitted lobe j (local, wo at azimuth 0), S..2S-1 its energy (Banks: albedo at azimuth j).
+uniform sampler2D u_lobe_table;
+
+vec3 lobe_table_mix(int row, int column, float f) {
+    return mix(texelFetch(u_lobe_table, ivec2(column, row), 0).rgb,
+               texelFetch(u_lobe_table, ivec2(column + 1, row), 0).rgb, f);
+}
+
+vec3 banks_lookup(int lobe_index, vec3 wo, mat3 tbn) {
+    int fibre = u_banks_fibre[lobe_index];
+    float along = fibre == 0 ? wo.x : wo.y;    // v.t
+    float across = fibre == 0 ? wo.y : wo.x;
+    // L_banks(t, v.t) = L_banks(-t, -v.t): the map holds v.t >= 0 only.
+    vec3 t = tbn * (fibre == 0 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)) * (along < 0.0 ? -1.0 : 1.0);
+    int depth = u_lobe_map_depth[lobe_index];
+    float slice = asin(min(abs(along), 1.0)) / (0.5 * PI) * float(depth - 1);  // banks.slice_angles
+    vec3 radiance = texture(u_lobe_maps[lobe_index], vec3(direction_to_latlong(t), (slice + 0.5) / float(depth))).rgb;
+    // Albedo, bilinear over (sqrt cos theta_o, azimuth from the fibre folded into [0, pi/2]).
+    float x = sqrt(clamp(wo.z, 0.0, 1.0)) * float(LOBE_SLICES - 1);
+    int x0 = min(int(floor(x)), LOBE_SLICES - 2);
+    float y = atan(abs(across), abs(along)) / (0.5 * PI) * float(LOBE_TABLE_ROWS - 1);
+    int y0 = min(int(floor(y)), LOBE_TABLE_ROWS - 2);
+    int row = lobe_index * LOBE_TABLE_ROWS + y0;
+    vec3 energy = mix(lobe_table_mix(row, LOBE_SLICES + x0, x - float(x0)),
+                      lobe_table_mix(row + 1, LOBE_SLICES + x0, x - float(x0)), y - float(y0));
+    return radiance * energy;
+}
+
+vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
+    if (wo.z <= 0.0) return vec3(0.0);
+    if (u_lobe_map_mode[lobe_index] == LOBE_MAP_SPLITSUM) {
+        vec3 r = tbn * vec3(-wo.xy, wo.z);
+#if defined(PARALLAX)
+        float unused_offset;
+        r = proxy_direction(r, unused_offset);
+#endif
+        float roughness = sqrt(sqrt(l.ax * l.ay));
+        vec3 radiance = textureLod(u_split_sum[l.dist], r, roughness * u_split_sum_max_level).rgb;
+        vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
+        vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
+        vec3 f0 = lobe_fresnel(l, 1.0);
+        vec3 scale = l.type == LOBE_GLTF_SPECULAR ? vec3(1.0) : l.k;
+        return radiance * (f0 * ab.x + ab.y) * scale;
+    }
+    if (u_lobe_map_mode[lobe_index] == LOBE_MAP_BANKS) return banks_lookup(lobe_index, wo, tbn);
+    float s = sqrt(clamp(wo.z, 0.0, 1.0)) * float(LOBE_SLICES - 1);  // lobe_fit.slice_coordinate
+    int s0 = min(int(floor(s)), LOBE_SLICES - 2);
+    float f = s - float(s0);
+    // Rotation of the local frame that takes azimuth 0 to wo's azimuth.
+    float len_xy = length(wo.xy);
+    vec2 u = len_xy > 1e-7 ? wo.xy / len_xy : vec2(-1.0, 0.0);
+    int count = u_lobe_map_count[lobe_index];
+    int depth = u_lobe_map_depth[lobe_index];
+    vec3 sum = vec3(0.0);
+    for (int j = 0; j < count; ++j) {
+        int row = lobe_index * LOBE_TABLE_ROWS + j;
+        vec3 a = lobe_table_mix(row, s0, f);
+        vec3 energy = lobe_table_mix(row, LOBE_SLICES + s0, f);
+        vec3 axis = tbn * normalize(vec3(a.x * u + a.y * vec2(-u.y, u.x), a.z));
+#if defined(PARALLAX)
+        float unused_offset;
+        axis = proxy_direction(axis, unused_offset);
+#endif
+        // Fitted lobe j owns slices j depth .. (j + 1) depth - 1: linear filtering in z never
+        // mixes two lobes because z stays between the first and last slice centre of the block.
+        float z = (float(j * depth) + (depth > 1 ? s : 0.0) + 0.5) / float(count * depth);
+        sum += texture(u_lobe_maps[lobe_index], vec3(direction_to_latlong(axis), z)).rgb * energy;
+    }
+    return sum;
+}

@@ -1,0 +1,166 @@
+"""The cube-map pass (thesis 4.3): per object that needs one, the scene seen from the centre of
+its bounding box without itself, with bounces, a disk cache keyed by the scene's content, and
+the queue of cube maps made stale by a material edit.
+
+Bounce 1 sees the light-mapped diffuse scene (the thesis' cube maps, where metals are black);
+each further bounce re-renders them with the other objects' lobes shaded from the previous
+bounce's cube maps, so a chrome sphere shows up in the gold torus and a glass pane is
+see-through. The pass draws through the callables the renderer gives it (background, scene),
+so it holds no shading code of its own.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from lobeview.core.cube_layout import face_point_directions
+from lobeview.core.methods import Method
+
+from .camera import perspective
+from .cubemap import RadianceCube
+
+CUBE_CACHE_VERSION = 3
+CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
+
+
+def face_view(face: int, eye) -> np.ndarray:
+    """View matrix whose image plane maps (x, y) in NDC to (sc, tc) of the cube face, so the
+    framebuffer (row 0 = t = 0) is the face's texel layout (core/cube_layout.py)."""
+    zero = np.zeros(1)
+    f = face_point_directions(face, zero, zero)[0]
+    r = face_point_directions(face, np.ones(1), zero)[0] * np.sqrt(2) - f  # d/dsc
+    u = face_point_directions(face, zero, np.ones(1))[0] * np.sqrt(2) - f  # d/dtc
+    view = np.eye(4)
+    view[0, :3], view[1, :3], view[2, :3] = r, u, -f
+    view[:3, 3] = -view[:3, :3] @ np.asarray(eye, dtype=np.float64)
+    return view
+
+
+def scene_content_key(scene, environment_key: str, face_size: int, bounces: int) -> str:
+    """What the cube maps depend on: geometry, lightmap coordinates, materials, emission,
+    lightmaps and base-colour textures, the environment, face size and bounces."""
+    h = hashlib.sha256()
+    h.update(f"v{CUBE_CACHE_VERSION} face{face_size} b{bounces} env{environment_key}".encode())
+    for obj in scene.objects:
+        h.update(obj.mesh.positions.tobytes())
+        h.update(obj.mesh.indices.tobytes())
+        if obj.uv1 is not None:
+            h.update(obj.uv1.tobytes())
+    for mat in scene.materials:
+        h.update(repr(sorted(mat.desc.items())).encode())
+        h.update(np.asarray(mat.emission, np.float64).tobytes())
+        if mat.lightmap is not None:
+            h.update(hashlib.sha256(mat.lightmap.image.tobytes()).digest())
+        if mat.base_color_texture is not None:
+            h.update(hashlib.sha256(mat.base_color_texture.tobytes()).digest())
+    return h.hexdigest()[:20]
+
+
+class CubeBake:
+    """``draw_background(cube, view_projection)`` and ``draw_scene(view_projection, eye, method,
+    specular, exclude)`` are the renderer's; ``objects`` its GPU objects (``.centre``, ``.cube``,
+    ``.name``)."""
+
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        face_size: int,
+        bounces: int,
+        scene_extent: float,
+        environment: RadianceCube,
+        draw_background: Callable,
+        draw_scene: Callable,
+        progress: bool = True,
+    ):
+        self.ctx = ctx
+        self.face_size = int(face_size)
+        self.bounces = max(1, int(bounces))
+        self.scene_extent = float(scene_extent)
+        self.environment = environment
+        self.draw_background = draw_background
+        self.draw_scene = draw_scene
+        self.progress = progress
+        self.stale: list[int] = []  # cube maps that show an outdated appearance of another object
+
+    def render_faces(self, eye, exclude: int | None = None, specular: bool = False) -> np.ndarray:
+        """Six faces of the light-mapped scene seen from ``eye`` (float32, (6, S, S, 3)); with
+        ``specular``, objects that have cube maps are shaded with their lobes too."""
+        size = self.face_size
+        color = self.ctx.texture((size, size), 4, dtype="f4")
+        extra = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(3)]
+        depth = self.ctx.depth_renderbuffer((size, size))
+        fbo = self.ctx.framebuffer(color_attachments=[color, *extra], depth_attachment=depth)
+        proj = perspective(90.0, 1.0, 1e-3 * self.scene_extent, 4.0 * self.scene_extent)
+        faces = np.empty((6, size, size, 3), dtype=np.float32)
+        viewport = self.ctx.viewport
+        try:
+            for face in range(6):
+                view_proj = proj @ face_view(face, eye)
+                fbo.use()
+                self.ctx.viewport = (0, 0, size, size)
+                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                self.draw_background(self.environment, view_proj)
+                self.draw_scene(view_proj, eye, CUBE_BOUNCE_METHOD, specular, exclude)
+                self.ctx.finish()
+                data = np.frombuffer(fbo.read(components=4, attachment=0, dtype="f4"), np.float32)
+                faces[face] = data.reshape(size, size, 4)[..., :3]  # row 0 = t = 0, no flip
+        finally:
+            fbo.release()
+            depth.release()
+            color.release()
+            for t in extra:
+                t.release()
+            self.ctx.viewport = viewport
+        return faces
+
+    def build(self, objects: list, wanted: list[int], key: str, cache_dir: Path | None) -> None:
+        """Cube maps of the objects ``wanted``, from the disk cache when it has them all."""
+        if not wanted:
+            return
+        cache_file = Path(cache_dir) / f"cubes-{key}.npz" if cache_dir else None
+        if cache_file is not None and cache_file.exists():
+            with np.load(cache_file) as data:
+                if {f"cube_{i}" for i in wanted} <= set(data.files):
+                    for i in wanted:
+                        objects[i].cube = RadianceCube(self.ctx, data[f"cube_{i}"].astype(np.float32))
+                    return
+        faces = {}
+        for bounce in range(self.bounces):
+            t0 = time.perf_counter()
+            for i in wanted:
+                faces[i] = self.render_faces(objects[i].centre, exclude=i, specular=bounce > 0)
+            for i in wanted:
+                if objects[i].cube is not None:
+                    objects[i].cube.release()
+                objects[i].cube = RadianceCube(self.ctx, faces[i])
+            if self.progress:
+                print(
+                    f"[cube] bounce {bounce + 1}: {len(wanted)} cube maps of {self.face_size}^2 x 6"
+                    f" in {time.perf_counter() - t0:.2f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
+        if cache_file is not None:
+            cache_file.parent.mkdir(parents=True, exist_ok=True)
+            # float32, not float16: a sun seen through a window exceeds half precision's 65504.
+            np.savez_compressed(cache_file, **{f"cube_{i}": f.astype(np.float32) for i, f in faces.items()})
+
+    def refresh_one(self, objects: list) -> str | None:
+        """Re-render the next stale cube map; returns its object's name (None: none was stale)."""
+        while self.stale:
+            index = self.stale.pop(0)
+            obj = objects[index]
+            if obj.cube is None:
+                continue
+            faces = self.render_faces(obj.centre, exclude=index, specular=self.bounces > 1)
+            obj.cube.release()
+            obj.cube = RadianceCube(self.ctx, faces)
+            return obj.name
+        return None

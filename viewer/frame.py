@@ -1,0 +1,86 @@
+"""The frame's float targets (the G-buffer every shading pass writes) and their framebuffers.
+
+Attachments 0-3: radiance (w < 0 flags NaN/Inf shading), world position (w = 1 on geometry),
+shading normal (w = object index + 1, for picking), tangent. With ``plane_state`` (the scene
+renderer) two more sets of four float targets hold the averaged-tangent-plane sums of Fig. 4.46b
+(points and normals per buffer, locations 4-7): a refinement pass on a reflector writes one set
+and reads the set the previous such pass wrote (``begin(averages_planes=True)`` alternates
+them); every other pass draws into the plain 4-target framebuffer, so real-time frames neither
+clear nor write the state targets.
+"""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+G_BUFFER = ("radiance", "position", "normal", "tangent")  # attachment order (shaders' out locations)
+
+
+class FrameTargets:
+    def __init__(self, ctx: moderngl.Context, size, plane_state: bool = False):
+        self.ctx = ctx
+        self.plane_state = plane_state
+        self.targets: list = []
+        self.resize(size)
+
+    def resize(self, size) -> None:
+        self.release()
+        self.size = (int(size[0]), int(size[1]))
+        self.targets = [self.ctx.texture(self.size, 4, dtype="f4") for _ in G_BUFFER]
+        self.depth = self.ctx.depth_renderbuffer(self.size)
+        self.plain_fbo = self.ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
+        self.plane_states = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(8 if self.plane_state else 0)]
+        self.state_fbos = [
+            self.ctx.framebuffer(color_attachments=[*self.targets, *self.plane_states[4 * k : 4 * k + 4]],
+                                 depth_attachment=self.depth)
+            for k in range(2 if self.plane_state else 0)
+        ]  # fmt: skip
+        self.parity = 0
+        self.fbo = self.plain_fbo  # the framebuffer the last pass drew into
+
+    def begin(self, averages_planes: bool = False):
+        """Bind and clear the framebuffer of the next pass (see the module doc) and return it."""
+        if averages_planes:
+            if not self.plane_state:
+                raise ValueError("these frame targets have no plane-state targets")
+            self.parity = 1 - self.parity
+            self.fbo = self.state_fbos[self.parity]
+        else:
+            self.fbo = self.plain_fbo
+        self.fbo.use()
+        self.ctx.viewport = (0, 0, *self.size)
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        return self.fbo
+
+    def previous_plane_states(self) -> list:
+        """The four state targets the previous averaging pass wrote: point sums (mirror,
+        see-through), then normal sums."""
+        k = 1 - self.parity
+        return self.plane_states[4 * k : 4 * k + 4]
+
+    def read(self, attachment: int) -> np.ndarray:
+        """(H, W, 4) float32 of one G-buffer target, row 0 at the top (OpenGL rows start at the
+        bottom). Reads the target texture through the plain framebuffer, which every pass's
+        framebuffer shares it with."""
+        width, height = self.size
+        data = self.plain_fbo.read(components=4, attachment=attachment, dtype="f4")
+        return np.frombuffer(data, dtype=np.float32).reshape(height, width, 4)[::-1].copy()
+
+    def pick(self, x: int, y: int) -> int | None:
+        """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
+        width, height = self.size
+        if not (0 <= x < width and 0 <= y < height):
+            return None
+        data = self.plain_fbo.read(
+            viewport=(int(x), int(height - 1 - y), 1, 1), components=4, attachment=G_BUFFER.index("normal"), dtype="f4"
+        )
+        value = float(np.frombuffer(data, dtype=np.float32)[3])
+        return int(round(value)) - 1 if np.isfinite(value) and value >= 0.5 else None
+
+    def release(self) -> None:
+        if not self.targets:
+            return
+        for item in [*self.state_fbos, self.plain_fbo, *self.plane_states, *self.targets, self.depth]:
+            item.release()
+        self.targets = []

@@ -1,0 +1,164 @@
+"""The planar mirror pass (thesis 4.5; numpy reference scenes/planar_mirror.py): per visible
+reflector per frame, the scene drawn from the camera mirrored about its plane (and, for panes,
+from the camera itself behind the plane: the see-through pass) with Lengyel's oblique near plane
+into a buffer of radiance (MIP chain), world position and normal; reused while nothing changes.
+The pass draws through the renderer's callables, so it holds no shading code of its own."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import moderngl
+import numpy as np
+
+from lobeview.core.methods import Method
+
+from .camera import Camera, perspective
+from .interface import TEXTURE_UNITS, bind_sampler, set_uniform
+
+MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # glossy objects inside mirror buffers (cheap)
+# Sampler-uniform prefixes of the mirror and see-through buffers (units: interface.TEXTURE_UNITS).
+BUFFER_PREFIXES = {"mirror": "u_mirror", "see-through": "u_through"}
+
+
+class MirrorTargets:
+    """One reflector's mirror buffer (thesis 4.5.1): radiance with a MIP chain, world position
+    (w = 1 geometry, 0 environment), normal, depth."""
+
+    def __init__(self, ctx, size):
+        self.size = size
+        self.radiance = ctx.texture(size, 4, dtype="f4")
+        self.radiance.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.radiance.repeat_x = self.radiance.repeat_y = False
+        self.position = ctx.texture(size, 4, dtype="f4")
+        self.normal = ctx.texture(size, 4, dtype="f4")
+        for tex in (self.position, self.normal):
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.depth = ctx.depth_renderbuffer(size)
+        self.fbo = ctx.framebuffer(
+            color_attachments=[self.radiance, self.position, self.normal], depth_attachment=self.depth
+        )
+        self.camera = None  # scenes.planar_mirror.MirrorCamera of the last pass
+
+    def release(self):
+        for item in (self.fbo, self.radiance, self.position, self.normal, self.depth):
+            item.release()
+
+
+def skip_reason(reflector, camera: Camera, view_proj: np.ndarray) -> str | None:
+    """Why a reflector needs no buffers this frame (None: it needs them): the camera is behind
+    its plane (a reflector that transmits is seen from both sides), or its bounding box lies
+    outside the view frustum."""
+    if not reflector.transmission and reflector.side(np.asarray(camera.position, dtype=np.float64)) <= 1e-6:
+        return "seen from behind"
+    clip = np.c_[reflector.corners(), np.ones(8)] @ view_proj.T
+    w = clip[:, 3:4]
+    for axis in range(3):
+        if np.all(clip[:, axis : axis + 1] > w) or np.all(clip[:, axis : axis + 1] < -w):
+            return "outside the view"
+    return None
+
+
+def buffer_size(frame_size, scale: float) -> tuple[int, int]:
+    width, height = frame_size
+    return max(1, round(width * scale)), max(1, round(height * scale))
+
+
+class MirrorPasses:
+    """``draw_background(cube, view_projection)`` and ``draw_scene(view_projection, eye, method,
+    specular, exclude)`` are the renderer's."""
+
+    def __init__(self, ctx: moderngl.Context, environment, draw_background: Callable, draw_scene: Callable):
+        self.ctx = ctx
+        self.environment = environment
+        self.draw_background = draw_background
+        self.draw_scene = draw_scene
+        self.targets: dict[tuple[int, str], MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
+        self._key = None
+        self._active: dict = {}  # index -> {kind: targets} drawn for _key
+        self.generation = 0  # bumped when what the buffers show changes (material edits)
+        self.report: list[str] = []  # what the last frame's passes did
+
+    def invalidate(self) -> None:
+        """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
+        self._key = None
+
+    def render(self, camera: Camera, frame_size, reflectors: dict, names: list, scale: float, specular: bool) -> dict:
+        """The buffers of the reflectors that need them for ``camera`` (index -> {'mirror' and/or
+        'see-through': targets}); reused while the camera, the size, the options and the materials
+        stay the same (refinement passes). ``specular``: glossy objects seen in a mirror are shaded
+        from their cube maps (lobe-3) instead of the thesis' diffuse-only mirror pass."""
+        from lobeview.scenes.planar_mirror import mirror_camera
+
+        width, height = frame_size
+        view_proj = camera.view_projection(width / height)
+        key = (
+            tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y, camera.near, camera.far,
+            tuple(frame_size), scale, specular, tuple(sorted(reflectors)), self.generation,
+        )  # fmt: skip
+        if key == self._key:
+            return self._active
+        report, active = [], {}
+        size = buffer_size(frame_size, scale)
+        projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
+        for index, reflector in reflectors.items():
+            reason = skip_reason(reflector, camera, view_proj)
+            if reason is not None:
+                report.append(f"{names[index]}: no mirror pass ({reason})")
+                continue
+            active[index] = {}
+            for kind in reflector.passes:
+                targets = self.targets.get((index, kind))
+                if targets is None or targets.size != size:
+                    if targets is not None:
+                        targets.release()
+                    targets = self.targets[(index, kind)] = MirrorTargets(self.ctx, size)
+                buffer_camera = mirror_camera(camera.view(), projection, reflector, size, see_through=kind != "mirror")
+                targets.fbo.use()
+                self.ctx.viewport = (0, 0, *size)
+                targets.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                self.draw_background(self.environment, buffer_camera.plain_view_projection)
+                self.draw_scene(
+                    buffer_camera.view_projection, buffer_camera.position, MIRROR_BOUNCE_METHOD, specular, index
+                )
+                targets.radiance.build_mipmaps()
+                targets.camera = buffer_camera
+                active[index][kind] = targets
+                report.append(f"{names[index]}: {kind} pass {size[0]}x{size[1]}")
+        self.ctx.viewport = (0, 0, width, height)
+        self._key, self._active, self.report = key, active, report
+        return active
+
+    def bind(self, program, reflector, buffers: dict, eye, dummy, previous_plane_states: list) -> None:
+        """The reflector's buffers (``dummy`` for a kind it does not have, flagged off in
+        u_mirror_sides), its plane's normal on the camera's side and the previous pass's
+        plane-state targets (averaged tangent planes)."""
+        plane = reflector.plane
+        front = plane[:3] if float(np.dot(plane[:3], eye) + plane[3]) >= 0.0 else -plane[:3]
+        set_uniform(program, "u_mirror_front", tuple(float(x) for x in front))
+        set_uniform(program, "u_mirror_sides", int("mirror" in buffers) | 2 * int("see-through" in buffers))
+        for kind, prefix in BUFFER_PREFIXES.items():
+            targets = buffers.get(kind)
+            textures = (targets.radiance, targets.position, targets.normal) if targets else (dummy,) * 3
+            for name, tex in zip(("radiance", "position", "normal"), textures, strict=True):
+                bind_sampler(program, f"{prefix}_{name}", tex)
+            if targets is None:
+                continue
+            camera = targets.camera
+            set_uniform(program, f"{prefix}_view", tuple(camera.view.T.astype("f4").ravel()))
+            set_uniform(
+                program, f"{prefix}_view_projection", tuple(camera.plain_view_projection.T.astype("f4").ravel())
+            )
+            set_uniform(program, f"{prefix}_eye", tuple(float(x) for x in camera.position))
+            set_uniform(program, f"{prefix}_focal_px", float(camera.focal_pixels))
+        if "u_plane_point_state" in program:
+            # Points (mirror, see-through), then normals: the order of the state attachments.
+            for k, tex in enumerate(previous_plane_states):
+                bind_sampler(program, ("u_plane_point_state", "u_plane_normal_state")[k // 2], tex, index=k % 2)
+            for name in ("u_plane_point_state", "u_plane_normal_state"):
+                set_uniform(program, name, list(TEXTURE_UNITS[name]))
+
+    def release(self) -> None:
+        for targets in self.targets.values():
+            targets.release()
+        self.targets.clear()
