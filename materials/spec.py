@@ -24,6 +24,8 @@ import math
 from pathlib import Path
 from typing import Any
 
+from lobeview.core.methods import MAX_LOBES
+
 from .bsdf import BSDF
 from .conductor import microfacet_bsdf
 from .fresnel import Fresnel
@@ -51,8 +53,6 @@ RANGES: dict[str, tuple[float, float]] = {
     "metallic": (0.0, 1.0),
     "roughness": (0.0, 1.0),
 }
-
-MAX_LOBES = 8
 
 
 class MaterialError(ValueError):
