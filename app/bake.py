@@ -11,6 +11,8 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
+from lobeview.app.options import add_trust_arguments, check_environment_option, trust_limits
+
 
 def add_arguments(p) -> None:
     p.add_argument("scene", help="glTF scene (.gltf/.glb)")
@@ -29,6 +31,7 @@ def add_arguments(p) -> None:
         help="shadow rays per texel towards emissive surfaces (default 32)",
     )
     p.add_argument("--out", help="output .glb (default: SCENE_baked.glb beside the input)")
+    add_trust_arguments(p)
 
 
 def run(args) -> int:
@@ -43,9 +46,11 @@ def run(args) -> int:
             raise ValueError(f"--{name} must be at least 1")
     if not 16 <= args.resolution <= 8192:
         raise ValueError("--resolution must be in [16, 8192]")
+    check_environment_option(args.env)
+    limits = trust_limits(args)
     t0 = time.perf_counter()
     source = Path(args.scene)
-    scene = load_gltf(source)
+    scene = load_gltf(source, limits)
     if any(obj.uv1 is None for obj in scene.objects):
         print(f"unwrapping {len(scene.objects)} objects into one {args.resolution}^2 lightmap atlas (xatlas)")
         scene = unwrap_lightmap_uvs(scene, args.resolution)

@@ -72,6 +72,40 @@ def add_scene_arguments(p) -> None:
         " (default ~/.cache/lobeview or $LOBEVIEW_CACHE)",
     )
     a("--materials", help="apply edited materials from this JSON file (the viewer's save/F12 writes them)")
+    add_trust_arguments(p)
+
+
+def add_trust_arguments(p) -> None:
+    """The trust boundary's two user controls (README "Security and limits")."""
+    p.add_argument(
+        "--allow-outside-references",
+        action="store_true",
+        help="let the scene file read images, buffers and lightmaps outside its own folder (absolute paths,"
+        " '..'); off by default because a downloaded scene could otherwise read any file you can",
+    )
+    p.add_argument(
+        "--memory-budget",
+        default="6G",
+        help="most memory one scene load may allocate for geometry and images, e.g. 6G or 512M (default 6G);"
+        " a file declaring more is refused before anything is allocated",
+    )
+
+
+def trust_limits(args):
+    """:class:`~lobeview.core.trust.Limits` from ``--allow-outside-references`` / ``--memory-budget``."""
+    from lobeview.core.trust import Limits, parse_budget
+
+    try:
+        budget = parse_budget(args.memory_budget)
+    except ValueError as exc:
+        raise OptionError(f"--memory-budget: {exc}") from None
+    return Limits(allow_outside=args.allow_outside_references, memory_budget_bytes=budget)
+
+
+def check_environment_option(env: str | None) -> None:
+    """A missing environment file is reported before the scene is loaded and cube maps baked."""
+    if env is not None and not env.startswith("builtin:") and not Path(env).is_file():
+        raise OptionError(f"--env: no such file {env!r} (use an .exr/.hdr file or builtin:studio|sky|overcast)")
 
 
 # -- values ---------------------------------------------------------------------------------------
@@ -102,6 +136,10 @@ def check_scene_options(args) -> None:
         raise OptionError(f"--mirror-scale must be in [0.05, 2], got {args.mirror_scale}")
     if args.materials is not None and not Path(args.materials).is_file():
         raise OptionError(f"--materials: no such file {args.materials!r}")
+    if getattr(args, "scene", None) is not None and not Path(args.scene).is_file():
+        raise OptionError(f"no such scene file {args.scene!r}")
+    check_environment_option(getattr(args, "env", None))
+    args.limits = trust_limits(args)
 
 
 def scene_view(scene, view: str | None):
@@ -140,10 +178,12 @@ def camera_from_args(args, default) -> Camera:
 
 
 # -- scene set-up ---------------------------------------------------------------------------------
-def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache_arg: str | None):
+def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache_arg: str | None, limits=None):
     """(scene path, Scene, EnvironmentMap, cache folder) for ``shot`` and ``view``: the demo
-    (built and cached on first use) when no scene is given, with the matching default sky."""
+    (built and cached on first use) when no scene is given, with the matching default sky.
+    ``limits``: the trust boundary of the scene file (:func:`trust_limits`)."""
     from lobeview.core.paths import cache_dir
+    from lobeview.core.trust import DEFAULT_LIMITS
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene
     from lobeview.scenes.gltf_loader import load_gltf
@@ -155,7 +195,7 @@ def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache
     else:
         path = Path(scene_arg)
         env_name = env_arg or SCENE_ENV
-    return path, load_gltf(path), load_environment(env_name), cache
+    return path, load_gltf(path, limits or DEFAULT_LIMITS), load_environment(env_name), cache
 
 
 def read_material_edits(path: str | Path) -> dict:

@@ -87,7 +87,7 @@ def run(args) -> int:
 
     from lobeview.app.window import LobeviewWindow, Session
 
-    scene_path, scene, environment, cache = load_scene_and_environment(args.scene, args.env, args.cache)
+    scene_path, scene, environment, cache = load_scene_and_environment(args.scene, args.env, args.cache, args.limits)
     apply_reflection_proxy(scene, args.reflection_proxy)
     original, loaded = None, None
     if edits is not None:

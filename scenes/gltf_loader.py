@@ -6,6 +6,13 @@ here with numpy because lobeview needs what general loaders drop: TEXCOORD_1 and
 Radiance .hdr, ``texCoord``, ``intensity``), and a thesis-model material in ``extras.lobeview``
 (a preset name or a material object, see README).
 
+Scene files are untrusted (README "Security and limits"): every URI goes through
+:mod:`lobeview.core.trust` (only regular files inside the scene's folder unless the user opts in),
+every index is range-checked (a negative index would silently wrap in Python), every accessor is
+bounds-checked against its bufferView before a numpy view is made, the node graph must be a
+forest (a node reached twice is refused: cycles and exponential instancing), and decoded arrays
+count against a :class:`~lobeview.core.trust.LoadBudget` before they are allocated.
+
 Bad input gets a :class:`GltfError` naming the file and the problem (missing file, corrupt or
 truncated GLB, unsupported required extension, sparse accessors, missing buffers); recoverable
 problems (missing images, non-triangle primitives, degenerate triangles, missing lightmaps) are
@@ -16,15 +23,26 @@ from __future__ import annotations
 
 import base64
 import io
+import json
 import struct
 import warnings
 from pathlib import Path
 
 import numpy as np
 
-from lobeview.materials.spec import MaterialError, load_material, validate
+from lobeview.core.trust import (
+    DEFAULT_LIMITS,
+    BudgetError,
+    Limits,
+    LoadBudget,
+    UntrustedReferenceError,
+    check_regular_file,
+    read_reference,
+    resolve_reference,
+)
+from lobeview.materials.spec import MaterialError, validate
 
-from .hdrio import HDRImageError, read_hdr_image, sanitize_radiance
+from .hdrio import read_hdr_image, sanitize_radiance
 from .meshes import Mesh, vertex_normals, vertex_tangents
 from .scene import Lightmap, Scene, SceneCamera, SceneMaterial, SceneObject
 
@@ -64,9 +82,29 @@ def _warn(scene_warnings: list, message: str) -> None:
     warnings.warn(message, GltfWarning, stacklevel=3)
 
 
-def _parse(path: Path):
+def _index(items, index, kind: str, path: Path):
+    """``items[index]`` for an index read from the file: a checked non-negative int in range."""
+    if isinstance(index, bool) or not isinstance(index, int) or not 0 <= index < len(items or []):
+        raise GltfError(f"{path}: {kind} index {index!r} is out of range (the file has {len(items or [])})")
+    return items[index]
+
+
+def _count(value, what: str, path: Path, default: int | None = None) -> int:
+    """A non-negative integer field of the file (offsets, lengths, counts, strides)."""
+    if value is None and default is not None:
+        return default
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise GltfError(f"{path}: {what} must be a non-negative integer, not {value!r}")
+    return value
+
+
+def _parse(path: Path, limits: Limits):
     import pygltflib
 
+    try:
+        check_regular_file(path, "scene file", limits)
+    except UntrustedReferenceError as exc:
+        raise GltfError(str(exc)) from None
     data = path.read_bytes()
     if path.suffix.lower() == ".glb":
         if len(data) < 20 or data[:4] != b"glTF":
@@ -91,76 +129,86 @@ def _parse(path: Path):
 
 
 class _Reader:
-    def __init__(self, gltf, path: Path):
+    def __init__(self, gltf, path: Path, limits: Limits = DEFAULT_LIMITS):
         self.gltf = gltf
         self.path = path
+        self.limits = limits
+        self.budget = LoadBudget(limits, str(path))
         self._buffers: dict[int, bytes] = {}
 
     def buffer(self, index: int) -> bytes:
         if index in self._buffers:
             return self._buffers[index]
-        buf = self.gltf.buffers[index]
+        buf = _index(self.gltf.buffers, index, "buffer", self.path)
+        byte_length = _count(buf.byteLength, f"buffer {index} byteLength", self.path)
         if buf.uri is None:
             blob = self.gltf.binary_blob()
             if blob is None:
                 raise GltfError(f"{self.path}: buffer {index} has no uri and there is no GLB binary chunk")
             data = bytes(blob)
+        elif not isinstance(buf.uri, str):
+            raise GltfError(f"{self.path}: buffer {index} has a non-string uri {buf.uri!r}")
         elif buf.uri.startswith("data:"):
-            try:
-                data = base64.b64decode(buf.uri.split(",", 1)[1])
-            except Exception:
-                raise GltfError(f"{self.path}: buffer {index} has a corrupt data URI") from None
+            data = _decode_data_uri(buf.uri, f"{self.path}: buffer {index}")
         else:
-            file = self.path.parent / buf.uri
-            if not file.exists():
-                raise GltfError(f"{self.path}: buffer file {buf.uri!r} not found")
-            data = file.read_bytes()
-        if len(data) < buf.byteLength:
-            raise GltfError(f"{self.path}: buffer {index} is truncated ({len(data)} of {buf.byteLength} bytes)")
+            try:
+                data = read_reference(self.path.parent, buf.uri, f"{self.path}: buffer {index}", self.limits)
+            except FileNotFoundError:
+                raise GltfError(f"{self.path}: buffer file {buf.uri!r} not found") from None
+            except (UntrustedReferenceError, OSError) as exc:
+                raise GltfError(str(exc)) from None
+        if len(data) < byte_length:
+            raise GltfError(f"{self.path}: buffer {index} is truncated ({len(data)} of {byte_length} bytes)")
         self._buffers[index] = data
         return data
 
     def view_bytes(self, view_index: int) -> tuple[bytes, int | None]:
         """The bytes of a bufferView and its byteStride."""
-        view = self.gltf.bufferViews[view_index]
+        view = _index(self.gltf.bufferViews, view_index, "bufferView", self.path)
         data = self.buffer(view.buffer)
-        start = view.byteOffset or 0
-        end = start + view.byteLength
+        start = _count(view.byteOffset, f"bufferView {view_index} byteOffset", self.path, default=0)
+        end = start + _count(view.byteLength, f"bufferView {view_index} byteLength", self.path)
         if end > len(data):
             raise GltfError(f"{self.path}: bufferView {view_index} runs past the end of its buffer")
-        return data[start:end], view.byteStride
+        stride = view.byteStride
+        if stride is not None:
+            _count(stride, f"bufferView {view_index} byteStride", self.path)
+        if stride is not None and not 4 <= stride <= 252:
+            raise GltfError(f"{self.path}: bufferView {view_index} byteStride {stride} is outside 4..252")
+        return memoryview(data)[start:end], stride
 
     def accessor(self, index: int) -> np.ndarray:
-        acc = self.gltf.accessors[index]
+        acc = _index(self.gltf.accessors, index, "accessor", self.path)
         if acc.sparse is not None:
             raise GltfError(f"{self.path}: accessor {index} is sparse; sparse accessors are not supported")
         if acc.componentType not in _DTYPES or acc.type not in _COMPONENTS:
             raise GltfError(f"{self.path}: accessor {index} has an unsupported type {acc.type}/{acc.componentType}")
         dtype = np.dtype(_DTYPES[acc.componentType]).newbyteorder("<")
         ncomp = _COMPONENTS[acc.type]
+        count = _count(acc.count, f"accessor {index} count", self.path)
+        # The decoded copy is float64 (or the integer type): charge it before anything is made.
+        self.budget.take(count * ncomp * 8, f"accessor {index} ({count} x {acc.type})")
         if acc.bufferView is None:
-            out = np.zeros((acc.count, ncomp), dtype=np.float64)
+            out = np.zeros((count, ncomp), dtype=np.float64)
         else:
             raw, stride = self.view_bytes(acc.bufferView)
-            offset = acc.byteOffset or 0
+            offset = _count(acc.byteOffset, f"accessor {index} byteOffset", self.path, default=0)
             item = dtype.itemsize * ncomp
             stride = stride or item
-            needed = offset + stride * (acc.count - 1) + item if acc.count else 0
+            if stride < item:
+                raise GltfError(f"{self.path}: accessor {index}: byteStride {stride} is less than one element ({item})")
+            needed = offset + stride * (count - 1) + item if count else 0
             if needed > len(raw):
                 raise GltfError(f"{self.path}: accessor {index} reads past the end of its bufferView")
-            if stride == item:
-                out = np.frombuffer(raw, dtype=dtype, count=acc.count * ncomp, offset=offset).reshape(acc.count, ncomp)
+            if count == 0:
+                out = np.zeros((0, ncomp), dtype=dtype)
+            elif stride == item:
+                out = np.frombuffer(raw, dtype=dtype, count=count * ncomp, offset=offset).reshape(count, ncomp)
             else:
-                out = (
-                    np.lib.stride_tricks.as_strided(
-                        np.frombuffer(raw, dtype=np.uint8, offset=offset),
-                        shape=(acc.count, item),
-                        strides=(stride, 1),
-                    )
-                    .copy()
-                    .view(dtype)
-                    .reshape(acc.count, ncomp)
-                )
+                # Gather whole rows by index (bounds already checked, no as_strided past the end).
+                rows = np.frombuffer(raw, dtype=np.uint8, count=needed - offset, offset=offset)
+                starts = np.arange(count, dtype=np.int64)[:, None] * stride + np.arange(item, dtype=np.int64)[None, :]
+                out = rows[starts].copy().view(dtype).reshape(count, ncomp)
         out = out.astype(np.float64) if acc.componentType == 5126 or acc.normalized else out
         if acc.normalized and acc.componentType in _NORMALIZE:
             out = np.maximum(out / _NORMALIZE[acc.componentType], -1.0)
@@ -168,32 +216,53 @@ class _Reader:
 
     def image(self, texture_index: int, hdr: bool = False) -> np.ndarray | None:
         """Texture image as float32 (H, W, 3): sRGB-decoded for 8-bit colour, linear for HDR."""
+        self.last_image_problem = "file not found"
         try:
-            texture = self.gltf.textures[texture_index]
-            image = self.gltf.images[texture.source]
-        except (IndexError, TypeError):
+            texture = _index(self.gltf.textures, texture_index, "texture", self.path)
+            image = _index(self.gltf.images, texture.source, "image", self.path)
+        except GltfError as exc:
+            self.last_image_problem = str(exc)
             return None
         try:
             if image.uri is not None and not image.uri.startswith("data:"):
-                file = self.path.parent / image.uri
-                if not file.exists():
-                    return None
+                file = resolve_reference(self.path.parent, image.uri, "image", self.limits)
                 if file.suffix.lower() in (".exr", ".hdr", ".pic"):
-                    return read_hdr_image(file)
+                    return read_hdr_image(file, self.budget)
                 data = file.read_bytes()
             elif image.uri is not None:
-                data = base64.b64decode(image.uri.split(",", 1)[1])
+                data = _decode_data_uri(image.uri, f"{self.path}: image")
             else:
                 data, _ = self.view_bytes(image.bufferView)
             from PIL import Image
 
-            pil = Image.open(io.BytesIO(data)).convert("RGB")
-            rgb = np.asarray(pil, dtype=np.float32) / 255.0
+            pil = Image.open(io.BytesIO(data))
+            width, height = pil.size  # from the header: checked before the pixels are decoded
+            self.budget.check_image(width, height, 3, 4 + 1, f"image {image.name or texture.source!r}")
+            rgb = np.asarray(pil.convert("RGB"), dtype=np.float32) / 255.0
             if hdr:
                 return rgb
             return np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4).astype(np.float32)
-        except (HDRImageError, OSError, ValueError):
+        except FileNotFoundError:
             return None
+        except Exception as exc:  # noqa: BLE001 - any decoder failure means "no image": warned by the caller
+            # Pillow raises OSError, ValueError, SyntaxError, struct.error or DecompressionBombError
+            # for corrupt or huge files; BudgetError/UntrustedReferenceError carry their reason.
+            self.last_image_problem = str(exc) or type(exc).__name__
+            return None
+
+
+def _decode_data_uri(uri: str, what: str) -> bytes:
+    header, sep, payload = uri.partition(",")
+    if not sep:
+        raise GltfError(f"{what}: data URI without a ',' separator")
+    try:
+        if header.endswith(";base64"):
+            return base64.b64decode(payload, validate=False)
+        from urllib.parse import unquote_to_bytes
+
+        return unquote_to_bytes(payload)
+    except Exception:
+        raise GltfError(f"{what}: corrupt data URI") from None
 
 
 def _node_matrix(node) -> np.ndarray:
@@ -215,6 +284,30 @@ def _node_matrix(node) -> np.ndarray:
     return m
 
 
+def _custom_material(reader: _Reader, custom) -> dict:
+    """``extras.lobeview`` of a material: a preset name, a material object, or the name of a JSON
+    file in the scene's folder (never a path outside it: the scene file is untrusted)."""
+    from lobeview.materials.presets import PRESETS
+
+    if isinstance(custom, dict):
+        return validate(custom)
+    if not isinstance(custom, str):
+        raise MaterialError(f"extras.lobeview must be a preset name, a material object or a JSON file, not {custom!r}")
+    if custom in PRESETS:
+        return validate(PRESETS[custom])
+    try:
+        text = read_reference(reader.path.parent, custom, f"{reader.path}: material file", reader.limits)
+    except FileNotFoundError:
+        names = ", ".join(sorted(PRESETS))
+        raise MaterialError(f"{custom!r} is neither a preset name ({names}) nor a file in the scene's folder") from None
+    except UntrustedReferenceError as exc:
+        raise MaterialError(str(exc)) from None
+    try:
+        return validate(json.loads(text))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise MaterialError(f"material file {custom!r} is not valid JSON: {exc}") from None
+
+
 def _material(reader: _Reader, index: int | None, scene_warnings: list) -> SceneMaterial:
     gltf = reader.gltf
     path = reader.path
@@ -230,7 +323,7 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
     custom = extras.get("lobeview") if isinstance(extras, dict) else None
     try:
         if custom is not None:
-            desc = load_material(custom) if isinstance(custom, str) else validate(custom)
+            desc = _custom_material(reader, custom)
         else:
             base = list(pbr.baseColorFactor[:3]) if pbr and pbr.baseColorFactor else [1.0, 1.0, 1.0]
             desc = validate(
@@ -261,7 +354,8 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
         if image is None:
             _warn(
                 scene_warnings,
-                f"{path}: material {name!r}: base colour image missing or unreadable; {FALLBACKS['missing image']}",
+                f"{path}: material {name!r}: base colour image missing or unusable ({reader.last_image_problem}); "
+                + FALLBACKS["missing image"],
             )
         else:
             out.base_color_texture = image
@@ -276,11 +370,12 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
         out.emission = np.zeros(3)
     lightmap_ext = (mat.extensions or {}).get("MOZ_lightmap")
     if lightmap_ext is not None:
-        image = reader.image(int(lightmap_ext.get("index", -1)), hdr=True)
+        image = reader.image(lightmap_ext.get("index", -1), hdr=True)
         if image is None:
             _warn(
                 scene_warnings,
-                f"{path}: material {name!r}: lightmap image missing or unreadable; {FALLBACKS['missing lightmap']}",
+                f"{path}: material {name!r}: lightmap image missing or unusable ({reader.last_image_problem}); "
+                + FALLBACKS["missing lightmap"],
             )
         else:
             clean, _ = sanitize_radiance(image, f"{path}: lightmap of {name!r}")
@@ -293,13 +388,29 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
     return out
 
 
-def load_gltf(path: str | Path) -> Scene:
+def load_gltf(path: str | Path, limits: Limits = DEFAULT_LIMITS) -> Scene:
+    """Load a glTF/GLB file as an untrusted input (see the module docstring and ``limits``)."""
     path = Path(path)
     if not path.exists():
         raise GltfError(f"{path}: no such file")
     if path.suffix.lower() not in (".gltf", ".glb"):
         raise GltfError(f"{path}: not a glTF file (expected .gltf or .glb)")
-    gltf = _parse(path)
+    try:
+        return _load(path, limits)
+    except GltfError:
+        raise
+    except (BudgetError, UntrustedReferenceError, MaterialError) as exc:
+        raise GltfError(f"{path}: {exc}" if str(path) not in str(exc) else str(exc)) from None
+    except (TypeError, ValueError, KeyError, IndexError, AttributeError, OverflowError, RecursionError) as exc:
+        # A field of the wrong JSON type or shape that no explicit check above names: still the
+        # file's fault, reported as such rather than as a traceback.
+        raise GltfError(f"{path}: malformed glTF ({type(exc).__name__}: {exc})") from None
+    except MemoryError:
+        raise GltfError(f"{path}: out of memory while loading (the file declares more data than fits)") from None
+
+
+def _load(path: Path, limits: Limits) -> Scene:
+    gltf = _parse(path, limits)
     required = set(gltf.extensionsRequired or [])
     unsupported = required - SUPPORTED_EXTENSIONS
     if unsupported:
@@ -307,7 +418,7 @@ def load_gltf(path: str | Path) -> Scene:
             f"{path}: requires unsupported extension(s) {sorted(unsupported)}; "
             f"supported: {sorted(SUPPORTED_EXTENSIONS)}"
         )
-    reader = _Reader(gltf, path)
+    reader = _Reader(gltf, path, limits)
     scene_warnings: list[str] = []
     materials = [_material(reader, i, scene_warnings) for i in range(len(gltf.materials or []))]
     default_material = len(materials)
@@ -319,18 +430,27 @@ def load_gltf(path: str | Path) -> Scene:
     scene_index = gltf.scene if gltf.scene is not None else 0
     if not gltf.scenes:
         raise GltfError(f"{path}: contains no scene")
-    roots = gltf.scenes[scene_index].nodes or []
+    roots = _index(gltf.scenes, scene_index, "scene", path).nodes or []
+    visited: set[int] = set()
 
     def visit(node_index: int, parent: np.ndarray, depth: int):
         if depth > 64:
-            raise GltfError(f"{path}: node hierarchy deeper than 64 (cycle?)")
-        node = gltf.nodes[node_index]
+            raise GltfError(f"{path}: node hierarchy deeper than 64 levels")
+        node = _index(gltf.nodes, node_index, "node", path)
+        # The glTF node graph is a forest: a node with two parents (or a cycle) would be drawn
+        # twice, or without end, and k levels of shared children would make 2^k instances.
+        if node_index in visited:
+            raise GltfError(
+                f"{path}: node {node_index} is reached twice (a cycle or a shared child); glTF nodes have one parent"
+            )
+        visited.add(node_index)
         world = parent @ _node_matrix(node)
+        if not np.all(np.isfinite(world)):
+            raise GltfError(f"{path}: node {node_index} has a NaN/Inf transform")
         if node.mesh is not None:
-            for p_index, prim in enumerate(gltf.meshes[node.mesh].primitives):
-                name = f"{node.name or gltf.meshes[node.mesh].name or f'node{node_index}'}" + (
-                    f"#{p_index}" if p_index else ""
-                )
+            mesh = _index(gltf.meshes, node.mesh, "mesh", path)
+            for p_index, prim in enumerate(mesh.primitives or []):
+                name = f"{node.name or mesh.name or f'node{node_index}'}" + (f"#{p_index}" if p_index else "")
                 obj = _primitive(reader, prim, world, name, scene_warnings)
                 if obj is not None:
                     if obj.material < 0:
@@ -338,8 +458,19 @@ def load_gltf(path: str | Path) -> Scene:
                     objects.append(obj)
                     node_extras.append((obj, node.extras))
         if node.camera is not None:
-            cam = gltf.cameras[node.camera]
-            if cam.type == "perspective" and cam.perspective is not None:
+            cam = _index(gltf.cameras, node.camera, "camera", path)
+            yfov = getattr(cam.perspective, "yfov", None)
+            axes_ok = np.linalg.norm(np.cross(world[:3, 2], world[:3, 1])) > 1e-12
+            if (
+                cam.type == "perspective"
+                and cam.perspective is not None
+                and not (isinstance(yfov, (int, float)) and 0 < yfov < np.pi and axes_ok)
+            ):
+                _warn(
+                    scene_warnings,
+                    f"{path}: camera {cam.name or node.camera!r} has yfov {yfov!r} or a degenerate transform; skipped",
+                )
+            elif cam.type == "perspective" and cam.perspective is not None:
                 position = world[:3, 3]
                 forward = -world[:3, 2] / np.linalg.norm(world[:3, 2])
                 up = world[:3, 1] / np.linalg.norm(world[:3, 1])
@@ -464,5 +595,7 @@ def _primitive(reader: _Reader, prim, world: np.ndarray, name: str, scene_warnin
         tri32,
         name,
     )
-    material = -1 if prim.material is None else int(prim.material)
+    if prim.material is not None:
+        _index(reader.gltf.materials, prim.material, "material", path)
+    material = -1 if prim.material is None else prim.material
     return SceneObject(name, mesh, material, None if uv1 is None else uv1.astype(np.float32))

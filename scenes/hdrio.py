@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.core.trust import BudgetError, LoadBudget, UntrustedReferenceError, check_regular_file
+
 HDR_EXTENSIONS = (".exr", ".hdr", ".pic")
 
 
@@ -27,16 +29,24 @@ class HDRImageWarning(UserWarning):
     """A documented fallback was applied to an HDR image (e.g. NaN texels set to 0)."""
 
 
-def read_hdr_image(path: str | Path) -> np.ndarray:
+def read_hdr_image(path: str | Path, budget: LoadBudget | None = None) -> np.ndarray:
+    """Read an EXR or Radiance image. Only regular files within the size limit are opened, and
+    the declared resolution is checked against ``budget`` (default: the default limits) before
+    the pixels are allocated."""
     path = Path(path)
-    if not path.exists():
-        raise HDRImageError(f"{path}: no such file")
+    budget = budget if budget is not None else LoadBudget(source=str(path))
     suffix = path.suffix.lower()
-    if suffix == ".exr":
-        return _read_exr(path)
-    if suffix in (".hdr", ".pic"):
-        return _read_rgbe(path)
-    raise HDRImageError(f"{path}: unsupported HDR format {suffix!r}; use one of {HDR_EXTENSIONS}")
+    if suffix not in HDR_EXTENSIONS:
+        raise HDRImageError(f"{path}: unsupported HDR format {suffix!r}; use one of {HDR_EXTENSIONS}")
+    try:
+        check_regular_file(path, "HDR image", budget.limits)
+        if suffix == ".exr":
+            return _read_exr(path, budget)
+        return _read_rgbe(path, budget)
+    except FileNotFoundError:
+        raise HDRImageError(f"{path}: no such file") from None
+    except (UntrustedReferenceError, BudgetError) as exc:
+        raise HDRImageError(str(exc)) from None
 
 
 def write_hdr_image(path: str | Path, image: np.ndarray) -> Path:
@@ -57,9 +67,17 @@ def write_hdr_image(path: str | Path, image: np.ndarray) -> Path:
 # -- OpenEXR ----------------------------------------------------------------------------------
 
 
-def _read_exr(path: Path) -> np.ndarray:
+def _read_exr(path: Path, budget: LoadBudget) -> np.ndarray:
     import OpenEXR
 
+    try:
+        with OpenEXR.File(str(path), header_only=True) as exr:
+            low, high = (np.asarray(corner, dtype=np.int64) for corner in exr.header()["dataWindow"])
+    except Exception as exc:
+        raise HDRImageError(f"{path}: cannot read EXR header: {exc}") from None
+    width, height = int(high[0] - low[0] + 1), int(high[1] - low[1] + 1)
+    # 4 channels x float32 for what OpenEXR decodes, 3 x float32 for the result.
+    budget.check_image(width, height, 7, 4, f"EXR {path.name}")
     try:
         with OpenEXR.File(str(path)) as exr:
             channels = exr.channels()
@@ -96,7 +114,7 @@ def _write_exr(path: Path, image: np.ndarray) -> None:
 _RESOLUTION = re.compile(rb"^([-+])Y (\d+) ([-+])X (\d+)$")
 
 
-def _read_rgbe(path: Path) -> np.ndarray:
+def _read_rgbe(path: Path, budget: LoadBudget) -> np.ndarray:
     data = path.read_bytes()
     pos = 0
     header_lines = []
@@ -121,6 +139,14 @@ def _read_rgbe(path: Path) -> np.ndarray:
     if match.group(1) != b"-" or match.group(3) != b"+":
         raise HDRImageError(f"{path}: only the standard '-Y H +X W' orientation is supported")
     height, width = int(match.group(2)), int(match.group(4))
+    # 4 bytes RGBE + 3 x float64 while decoding + 3 x float32 result per texel.
+    budget.check_image(width, height, 1, 4 + 24 + 12, f"Radiance image {path.name}")
+    # Lower bound on the pixel bytes: 4 per flat texel or per RLE scanline header, and at
+    # least 2 bytes per 128-texel run in each of the 4 channels.
+    if len(data) - end < height * max(4, 8 * (width // 128)):
+        raise HDRImageError(
+            f"{path}: {width}x{height} pixels declared but the pixel data is truncated to {len(data) - end} bytes"
+        )
     pos = end + 1
     rgbe = np.empty((height, width, 4), dtype=np.uint8)
     buf = np.frombuffer(data, dtype=np.uint8)
@@ -196,36 +222,97 @@ def _write_rgbe(path: Path, image: np.ndarray) -> None:
 class SanitizeReport:
     non_finite: int = 0  # texels with a NaN/Inf channel
     negative: int = 0  # texels with a negative channel
+    energy_before: tuple = (0.0, 0.0, 0.0)  # per-channel sum of the finite values, signed
+    energy_after: tuple = (0.0, 0.0, 0.0)
 
     @property
     def changed(self) -> bool:
         return bool(self.non_finite or self.negative)
 
+    @property
+    def relative_energy_change(self) -> float:
+        before, after = sum(self.energy_before), sum(self.energy_after)
+        return (after - before) / before if before > 0 else 0.0
+
+
+def _box3(image: np.ndarray) -> np.ndarray:
+    """3x3 box sum per channel, zero outside (wrap would be right for an equirect's longitude,
+    but the repair must also serve lightmaps; the borders are a one-texel detail)."""
+    padded = np.pad(image, ((1, 1), (1, 1), (0, 0)))
+    h, w = image.shape[:2]
+    return sum(padded[dy : dy + h, dx : dx + w] for dy in range(3) for dx in range(3))
+
+
+def repair_negative(values: np.ndarray) -> np.ndarray:
+    """Clamp negative texels to 0 without adding energy (per channel, float64 in and out).
+
+    Negative texels in real captures are the ringing of a resampling filter (Lanczos, DWAB) next
+    to bright features; clamping alone adds their magnitude as light (+5 to +13 % measured on
+    resampled HDRIs with a sun). Each negative texel's deficit is taken instead from the positive
+    texels of its 3x3 neighbourhood in proportion to their value (where the ringing came from),
+    which keeps the energy local; what a neighbourhood cannot give (no positive neighbour) is
+    taken from the whole channel by one scale factor. The per-channel sum of the result equals
+    the signed sum of the input whenever that sum is positive."""
+    deficit = np.maximum(-values, 0.0)
+    clamped = np.maximum(values, 0.0)
+    neighbourhood = _box3(clamped)
+    share = np.where(neighbourhood > 0, deficit / np.where(neighbourhood > 0, neighbourhood, 1.0), 0.0)
+    removal = np.minimum(_box3(share), 1.0)  # fraction of each positive texel given up
+    repaired = clamped * (1.0 - removal)
+    target = values.sum(axis=(0, 1))
+    current = repaired.sum(axis=(0, 1))
+    scale = np.where((current > 0) & (target > 0), target / np.where(current > 0, current, 1.0), 1.0)
+    scale = np.where(target <= 0, 0.0, scale)  # a channel with no net light stays dark
+    return repaired * np.minimum(scale, 1.0)[None, None, :]
+
+
+def _repair_non_finite(image: np.ndarray, bad: np.ndarray) -> np.ndarray:
+    """Texels with NaN/Inf channels: a channel lost to a half-float overflow (+Inf) or a broken
+    encoder (NaN) takes the brightest finite channel of the same texel, so a sun that survives in
+    one channel stays a (white) sun instead of a coloured rim; a texel with no finite channel
+    becomes 0."""
+    finite = np.isfinite(image)
+    finite_max = np.max(np.where(finite, image, -np.inf), axis=-1, keepdims=True)
+    finite_max = np.where(np.isfinite(finite_max), np.maximum(finite_max, 0.0), 0.0)
+    fixed = np.where(finite, image, finite_max)
+    return np.where(bad[..., None], fixed, image)
+
 
 def sanitize_radiance(
     image: np.ndarray, name: str, negative_tolerance: float = 0.0
 ) -> tuple[np.ndarray, SanitizeReport]:
-    """Replace NaN/Inf texel values and negative values by 0 (documented fallback) and warn
-    with the counts. Lossy-compressed EXRs (DWAB) routinely hold tiny negatives."""
+    """Make radiance finite and non-negative, warning with the counts and the energy change.
+
+    NaN/Inf channels: see :func:`_repair_non_finite`. Negative values: :func:`repair_negative`,
+    which conserves each channel's energy instead of adding the clamped amount. Warnings about
+    negatives are silenced when none is below ``-negative_tolerance`` (lossy EXRs hold tiny ones).
+    """
     image = np.asarray(image, dtype=np.float32)
     finite = np.isfinite(image)
-    report = SanitizeReport(non_finite=int(np.count_nonzero(~np.all(finite, axis=-1))))
-    clean = np.where(finite, image, 0.0)
+    bad = ~np.all(finite, axis=-1)
+    report = SanitizeReport(non_finite=int(np.count_nonzero(bad)))
+    clean = _repair_non_finite(image, bad).astype(np.float64) if report.non_finite else image.astype(np.float64)
+    report.energy_before = tuple(float(v) for v in clean.sum(axis=(0, 1)))
     negative = clean < 0.0
     report.negative = int(np.count_nonzero(np.any(negative, axis=-1)))
-    clean = np.where(negative, 0.0, clean).astype(np.float32)
+    if report.negative:
+        most_negative = float(clean.min())
+        clean = repair_negative(clean)
+    report.energy_after = tuple(float(v) for v in clean.sum(axis=(0, 1)))
+    clean = np.minimum(clean, np.finfo(np.float32).max).astype(np.float32)
     if report.non_finite:
         warnings.warn(
-            f"{name}: {report.non_finite} texels with NaN/Inf values set to 0",
+            f"{name}: {report.non_finite} texels with NaN/Inf channels repaired (from the texel's brightest "
+            "finite channel, else 0)",
             HDRImageWarning,
             stacklevel=2,
         )
-    if report.negative:
-        most_negative = float(image[finite].min()) if np.any(finite) else 0.0
-        if most_negative < -negative_tolerance:
-            warnings.warn(
-                f"{name}: {report.negative} texels with negative values (down to {most_negative:.3g}) clamped to 0",
-                HDRImageWarning,
-                stacklevel=2,
-            )
+    if report.negative and most_negative < -negative_tolerance:
+        warnings.warn(
+            f"{name}: {report.negative} texels with negative values (down to {most_negative:.3g}) set to 0 and their "
+            f"deficit taken from their neighbours; energy change {100 * report.relative_energy_change:+.3f} % "
+            "(clamping alone would add it)",
+            HDRImageWarning,
+            stacklevel=2,
+        )
     return clean, report

@@ -107,8 +107,8 @@ def test_shot_with_nan_and_negative_environment_texels_warns_and_renders(tmp_pat
             == 0
         )
     messages = " ".join(str(w.message) for w in record)
-    assert "2 texels with NaN/Inf values set to 0" in messages
-    assert "1 texels with negative values (down to -2) clamped to 0" in messages
+    assert "2 texels with NaN/Inf channels repaired" in messages
+    assert "1 texels with negative values (down to -2) set to 0" in messages and "energy change" in messages
     radiance = np.load(tmp_path / "x.npy")
     assert np.all(np.isfinite(radiance)) and radiance.min() >= 0
 
