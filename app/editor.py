@@ -59,7 +59,12 @@ class MaterialEditor:
         path.write_text(json.dumps(data, indent=2, sort_keys=True))
 
     def load(self, path: Path) -> list[str]:
-        data = json.loads(Path(path).read_text())
+        """Apply a materials file; a corrupt or invalid file raises OptionError/MaterialError
+        before anything changes (the panel shows the message)."""
+        from lobeview.app.options import read_material_edits
+        from lobeview.materials.spec import validate
+
+        data = {name: validate(desc) for name, desc in read_material_edits(path).items()}
         scene = self.renderer.scene
         changed = []
         for i, obj in enumerate(scene.objects):

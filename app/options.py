@@ -201,8 +201,8 @@ def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache
 def read_material_edits(path: str | Path) -> dict:
     """A materials file (material name -> description), as the viewer's save and F12 write it."""
     try:
-        data = json.loads(Path(path).read_text())
-    except json.JSONDecodeError as exc:
+        data = json.loads(Path(path).read_bytes().decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise OptionError(f"--materials {path}: not valid JSON ({exc})") from None
     if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
         raise OptionError(f"--materials {path}: expected an object of material name -> description")

@@ -131,12 +131,21 @@ def _material(window) -> None:
     imgui.same_line()
     sidecar = Path(str(window.session.scene_path) + ".materials.json")
     if imgui.button("save"):
-        editor.save(sidecar)
-        window.message = f"saved {sidecar}"
+        try:
+            editor.save(sidecar)
+            window.message = f"saved {sidecar}"
+        except OSError as exc:  # read-only folder, full disk: say so, keep running
+            window.message = f"cannot save {sidecar}: {exc.strerror or exc}"
     imgui.same_line()
     if imgui.button("load"):
         if sidecar.exists():
-            editor.load(sidecar)
-            window.dirty = True
+            from lobeview.app.options import OptionError
+            from lobeview.materials.spec import MaterialError
+
+            try:
+                editor.load(sidecar)
+                window.dirty = True
+            except (OptionError, MaterialError, OSError) as exc:
+                window.message = f"not loaded: {exc}"
         else:
             window.message = f"no {sidecar} to load"

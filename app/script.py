@@ -35,8 +35,8 @@ class ScriptError(ValueError):
 def load_script(path: str | Path) -> list[dict]:
     """Read and check a script: a clear message for a bad step before the window opens."""
     try:
-        steps = json.loads(Path(path).read_text())
-    except json.JSONDecodeError as exc:
+        steps = json.loads(Path(path).read_bytes().decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ScriptError(f"--script {path}: not valid JSON ({exc})") from None
     if not isinstance(steps, list) or not all(isinstance(s, dict) for s in steps):
         raise ScriptError(f"--script {path}: expected a list of steps {{'frame': N, 'action': ...}}")

@@ -212,8 +212,8 @@ def load_material(source: str) -> dict:
         names = ", ".join(sorted(PRESETS))
         raise MaterialError(f"{source!r} is neither a preset name ({names}) nor an existing file")
     try:
-        desc = json.loads(path.read_text())
-    except json.JSONDecodeError as exc:
+        desc = json.loads(path.read_bytes().decode("utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise MaterialError(f"{path}: not valid JSON: {exc}") from None
     except OSError as exc:
         raise MaterialError(f"{path}: cannot read: {exc}") from None

@@ -57,6 +57,8 @@ FALLBACKS = {
     "missing tangents": "from TEXCOORD_0, or any vector orthogonal to the normal",
 }
 
+MAX_COORDINATE = 1e15  # |world position| bound: float32 holds it, products of two stay finite
+
 _COMPONENTS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
 _DTYPES = {
     5120: np.int8,
@@ -189,6 +191,10 @@ class _Reader:
         # The decoded copy is float64 (or the integer type): charge it before anything is made.
         self.budget.take(count * ncomp * 8, f"accessor {index} ({count} x {acc.type})")
         if acc.bufferView is None:
+            # All zeros by the specification (meant for sparse accessors, which are refused):
+            # nothing real needs many, and a huge count would only allocate.
+            if count > 1 << 16:
+                raise GltfError(f"{self.path}: accessor {index} has no bufferView but declares {count} elements")
             out = np.zeros((count, ncomp), dtype=np.float64)
         else:
             raw, stride = self.view_bytes(acc.bufferView)
@@ -539,6 +545,11 @@ def _primitive(reader: _Reader, prim, world: np.ndarray, name: str, scene_warnin
     if not np.all(np.isfinite(positions)):
         raise GltfError(f"{path}: primitive {name!r} has NaN/Inf vertex positions")
     world_pos = positions @ world[:3, :3].T + world[:3, 3]
+    if not np.all(np.abs(world_pos) < MAX_COORDINATE):
+        raise GltfError(
+            f"{path}: primitive {name!r} has vertex positions beyond +-{MAX_COORDINATE:g} after its node transforms "
+            "(float32 geometry and the renderer's depth range cannot hold them)"
+        )
     area = np.linalg.norm(
         np.cross(
             world_pos[tris[:, 1]] - world_pos[tris[:, 0]],
