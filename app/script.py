@@ -11,6 +11,10 @@ frame N (in order; steps of earlier frames first):
     method            value: a method name (core/methods.py grammar)
     screenshot        name: file stem in --screenshot-dir
     save_materials    path
+    load_materials    path (as the panel's load button)
+    undo              the last material edit (as Ctrl+Z)
+    click             x, y: window pixels, a left click through the window's mouse handler
+    stats             print "stats frame=N gl_objects=K rss_mib=M" (soak tests)
     quit
 """
 
@@ -23,9 +27,56 @@ import numpy as np
 
 from lobeview.core.methods import Method
 
-ACTIONS = ("press", "release", "move", "look", "select", "set", "method", "screenshot", "save_materials", "quit")
+ACTIONS = (
+    "press",
+    "release",
+    "move",
+    "look",
+    "select",
+    "set",
+    "method",
+    "screenshot",
+    "save_materials",
+    "load_materials",
+    "undo",
+    "click",
+    "stats",
+    "quit",
+)
 # Actions after which the image is unchanged (no reset of the refinement).
-_KEEP_IMAGE = ("screenshot", "save_materials")
+_KEEP_IMAGE = ("screenshot", "save_materials", "stats")
+
+
+def live_gl_objects() -> int:
+    """moderngl objects alive (not released) in this process: a leak shows as growth."""
+    import gc
+
+    import moderngl
+
+    kinds = (
+        moderngl.Texture,
+        moderngl.TextureCube,
+        moderngl.Buffer,
+        moderngl.Framebuffer,
+        moderngl.Program,
+        moderngl.VertexArray,
+        moderngl.Renderbuffer,
+        moderngl.Sampler,
+        moderngl.TextureArray,
+    )
+    gc.collect()
+    return sum(1 for obj in gc.get_objects() if isinstance(obj, kinds) and type(obj.mglo).__name__ != "InvalidObject")
+
+
+def resident_mib() -> float:
+    """Resident set size of this process (Linux /proc; 0 where unavailable)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
 
 
 class ScriptError(ValueError):
@@ -83,6 +134,18 @@ def run_due_steps(window, steps: list[dict]) -> None:
             window.save_screenshot(step["name"])
         elif action == "save_materials":
             window.editor.save(Path(step["path"]))
+        elif action == "load_materials":
+            window.editor.load(Path(step["path"]))
+        elif action == "undo":
+            window.editor.undo_last()
+        elif action == "click":
+            window.on_mouse_press_event(float(step["x"]), float(step["y"]), 1)
+            window.on_mouse_release_event(float(step["x"]), float(step["y"]), 1)
+        elif action == "stats":
+            print(
+                f"stats frame={window.frame} gl_objects={live_gl_objects()} rss_mib={resident_mib():.0f}",
+                flush=True,
+            )
         elif action == "quit":
             window.quit_requested = True
         if action not in _KEEP_IMAGE:

@@ -176,8 +176,14 @@ class LobeviewWindow(mglw.WindowConfig):
         if button == 1 and not imgui.get_io().want_capture_mouse:
             scale = self.wnd.pixel_ratio
             picked = self.renderer.pick(int(x * scale), int(y * scale))
+            if picked is not None and not 0 <= picked < len(self.scene.objects):
+                picked = None  # a stale or foreign id buffer value: select nothing rather than crash
             if picked is not None:
                 self.select(picked)
+            # One line per click: what was picked (users see what a click did; the click test
+            # under Xvfb reads it).
+            name = self.scene.objects[picked].name if picked is not None else None
+            print(f"picked {name!r} at ({x}, {y})", flush=True)
 
     def on_mouse_release_event(self, x, y, button):
         self.imgui.mouse_release_event(x, y, button)

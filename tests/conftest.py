@@ -4,10 +4,39 @@ user's ~/.cache, and the demo scene is built at draft quality so CI stays fast."
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
 import tempfile
+import time
 from pathlib import Path
+
+import pytest
 
 os.environ.setdefault("LOBEVIEW_CACHE", tempfile.mkdtemp(prefix="lobeview-test-cache-"))
 os.environ.setdefault("LOBEVIEW_DEMO_QUALITY", "draft")
 
 SHARED_ASSETS = Path(__file__).resolve().parents[1].parent / "shared" / "assets"
+
+
+HAVE_XVFB = shutil.which("Xvfb") is not None
+
+
+@pytest.fixture(scope="session")
+def xvfb():
+    """A virtual X server for the window tests (real viewer, real events)."""
+    if not HAVE_XVFB:
+        if os.environ.get("CI"):
+            pytest.fail("Xvfb is missing on CI: .ci/setup should install it")
+        pytest.skip("Xvfb not installed (apt-get install xvfb)")
+    display = f":{100 + os.getpid() % 400}"
+    proc = subprocess.Popen(
+        ["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    time.sleep(1.5)
+    if proc.poll() is not None:
+        pytest.fail(f"Xvfb {display} did not start")
+    yield display
+    proc.terminate()
+    proc.wait(timeout=10)

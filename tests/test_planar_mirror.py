@@ -565,3 +565,26 @@ def test_picking_reads_the_object_under_the_pixel_after_every_kind_of_pass(gloss
         expected = [None if reference.object_id[y, x] < 0 else int(reference.object_id[y, x]) for y, x in pixels]
         assert picked == expected, method
     assert renderer.pick(-1, 0) is None and renderer.pick(width, height) is None
+
+
+def test_passes_do_not_inherit_blending_from_another_renderer(ctx):
+    """The viewer's ImGui renderer leaves BLEND on in the shared context; a refinement pass on a
+    glossy reflector (the 8-target plane-state framebuffer) drawn after it must still write
+    object ids (picking) and radiance exactly as without it."""
+    import moderngl
+
+    renderer = _renderer(ctx, mirror_floor_scene(0.2))
+    camera = _camera()
+    pixels = [(x, y) for x in range(5, SIZE[0], 23) for y in range(5, SIZE[1], 19)]
+    renderer.render(camera, "reference", spp=4)
+    clean = renderer.render(camera, "reference", spp=4)
+    ids = [renderer.pick(x, y) for x, y in pixels]
+    assert len({i for i in ids if i is not None}) >= 2
+    ctx.enable_only(moderngl.BLEND)  # what moderngl-window's imgui integration leaves behind
+    ctx.scissor = (0, 0, 4, 4)
+    renderer.render(camera, "reference", spp=4)
+    blended = renderer.render(camera, "reference", spp=4)
+    ctx.disable(moderngl.BLEND)
+    assert [renderer.pick(x, y) for x, y in pixels] == ids
+    np.testing.assert_array_equal(blended.radiance, clean.radiance)
+    renderer.release()

@@ -7,14 +7,11 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
-import time
 import warnings
 
 import numpy as np
-import pytest
 
 from lobeview.app.editor import MaterialEditor
 from lobeview.app.walk import WalkCamera
@@ -25,28 +22,6 @@ from lobeview.scenes.hdrio import read_hdr_image
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context
 from lobeview.viewer.scene_renderer import SceneRenderer
-
-HAVE_XVFB = shutil.which("Xvfb") is not None
-
-
-@pytest.fixture(scope="module")
-def xvfb():
-    if not HAVE_XVFB:
-        if os.environ.get("CI"):
-            pytest.fail("Xvfb is missing on CI: .ci/setup should install it")
-        pytest.skip("Xvfb not installed (apt-get install xvfb)")
-    display = f":{100 + os.getpid() % 400}"
-    proc = subprocess.Popen(
-        ["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    time.sleep(1.5)
-    if proc.poll() is not None:
-        pytest.fail(f"Xvfb {display} did not start")
-    yield display
-    proc.terminate()
-    proc.wait(timeout=10)
 
 
 def _project(camera: Camera, point, size):

@@ -25,6 +25,7 @@ from lobeview.core.methods import Method
 
 from .camera import perspective
 from .cubemap import RadianceCube
+from .frame import begin_pass
 
 CUBE_CACHE_VERSION = 3
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
@@ -103,9 +104,7 @@ class CubeBake:
         try:
             for face in range(6):
                 view_proj = proj @ face_view(face, eye)
-                fbo.use()
-                self.ctx.viewport = (0, 0, size, size)
-                fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                begin_pass(self.ctx, fbo, (size, size))
                 self.draw_background(self.environment, view_proj)
                 self.draw_scene(view_proj, eye, CUBE_BOUNCE_METHOD, specular, exclude)
                 self.ctx.finish()

@@ -17,6 +17,19 @@ import numpy as np
 G_BUFFER = ("radiance", "position", "normal", "tangent")  # attachment order (shaders' out locations)
 
 
+def begin_pass(ctx: moderngl.Context, fbo, size) -> None:
+    """Bind and clear ``fbo`` for a pass that writes raw values (G-buffer, cube faces, mirror
+    buffers), with the GL state such a pass assumes set explicitly. The viewer shares its context
+    with the ImGui renderer, which leaves BLEND on: blended writes of float targets whose w is an
+    object id or a sample count are garbage (the click crash of issue 17 read 'object 80 of 15').
+    """
+    ctx.disable(moderngl.BLEND)
+    ctx.scissor = None
+    fbo.use()
+    ctx.viewport = (0, 0, *size)
+    fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+
+
 class FrameTargets:
     def __init__(self, ctx: moderngl.Context, size, plane_state: bool = False):
         self.ctx = ctx
@@ -48,9 +61,7 @@ class FrameTargets:
             self.fbo = self.state_fbos[self.parity]
         else:
             self.fbo = self.plain_fbo
-        self.fbo.use()
-        self.ctx.viewport = (0, 0, *self.size)
-        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        begin_pass(self.ctx, self.fbo, self.size)
         return self.fbo
 
     def previous_plane_states(self) -> list:

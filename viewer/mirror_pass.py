@@ -14,6 +14,7 @@ import numpy as np
 from lobeview.core.methods import Method
 
 from .camera import Camera, perspective
+from .frame import begin_pass
 from .interface import TEXTURE_UNITS, bind_sampler, set_uniform
 
 MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # glossy objects inside mirror buffers (cheap)
@@ -114,9 +115,7 @@ class MirrorPasses:
                         targets.release()
                     targets = self.targets[(index, kind)] = MirrorTargets(self.ctx, size)
                 buffer_camera = mirror_camera(camera.view(), projection, reflector, size, see_through=kind != "mirror")
-                targets.fbo.use()
-                self.ctx.viewport = (0, 0, *size)
-                targets.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+                begin_pass(self.ctx, targets.fbo, size)
                 self.draw_background(self.environment, buffer_camera.plain_view_projection)
                 self.draw_scene(
                     buffer_camera.view_projection, buffer_camera.position, MIRROR_BOUNCE_METHOD, specular, index
