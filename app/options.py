@@ -137,7 +137,7 @@ def check_scene_options(args) -> None:
     if args.materials is not None and not Path(args.materials).is_file():
         raise OptionError(f"--materials: no such file {args.materials!r}")
     if getattr(args, "scene", None) is not None and not Path(args.scene).is_file():
-        raise OptionError(f"no such scene file {args.scene!r}")
+        raise OptionError(f"scene: no such file {args.scene!r}")
     check_environment_option(getattr(args, "env", None))
     args.limits = trust_limits(args)
 

@@ -83,6 +83,9 @@ class LobeviewWindow(mglw.WindowConfig):
         self.scene, self.args = session.scene, session.args
         self.wnd.title = f"lobeview - {session.scene_path.name}"
         imgui.create_context()
+        # No imgui.ini in whatever folder the viewer was started from: the panel lays
+        # itself out each start.
+        imgui.get_io().set_ini_filename("")
         implot.create_context()
         self.imgui = ModernglWindowRenderer(self.wnd)
         size = self.wnd.buffer_size

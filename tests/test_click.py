@@ -70,8 +70,12 @@ class _Viewer:
     """The viewer process, its stdout as a queue of lines, and an X connection to drive it."""
 
     def __init__(self, display: str, extra: list[str]):
+        import tempfile
+
         from Xlib import display as xdisplay
 
+        # stderr into a file: a pipe nobody reads fills up with progress lines and blocks the viewer.
+        self.stderr = tempfile.TemporaryFile("w+")
         self.proc = subprocess.Popen(
             [
                 sys.executable,
@@ -89,13 +93,17 @@ class _Viewer:
             ],
             env={**os.environ, "DISPLAY": display},
             stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
+            stderr=self.stderr,
             text=True,
         )
         self.lines: queue.Queue = queue.Queue()
         threading.Thread(target=self._pump, daemon=True).start()
         self.x = xdisplay.Display(display)
         self.window = self._find_window(timeout=600)
+
+    def stderr_tail(self) -> str:
+        self.stderr.seek(0)
+        return self.stderr.read()[-3000:]
 
     def _pump(self):
         for line in self.proc.stdout:
@@ -106,7 +114,7 @@ class _Viewer:
         deadline = time.time() + timeout
         while time.time() < deadline:
             if self.proc.poll() is not None:
-                raise AssertionError(f"viewer exited early: {self.proc.stderr.read()[-3000:]}")
+                raise AssertionError(f"viewer exited early: {self.stderr_tail()}")
             for child in root.query_tree().children:
                 name = child.get_wm_name()
                 if isinstance(name, str) and name.startswith("lobeview") and child.get_attributes().map_state:
@@ -121,7 +129,7 @@ class _Viewer:
                 line = self.lines.get(timeout=1.0)
             except queue.Empty:
                 if self.proc.poll() is not None:
-                    raise AssertionError(f"viewer died: {self.proc.stderr.read()[-3000:]}") from None
+                    raise AssertionError(f"viewer died: {self.stderr_tail()}") from None
                 continue
             match = re.search(pattern, line)
             if match:
@@ -217,5 +225,5 @@ def test_every_object_is_picked_by_a_real_click_in_every_state(xvfb, targets, tm
                 viewer.key("w", press=False)
         finally:
             code = viewer.close()
-        assert code == 0, viewer.proc.stderr.read()[-3000:]
+        assert code == 0, viewer.stderr_tail()
     assert not wrong, "\n".join(wrong)
