@@ -11,6 +11,13 @@ import numpy as np
 from lobeview.viewer.camera import Camera
 
 
+def walk_speed_for(bounds) -> float:
+    """Walking speed for a scene: crossing its largest extent in four seconds (1.5 m/s in
+    a 6 m room), so a scene authored in millimetres or kilometres walks like one in metres."""
+    extent = float(np.max(np.asarray(bounds[1], float) - np.asarray(bounds[0], float)))
+    return max(0.25 * extent, 1e-6)
+
+
 @dataclass
 class WalkCamera:
     position: np.ndarray

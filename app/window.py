@@ -24,7 +24,7 @@ from lobeview.app.editor import MaterialEditor
 from lobeview.app.options import scene_renderer_from_args, scene_view, shot_command
 from lobeview.app.panel import draw_panel
 from lobeview.app.script import run_due_steps
-from lobeview.app.walk import WalkCamera
+from lobeview.app.walk import WalkCamera, walk_speed_for
 from lobeview.core.methods import Method
 from lobeview.scenes.hdrio import write_hdr_image
 from lobeview.viewer.camera import Camera
@@ -96,6 +96,8 @@ class LobeviewWindow(mglw.WindowConfig):
         self.pending_screenshots: list[str] = []
         position, target, up, fov = scene_view(self.scene, self.args.view)
         self.walk = WalkCamera.from_camera(Camera(position, target, up, fov))
+        self.default_walk_speed = walk_speed_for(self.scene.bounds)
+        self.walk.speed = self.default_walk_speed
         self.method = session.method
         # kept apart from the method so switching to fis-N and back keeps the choice
         self.lobe_normalize = self.args.lobe_normalize
@@ -172,7 +174,8 @@ class LobeviewWindow(mglw.WindowConfig):
     def on_mouse_scroll_event(self, x_offset, y_offset):
         self.imgui.mouse_scroll_event(x_offset, y_offset)
         if not imgui.get_io().want_capture_mouse:
-            self.walk.speed = float(np.clip(self.walk.speed * (1.2**y_offset), 0.05, 50.0))
+            base = self.default_walk_speed  # the wheel spans 1/30 to 30 times the scene's own speed
+            self.walk.speed = float(np.clip(self.walk.speed * (1.2**y_offset), base / 30.0, base * 30.0))
 
     def on_mouse_press_event(self, x, y, button):
         self.imgui.mouse_press_event(x, y, button)

@@ -3,7 +3,7 @@ looking down -Z in view space, as glTF cameras)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -36,6 +36,27 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.
     return proj
 
 
+DEPTH_RANGE_RATIO = 5000.0  # far / near kept by fit_clip_planes: 24-bit depth resolves ~far/1e4 at far
+
+
+def fit_clip_planes(position, bounds_min, bounds_max) -> tuple[float, float]:
+    """Near and far planes that hold a scene of any scale (millimetres to kilometres).
+
+    ``far`` covers every point of the scene's bounding box seen from ``position`` and from its
+    mirror image in any plane through the box (mirror passes reuse the projection): for the box
+    centre c and half-diagonal h, |e - c| + 3 h. ``near`` is half the distance to the box when the
+    camera is outside it, and never closer than far / DEPTH_RANGE_RATIO, which keeps the 24-bit
+    depth buffer's resolution at about far / 1e4 at the far end."""
+    eye = np.asarray(position, dtype=np.float64)
+    low, high = np.asarray(bounds_min, dtype=np.float64), np.asarray(bounds_max, dtype=np.float64)
+    centre, half_diagonal = 0.5 * (low + high), 0.5 * float(np.linalg.norm(high - low))
+    half_diagonal = max(half_diagonal, 1e-6 * max(float(np.max(np.abs(centre))), 1.0), 1e-9)
+    far = 1.01 * (float(np.linalg.norm(eye - centre)) + 3.0 * half_diagonal)
+    outside = float(np.linalg.norm(eye - np.clip(eye, low, high)))
+    near = max(0.5 * outside, far / DEPTH_RANGE_RATIO)
+    return near, far
+
+
 @dataclass
 class Camera:
     position: tuple = (0.0, 0.0, 3.0)
@@ -44,6 +65,11 @@ class Camera:
     fov_y: float = 40.0
     near: float = 0.05
     far: float = 200.0
+
+    def fitted_to(self, bounds) -> Camera:
+        """This camera with near/far planes fitted to a scene's (min, max) bounds."""
+        near, far = fit_clip_planes(self.position, *bounds)
+        return replace(self, near=near, far=far)
 
     def view(self) -> np.ndarray:
         return look_at(self.position, self.target, self.up)

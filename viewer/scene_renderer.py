@@ -124,7 +124,8 @@ class SceneRenderer(RendererBase):
         self.object_methods: dict[int, Method] = {}
         self.cache_dir = Path(cache_dir) if cache_dir else None
         self.mirror_passes = MirrorPasses(ctx, self.environment, self.draw_background, self._draw_pass)
-        extent = float(np.max(scene.bounds[1] - scene.bounds[0]))
+        self.bounds = scene.bounds  # static scene: near/far planes are fitted to it every frame
+        extent = float(np.max(self.bounds[1] - self.bounds[0]))
         self.cube_bake = CubeBake(
             ctx, cube_face_size, cube_bounces, extent, self.environment, self.draw_background, self._draw_pass, progress
         )
@@ -343,6 +344,7 @@ class SceneRenderer(RendererBase):
     def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:
         """One pass into the renderer's own float targets (radiance in ``targets[0]``), no read
         back: what the interactive viewer calls every frame."""
+        camera = camera.fitted_to(self.bounds)  # any scene scale, mm to km (viewer/camera.py)
         width, height = self.size
         view_proj = camera.view_projection(width / height)
         # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
