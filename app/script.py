@@ -124,11 +124,17 @@ def run_due_steps(window, steps: list[dict]) -> None:
                 raise ScriptError(f"select: no object {step['object']!r}; the scene has {names}")
             window.select(names.index(step["object"]))
         elif action == "set":
+            if window.selected is None:
+                raise ScriptError(f"set {step['path']}: no object is selected (a select step first)")
             desc = window.editor.desc(window.selected)
             target = desc
-            for part in step["path"][:-1]:
-                target = target[part]
-            target[step["path"][-1]] = step["value"]
+            try:
+                for part in step["path"][:-1]:
+                    target = target[part]
+                target[step["path"][-1]] = step["value"]
+            except (KeyError, IndexError, TypeError):
+                name = window.scene.objects[window.selected].name
+                raise ScriptError(f"set: the material of {name!r} has no {step['path']}") from None
             window.message = window.editor.apply(window.selected, desc) or ""
         elif action == "method":
             method = Method.parse(step["value"])

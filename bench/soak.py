@@ -86,6 +86,7 @@ def soak_script(
             steps.append(
                 {"frame": frame, "action": "click", "x": float(rng.uniform(0, 1)), "y": float(rng.uniform(0, 1))}
             )
+            selected = None  # the click selects whatever it hits: edits wait for the next select
         elif roll < 0.86:
             steps.append({"frame": frame, "action": "save_materials", "path": str(materials_file)})
         elif roll < 0.88:
