@@ -532,7 +532,8 @@ def _run_target(case: dict, work: Path) -> tuple[str, str]:
                 if not all(_finite(a) for a in (obj.mesh.positions, obj.mesh.normals, obj.mesh.tangents, obj.mesh.uvs)):
                     return "nonfinite", f"object {obj.name} has NaN/Inf vertex data"
             for mat in scene.materials:
-                for image in (mat.base_color_texture, mat.lightmap.image if mat.lightmap else None):
+                images = [slot.linear() for slot in mat.textures.values()]
+                for image in (*images, mat.lightmap.image if mat.lightmap else None):
                     if image is not None and not (_finite(image) and np.min(image) >= 0):
                         return "nonfinite", f"material {mat.name} has a NaN/Inf/negative image"
         elif target == "env":

@@ -162,8 +162,9 @@ def bake_lightmap(
     for o in blockers:
         mat = scene.materials[o.material]
         kd = diffuse_albedo(build_bsdf(mat.desc))
-        if mat.base_color_texture is not None:
-            kd = kd * mat.base_color_texture.reshape(-1, 3).mean(axis=0)
+        base = mat.texture("base_color")
+        if base is not None:  # the bake's bounces use the texture's mean colour (per face: future work)
+            kd = kd * base.linear()[..., :3].reshape(-1, 3).mean(axis=0)
         kd_face.append(np.broadcast_to(kd, (len(o.mesh.indices), 3)))
         emission_face.append(np.broadcast_to(mat.emission, (len(o.mesh.indices), 3)))
     kd_face = np.concatenate(kd_face)

@@ -44,12 +44,28 @@ from lobeview.materials.spec import MaterialError, validate
 
 from .hdrio import read_hdr_image, sanitize_radiance
 from .meshes import Mesh, vertex_normals, vertex_tangents
-from .scene import Lightmap, Scene, SceneCamera, SceneMaterial, SceneObject
+from .scene import (
+    COLOUR_SLOTS,
+    MAG_FILTERS,
+    MIN_FILTERS,
+    REPEAT,
+    WRAP_MODES,
+    Lightmap,
+    Scene,
+    SceneCamera,
+    SceneMaterial,
+    SceneObject,
+    TextureSlot,
+)
 
-SUPPORTED_EXTENSIONS = {"MOZ_lightmap", "KHR_materials_emissive_strength"}
+SUPPORTED_EXTENSIONS = {"MOZ_lightmap", "KHR_materials_emissive_strength", "KHR_texture_transform"}
+ALPHA_MODES = ("OPAQUE", "MASK", "BLEND")
+MATERIAL_EXTENSIONS_USED = {"MOZ_lightmap", "KHR_materials_emissive_strength"}
 
 FALLBACKS = {
     "missing image": "the texture is ignored (factor only)",
+    "missing normal map": "the interpolated vertex normals are used",
+    "missing occlusion map": "no ambient occlusion",
     "missing lightmap": "the object gets a constant irradiance (see Scene.warnings)",
     "non-triangle primitive": "skipped",
     "degenerate triangles": "dropped",
@@ -257,6 +273,113 @@ class _Reader:
             return None
 
 
+def _texture_image(reader: _Reader, texture_index: int) -> np.ndarray | None:
+    """A material texture's pixels as stored: (H, W, 4) uint8 for PNG/JPEG (colour stays
+    sRGB-encoded, decoded by the GPU before filtering), float32 (H, W, 3) for EXR/HDR. None when
+    unreadable, with the reason in ``reader.last_image_problem``."""
+    reader.last_image_problem = "file not found"
+    try:
+        texture = _index(reader.gltf.textures, texture_index, "texture", reader.path)
+        image = _index(reader.gltf.images, texture.source, "image", reader.path)
+    except GltfError as exc:
+        reader.last_image_problem = str(exc)
+        return None
+    try:
+        if image.uri is not None and not image.uri.startswith("data:"):
+            file = resolve_reference(reader.path.parent, image.uri, "image", reader.limits)
+            if file.suffix.lower() in (".exr", ".hdr", ".pic"):
+                return read_hdr_image(file, reader.budget)
+            data = file.read_bytes()
+        elif image.uri is not None:
+            data = _decode_data_uri(image.uri, f"{reader.path}: image")
+        else:
+            data, _ = reader.view_bytes(image.bufferView)
+        from PIL import Image
+
+        pil = Image.open(io.BytesIO(data))
+        width, height = pil.size  # from the header: checked before the pixels are decoded
+        reader.budget.check_image(width, height, 4, 2, f"image {image.name or texture.source!r}")
+        return np.ascontiguousarray(np.asarray(pil.convert("RGBA"), dtype=np.uint8))
+    except FileNotFoundError:
+        return None
+    except Exception as exc:  # noqa: BLE001 - any decoder failure means "no image": warned by the caller
+        reader.last_image_problem = str(exc) or type(exc).__name__
+        return None
+
+
+def _texture_transform(info, where: str, scene_warnings: list) -> tuple[np.ndarray, int | None]:
+    """KHR_texture_transform of a textureInfo: the 3x3 UV matrix translation x rotation x scale
+    (the extension's definition) and its texCoord override (None: the textureInfo's)."""
+    extension = (getattr(info, "extensions", None) or {}).get("KHR_texture_transform")
+    if extension is None:
+        return np.eye(3), None
+    try:
+        offset = np.asarray(extension.get("offset", [0.0, 0.0]), dtype=np.float64).reshape(2)
+        rotation = float(extension.get("rotation", 0.0))
+        scale = np.asarray(extension.get("scale", [1.0, 1.0]), dtype=np.float64).reshape(2)
+        tex_coord = extension.get("texCoord")
+        if not (np.all(np.isfinite(offset)) and np.isfinite(rotation) and np.all(np.isfinite(scale))):
+            raise ValueError("non-finite value")
+    except (TypeError, ValueError, AttributeError) as exc:
+        _warn(scene_warnings, f"{where}: KHR_texture_transform unreadable ({exc}); ignored")
+        return np.eye(3), None
+    c, s = np.cos(rotation), np.sin(rotation)
+    translation = np.array([[1.0, 0.0, offset[0]], [0.0, 1.0, offset[1]], [0.0, 0.0, 1.0]])
+    rotate = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+    return translation @ rotate @ np.diag([scale[0], scale[1], 1.0]), tex_coord
+
+
+def _texture_slot(reader: _Reader, info, slot: str, material: str, scene_warnings: list, fallback: str):
+    """A material's textureInfo as a :class:`TextureSlot`, or None (warned) when unusable."""
+    if info is None:
+        return None
+    where = f"{reader.path}: material {material!r}: {slot.replace('_', ' ')} texture"
+    image = _texture_image(reader, info.index)
+    if image is None:
+        _warn(scene_warnings, f"{where} missing or unusable ({reader.last_image_problem}); {fallback}")
+        return None
+    out = TextureSlot(image, srgb=slot in COLOUR_SLOTS and image.dtype == np.uint8, source=where)
+    texture = reader.gltf.textures[info.index]
+    if texture.sampler is not None:
+        try:
+            sampler = _index(reader.gltf.samplers, texture.sampler, "sampler", reader.path)
+        except GltfError as exc:
+            _warn(scene_warnings, f"{where}: {exc}; default sampler (repeat, trilinear)")
+            sampler = None
+        if sampler is not None:
+            for attribute, allowed, default in (
+                ("wrapS", WRAP_MODES, REPEAT),
+                ("wrapT", WRAP_MODES, REPEAT),
+                ("magFilter", MAG_FILTERS, None),
+                ("minFilter", MIN_FILTERS, None),
+            ):
+                value = getattr(sampler, attribute)
+                if value is not None and value not in allowed:
+                    _warn(scene_warnings, f"{where}: sampler {attribute} {value!r} is not a glTF value; default used")
+                    value = None
+                if value is None:
+                    value = default
+                if value is not None:
+                    field = {"wrapS": "wrap_s", "wrapT": "wrap_t", "magFilter": "mag_filter", "minFilter": "min_filter"}
+                    setattr(out, field[attribute], int(value))
+    transform, override = _texture_transform(info, where, scene_warnings)
+    out.transform = transform
+    tex_coord = override if override is not None else (info.texCoord or 0)
+    if not isinstance(tex_coord, int) or tex_coord not in (0, 1):
+        _warn(scene_warnings, f"{where}: texCoord {tex_coord!r} (lobeview reads TEXCOORD_0 and _1); TEXCOORD_0 used")
+        tex_coord = 0
+    out.tex_coord = tex_coord
+    return out
+
+
+def _finite(value, default: float) -> float:
+    try:
+        value = float(value if value is not None else default)
+    except (TypeError, ValueError):
+        return default
+    return value if np.isfinite(value) else default
+
+
 def _decode_data_uri(uri: str, what: str) -> bytes:
     header, sep, payload = uri.partition(",")
     if not sep:
@@ -355,25 +478,52 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
     except MaterialError as exc:
         raise GltfError(f"{path}: material {name!r}: {exc}") from None
     out = SceneMaterial(name, desc, double_sided=bool(mat.doubleSided))
-    if pbr is not None and pbr.baseColorTexture is not None:
-        image = reader.image(pbr.baseColorTexture.index)
-        if image is None:
-            _warn(
-                scene_warnings,
-                f"{path}: material {name!r}: base colour image missing or unusable ({reader.last_image_problem}); "
-                + FALLBACKS["missing image"],
-            )
-        else:
-            out.base_color_texture = image
+    gltf_model = desc["model"] == "gltf"
+    factor = list(pbr.baseColorFactor) if pbr and pbr.baseColorFactor else [1.0, 1.0, 1.0, 1.0]
+    out.base_alpha = min(max(float(factor[3]), 0.0), 1.0) if len(factor) > 3 and np.isfinite(factor[3]) else 1.0
+    mode = mat.alphaMode or "OPAQUE"
+    if mode not in ALPHA_MODES:
+        _warn(scene_warnings, f"{path}: material {name!r}: alphaMode {mode!r} is not a glTF mode; OPAQUE used")
+        mode = "OPAQUE"
+    out.alpha_mode = mode
+    cutoff = 0.5 if mat.alphaCutoff is None else mat.alphaCutoff
+    if not (isinstance(cutoff, (int, float)) and np.isfinite(cutoff) and cutoff >= 0):
+        _warn(scene_warnings, f"{path}: material {name!r}: alphaCutoff {cutoff!r} is invalid; 0.5 used")
+        cutoff = 0.5
+    out.alpha_cutoff = float(cutoff)
+    slots = {
+        "base_color": (pbr.baseColorTexture if pbr else None, FALLBACKS["missing image"]),
+        "metallic_roughness": (
+            (pbr.metallicRoughnessTexture if pbr else None) if gltf_model else None,
+            "metallic and roughness factors only",
+        ),
+        "normal": (mat.normalTexture, FALLBACKS["missing normal map"]),
+        "occlusion": (mat.occlusionTexture, FALLBACKS["missing occlusion map"]),
+        "emissive": (mat.emissiveTexture, "the emissive factor alone"),
+    }
+    if not gltf_model and pbr is not None and pbr.metallicRoughnessTexture is not None:
+        _warn(
+            scene_warnings,
+            f"{path}: material {name!r}: metallicRoughnessTexture ignored (extras.lobeview replaces the glTF BRDF)",
+        )
+    for slot, (info, fallback) in slots.items():
+        texture = _texture_slot(reader, info, slot, name, scene_warnings, fallback)
+        if texture is not None:
+            out.textures[slot] = texture
+    if mat.normalTexture is not None and "normal" in out.textures:
+        out.normal_scale = _finite(getattr(mat.normalTexture, "scale", 1.0), 1.0)
+    if mat.occlusionTexture is not None and "occlusion" in out.textures:
+        out.occlusion_strength = min(max(_finite(getattr(mat.occlusionTexture, "strength", 1.0), 1.0), 0.0), 1.0)
+    # Material extensions lobeview does not honour yet: said once per material, never dropped silently.
+    for extension in sorted(set(mat.extensions or {}) - MATERIAL_EXTENSIONS_USED):
+        _warn(
+            scene_warnings,
+            f"{path}: material {name!r}: {extension} is not supported yet; the material renders without it"
+            " (README: glTF support)",
+        )
     emissive = np.asarray(mat.emissiveFactor or [0, 0, 0], dtype=np.float64)
     strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     out.emission = emissive * float(strength)
-    if mat.emissiveTexture is not None and np.any(out.emission > 0):
-        _warn(
-            scene_warnings,
-            f"{path}: material {name!r}: emissive textures are not supported; its emission is ignored",
-        )
-        out.emission = np.zeros(3)
     lightmap_ext = (mat.extensions or {}).get("MOZ_lightmap")
     if lightmap_ext is not None:
         image = reader.image(lightmap_ext.get("index", -1), hdr=True)
@@ -426,6 +576,12 @@ def _load(path: Path, limits: Limits) -> Scene:
         )
     reader = _Reader(gltf, path, limits)
     scene_warnings: list[str] = []
+    if "KHR_lights_punctual" in set(gltf.extensionsUsed or []):
+        _warn(
+            scene_warnings,
+            f"{path}: KHR_lights_punctual lamps are not used yet (neither baked nor shaded); "
+            "light comes from the environment, emissive surfaces and the lightmaps",
+        )
     materials = [_material(reader, i, scene_warnings) for i in range(len(gltf.materials or []))]
     default_material = len(materials)
     materials.append(_material(reader, None, scene_warnings))
@@ -591,7 +747,9 @@ def _primitive(reader: _Reader, prim, world: np.ndarray, name: str, scene_warnin
         normals = vertex_normals(world_pos.astype(np.float32), tri32)
     if attrs.TANGENT is not None:
         t = reader.accessor(attrs.TANGENT)
-        tangents = np.concatenate([t[:, :3] @ world[:3, :3].T, t[:, 3:4]], axis=1)
+        # A mirroring transform swaps the bitangent's side: w changes sign with det(world).
+        handedness = np.where(t[:, 3:4] < 0, -1.0, 1.0) * (-1.0 if flip else 1.0)
+        tangents = np.concatenate([t[:, :3] @ world[:3, :3].T, handedness], axis=1)
         if not np.all(np.isfinite(tangents)):
             tangents = vertex_tangents(world_pos, normals, uv0, tri32)
     else:

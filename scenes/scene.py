@@ -23,14 +23,103 @@ class Lightmap:
     source: str = ""
 
 
+# glTF sampler enums (OpenGL values, as the specification uses them).
+REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT = 10497, 33071, 33648
+NEAREST, LINEAR = 9728, 9729
+NEAREST_MIPMAP_NEAREST, LINEAR_MIPMAP_NEAREST, NEAREST_MIPMAP_LINEAR, LINEAR_MIPMAP_LINEAR = 9984, 9985, 9986, 9987
+WRAP_MODES = (REPEAT, CLAMP_TO_EDGE, MIRRORED_REPEAT)
+MAG_FILTERS = (NEAREST, LINEAR)
+MIN_FILTERS = (
+    NEAREST,
+    LINEAR,
+    NEAREST_MIPMAP_NEAREST,
+    LINEAR_MIPMAP_NEAREST,
+    NEAREST_MIPMAP_LINEAR,
+    LINEAR_MIPMAP_LINEAR,
+)
+
+# The texture slots of a glTF material (core specification 3.9) in the order shaders bind them.
+TEXTURE_SLOTS = ("base_color", "metallic_roughness", "normal", "occlusion", "emissive")
+COLOUR_SLOTS = ("base_color", "emissive")  # sRGB-encoded; the others hold linear data
+
+
+def srgb_to_linear(values: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function inverted (IEC 61966-2-1), values in [0, 1]."""
+    values = np.asarray(values, dtype=np.float32)
+    return np.where(values <= 0.04045, values / 12.92, ((values + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+@dataclass
+class TextureSlot:
+    """One glTF ``textureInfo``: the image, which UV set, its sampler and KHR_texture_transform.
+
+    ``image`` is what the file stores: (H, W, 4) uint8 (sRGB-encoded when ``srgb``, as glTF's
+    colour textures are; the GPU decodes it before filtering with an SRGB8_ALPHA8 texture), or
+    float32 (H, W, 3|4) linear values for generated scenes. Row 0 is v = 0, the top of the image
+    (glTF's UV origin)."""
+
+    image: np.ndarray
+    srgb: bool = False
+    tex_coord: int = 0
+    wrap_s: int = REPEAT
+    wrap_t: int = REPEAT
+    mag_filter: int = LINEAR
+    min_filter: int = LINEAR_MIPMAP_LINEAR
+    transform: np.ndarray = field(default_factory=lambda: np.eye(3))  # uv' = (T @ [u, v, 1])[:2]
+    source: str = ""
+
+    def linear(self) -> np.ndarray:
+        """(H, W, 4) float32 linear values (sRGB decoded, alpha linear; alpha 1 if absent)."""
+        image = self.image
+        if image.dtype == np.uint8:
+            values = image.astype(np.float32) / 255.0
+            if self.srgb:
+                values[..., :3] = srgb_to_linear(values[..., :3])
+        else:
+            values = image.astype(np.float32)
+        if values.shape[-1] == 3:
+            values = np.concatenate([values, np.ones(values.shape[:-1] + (1,), np.float32)], axis=-1)
+        return values
+
+    def key(self) -> bytes:
+        """Everything that decides what the slot looks like (cube-map cache keys)."""
+        import hashlib
+
+        h = hashlib.sha256(np.ascontiguousarray(self.image).tobytes())
+        h.update(repr((self.image.shape, str(self.image.dtype), self.srgb, self.tex_coord, self.wrap_s,
+                       self.wrap_t, self.mag_filter, self.min_filter)).encode())  # fmt: skip
+        h.update(np.asarray(self.transform, np.float64).tobytes())
+        return h.digest()
+
+
 @dataclass
 class SceneMaterial:
+    """A material of the scene: the BSDF description plus glTF's per-pixel inputs.
+
+    For the ``gltf`` model the textures act as the specification says (Appendix B): base colour
+    (RGBA) x factor, metallic (B) and roughness (G) x factors, a tangent-space normal map scaled
+    by ``normal_scale``, occlusion on the indirect diffuse by ``occlusion_strength``, emission x
+    the emissive texture. For the other models the base-colour texture multiplies kd."""
+
     name: str
     desc: dict  # validated material description (lobeview.materials.spec)
-    base_color_texture: np.ndarray | None = None  # (H, W, 3) linear, multiplies kd
+    base_color_texture: np.ndarray | None = None  # generated scenes: (H, W, 3) linear, multiplies kd
     emission: np.ndarray = field(default_factory=lambda: np.zeros(3))  # emitted radiance
     lightmap: Lightmap | None = None
     double_sided: bool = False
+    textures: dict = field(default_factory=dict)  # slot name (TEXTURE_SLOTS) -> TextureSlot
+    base_alpha: float = 1.0  # baseColorFactor's alpha
+    alpha_mode: str = "OPAQUE"  # OPAQUE, MASK (alpha_cutoff) or BLEND
+    alpha_cutoff: float = 0.5
+    normal_scale: float = 1.0
+    occlusion_strength: float = 1.0
+
+    def __post_init__(self):
+        if self.base_color_texture is not None and "base_color" not in self.textures:
+            self.textures["base_color"] = TextureSlot(np.asarray(self.base_color_texture, np.float32), source=self.name)
+
+    def texture(self, slot: str) -> TextureSlot | None:
+        return self.textures.get(slot)
 
 
 @dataclass

@@ -99,7 +99,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     }
 #if defined(LOBE_NORMALIZE)
     // lobeview's energy normalisation: Eq. 4.25 rescaled to be exact under uniform light.
-    vec3 target = lobe_albedo(lobe_index, wo);
+    vec3 target = lobe_albedo(l, lobe_index, wo);
     return vec3(num_unit.r > 0.0 ? num.r * target.r / num_unit.r : 0.0,
                 num_unit.g > 0.0 ? num.g * target.g / num_unit.g : 0.0,
                 num_unit.b > 0.0 ? num.b * target.b / num_unit.b : 0.0);

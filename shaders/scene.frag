@@ -3,6 +3,7 @@
 // SPECULAR the view-dependent lobes integrated from the object's cube map (thesis 4.4).
 #include "frame.glsl"
 #include "integrate.glsl"
+#include "material_maps.glsl"
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -15,9 +16,18 @@ uniform sampler2D u_lightmap;
 uniform int u_lightmap_texcoord;      // 0 or 1; -1: no lightmap, use u_fallback_irradiance
 uniform float u_lightmap_intensity;
 uniform vec3 u_fallback_irradiance;
-uniform sampler2D u_base_color;
-uniform int u_has_base_color;
-uniform vec3 u_emission;
+uniform vec3 u_emission;              // emissive factor x KHR_materials_emissive_strength
+// glTF metallic-roughness per pixel (Appendix B): with u_gltf_model the textures' base colour,
+// metallic and roughness replace the material's in the diffuse term and in its glTF lobe;
+// otherwise the base-colour texture multiplies kd (thesis and microfacet models).
+uniform int u_gltf_model;
+uniform vec4 u_base_color_factor;     // rgb: the material's base colour, a: baseColorFactor alpha
+uniform float u_metallic_factor;
+uniform float u_roughness_factor;
+uniform float u_normal_scale;
+uniform float u_occlusion_strength;
+uniform int u_alpha_mode;             // ALPHA_OPAQUE, ALPHA_MASK (u_alpha_cutoff), ALPHA_BLEND
+uniform float u_alpha_cutoff;
 uniform float u_object_id;            // for picking: written + 1 into the normal buffer's w
 
 layout(location = 0) out vec4 out_radiance;
@@ -37,7 +47,20 @@ void main() {
     plane_average_load();
 #endif
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));
+    // Every texture is read before the alpha test: derivatives need the whole 2x2 quad.
+    vec4 base_texel = sample_map(MAP_BASE_COLOR, v_uv0, v_uv1, vec4(1.0));
+    vec4 mr_texel = sample_map(MAP_METALLIC_ROUGHNESS, v_uv0, v_uv1, vec4(1.0));
+    vec4 normal_texel = sample_map(MAP_NORMAL, v_uv0, v_uv1, vec4(0.5, 0.5, 1.0, 1.0));
+    vec4 occlusion_texel = sample_map(MAP_OCCLUSION, v_uv0, v_uv1, vec4(1.0));
+    vec4 emissive_texel = sample_map(MAP_EMISSIVE, v_uv0, v_uv1, vec4(1.0));
+    float coverage = u_alpha_mode == ALPHA_OPAQUE ? 1.0 : clamp(u_base_color_factor.a * base_texel.a, 0.0, 1.0);
+    if (u_alpha_mode == ALPHA_MASK && coverage < u_alpha_cutoff) discard;
+
     mat3 tbn = shading_frame(v_normal, v_tangent, geometric_normal);
+    if (u_map_texcoord[MAP_NORMAL] >= 0) {
+        vec3 n = mapped_normal(tbn, normal_texel.rgb, u_normal_scale);
+        tbn = shading_frame(n, vec4(tbn[0], v_tangent.w < 0.0 ? -1.0 : 1.0), geometric_normal);
+    }
     vec3 wo = view_in_frame(tbn, normalize(u_camera_position - v_position));
 
     vec3 irradiance = u_fallback_irradiance;
@@ -45,23 +68,46 @@ void main() {
         vec2 uv = u_lightmap_texcoord == 1 ? v_uv1 : v_uv0;
         irradiance = texture(u_lightmap, uv).rgb * u_lightmap_intensity;
     }
-    vec3 albedo = u_kd;
-    if (u_has_base_color == 1) albedo *= texture(u_base_color, v_uv0).rgb;
+    // Occlusion darkens the indirect (lightmap) diffuse only: mix(1, ao, strength) (spec 3.9.3).
+    irradiance *= 1.0 + u_occlusion_strength * (occlusion_texel.r - 1.0);
+    vec3 base_color = u_base_color_factor.rgb * base_texel.rgb;
+    float metallic = clamp(u_metallic_factor * mr_texel.b, 0.0, 1.0);
+    float roughness = clamp(u_roughness_factor * mr_texel.g, 0.0, 1.0);
+    vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * base_color : u_kd * base_texel.rgb;
     vec3 diffuse = albedo / PI * irradiance;
     diffuse *= diffuse_weight(wo.z);
-    vec3 radiance = u_emission + diffuse;
+    vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)
-    for (int i = 0; i < u_lobe_count; ++i) radiance += integrate_lobe(get_lobe(i), i, wo, tbn);
+    for (int i = 0; i < u_lobe_count; ++i) {
+        Lobe l = get_lobe(i);
+        if (u_gltf_model == 1 && l.type == LOBE_GLTF_SPECULAR) {
+            // alpha = roughness^2 (materials/gltf.py roughness_to_alpha), per pixel.
+            l.r0 = base_color;
+            l.metallic = metallic;
+            l.ax = l.ay = max(roughness * roughness, ALPHA_MIN);
+        }
+        radiance += integrate_lobe(l, i, wo, tbn);
+    }
 #endif
     bool bad = any(isnan(radiance)) || any(isinf(radiance));
     out_radiance = bad ? vec4(0.0, 0.0, 0.0, -1.0) : vec4(radiance, 1.0);
     out_position = vec4(v_position, 1.0);
     out_normal = vec4(tbn[2], u_object_id + 1.0);
     out_tangent = vec4(tbn[0], 1.0);
+    if (u_alpha_mode == ALPHA_BLEND) {
+        // Drawn after the opaque objects, back to front, with blend (ONE, ONE_MINUS_SRC_ALPHA) on
+        // every target: radiance premultiplied by coverage; zero (alpha 0) in the G-buffer
+        // targets keeps the opaque surface behind there (picking and refinement see through).
+        out_radiance = bad ? vec4(0.0) : vec4(radiance * coverage, coverage);
+        out_position = vec4(0.0);
+        out_normal = vec4(0.0);
+        out_tangent = vec4(0.0);
+    }
 #if defined(PLANE_AVERAGE)
     for (int side = 0; side < 2; ++side) {
-        out_plane_point[side] = g_plane_point_sum[side];
-        out_plane_normal[side] = vec4(g_plane_normal_sum[side], 0.0);
+        bool keep = u_alpha_mode != ALPHA_BLEND;
+        out_plane_point[side] = keep ? g_plane_point_sum[side] : vec4(0.0);
+        out_plane_normal[side] = keep ? vec4(g_plane_normal_sum[side], 0.0) : vec4(0.0);
     }
 #endif
 }

@@ -74,9 +74,14 @@ def _closed_box(kd: float, emission: float) -> Scene:
 def test_loads_the_sample_models():
     suzanne = load_gltf(SHARED_ASSETS / "gltf/Suzanne/Suzanne.gltf")
     assert len(suzanne.objects) == 1 and len(suzanne.objects[0].mesh.indices) == 3936
-    assert suzanne.materials[0].base_color_texture.shape == (1024, 1024, 3)
-    with pytest.warns(GltfWarning, match="emissive textures are not supported"):
+    assert suzanne.materials[0].texture("base_color").image.shape == (1024, 1024, 4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", GltfWarning)  # every texture of the bottle is used now
         bottle = load_gltf(SHARED_ASSETS / "gltf/WaterBottle/WaterBottle.glb")
+    material = bottle.materials[0]
+    assert set(material.textures) == {"base_color", "metallic_roughness", "normal", "occlusion", "emissive"}
+    assert material.texture("base_color").srgb and material.texture("emissive").srgb
+    assert not material.texture("metallic_roughness").srgb and not material.texture("normal").srgb
     assert len(bottle.objects[0].mesh.indices) == 4510
     cornell = load_gltf(SHARED_ASSETS / "gltf/CornellBox/CornellBox.glb")
     assert sum(len(o.mesh.indices) for o in cornell.objects) == 36

@@ -110,7 +110,7 @@ def test_the_opt_in_reads_outside_but_never_a_device(scene_dir):
 def test_images_and_material_files_outside_are_refused(scene_dir):
     with pytest.warns(GltfWarning, match="outside the scene's folder"):
         scene = _load(scene_dir, _gltf(image_uri="../canary.bin"))
-    assert scene.materials[0].base_color_texture is None
+    assert scene.materials[0].texture("base_color") is None
     with pytest.raises(GltfError, match="outside the scene's folder"):
         _load(scene_dir, _gltf(extras="../canary.bin"))
     (scene_dir / "mat.json").write_text(json.dumps({"model": "gltf", "base_color": [0.2, 0.3, 0.4]}))
@@ -176,7 +176,7 @@ def test_declared_sizes_are_refused_before_allocation(scene_dir):
     (scene_dir / "big.png").write_bytes(bytes(png))
     with pytest.warns(GltfWarning, match="100000x100000|10000000000 pixels"):
         scene = _load(scene_dir, _gltf(image_uri="big.png"))
-    assert scene.materials[0].base_color_texture is None
+    assert scene.materials[0].texture("base_color") is None
     # A Radiance header declaring the same.
     (scene_dir / "big.hdr").write_bytes(b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 100000 +X 100000\n" + b"\0" * 64)
     with pytest.raises(HDRImageError, match="100000x100000"):

@@ -25,9 +25,9 @@ from lobeview.core.methods import Method
 
 from .camera import perspective
 from .cubemap import RadianceCube
-from .frame import begin_pass
+from .frame import begin_pass, new_framebuffer
 
-CUBE_CACHE_VERSION = 3
+CUBE_CACHE_VERSION = 4  # 4: glTF textures, alpha modes and culling change what cubes see
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
 
 
@@ -59,8 +59,10 @@ def scene_content_key(scene, environment_key: str, face_size: int, bounces: int)
         h.update(np.asarray(mat.emission, np.float64).tobytes())
         if mat.lightmap is not None:
             h.update(hashlib.sha256(mat.lightmap.image.tobytes()).digest())
-        if mat.base_color_texture is not None:
-            h.update(hashlib.sha256(mat.base_color_texture.tobytes()).digest())
+        for name in sorted(mat.textures):
+            h.update(name.encode() + mat.textures[name].key())
+        h.update(repr((mat.base_alpha, mat.alpha_mode, mat.alpha_cutoff, mat.normal_scale,
+                       mat.occlusion_strength, mat.double_sided)).encode())  # fmt: skip
     return h.hexdigest()[:20]
 
 
@@ -97,7 +99,7 @@ class CubeBake:
         color = self.ctx.texture((size, size), 4, dtype="f4")
         extra = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(3)]
         depth = self.ctx.depth_renderbuffer((size, size))
-        fbo = self.ctx.framebuffer(color_attachments=[color, *extra], depth_attachment=depth)
+        fbo = new_framebuffer(self.ctx, [color, *extra], depth)
         proj = perspective(90.0, 1.0, 1e-3 * self.scene_extent, 4.0 * self.scene_extent)
         faces = np.empty((6, size, size, 3), dtype=np.float32)
         viewport = self.ctx.viewport

@@ -17,6 +17,16 @@ import numpy as np
 G_BUFFER = ("radiance", "position", "normal", "tangent")  # attachment order (shaders' out locations)
 
 
+def new_framebuffer(ctx: moderngl.Context, color_attachments, depth_attachment=None):
+    """ctx.framebuffer, with the GL error flag left clean: moderngl rebinds the framebuffer that
+    was bound before, and when that one has been released since (a cube-face or resize target),
+    GL flags GL_INVALID_OPERATION although the new framebuffer is complete (moderngl raises for
+    an incomplete one). SceneRenderer.render checks the flag after every frame."""
+    fbo = ctx.framebuffer(color_attachments=color_attachments, depth_attachment=depth_attachment)
+    _ = ctx.error
+    return fbo
+
+
 def begin_pass(ctx: moderngl.Context, fbo, size) -> None:
     """Bind and clear ``fbo`` for a pass that writes raw values (G-buffer, cube faces, mirror
     buffers), with the GL state such a pass assumes set explicitly. The viewer shares its context
@@ -42,11 +52,10 @@ class FrameTargets:
         self.size = (int(size[0]), int(size[1]))
         self.targets = [self.ctx.texture(self.size, 4, dtype="f4") for _ in G_BUFFER]
         self.depth = self.ctx.depth_renderbuffer(self.size)
-        self.plain_fbo = self.ctx.framebuffer(color_attachments=self.targets, depth_attachment=self.depth)
+        self.plain_fbo = new_framebuffer(self.ctx, self.targets, self.depth)
         self.plane_states = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(8 if self.plane_state else 0)]
         self.state_fbos = [
-            self.ctx.framebuffer(color_attachments=[*self.targets, *self.plane_states[4 * k : 4 * k + 4]],
-                                 depth_attachment=self.depth)
+            new_framebuffer(self.ctx, [*self.targets, *self.plane_states[4 * k : 4 * k + 4]], self.depth)
             for k in range(2 if self.plane_state else 0)
         ]  # fmt: skip
         self.parity = 0

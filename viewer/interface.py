@@ -25,6 +25,7 @@ import numpy as np
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN, Method
 from lobeview.materials.banks import BANKS_AZIMUTHS
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
+from lobeview.materials.microfacet import ALPHA_MIN
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, MAX_ELLIPSE_ANGLE, XI_BORDER
 from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
 
@@ -58,6 +59,10 @@ LOBE_MAP_MODES = {"splitsum": 0, "lobes": 1, "banks": 2}
 LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)
 CDF_ROW = 1024  # texels per row of the environment CDF texture (viewer/cubemap.py)
 PROXY_KINDS = {"planes": 1, "box": 2}  # u_proxy_kind (scenes/reflection_proxy.py)
+#: u_alpha_mode codes (glTF alphaMode)
+ALPHA_MODES = {"opaque": 0, "mask": 1, "blend": 2}
+#: u_material_maps slots (scenes/scene.py TEXTURE_SLOTS, in that order)
+MAP_SLOTS = {"base color": 0, "metallic roughness": 1, "normal": 2, "occlusion": 3, "emissive": 4}
 
 
 def _defines_of(prefix: str, codes: dict) -> dict:
@@ -73,6 +78,10 @@ SHADER_CONSTANTS: dict = {
     **_defines_of("FRESNEL", FRESNEL_TYPES),
     **_defines_of("LOBE_MAP", LOBE_MAP_MODES),
     **_defines_of("PROXY", PROXY_KINDS),
+    **_defines_of("ALPHA", ALPHA_MODES),
+    **_defines_of("MAP", MAP_SLOTS),
+    "MATERIAL_MAPS": len(MAP_SLOTS),
+    "ALPHA_MIN": float(ALPHA_MIN),  # materials/microfacet.py: the smallest GGX alpha
     "LOBE_SLICES": LOBE_SLICES,
     "LOBE_TABLE_ROWS": LOBE_TABLE_ROWS,
     "ALBEDO_PHI": ALBEDO_PHI,
@@ -91,7 +100,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     "u_env_cdf": 3,  # reference: environment importance tables
     "u_env_pdf": 4,
     "u_lightmap": 5,
-    "u_base_color": 6,
+    "u_material_maps": (6, 20, 21, 22, 23),  # glTF textures by MAP_SLOTS
     "u_albedo": 7,  # normalised lobe-N: the lobes' albedo tables
     "u_split_sum": (8, 9),  # by distribution (DIST_BECKMANN, DIST_GGX)
     "u_dfg": 10,

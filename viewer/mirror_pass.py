@@ -14,7 +14,7 @@ import numpy as np
 from lobeview.core.methods import Method
 
 from .camera import Camera, perspective
-from .frame import begin_pass
+from .frame import begin_pass, new_framebuffer
 from .interface import TEXTURE_UNITS, bind_sampler, set_uniform
 
 MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # glossy objects inside mirror buffers (cheap)
@@ -36,9 +36,7 @@ class MirrorTargets:
         for tex in (self.position, self.normal):
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.depth = ctx.depth_renderbuffer(size)
-        self.fbo = ctx.framebuffer(
-            color_attachments=[self.radiance, self.position, self.normal], depth_attachment=self.depth
-        )
+        self.fbo = new_framebuffer(ctx, [self.radiance, self.position, self.normal], self.depth)
         self.camera = None  # scenes.planar_mirror.MirrorCamera of the last pass
 
     def release(self):

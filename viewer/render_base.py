@@ -175,6 +175,10 @@ class RendererBase:
                 return tex, None
 
             bind_sampler(program, "u_albedo", self._material_texture(("albedo", material.lobes_key), albedo_texture)[0])
+            # Per-pixel glTF albedo (patterns.glsl) is the scene renderer's (textured materials);
+            # its table sampler still needs a 2D texture on its own unit, not unit 0's cube.
+            set_uniform(program, "u_albedo_per_pixel", 0)
+            bind_sampler(program, "u_dfg", self._dummy_texture("2d"))
 
     def _material_texture(self, key: tuple, make) -> tuple:
         """(texture, derived data) of a material, made by ``make()`` on first use and cached by
@@ -274,6 +278,8 @@ class RendererBase:
         if kind not in self._dummy_textures:
             if kind == "cube":
                 tex = self.ctx.texture_cube((1, 1), 4, b"\0" * 16 * 6, dtype="f4")
+            elif kind == "2d":
+                tex = self.ctx.texture((1, 1), 4, b"\0" * 16, dtype="f4")
             else:
                 tex = self.ctx.texture3d((1, 1, 1), 4, b"\0" * 16, dtype="f4")
             self._dummy_textures[kind] = tex

@@ -28,12 +28,20 @@ from lobeview.core.methods import Method
 from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
-from lobeview.scenes.scene import Scene
+from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
 
 from .camera import Camera
 from .cube_bake import CubeBake, scene_content_key
 from .cubemap import RadianceCube, equirect_to_cube_faces
-from .interface import PROXY_KINDS, bind_sampler, method_defines, set_uniform, write_uniform
+from .interface import (
+    ALPHA_MODES,
+    PROXY_KINDS,
+    TEXTURE_UNITS,
+    bind_sampler,
+    method_defines,
+    set_uniform,
+    write_uniform,
+)
 from .material_gpu import PackedMaterial, pack_material
 from .mirror_pass import MirrorPasses
 from .render_base import RendererBase, RenderResult
@@ -41,7 +49,8 @@ from .render_base import RendererBase, RenderResult
 __all__ = ["FALLBACK_IRRADIANCE", "SceneRenderer"]
 
 FALLBACK_IRRADIANCE = 1.0  # E for objects whose lightmap is missing (warned), i.e. kd/pi shading
-MAX_SCENE_TEXTURES = 256  # lightmaps and base-colour textures kept on the GPU
+MAX_SCENE_TEXTURES = 256  # lightmaps and material textures kept on the GPU
+GL_SRGB8_ALPHA8 = 0x8C43  # colour textures: the GPU decodes sRGB before filtering (glTF 3.9.2)
 
 
 class _GpuObject:
@@ -108,6 +117,8 @@ class SceneRenderer(RendererBase):
         # Every sampler uniform gets its own unit and a texture, even when unused: two samplers
         # of different types on one unit make the draw call fail (GL_INVALID_OPERATION).
         self._white = ctx.texture((1, 1), 3, np.ones(3, np.float32).tobytes(), dtype="f4")
+        self._samplers: dict = {}  # glTF sampler state -> moderngl.Sampler (a handful per scene)
+        self._dfg = None  # made on first use by a textured glTF lobe under normalised lobe-N
         self.objects = []
         for i, obj in enumerate(scene.objects):
             material = pack_material(build_bsdf(scene.materials[obj.material].desc))
@@ -198,6 +209,86 @@ class SceneRenderer(RendererBase):
             return image, tex
 
         return self.textures.get(id(image), upload)[1]
+
+    def _map_texture(self, slot: TextureSlot) -> moderngl.Texture:
+        """A material texture on the GPU: uint8 RGBA as stored (SRGB8_ALPHA8 for colour slots),
+        float RGBA for generated scenes; full MIP chain (the sampler object picks the filter)."""
+
+        def upload():
+            image = slot.image
+            if image.dtype == np.uint8:
+                data = np.ascontiguousarray(image if image.shape[-1] == 4 else slot.linear())
+                internal = GL_SRGB8_ALPHA8 if slot.srgb else None
+                tex = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), internal_format=internal)
+            else:
+                data = np.ascontiguousarray(slot.linear(), dtype=np.float32)
+                tex = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), dtype="f4")
+            tex.build_mipmaps()
+            return image, tex
+
+        return self.textures.get(("map", id(slot.image), slot.srgb), upload)[1]
+
+    def _dfg_texture(self) -> moderngl.Texture:
+        """The split-sum DFG table (viewer/prefiltered.py), for per-pixel glTF lobe albedo."""
+        if self._dfg is None:
+            from .prefiltered import dfg_texture_data
+
+            data = dfg_texture_data(directory=self.cache_dir).astype(np.float32)
+            self._dfg = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), dtype="f4")
+            self._dfg.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self._dfg.repeat_x = self._dfg.repeat_y = False
+        return self._dfg
+
+    def _map_sampler(self, slot: TextureSlot | None) -> moderngl.Sampler:
+        """Sampler object for a slot's glTF sampler: repeat or clamp-to-edge per axis and the
+        filters (glTF uses the GL enums); mirrored repeat repeats here and is folded in
+        shaders/material_maps.glsl."""
+        key = (slot.wrap_s, slot.wrap_t, slot.min_filter, slot.mag_filter) if slot is not None else ("white",)
+        sampler = self._samplers.get(key)
+        if sampler is None:
+            sampler = self.ctx.sampler()
+            if slot is not None:
+                sampler.repeat_x = slot.wrap_s != CLAMP_TO_EDGE
+                sampler.repeat_y = slot.wrap_t != CLAMP_TO_EDGE
+                sampler.filter = (slot.min_filter, slot.mag_filter)
+            self._samplers[key] = sampler
+        return sampler
+
+    def _bind_material(self, program, mat: SceneMaterial) -> None:
+        """glTF's per-pixel inputs (shaders/scene.frag): textures, factors, alpha mode."""
+        desc = mat.desc
+        gltf_model = desc["model"] == "gltf"
+        base = desc["base_color"] if gltf_model else [1.0, 1.0, 1.0]
+        set_uniform(program, "u_gltf_model", int(gltf_model))
+        set_uniform(program, "u_base_color_factor", (*(float(c) for c in base), float(mat.base_alpha)))
+        set_uniform(program, "u_metallic_factor", float(desc.get("metallic", 0.0)))
+        set_uniform(program, "u_roughness_factor", float(desc.get("roughness", 1.0)))
+        set_uniform(program, "u_normal_scale", float(mat.normal_scale))
+        set_uniform(program, "u_occlusion_strength", float(mat.occlusion_strength))
+        set_uniform(program, "u_alpha_mode", ALPHA_MODES[mat.alpha_mode.lower()])
+        set_uniform(program, "u_alpha_cutoff", float(mat.alpha_cutoff))
+        texcoords, transforms, mirrored = [], [], []
+        for i, name in enumerate(TEXTURE_SLOTS):
+            slot = mat.textures.get(name)
+            unit = TEXTURE_UNITS["u_material_maps"][i]
+            (self._map_texture(slot) if slot is not None else self._white).use(unit)
+            self._map_sampler(slot).use(unit)
+            texcoords.append(slot.tex_coord if slot is not None else -1)
+            transform = np.asarray(slot.transform if slot is not None else np.eye(3), dtype=np.float32)
+            transforms.append(transform.T)  # GLSL mat3 is column-major
+            mirrored.append(
+                [int(slot.wrap_s == MIRRORED_REPEAT), int(slot.wrap_t == MIRRORED_REPEAT)] if slot else [0, 0]
+            )
+        set_uniform(program, "u_material_maps", list(TEXTURE_UNITS["u_material_maps"]))
+        write_uniform(program, "u_map_texcoord", np.asarray(texcoords, dtype=np.int32))
+        write_uniform(program, "u_map_transform", np.asarray(transforms, dtype=np.float32))
+        write_uniform(program, "u_map_mirrored", np.asarray(mirrored, dtype=np.int32))
+        if "u_albedo_per_pixel" in program:  # normalised lobe-N (shaders/patterns.glsl lobe_albedo)
+            per_pixel = gltf_model and bool({"base_color", "metallic_roughness"} & set(mat.textures))
+            set_uniform(program, "u_albedo_per_pixel", int(per_pixel))
+            # Bound even when unused: a sampler left on unit 0 would meet the radiance cube there
+            # (two sampler types on one unit fail the draw with GL_INVALID_OPERATION).
+            bind_sampler(program, "u_dfg", self._dfg_texture() if per_pixel else self._white)
 
     def render_cube_faces(self, eye, exclude: int | None = None, specular: bool = False) -> np.ndarray:
         """Six faces of the scene seen from ``eye`` (viewer/cube_bake.py CubeBake.render_faces)."""
@@ -292,10 +383,22 @@ class SceneRenderer(RendererBase):
         sample_offset=0,
         seed=0,
         mirrors: dict | None = None,
+        cull: bool = False,
     ):
+        """Every object with its material. ``cull``: skip the back faces of single-sided
+        materials (the camera pass only: mirror and cube-map passes flip the winding)."""
         self.ctx.enable(moderngl.DEPTH_TEST)
         mirrors = mirrors or {}
-        for obj in self.objects:
+        for obj, blended in self._draw_order(eye):
+            if blended:  # alphaMode BLEND: composited over what is drawn, depth tested, not written
+                self.ctx.enable(moderngl.BLEND)
+                self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+                self.ctx.fbo.depth_mask = False
+            single_sided = cull and not self.scene.materials[self.scene.objects[obj.index].material].double_sided
+            if single_sided:
+                self.ctx.enable(moderngl.CULL_FACE)  # glTF doubleSided false: back faces are not drawn
+            else:
+                self.ctx.disable(moderngl.CULL_FACE)
             if obj.index == exclude or (not specular and self.analysis.objects[obj.index].transmission_lobes):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
                 # maps (as in the baker): a black pane would hide what lies behind it.
@@ -322,10 +425,7 @@ class SceneRenderer(RendererBase):
                 bind_sampler(program, "u_lightmap", self._white)
                 set_uniform(program, "u_lightmap_texcoord", -1)
                 set_uniform(program, "u_fallback_irradiance", (FALLBACK_IRRADIANCE,) * 3)
-            has_base_color = mat.base_color_texture is not None
-            base_color = self._texture(mat.base_color_texture) if has_base_color else self._white
-            bind_sampler(program, "u_base_color", base_color)
-            set_uniform(program, "u_has_base_color", int(has_base_color))
+            self._bind_material(program, mat)
             if use_specular:
                 self.bind_cube(program, obj.cube, obj_method, obj.material)
                 if proxy is not None:
@@ -336,6 +436,19 @@ class SceneRenderer(RendererBase):
                         self.frame.previous_plane_states(),
                     )  # fmt: skip
             self._vao(program, obj).render(moderngl.TRIANGLES)
+        self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+        self.ctx.fbo.depth_mask = True
+
+    def _draw_order(self, eye) -> list:
+        """(object, blended): opaque and masked objects first, then the alphaMode BLEND ones
+        from back to front by the distance of their bounding-box centre (glTF 3.9.4)."""
+        opaque, blended = [], []
+        for obj in self.objects:
+            mode = self.scene.materials[self.scene.objects[obj.index].material].alpha_mode
+            (blended if mode == "BLEND" else opaque).append(obj)
+        eye = np.asarray(eye, dtype=np.float64)
+        blended.sort(key=lambda o: -float(np.linalg.norm(o.centre - eye)))
+        return [(o, False) for o in opaque] + [(o, True) for o in blended]
 
     def _draw_pass(self, view_proj, eye, method: Method, specular: bool, exclude=None) -> None:
         """The scene as the cube-map and mirror passes draw it (no per-frame state)."""
@@ -358,7 +471,9 @@ class SceneRenderer(RendererBase):
             mirrors = self.render_mirror_passes(camera)
         self.frame.begin(averages_planes=any(self._averages_planes(self._object_method(i, method)) for i in mirrors))
         self.draw_background(self.environment, view_proj)
-        self._draw_objects(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors)
+        self._draw_objects(
+            view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors, cull=True
+        )
 
     def pick(self, x: int, y: int) -> int | None:
         """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
@@ -412,9 +527,13 @@ class SceneRenderer(RendererBase):
         g_buffers = None
         for p in range(passes):
             t0 = time.perf_counter()
+            _ = self.ctx.error  # reset the flag: only errors of this frame's passes count below
             with timer or contextlib.nullcontext():
                 self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
             self.ctx.finish()
+            error = self.ctx.error
+            if error != "GL_NO_ERROR":  # a failed draw leaves objects out of the image silently
+                raise RuntimeError(f"OpenGL reported {error} while drawing {method}: a renderer bug, please report it")
             t_shade += time.perf_counter() - t0
             if timer is not None:
                 t_gpu += timer.elapsed * 1e-9
@@ -441,5 +560,9 @@ class SceneRenderer(RendererBase):
         for obj in self.objects:
             obj.release()
         self.textures.clear()
+        for sampler in self._samplers.values():
+            sampler.release()
+        if self._dfg is not None:
+            self._dfg.release()
         self._white.release()
         self.environment.release()

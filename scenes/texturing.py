@@ -1,0 +1,109 @@
+"""glTF material textures per pixel in numpy: the reference twin of shaders/material_maps.glsl
+and of the per-pixel material in shaders/scene.frag (core specification 3.9 and Appendix B).
+
+- :func:`sample_slot`: a texture slot at UV coordinates as the GPU samples MIP level 0: the
+  slot's UV set, KHR_texture_transform, wrap mode per axis (repeat, clamp-to-edge, mirrored
+  repeat folded into [0, 1] and then repeated, as the shader does), nearest or bilinear filter
+  between texel centres, sRGB decoded per texel before filtering (an SRGB8_ALPHA8 texture).
+- :func:`texel_material`: base colour (RGBA x factor), metallic (B) and roughness (G) x factors,
+  the tangent-space normal, occlusion and emission of a material at UV coordinates.
+- :func:`mapped_normal`: the normal map in the interpolated tangent frame.
+- :func:`pixel_bsdf`: the glTF BSDF of one pixel's parameters (materials/gltf.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, NEAREST, SceneMaterial, TextureSlot
+
+
+def transformed_uv(slot: TextureSlot, uv0: np.ndarray, uv1: np.ndarray | None = None) -> np.ndarray:
+    """(N, 2) coordinates of the slot: its UV set through its KHR_texture_transform matrix."""
+    uv = np.asarray(uv1 if slot.tex_coord == 1 and uv1 is not None else uv0, dtype=np.float64).reshape(-1, 2)
+    homogeneous = np.concatenate([uv, np.ones((len(uv), 1))], axis=1)
+    return (homogeneous @ np.asarray(slot.transform, dtype=np.float64).T)[:, :2]
+
+
+def _fold(coordinate: np.ndarray, wrap: int) -> np.ndarray:
+    if wrap == MIRRORED_REPEAT:
+        t = coordinate - 2.0 * np.floor(0.5 * coordinate)
+        return np.where(t > 1.0, 2.0 - t, t)
+    return coordinate
+
+
+def _texel_index(index: np.ndarray, size: int, wrap: int) -> np.ndarray:
+    if wrap == CLAMP_TO_EDGE:
+        return np.clip(index, 0, size - 1)
+    return np.mod(index, size)  # repeat (mirrored repeat is folded before, then repeats)
+
+
+def sample_slot(slot: TextureSlot, uv0: np.ndarray, uv1: np.ndarray | None = None) -> np.ndarray:
+    """(N, 4) linear RGBA of the slot at the given vertex coordinates (MIP level 0)."""
+    texels = slot.linear().astype(np.float64)
+    height, width = texels.shape[:2]
+    uv = transformed_uv(slot, uv0, uv1)
+    u, v = _fold(uv[:, 0], slot.wrap_s), _fold(uv[:, 1], slot.wrap_t)
+    x, y = u * width - 0.5, v * height - 0.5
+    if slot.mag_filter == NEAREST:
+        xi = _texel_index(np.floor(x + 0.5).astype(np.int64), width, slot.wrap_s)
+        yi = _texel_index(np.floor(y + 0.5).astype(np.int64), height, slot.wrap_t)
+        return texels[yi, xi]
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+    xa, xb = _texel_index(x0, width, slot.wrap_s), _texel_index(x0 + 1, width, slot.wrap_s)
+    ya, yb = _texel_index(y0, height, slot.wrap_t), _texel_index(y0 + 1, height, slot.wrap_t)
+    top = texels[ya, xa] * (1 - fx) + texels[ya, xb] * fx
+    bottom = texels[yb, xa] * (1 - fx) + texels[yb, xb] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def texel_material(material: SceneMaterial, uv0: np.ndarray, uv1: np.ndarray | None = None) -> dict:
+    """Per-pixel inputs of ``material`` at (N, 2) coordinates, as shaders/scene.frag computes them:
+    base_color (N, 3), coverage (N,), metallic, roughness (N,), normal_texel (N, 3) or None,
+    occlusion (N,), emission (N, 3)."""
+    count = len(np.asarray(uv0).reshape(-1, 2))
+    ones = np.ones((count, 4))
+
+    def texel(name, absent=ones):
+        slot = material.texture(name)
+        return sample_slot(slot, uv0, uv1) if slot is not None else absent
+
+    desc = material.desc
+    gltf_model = desc["model"] == "gltf"
+    base_texel = texel("base_color")
+    mr_texel = texel("metallic_roughness")
+    factor = np.asarray(desc["base_color"] if gltf_model else [1.0, 1.0, 1.0], dtype=np.float64)
+    coverage = (
+        np.ones(count) if material.alpha_mode == "OPAQUE" else np.clip(material.base_alpha * base_texel[:, 3], 0, 1)
+    )
+    occlusion = texel("occlusion")[:, 0]
+    return {
+        "gltf_model": gltf_model,
+        "base_color": factor * base_texel[:, :3],
+        "base_texel": base_texel[:, :3],
+        "coverage": coverage,
+        "metallic": np.clip(float(desc.get("metallic", 0.0)) * mr_texel[:, 2], 0, 1),
+        "roughness": np.clip(float(desc.get("roughness", 1.0)) * mr_texel[:, 1], 0, 1),
+        "normal_texel": texel("normal")[:, :3] if material.texture("normal") is not None else None,
+        "occlusion": 1.0 + material.occlusion_strength * (occlusion - 1.0),
+        "emission": np.asarray(material.emission, dtype=np.float64) * texel("emissive")[:, :3],
+    }
+
+
+def mapped_normal(frame: np.ndarray, normal_texel: np.ndarray, scale: float) -> np.ndarray:
+    """Normal-mapped world normal (spec 3.9.3): ``frame`` (3, 3) columns tangent, bitangent
+    (with handedness), normal; n = normalize((2 t - 1) (scale, scale, 1)) in that frame."""
+    n = (2.0 * np.asarray(normal_texel, dtype=np.float64) - 1.0) * np.array([scale, scale, 1.0])
+    length = np.linalg.norm(n)
+    if not length > 1e-6:
+        return frame[:, 2]
+    world = frame @ (n / length)
+    return world / np.linalg.norm(world)
+
+
+def pixel_bsdf(parameters: dict, k: int):
+    """The glTF BSDF of pixel ``k`` of :func:`texel_material`'s output (gltf model only)."""
+    from lobeview.materials.gltf import gltf_bsdf
+
+    return gltf_bsdf(parameters["base_color"][k], float(parameters["metallic"][k]), float(parameters["roughness"][k]))

@@ -1,0 +1,36 @@
+// glTF material textures sampled per pixel (core specification 3.9 and Appendix B); the numpy
+// twin is scenes/texturing.py. Slots (MAP_*): base colour (sRGB RGBA, decoded by the SRGB8_ALPHA8
+// texture before filtering), metallic-roughness (B metal, G roughness), tangent-space normal,
+// occlusion (R) and emissive (sRGB). Each slot has its UV set, its KHR_texture_transform matrix
+// and its sampler; the sampler object does repeat / clamp-to-edge and the filters, mirrored
+// repeat is folded here (the texture repeats, so the GPU only sees coordinates in [0, 1]).
+
+uniform sampler2D u_material_maps[MATERIAL_MAPS];
+uniform int u_map_texcoord[MATERIAL_MAPS];      // 0 or 1: the UV set; -1: the slot has no texture
+uniform mat3 u_map_transform[MATERIAL_MAPS];    // uv' = T (u, v, 1): KHR_texture_transform
+uniform ivec2 u_map_mirrored[MATERIAL_MAPS];    // MIRRORED_REPEAT in s, t
+
+float mirrored_repeat(float x) {
+    float t = x - 2.0 * floor(0.5 * x);  // [0, 2)
+    return t > 1.0 ? 2.0 - t : t;
+}
+
+// The slot's texel at this fragment, or `absent` without a texture. Called in uniform control
+// flow (before any discard): the derivatives of the unfolded coordinates pick the MIP level.
+vec4 sample_map(int slot, vec2 uv0, vec2 uv1, vec4 absent) {
+    if (u_map_texcoord[slot] < 0) return absent;
+    vec2 uv = (u_map_transform[slot] * vec3(u_map_texcoord[slot] == 1 ? uv1 : uv0, 1.0)).xy;
+    vec2 gx = dFdx(uv);
+    vec2 gy = dFdy(uv);
+    if (u_map_mirrored[slot].x == 1) uv.x = mirrored_repeat(uv.x);
+    if (u_map_mirrored[slot].y == 1) uv.y = mirrored_repeat(uv.y);
+    return textureGrad(u_material_maps[slot], uv, gx, gy);
+}
+
+// Tangent-space normal map (spec 3.9.3): n = normalize((2 t - 1) (scale, scale, 1)), expressed
+// in the interpolated frame (columns tangent, bitangent with handedness, normal).
+vec3 mapped_normal(mat3 vertex_frame, vec3 texel, float scale) {
+    vec3 n = (2.0 * texel - 1.0) * vec3(scale, scale, 1.0);
+    if (!(dot(n, n) > 1e-12)) return vertex_frame[2];
+    return normalize(vertex_frame * normalize(n));
+}
