@@ -66,7 +66,7 @@ FALLBACKS = {
     "missing image": "the texture is ignored (factor only)",
     "missing normal map": "the interpolated vertex normals are used",
     "missing occlusion map": "no ambient occlusion",
-    "missing lightmap": "the object gets a constant irradiance (see Scene.warnings)",
+    "missing lightmap": "the object is lit by the environment's irradiance, unoccluded (see Scene.warnings)",
     "non-triangle primitive": "skipped",
     "degenerate triangles": "dropped",
     "missing normals": "area-weighted vertex normals",

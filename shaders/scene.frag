@@ -13,9 +13,9 @@ in vec2 v_uv1;
 
 uniform vec3 u_camera_position;
 uniform sampler2D u_lightmap;
-uniform int u_lightmap_texcoord;      // 0 or 1; -1: no lightmap, use u_fallback_irradiance
+uniform int u_lightmap_texcoord;      // 0 or 1; -1: no lightmap, the environment's irradiance
 uniform float u_lightmap_intensity;
-uniform vec3 u_fallback_irradiance;
+uniform vec3 u_irradiance_sh9[9];     // E(n) of the environment (scenes/envmap.py irradiance_sh9)
 uniform vec3 u_emission;              // emissive factor x KHR_materials_emissive_strength
 // glTF metallic-roughness per pixel (Appendix B): with u_gltf_model the textures' base colour,
 // metallic and roughness replace the material's in the diffuse term and in its glTF lobe;
@@ -38,6 +38,16 @@ layout(location = 3) out vec4 out_tangent;
 layout(location = 4) out vec4 out_plane_point[2];   // averaged tangent planes (integrate.glsl), 4-5
 layout(location = 6) out vec4 out_plane_normal[2];  // 6-7
 #endif
+
+// Twin of scenes/envmap.py sh9_basis / eval_sh9: order-2 real SH, clamped at zero.
+vec3 sh9_irradiance(vec3 n) {
+    float basis[9] = float[9](0.282095, 0.488603 * n.y, 0.488603 * n.z, 0.488603 * n.x,
+                              1.092548 * n.x * n.y, 1.092548 * n.y * n.z, 0.315392 * (3.0 * n.z * n.z - 1.0),
+                              1.092548 * n.x * n.z, 0.546274 * (n.x * n.x - n.y * n.y));
+    vec3 e = vec3(0.0);
+    for (int k = 0; k < 9; ++k) e += basis[k] * u_irradiance_sh9[k];
+    return max(e, vec3(0.0));
+}
 
 void main() {
 #if defined(PARALLAX) || defined(MIRROR)
@@ -63,7 +73,8 @@ void main() {
     }
     vec3 wo = view_in_frame(tbn, normalize(u_camera_position - v_position));
 
-    vec3 irradiance = u_fallback_irradiance;
+    // Without a lightmap: the environment's irradiance at the shading normal (no occlusion).
+    vec3 irradiance = sh9_irradiance(tbn[2]);
     if (u_lightmap_texcoord >= 0) {
         vec2 uv = u_lightmap_texcoord == 1 ? v_uv1 : v_uv0;
         irradiance = texture(u_lightmap, uv).rgb * u_lightmap_intensity;

@@ -223,7 +223,7 @@ def rendered():
     from lobeview.bench.testing import CubeLookup
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import FALLBACK_IRRADIANCE, SceneRenderer
+    from lobeview.viewer.scene_renderer import SceneRenderer
 
     ctx = create_headless_context()
     scene = _textured_quad_scene()
@@ -231,7 +231,7 @@ def rendered():
     with pytest.warns(UserWarning, match="no usable lightmap"):
         renderer = SceneRenderer(ctx, scene, env, size=SIZE, cube_face_size=32, progress=False)
     lookup = CubeLookup(ctx, renderer.programs)
-    yield renderer, lookup, scene, FALLBACK_IRRADIANCE
+    yield renderer, lookup, scene, renderer.environment_sh9
     renderer.release()
     ctx.release()
 
@@ -267,9 +267,10 @@ def test_normal_map_matches_numpy_per_pixel(rendered):
 def test_textured_glTF_material_matches_numpy_per_pixel(rendered, method, normalize):
     from lobeview.materials.gltf import GltfSpecular
     from lobeview.materials.prefilter import dfg_lookup
+    from lobeview.scenes.envmap import eval_sh9
     from lobeview.viewer.prefiltered import dfg_texture_data
 
-    renderer, lookup, scene, irradiance = rendered
+    renderer, lookup, scene, sh9 = rendered
     result = renderer.render(CAMERA, method)
     assert not result.invalid.any()
     material = scene.materials[0]
@@ -298,6 +299,7 @@ def test_textured_glTF_material_matches_numpy_per_pixel(rendered, method, normal
                 lobe, wo, lambda d, lod: lookup(cube.radiance, d, lod), 7, cube.face_size, frame, albedo_table=table
             )
         albedo = (1 - params["metallic"][0]) * params["base_color"][0]
+        irradiance = eval_sh9(sh9, n / np.linalg.norm(n))  # unbaked: the environment's irradiance
         expected += albedo / np.pi * irradiance * (1 - (0.04 + 0.96 * (1 - wo[2]) ** 5))
         # Same texel, same formulas; the GPU's SRGB8 decode and the normal map's 8-bit frame
         # differ from numpy's float64 by ~1e-3 relative (measured up to 0.7 % on dark channels).
@@ -312,3 +314,25 @@ def test_unsupported_material_extensions_are_named_not_dropped_silently(tmp_path
     with pytest.warns(UserWarning, match="KHR_materials_clearcoat is not supported yet") as caught:
         load_gltf(_textured_gltf(tmp_path, material, [np.zeros((2, 2, 4), np.uint8)]))
     assert not any("emissive_strength" in str(w.message) for w in caught)
+
+
+def test_irradiance_of_unbaked_objects_is_the_environments():
+    """SH9 irradiance (scenes/envmap.py) against brute-force quadrature of L max(0, n.w): exact
+    for radiance of order <= 2, and E(up) of the closed form pi a + (2 pi / 3) b for a + b y."""
+    from lobeview.scenes.envmap import EnvironmentMap, eval_sh9
+
+    def sky(d):
+        return (1.0 + 0.5 * d[..., 1:2] + 0.3 * d[..., 0:1] * d[..., 2:3]) * np.array([1.0, 0.8, 0.6])
+
+    env = EnvironmentMap.from_function(sky, height=128)
+    rng = np.random.default_rng(0)
+    normals = rng.normal(size=(40, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    coefficients = env.irradiance_sh9()
+    np.testing.assert_allclose(eval_sh9(coefficients, normals), env.irradiance(normals, 128), rtol=1e-4, atol=1e-4)
+    assert eval_sh9(coefficients, np.array([0.0, 1.0, 0.0]))[0] == pytest.approx(np.pi + np.pi / 3, rel=1e-4)
+    # A sun: the series rings, the clamp keeps it non-negative, the mean stays right.
+    sun = EnvironmentMap.from_function(lambda d: 50.0 * (np.sum(d * [0, 1, 0], -1) > 0.99)[..., None] * np.ones(3))
+    e = eval_sh9(sun.irradiance_sh9(), normals)
+    assert np.all(e >= 0)
+    assert e.mean() == pytest.approx(sun.irradiance(normals, 128).mean(), rel=0.15)

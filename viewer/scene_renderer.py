@@ -46,9 +46,7 @@ from .material_gpu import PackedMaterial, pack_material
 from .mirror_pass import MirrorPasses
 from .render_base import RendererBase, RenderResult
 
-__all__ = ["FALLBACK_IRRADIANCE", "SceneRenderer"]
-
-FALLBACK_IRRADIANCE = 1.0  # E for objects whose lightmap is missing (warned), i.e. kd/pi shading
+__all__ = ["SceneRenderer"]
 MAX_SCENE_TEXTURES = 256  # lightmaps and material textures kept on the GPU
 GL_SRGB8_ALPHA8 = 0x8C43  # colour textures: the GPU decodes sRGB before filtering (glTF 3.9.2)
 
@@ -110,6 +108,8 @@ class SceneRenderer(RendererBase):
         t0 = time.perf_counter()
         self.environment = RadianceCube(ctx, equirect_to_cube_faces(environment, 256))
         self.environment_name = environment.name
+        # Diffuse light of objects without a lightmap: the environment's irradiance (SH9).
+        self.environment_sh9 = environment.irradiance_sh9()
         self._env_hash = hashlib.sha256(environment.image.tobytes()).hexdigest()[:16]
         # Lightmaps and base-colour textures by the image they upload; the image is kept with the
         # texture so that its id() cannot be reused while the entry lives.
@@ -126,8 +126,8 @@ class SceneRenderer(RendererBase):
         for needs in self.analysis.objects:
             if not needs.has_lightmap:
                 warnings.warn(
-                    f"object {needs.name!r} has no usable lightmap: shaded with a constant "
-                    f"irradiance of {FALLBACK_IRRADIANCE} (kd / pi)",
+                    f"object {needs.name!r} has no usable lightmap: its diffuse light is the environment's "
+                    "irradiance at each normal (SH9, nothing occludes it: bake the scene for shadows)",
                     stacklevel=2,
                 )
         self.timings["upload"] = time.perf_counter() - t0
@@ -424,7 +424,7 @@ class SceneRenderer(RendererBase):
             else:
                 bind_sampler(program, "u_lightmap", self._white)
                 set_uniform(program, "u_lightmap_texcoord", -1)
-                set_uniform(program, "u_fallback_irradiance", (FALLBACK_IRRADIANCE,) * 3)
+                write_uniform(program, "u_irradiance_sh9", self.environment_sh9.astype(np.float32))
             self._bind_material(program, mat)
             if use_specular:
                 self.bind_cube(program, obj.cube, obj_method, obj.material)
