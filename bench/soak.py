@@ -100,12 +100,9 @@ def soak_script(
     return steps
 
 
-def _start_xvfb() -> tuple[subprocess.Popen | None, str]:
-    if os.environ.get("DISPLAY"):
-        return None, os.environ["DISPLAY"]
-    if shutil.which("Xvfb") is None:
-        raise SystemExit("the soak test needs an X display: set DISPLAY or install Xvfb")
-    display = f":{400 + os.getpid() % 300}"
+def start_xvfb(display_number: int) -> tuple[subprocess.Popen, str]:
+    """A virtual X server ``:display_number`` (1024x768x24, no TCP) for the window tests."""
+    display = f":{display_number}"
     proc = subprocess.Popen(
         ["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
         stdout=subprocess.DEVNULL,
@@ -113,6 +110,14 @@ def _start_xvfb() -> tuple[subprocess.Popen | None, str]:
     )
     time.sleep(1.5)
     return proc, display
+
+
+def _display_for_soak() -> tuple[subprocess.Popen | None, str]:
+    if os.environ.get("DISPLAY"):
+        return None, os.environ["DISPLAY"]
+    if shutil.which("Xvfb") is None:
+        raise SystemExit("the soak test needs an X display: set DISPLAY or install Xvfb")
+    return start_xvfb(400 + os.getpid() % 300)
 
 
 def run_soak(
@@ -137,7 +142,7 @@ def run_soak(
         if step["action"] == "click":
             step["x"], step["y"] = step["x"] * size[0], step["y"] * size[1]
     (work / "soak.json").write_text(json.dumps(steps))
-    xvfb, display = _start_xvfb()
+    xvfb, display = _display_for_soak()
     t0 = time.perf_counter()
     stderr_file = open(work / "viewer.stderr", "w+")  # a file, not a pipe: a full pipe would block the viewer
     try:

@@ -113,9 +113,10 @@ class EnvironmentMap:
         img = (img * weights[:, :, None, None, None]).sum(axis=(1, 3)) / (weights.sum(1)[:, None, None] * factor)
         return EnvironmentMap(img.astype(np.float32), self.name)
 
-    def irradiance(self, normals: np.ndarray, source_height: int = 64) -> np.ndarray:
-        """Irradiance E(n) = integral of L(w) max(0, n.w) dw by brute-force summation over a
-        box-downsampled copy of the map (exact up to that resolution)."""
+    def _texel_quadrature(self, source_height: int) -> tuple[np.ndarray, np.ndarray]:
+        """(texel centre directions (N, 3), radiance x texel solid angle (N, 3)) of a copy
+        box-downsampled to at most ``source_height`` rows: the sum of the second is the
+        integral of L over the sphere."""
         src = self
         while src.height > source_height and src.height % 2 == 0:
             src = src.downsampled(src.height // 2)
@@ -125,7 +126,12 @@ class EnvironmentMap:
             indexing="ij",
         )
         dirs = equirect_direction(u, v).reshape(-1, 3)
-        radiance = (src.image.astype(np.float64) * src.texel_solid_angles()[:, None, None]).reshape(-1, 3)
+        return dirs, (src.image.astype(np.float64) * src.texel_solid_angles()[:, None, None]).reshape(-1, 3)
+
+    def irradiance(self, normals: np.ndarray, source_height: int = 64) -> np.ndarray:
+        """Irradiance E(n) = integral of L(w) max(0, n.w) dw by brute-force summation over a
+        box-downsampled copy of the map (exact up to that resolution)."""
+        dirs, radiance = self._texel_quadrature(source_height)
         normals = np.asarray(normals, dtype=np.float64)
         flat = normals.reshape(-1, 3)
         out = np.empty_like(flat)
@@ -140,16 +146,7 @@ class EnvironmentMap:
         the radiance projected on Y_lm, times the clamped-cosine factors pi, 2 pi / 3, pi / 4.
         Exact for radiance of order <= 2; a smooth approximation (within ~10 % of the
         irradiance's range) for sharp maps. Evaluate with :func:`eval_sh9`."""
-        src = self
-        while src.height > source_height and src.height % 2 == 0:
-            src = src.downsampled(src.height // 2)
-        v, u = np.meshgrid(
-            (np.arange(src.height) + 0.5) / src.height,
-            (np.arange(src.width) + 0.5) / src.width,
-            indexing="ij",
-        )
-        dirs = equirect_direction(u, v).reshape(-1, 3)
-        weighted = (src.image.astype(np.float64) * src.texel_solid_angles()[:, None, None]).reshape(-1, 3)
+        dirs, weighted = self._texel_quadrature(source_height)
         coefficients = sh9_basis(dirs).T @ weighted  # (9, 3): integral L Y_lm dw
         return coefficients * SH9_COSINE_FACTORS[:, None]
 

@@ -236,8 +236,12 @@ class _Reader:
             out = np.maximum(out / _NORMALIZE[acc.componentType], -1.0)
         return out
 
-    def image(self, texture_index: int, hdr: bool = False) -> np.ndarray | None:
-        """Texture image as float32 (H, W, 3): sRGB-decoded for 8-bit colour, linear for HDR."""
+    def image(self, texture_index: int, stored: bool = False) -> np.ndarray | None:
+        """A texture's image: EXR/Radiance files as float32 (H, W, 3) linear values; PNG/JPEG as
+        (H, W, 4) uint8 as stored with ``stored`` (material textures: colour stays sRGB-encoded
+        for the GPU to decode before filtering), else as float32 (H, W, 3) values / 255 (an
+        8-bit lightmap holds linear irradiance). None when unreadable, with the reason in
+        ``last_image_problem``."""
         self.last_image_problem = "file not found"
         try:
             texture = _index(self.gltf.textures, texture_index, "texture", self.path)
@@ -259,11 +263,12 @@ class _Reader:
 
             pil = Image.open(io.BytesIO(data))
             width, height = pil.size  # from the header: checked before the pixels are decoded
-            self.budget.check_image(width, height, 3, 4 + 1, f"image {image.name or texture.source!r}")
-            rgb = np.asarray(pil.convert("RGB"), dtype=np.float32) / 255.0
-            if hdr:
-                return rgb
-            return np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4).astype(np.float32)
+            label = f"image {image.name or texture.source!r}"
+            if stored:
+                self.budget.check_image(width, height, 4, 2, label)
+                return np.ascontiguousarray(np.asarray(pil.convert("RGBA"), dtype=np.uint8))
+            self.budget.check_image(width, height, 3, 4 + 1, label)
+            return np.asarray(pil.convert("RGB"), dtype=np.float32) / 255.0
         except FileNotFoundError:
             return None
         except Exception as exc:  # noqa: BLE001 - any decoder failure means "no image": warned by the caller
@@ -271,40 +276,6 @@ class _Reader:
             # for corrupt or huge files; BudgetError/UntrustedReferenceError carry their reason.
             self.last_image_problem = str(exc) or type(exc).__name__
             return None
-
-
-def _texture_image(reader: _Reader, texture_index: int) -> np.ndarray | None:
-    """A material texture's pixels as stored: (H, W, 4) uint8 for PNG/JPEG (colour stays
-    sRGB-encoded, decoded by the GPU before filtering), float32 (H, W, 3) for EXR/HDR. None when
-    unreadable, with the reason in ``reader.last_image_problem``."""
-    reader.last_image_problem = "file not found"
-    try:
-        texture = _index(reader.gltf.textures, texture_index, "texture", reader.path)
-        image = _index(reader.gltf.images, texture.source, "image", reader.path)
-    except GltfError as exc:
-        reader.last_image_problem = str(exc)
-        return None
-    try:
-        if image.uri is not None and not image.uri.startswith("data:"):
-            file = resolve_reference(reader.path.parent, image.uri, "image", reader.limits)
-            if file.suffix.lower() in (".exr", ".hdr", ".pic"):
-                return read_hdr_image(file, reader.budget)
-            data = file.read_bytes()
-        elif image.uri is not None:
-            data = _decode_data_uri(image.uri, f"{reader.path}: image")
-        else:
-            data, _ = reader.view_bytes(image.bufferView)
-        from PIL import Image
-
-        pil = Image.open(io.BytesIO(data))
-        width, height = pil.size  # from the header: checked before the pixels are decoded
-        reader.budget.check_image(width, height, 4, 2, f"image {image.name or texture.source!r}")
-        return np.ascontiguousarray(np.asarray(pil.convert("RGBA"), dtype=np.uint8))
-    except FileNotFoundError:
-        return None
-    except Exception as exc:  # noqa: BLE001 - any decoder failure means "no image": warned by the caller
-        reader.last_image_problem = str(exc) or type(exc).__name__
-        return None
 
 
 def _texture_transform(info, where: str, scene_warnings: list) -> tuple[np.ndarray, int | None]:
@@ -334,7 +305,7 @@ def _texture_slot(reader: _Reader, info, slot: str, material: str, scene_warning
     if info is None:
         return None
     where = f"{reader.path}: material {material!r}: {slot.replace('_', ' ')} texture"
-    image = _texture_image(reader, info.index)
+    image = reader.image(info.index, stored=True)
     if image is None:
         _warn(scene_warnings, f"{where} missing or unusable ({reader.last_image_problem}); {fallback}")
         return None
@@ -526,7 +497,7 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
     out.emission = emissive * float(strength)
     lightmap_ext = (mat.extensions or {}).get("MOZ_lightmap")
     if lightmap_ext is not None:
-        image = reader.image(lightmap_ext.get("index", -1), hdr=True)
+        image = reader.image(lightmap_ext.get("index", -1))
         if image is None:
             _warn(
                 scene_warnings,

@@ -5,9 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
-import subprocess
 import tempfile
-import time
 from pathlib import Path
 
 import pytest
@@ -28,13 +26,9 @@ def xvfb():
         if os.environ.get("CI"):
             pytest.fail("Xvfb is missing on CI: .ci/setup should install it")
         pytest.skip("Xvfb not installed (apt-get install xvfb)")
-    display = f":{100 + os.getpid() % 400}"
-    proc = subprocess.Popen(
-        ["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    time.sleep(1.5)
+    from lobeview.bench.soak import start_xvfb
+
+    proc, display = start_xvfb(100 + os.getpid() % 400)
     if proc.poll() is not None:
         pytest.fail(f"Xvfb {display} did not start")
     yield display
