@@ -45,10 +45,10 @@ from lobeview.materials.spec import MaterialError, validate
 from .hdrio import read_hdr_image, sanitize_radiance
 from .meshes import Mesh, vertex_normals, vertex_tangents
 from .scene import (
+    ALPHA_MODES,
     COLOUR_SLOTS,
     MAG_FILTERS,
     MIN_FILTERS,
-    REPEAT,
     WRAP_MODES,
     Lightmap,
     Scene,
@@ -59,7 +59,6 @@ from .scene import (
 )
 
 SUPPORTED_EXTENSIONS = {"MOZ_lightmap", "KHR_materials_emissive_strength", "KHR_texture_transform"}
-ALPHA_MODES = ("OPAQUE", "MASK", "BLEND")
 MATERIAL_EXTENSIONS_USED = {"MOZ_lightmap", "KHR_materials_emissive_strength"}
 
 FALLBACKS = {
@@ -318,21 +317,18 @@ def _texture_slot(reader: _Reader, info, slot: str, material: str, scene_warning
             _warn(scene_warnings, f"{where}: {exc}; default sampler (repeat, trilinear)")
             sampler = None
         if sampler is not None:
-            for attribute, allowed, default in (
-                ("wrapS", WRAP_MODES, REPEAT),
-                ("wrapT", WRAP_MODES, REPEAT),
-                ("magFilter", MAG_FILTERS, None),
-                ("minFilter", MIN_FILTERS, None),
+            # A missing or invalid value keeps the TextureSlot default (repeat, trilinear).
+            for attribute, field, allowed in (
+                ("wrapS", "wrap_s", WRAP_MODES),
+                ("wrapT", "wrap_t", WRAP_MODES),
+                ("magFilter", "mag_filter", MAG_FILTERS),
+                ("minFilter", "min_filter", MIN_FILTERS),
             ):
                 value = getattr(sampler, attribute)
                 if value is not None and value not in allowed:
                     _warn(scene_warnings, f"{where}: sampler {attribute} {value!r} is not a glTF value; default used")
-                    value = None
-                if value is None:
-                    value = default
-                if value is not None:
-                    field = {"wrapS": "wrap_s", "wrapT": "wrap_t", "magFilter": "mag_filter", "minFilter": "min_filter"}
-                    setattr(out, field[attribute], int(value))
+                elif value is not None:
+                    setattr(out, field, int(value))
     transform, override = _texture_transform(info, where, scene_warnings)
     out.transform = transform
     tex_coord = override if override is not None else (info.texCoord or 0)

@@ -41,6 +41,7 @@ MIN_FILTERS = (
 # The texture slots of a glTF material (core specification 3.9) in the order shaders bind them.
 TEXTURE_SLOTS = ("base_color", "metallic_roughness", "normal", "occlusion", "emissive")
 COLOUR_SLOTS = ("base_color", "emissive")  # sRGB-encoded; the others hold linear data
+ALPHA_MODES = ("OPAQUE", "MASK", "BLEND")  # glTF alphaMode, in the order of the shaders' codes
 
 
 def srgb_to_linear(values: np.ndarray) -> np.ndarray:

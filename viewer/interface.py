@@ -28,6 +28,8 @@ from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
 from lobeview.materials.microfacet import ALPHA_MIN
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, MAX_ELLIPSE_ANGLE, XI_BORDER
 from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
+from lobeview.scenes.scene import ALPHA_MODES as GLTF_ALPHA_MODES
+from lobeview.scenes.scene import TEXTURE_SLOTS
 
 
 class UniformError(KeyError):
@@ -59,10 +61,10 @@ LOBE_MAP_MODES = {"splitsum": 0, "lobes": 1, "banks": 2}
 LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)
 CDF_ROW = 1024  # texels per row of the environment CDF texture (viewer/cubemap.py)
 PROXY_KINDS = {"planes": 1, "box": 2}  # u_proxy_kind (scenes/reflection_proxy.py)
-#: u_alpha_mode codes (glTF alphaMode)
-ALPHA_MODES = {"opaque": 0, "mask": 1, "blend": 2}
+#: u_alpha_mode codes (glTF alphaMode, scenes/scene.py ALPHA_MODES)
+ALPHA_MODES = {mode.lower(): code for code, mode in enumerate(GLTF_ALPHA_MODES)}
 #: u_material_maps slots (scenes/scene.py TEXTURE_SLOTS, in that order)
-MAP_SLOTS = {"base color": 0, "metallic roughness": 1, "normal": 2, "occlusion": 3, "emissive": 4}
+MAP_SLOTS = {slot.replace("_", " "): index for index, slot in enumerate(TEXTURE_SLOTS)}
 
 
 def _defines_of(prefix: str, codes: dict) -> dict:

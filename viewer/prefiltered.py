@@ -71,6 +71,16 @@ def dfg_texture_data(size: int = DFG_SIZE, directory: Path | None = None) -> np.
     return _DFG_CACHE[size]
 
 
+def dfg_texture(ctx: moderngl.Context, directory: Path | None = None) -> moderngl.Texture:
+    """The DFG table (:func:`dfg_texture_data`) as a linearly filtered, edge-clamped texture:
+    the split-sum lookup and the per-pixel glTF lobe albedo of normalised lobe-N read it."""
+    data = dfg_texture_data(directory=directory).astype(np.float32)
+    tex = ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), dtype="f4")
+    tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    tex.repeat_x = tex.repeat_y = False
+    return tex
+
+
 def _rows_for(angle: float, most: int) -> int:
     """Rows of an equirectangular map with about two texels across ``angle`` (radians),
     between 16 and ``most`` (multiple of 8)."""
@@ -244,11 +254,8 @@ class PrefilteredMaps:
     def dfg(self) -> moderngl.Texture:
         if self._dfg is None:
             t0 = time.perf_counter()
-            data = dfg_texture_data(directory=self.cache_dir).astype(np.float32)
-            self._dfg = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), dtype="f4")
-            self._dfg.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            self._dfg.repeat_x = self._dfg.repeat_y = False
-            self.memory["DFG table"] = data.nbytes
+            self._dfg = dfg_texture(self.ctx, self.cache_dir)
+            self.memory["DFG table"] = self._dfg.size[0] * self._dfg.size[1] * 16
             self.seconds["DFG table"] = time.perf_counter() - t0
         return self._dfg
 

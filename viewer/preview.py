@@ -98,9 +98,7 @@ class PreviewRenderer(RendererBase):
             with timer or contextlib.nullcontext():
                 vao.render(moderngl.TRIANGLES)
             self.ctx.finish()
-            error = self.ctx.error
-            if error != "GL_NO_ERROR":  # a failed draw would return an empty image silently
-                raise RuntimeError(f"OpenGL reported {error} while drawing {method}: a renderer bug, please report it")
+            self.raise_on_gl_error(method)
             timings["shade"] += time.perf_counter() - t0
             if timer is not None:
                 timings["gpu shade"] = timings.get("gpu shade", 0.0) + timer.elapsed * 1e-9

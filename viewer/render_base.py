@@ -180,6 +180,13 @@ class RendererBase:
             set_uniform(program, "u_albedo_per_pixel", 0)
             bind_sampler(program, "u_dfg", self._dummy_texture("2d"))
 
+    def raise_on_gl_error(self, method) -> None:
+        """Raise if GL flagged an error since the flag was last read: a failed draw call leaves
+        objects out of the image (or the whole image empty) without any other sign."""
+        error = self.ctx.error
+        if error != "GL_NO_ERROR":
+            raise RuntimeError(f"OpenGL reported {error} while drawing {method}: a renderer bug, please report it")
+
     def _material_texture(self, key: tuple, make) -> tuple:
         """(texture, derived data) of a material, made by ``make()`` on first use and cached by
         content; the least recently used is released beyond MAX_MATERIAL_TEXTURES."""

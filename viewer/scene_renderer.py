@@ -109,7 +109,7 @@ class SceneRenderer(RendererBase):
         self.environment = RadianceCube(ctx, equirect_to_cube_faces(environment, 256))
         self.environment_name = environment.name
         # Diffuse light of objects without a lightmap: the environment's irradiance (SH9).
-        self.environment_sh9 = environment.irradiance_sh9()
+        self.environment_sh9 = environment.irradiance_sh9().astype(np.float32)
         self._env_hash = hashlib.sha256(environment.image.tobytes()).hexdigest()[:16]
         # Lightmaps and base-colour textures by the image they upload; the image is kept with the
         # texture so that its id() cannot be reused while the entry lives.
@@ -217,7 +217,9 @@ class SceneRenderer(RendererBase):
         def upload():
             image = slot.image
             if image.dtype == np.uint8:
-                data = np.ascontiguousarray(image if image.shape[-1] == 4 else slot.linear())
+                if image.shape[-1] == 3:
+                    image = np.concatenate([image, np.full(image.shape[:-1] + (1,), 255, np.uint8)], axis=-1)
+                data = np.ascontiguousarray(image)
                 internal = GL_SRGB8_ALPHA8 if slot.srgb else None
                 tex = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), internal_format=internal)
             else:
@@ -231,12 +233,9 @@ class SceneRenderer(RendererBase):
     def _dfg_texture(self) -> moderngl.Texture:
         """The split-sum DFG table (viewer/prefiltered.py), for per-pixel glTF lobe albedo."""
         if self._dfg is None:
-            from .prefiltered import dfg_texture_data
+            from .prefiltered import dfg_texture
 
-            data = dfg_texture_data(directory=self.cache_dir).astype(np.float32)
-            self._dfg = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), dtype="f4")
-            self._dfg.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            self._dfg.repeat_x = self._dfg.repeat_y = False
+            self._dfg = dfg_texture(self.ctx, self.cache_dir)
         return self._dfg
 
     def _map_sampler(self, slot: TextureSlot | None) -> moderngl.Sampler:
@@ -424,7 +423,7 @@ class SceneRenderer(RendererBase):
             else:
                 bind_sampler(program, "u_lightmap", self._white)
                 set_uniform(program, "u_lightmap_texcoord", -1)
-                write_uniform(program, "u_irradiance_sh9", self.environment_sh9.astype(np.float32))
+                write_uniform(program, "u_irradiance_sh9", self.environment_sh9)
             self._bind_material(program, mat)
             if use_specular:
                 self.bind_cube(program, obj.cube, obj_method, obj.material)
@@ -531,9 +530,7 @@ class SceneRenderer(RendererBase):
             with timer or contextlib.nullcontext():
                 self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
             self.ctx.finish()
-            error = self.ctx.error
-            if error != "GL_NO_ERROR":  # a failed draw leaves objects out of the image silently
-                raise RuntimeError(f"OpenGL reported {error} while drawing {method}: a renderer bug, please report it")
+            self.raise_on_gl_error(method)
             t_shade += time.perf_counter() - t0
             if timer is not None:
                 t_gpu += timer.elapsed * 1e-9
