@@ -1,9 +1,11 @@
 """``lobeview bake SCENE``: bake (or re-bake) lightmaps for a glTF scene.
 
-Objects without TEXCOORD_1 are unwrapped with xatlas (all objects into one atlas when any is
-missing); every material gets a MOZ_lightmap extension pointing at the baked EXR. Writes
-``SCENE_baked.glb`` + ``SCENE_baked_lightmap.exr`` next to the input unless ``--out`` says
-otherwise.
+The scene is baked into one shared atlas over TEXCOORD_1: the file's own coordinates when every
+baked object has them and they do not overlap, else a new xatlas unwrap of all objects (uniform
+texel density over the scene's real extent; said so). The output is the input glTF unchanged
+except for the lightmap (scenes/baked_gltf.py): one self-contained ``SCENE_baked.glb`` in the
+current folder unless ``--out`` names another, with the atlas embedded as an EXR image, or
+written beside it with ``--external-lightmap``. The input's folder is never written to.
 """
 
 from __future__ import annotations
@@ -30,16 +32,25 @@ def add_arguments(p) -> None:
         default=32,
         help="shadow rays per texel towards emissive surfaces (default 32)",
     )
-    p.add_argument("--out", help="output .glb (default: SCENE_baked.glb beside the input)")
+    p.add_argument("--out", help="output .glb (default: SCENE_baked.glb in the current folder)")
+    p.add_argument(
+        "--external-lightmap",
+        action="store_true",
+        help="write the lightmap as OUT_lightmap.exr beside the .glb instead of embedding it",
+    )
     add_trust_arguments(p)
 
 
+# More than this fraction of the file's TEXCOORD_1 texels claimed twice: not a shared atlas.
+MAX_UV_OVERLAP = 0.05
+
+
 def run(args) -> int:
-    from lobeview.scenes.baker import bake_lightmap
+    from lobeview.scenes.baked_gltf import write_baked_gltf
+    from lobeview.scenes.baker import bake_lightmap, lightmap_uv_overlap
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.scenes.demo import unwrap_lightmap_uvs
     from lobeview.scenes.gltf_loader import load_gltf
-    from lobeview.scenes.gltf_writer import write_glb
 
     for name in ("resolution", "rays", "bounces"):
         if getattr(args, name) < 1:
@@ -50,9 +61,23 @@ def run(args) -> int:
     limits = trust_limits(args)
     t0 = time.perf_counter()
     source = Path(args.scene)
+    out = Path(args.out) if args.out else Path.cwd() / (source.stem + "_baked.glb")
+    _check_writable(out)
     scene = load_gltf(source, limits)
-    if any(obj.uv1 is None for obj in scene.objects):
-        print(f"unwrapping {len(scene.objects)} objects into one {args.resolution}^2 lightmap atlas (xatlas)")
+    missing = [obj.name for obj in scene.objects if obj.uv1 is None]
+    overlap = 0.0 if missing else lightmap_uv_overlap(scene, args.resolution)
+    if missing or overlap > MAX_UV_OVERLAP:
+        reason = (
+            f"{len(missing)} of {len(scene.objects)} objects have no TEXCOORD_1"
+            if missing
+            else f"the file's TEXCOORD_1 claims {overlap:.0%} of its texels twice (per-object or stacked "
+            "lightmap UVs, not one shared atlas)"
+        )
+        _check_texcoord1_free(scene, source)
+        print(
+            f"{reason}: unwrapping all {len(scene.objects)} objects into one {args.resolution}^2 atlas "
+            "(xatlas); the output's TEXCOORD_1 is the new atlas"
+        )
         scene = unwrap_lightmap_uvs(scene, args.resolution)
     lightmap = bake_lightmap(
         scene,
@@ -62,7 +87,33 @@ def run(args) -> int:
         args.bounces,
         light_samples=args.light_samples,
     )
-    out = Path(args.out) if args.out else source.with_name(source.stem + "_baked.glb")
-    write_glb(scene, out, lightmap, lightmap_name=out.stem + "_lightmap.exr")
-    print(f"wrote {out} and {out.stem}_lightmap.exr in {time.perf_counter() - t0:.1f} s")
+    written = write_baked_gltf(source, scene, lightmap, out, limits, external_lightmap=args.external_lightmap)
+    print(f"wrote {' and '.join(str(p) for p in written)} in {time.perf_counter() - t0:.1f} s")
     return 0
+
+
+def _check_writable(out: Path) -> None:
+    """Refuse an output that cannot be written before an hour of baking, not after it."""
+    if out.suffix.lower() != ".glb":
+        raise ValueError(f"--out {out}: the baked scene is a .glb file")
+    folder = out.parent if str(out.parent) else Path(".")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        probe = folder / f".{out.name}.lobeview-write-test"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        reason = exc.strerror or exc
+        raise ValueError(f"cannot write to {folder} ({reason}); name a writable place with --out") from None
+
+
+def _check_texcoord1_free(scene, source: Path) -> None:
+    """A new atlas replaces TEXCOORD_1: refuse when a material's textures read that set."""
+    for material in scene.materials:
+        for slot_name, slot in material.textures.items():
+            if slot.tex_coord == 1:
+                raise ValueError(
+                    f"{source}: material {material.name!r} reads its {slot_name} texture through TEXCOORD_1, "
+                    "which the lightmap atlas would replace; give every object its own non-overlapping "
+                    "TEXCOORD_1 lightmap coordinates, or move that texture to TEXCOORD_0"
+                )

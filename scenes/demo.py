@@ -247,6 +247,7 @@ def unwrap_lightmap_uvs(scene: Scene, resolution: int) -> Scene:
             m.name,
         )
         obj.uv1 = uvs.astype(np.float32)
+        obj.vertex_map = vmapping if obj.vertex_map is None else obj.vertex_map[vmapping]
     return scene
 
 

@@ -194,7 +194,10 @@ class _Reader:
             raise GltfError(f"{self.path}: bufferView {view_index} byteStride {stride} is outside 4..252")
         return memoryview(data)[start:end], stride
 
-    def accessor(self, index: int) -> np.ndarray:
+    def accessor(self, index: int, raw: bool = False) -> np.ndarray:
+        """An accessor's elements as (count, components): float64 for floats and normalized
+        integers (scaled to [0, 1] / [-1, 1]), else the integer type; with ``raw`` exactly the
+        stored component type (to copy the data elsewhere unchanged)."""
         acc = _index(self.gltf.accessors, index, "accessor", self.path)
         if acc.sparse is not None:
             raise GltfError(f"{self.path}: accessor {index} is sparse; sparse accessors are not supported")
@@ -212,24 +215,26 @@ class _Reader:
                 raise GltfError(f"{self.path}: accessor {index} has no bufferView but declares {count} elements")
             out = np.zeros((count, ncomp), dtype=np.float64)
         else:
-            raw, stride = self.view_bytes(acc.bufferView)
+            view_data, stride = self.view_bytes(acc.bufferView)
             offset = _count(acc.byteOffset, f"accessor {index} byteOffset", self.path, default=0)
             item = dtype.itemsize * ncomp
             stride = stride or item
             if stride < item:
                 raise GltfError(f"{self.path}: accessor {index}: byteStride {stride} is less than one element ({item})")
             needed = offset + stride * (count - 1) + item if count else 0
-            if needed > len(raw):
+            if needed > len(view_data):
                 raise GltfError(f"{self.path}: accessor {index} reads past the end of its bufferView")
             if count == 0:
                 out = np.zeros((0, ncomp), dtype=dtype)
             elif stride == item:
-                out = np.frombuffer(raw, dtype=dtype, count=count * ncomp, offset=offset).reshape(count, ncomp)
+                out = np.frombuffer(view_data, dtype=dtype, count=count * ncomp, offset=offset).reshape(count, ncomp)
             else:
                 # Gather whole rows by index (bounds already checked, no as_strided past the end).
-                rows = np.frombuffer(raw, dtype=np.uint8, count=needed - offset, offset=offset)
+                rows = np.frombuffer(view_data, dtype=np.uint8, count=needed - offset, offset=offset)
                 starts = np.arange(count, dtype=np.int64)[:, None] * stride + np.arange(item, dtype=np.int64)[None, :]
                 out = rows[starts].copy().view(dtype).reshape(count, ncomp)
+        if raw:
+            return np.ascontiguousarray(out)
         out = out.astype(np.float64) if acc.componentType == 5126 or acc.normalized else out
         if acc.normalized and acc.componentType in _NORMALIZE:
             out = np.maximum(out / _NORMALIZE[acc.componentType], -1.0)
@@ -258,6 +263,9 @@ class _Reader:
                 data = _decode_data_uri(image.uri, f"{self.path}: image")
             else:
                 data, _ = self.view_bytes(image.bufferView)
+            hdr_suffix = _embedded_hdr_suffix(image.mimeType, data)
+            if hdr_suffix is not None:
+                return _read_embedded_hdr(bytes(data), hdr_suffix, self.budget)
             from PIL import Image
 
             pil = Image.open(io.BytesIO(data))
@@ -275,6 +283,33 @@ class _Reader:
             # for corrupt or huge files; BudgetError/UntrustedReferenceError carry their reason.
             self.last_image_problem = str(exc) or type(exc).__name__
             return None
+
+
+# Embedded HDR images (a baked lightmap inside its .glb): the MIME types lobeview writes and the
+# files' magic numbers, which decide when the MIME type is missing.
+HDR_MIME_TYPES = {"image/x-exr": ".exr", "image/vnd.radiance": ".hdr"}
+
+
+def _embedded_hdr_suffix(mime_type, data) -> str | None:
+    if mime_type in HDR_MIME_TYPES:
+        return HDR_MIME_TYPES[mime_type]
+    head = bytes(data[:10])
+    if head[:4] == b"\x76\x2f\x31\x01":
+        return ".exr"
+    if head.startswith((b"#?RADIANCE", b"#?RGBE")):
+        return ".hdr"
+    return None
+
+
+def _read_embedded_hdr(data: bytes, suffix: str, budget: LoadBudget) -> np.ndarray:
+    """An EXR/Radiance image held in a buffer: OpenEXR reads files, so the bytes go through a
+    private temporary file; the header is checked against ``budget`` before any pixels are read."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="lobeview-image-") as folder:
+        file = Path(folder) / f"embedded{suffix}"
+        file.write_bytes(data)
+        return read_hdr_image(file, budget)
 
 
 def _texture_transform(info, where: str, scene_warnings: list) -> tuple[np.ndarray, int | None]:
@@ -580,7 +615,7 @@ def _load(path: Path, limits: Limits) -> Scene:
             mesh = _index(gltf.meshes, node.mesh, "mesh", path)
             for p_index, prim in enumerate(mesh.primitives or []):
                 name = f"{node.name or mesh.name or f'node{node_index}'}" + (f"#{p_index}" if p_index else "")
-                obj = _primitive(reader, prim, world, name, scene_warnings)
+                obj = _primitive(reader, prim, world, name, scene_warnings, (node_index, node.mesh, p_index))
                 if obj is not None:
                     if obj.material < 0:
                         obj.material = default_material
@@ -642,7 +677,9 @@ def _load(path: Path, limits: Limits) -> Scene:
     return scene
 
 
-def _primitive(reader: _Reader, prim, world: np.ndarray, name: str, scene_warnings: list) -> SceneObject | None:
+def _primitive(
+    reader: _Reader, prim, world: np.ndarray, name: str, scene_warnings: list, origin: tuple[int, int, int]
+) -> SceneObject | None:
     path = reader.path
     mode = 4 if prim.mode is None else prim.mode
     if mode != 4:
@@ -734,4 +771,10 @@ def _primitive(reader: _Reader, prim, world: np.ndarray, name: str, scene_warnin
     if prim.material is not None:
         _index(reader.gltf.materials, prim.material, "material", path)
     material = -1 if prim.material is None else prim.material
-    return SceneObject(name, mesh, material, None if uv1 is None else uv1.astype(np.float32))
+    return SceneObject(
+        name,
+        mesh,
+        material,
+        None if uv1 is None else uv1.astype(np.float32),
+        origin=(origin[0], origin[1], origin[2], bool(flip)),
+    )

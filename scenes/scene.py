@@ -131,6 +131,13 @@ class SceneObject:
     uv1: np.ndarray | None = None  # (V, 2) lightmap coordinates
     reflection_proxy: object | None = None  # scenes.reflection_proxy.ReflectionProxy (None: plain lookup)
     planar_reflector: bool | str = "auto"  # mirror pass: True, False or "auto" (scenes/planar_mirror.py)
+    # Where a loaded object came from, so that `lobeview bake` can write the input file back with
+    # only the lightmap added: (node, mesh, primitive) indices of the glTF and whether the node's
+    # transform mirrors (the loader then reversed the triangles' winding). None: generated.
+    origin: tuple[int, int, int, bool] | None = None
+    # After a lightmap unwrap: the loaded vertex each vertex of ``mesh`` copies (xatlas splits
+    # vertices along chart seams). None: the vertices are the file's, one to one.
+    vertex_map: np.ndarray | None = None
 
 
 @dataclass

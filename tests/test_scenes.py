@@ -359,7 +359,7 @@ def test_bake_command_unwraps_and_writes_a_lightmapped_scene(tmp_path, capsys):
     source = write_glb(scene, tmp_path / "plain.glb")
     out = tmp_path / "baked.glb"
     assert main(["bake", str(source), "--resolution", "64", "--rays", "8", "--bounces", "1", "--out", str(out)]) == 0
-    assert "unwrapping 2 objects" in capsys.readouterr().out
+    assert "unwrapping all 2 objects" in capsys.readouterr().out
     baked = load_gltf(out)
     assert all(o.uv1 is not None for o in baked.objects)
     assert all(m.lightmap is not None for m in baked.materials[:2])
