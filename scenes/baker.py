@@ -8,8 +8,11 @@ E = pi * mean(L_in) (cosine-weighted estimator of integral L cos d omega), itera
 ``bounces`` passes. Emissive surfaces are sampled directly (next-event estimation):
 ``light_samples`` points uniform over the emitters' area, each with a shadow ray, give
 E_direct = A / S * sum L_e cos(theta_r) cos(theta_e) / d^2, so small lamps do not turn into
-noise; cosine rays that hit an emitter count only its reflected light. Thin transmissive objects (glass panes)
-are left out of the ray casting: they cast no shadow, a documented simplification.
+noise; cosine rays that hit an emitter count only its reflected light. KHR_lights_punctual lamps
+add their irradiance (:func:`lamp_irradiance`, the extension's falloff and spot cone) with one
+exact shadow ray per texel and lamp, before the bounces, so their light is reflected too. Thin
+transmissive objects (glass panes) are left out of the ray casting: they cast no shadow, a
+documented simplification.
 
 Directions come from a 2D Sobol sequence with a per-texel Cranley-Patterson rotation, so a bake
 is deterministic. Islands are dilated by a few texels so bilinear lookups never read the black
@@ -227,6 +230,15 @@ def bake_lightmap(
     rotation = rng.random((len(pixel), 2))
 
     direct = _direct_emission(mesh, intersector, faces, emission_face, origin, normal, light_samples, seed)
+    if scene.lights:
+        t_lamps = time.perf_counter()
+        direct = direct + _lamp_light(scene.lights, mesh, intersector, origin, normal, extent)
+        if progress:
+            print(
+                f"[bake] {len(scene.lights)} lamp(s) (KHR_lights_punctual): {time.perf_counter() - t_lamps:.1f} s",
+                file=sys.stderr,
+                flush=True,
+            )
     lightmap = np.zeros((resolution, resolution, 3))
     hit_tri = None
     escape_radiance = None
@@ -324,6 +336,58 @@ def _direct_emission(mesh, intersector, faces, emission_face, origin, normal, sa
         g = cos_r[idx] * cos_e[idx] / np.maximum(dist2[idx], 1e-12)
         out[idx] += emission_face[emitters[k[idx]]] * g[:, None]
     return out * total_area / samples
+
+
+def lamp_irradiance(light, position: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """Unshadowed irradiance (M, 3) from one KHR_lights_punctual lamp at surface points with
+    unit normals, as the extension defines it: E = I cos(theta) / d^2 for point and spot lamps,
+    windowed by the recommended range falloff clamp(1 - (d / range)^4, 0, 1) and, for spot lamps,
+    the squared linear ramp between the cones' cosines; E = I cos(theta) for directional ones."""
+    colour = np.asarray(light.colour, np.float64) * float(light.intensity)
+    if light.type == "directional":
+        cos_theta = np.clip(-(normal @ np.asarray(light.direction, np.float64)), 0.0, None)
+        return cos_theta[:, None] * colour[None, :]
+    to_lamp = np.asarray(light.position, np.float64)[None, :] - position
+    dist2 = np.maximum(np.sum(to_lamp * to_lamp, axis=1), 1e-30)
+    dist = np.sqrt(dist2)
+    cos_theta = np.clip(np.sum(normal * to_lamp, axis=1) / dist, 0.0, None)
+    falloff = 1.0 / dist2
+    if light.range is not None:
+        falloff *= np.clip(1.0 - (dist / light.range) ** 4, 0.0, 1.0)
+    if light.type == "spot":
+        cos_outer, cos_inner = np.cos(light.outer_cone), np.cos(light.inner_cone)
+        scale = 1.0 / max(1e-3, cos_inner - cos_outer)
+        cos_axis = -np.sum(to_lamp * np.asarray(light.direction, np.float64)[None, :], axis=1) / dist
+        falloff *= np.clip((cos_axis - cos_outer) * scale, 0.0, 1.0) ** 2
+    return (cos_theta * falloff)[:, None] * colour[None, :]
+
+
+def _lamp_light(lights, mesh, intersector, origin, normal, extent: float) -> np.ndarray:
+    """Irradiance from the scene's lamps at the texels, one shadow ray per texel and lamp (a
+    punctual lamp has no area: the shadow is hard and exact, no noise)."""
+    out = np.zeros((len(origin), 3))
+    for light in lights:
+        e = lamp_irradiance(light, origin, normal)
+        lit = np.flatnonzero(np.max(e, axis=1) > 0)
+        if len(lit) == 0:
+            continue
+        if light.type == "directional":
+            direction = np.broadcast_to(-np.asarray(light.direction, np.float64), (len(lit), 3))
+            dist = np.full(len(lit), np.inf)
+        else:
+            to_lamp = np.asarray(light.position, np.float64)[None, :] - origin[lit]
+            dist = np.linalg.norm(to_lamp, axis=1)
+            direction = to_lamp / np.maximum(dist, 1e-30)[:, None]
+        direction = np.ascontiguousarray(direction)
+        first = intersector.intersects_first(origin[lit], direction)
+        blocked = first >= 0
+        if np.any(blocked):
+            hits = _hit_points(mesh, origin[lit][blocked], direction[blocked], first[blocked])
+            # Only geometry between the texel and the lamp shadows it (a lamp may hang below a ceiling).
+            hit_dist = np.linalg.norm(hits - origin[lit][blocked], axis=1)
+            blocked[np.flatnonzero(blocked)] = hit_dist < dist[blocked] - 1e-6 * extent
+        out[lit[~blocked]] += e[lit[~blocked]]
+    return out
 
 
 def _hit_points(mesh, origins, directions, tris):

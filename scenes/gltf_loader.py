@@ -47,10 +47,12 @@ from .meshes import Mesh, vertex_normals, vertex_tangents
 from .scene import (
     ALPHA_MODES,
     COLOUR_SLOTS,
+    LIGHT_TYPES,
     MAG_FILTERS,
     MIN_FILTERS,
     WRAP_MODES,
     Lightmap,
+    PunctualLight,
     Scene,
     SceneCamera,
     SceneMaterial,
@@ -578,12 +580,8 @@ def _load(path: Path, limits: Limits) -> Scene:
         )
     reader = _Reader(gltf, path, limits)
     scene_warnings: list[str] = []
-    if "KHR_lights_punctual" in set(gltf.extensionsUsed or []):
-        _warn(
-            scene_warnings,
-            f"{path}: KHR_lights_punctual lamps are not used yet (neither baked nor shaded); "
-            "light comes from the environment, emissive surfaces and the lightmaps",
-        )
+    lamp_definitions = _lamp_definitions(gltf, path, scene_warnings)
+    lights: list[PunctualLight] = []
     materials = [_material(reader, i, scene_warnings) for i in range(len(gltf.materials or []))]
     default_material = len(materials)
     materials.append(_material(reader, None, scene_warnings))
@@ -621,6 +619,11 @@ def _load(path: Path, limits: Limits) -> Scene:
                         obj.material = default_material
                     objects.append(obj)
                     node_extras.append((obj, node.extras))
+        lamp = ((node.extensions or {}).get("KHR_lights_punctual") or {}).get("light")
+        if lamp is not None:
+            light = _placed_lamp(lamp_definitions, lamp, world, node.name or f"node{node_index}", path, scene_warnings)
+            if light is not None:
+                lights.append(light)
         if node.camera is not None:
             cam = _index(gltf.cameras, node.camera, "camera", path)
             yfov = getattr(cam.perspective, "yfov", None)
@@ -661,7 +664,14 @@ def _load(path: Path, limits: Limits) -> Scene:
                 scene_warnings,
                 f"{path}: object {obj.name!r} uses a lightmap but has no TEXCOORD_1; {FALLBACKS['missing lightmap']}",
             )
-    scene = Scene(objects, materials, cameras, str(path), scene_warnings)
+    if lights:
+        _warn(
+            scene_warnings,
+            f"{path}: {len(lights)} KHR_lights_punctual lamp(s): `lobeview bake` bakes their light into the "
+            "lightmaps; live shading does not see them (no lamp highlights in the specular lobes, unbaked "
+            "objects get no lamp light)",
+        )
+    scene = Scene(objects, materials, cameras, str(path), scene_warnings, lights)
     if objects:
         from .planar_mirror import reflector_mode
         from .reflection_proxy import object_proxy
@@ -675,6 +685,57 @@ def _load(path: Path, limits: Limits) -> Scene:
             for w in caught:
                 _warn(scene_warnings, f"{path}: {w.message}")
     return scene
+
+
+def _lamp_definitions(gltf, path: Path, scene_warnings: list) -> list[dict | None]:
+    """The file's KHR_lights_punctual lamps, validated (None for a lamp that is skipped)."""
+    lamps = ((gltf.extensions or {}).get("KHR_lights_punctual") or {}).get("lights") or []
+    if not isinstance(lamps, list):
+        _warn(scene_warnings, f"{path}: KHR_lights_punctual lights is not a list; no lamps used")
+        return []
+    out = []
+    for index, lamp in enumerate(lamps):
+        name = lamp.get("name", f"light{index}") if isinstance(lamp, dict) else f"light{index}"
+        try:
+            if not isinstance(lamp, dict) or lamp.get("type") not in LIGHT_TYPES:
+                raise ValueError(
+                    f"type {lamp.get('type') if isinstance(lamp, dict) else lamp!r} is not one of {LIGHT_TYPES}"
+                )
+            colour = np.asarray(lamp.get("color", [1.0, 1.0, 1.0]), dtype=np.float64).reshape(3)
+            intensity = float(lamp.get("intensity", 1.0))
+            lamp_range = lamp.get("range")
+            lamp_range = None if lamp_range is None else float(lamp_range)
+            spot = lamp.get("spot") or {}
+            inner, outer = float(spot.get("innerConeAngle", 0.0)), float(spot.get("outerConeAngle", np.pi / 4))
+            if not (np.all(np.isfinite(colour)) and np.all(colour >= 0) and np.isfinite(intensity) and intensity >= 0):
+                raise ValueError("colour and intensity must be finite and not negative")
+            if lamp_range is not None and not (np.isfinite(lamp_range) and lamp_range > 0):
+                raise ValueError(f"range {lamp_range} must be positive")
+            if lamp["type"] == "spot" and not (0 <= inner < outer <= np.pi / 2):
+                raise ValueError(f"spot cone angles {inner}, {outer} need 0 <= inner < outer <= pi/2")
+        except (TypeError, ValueError, AttributeError) as exc:
+            _warn(scene_warnings, f"{path}: lamp {name!r} (KHR_lights_punctual) skipped: {exc}")
+            out.append(None)
+            continue
+        out.append(dict(name=name, type=lamp["type"], colour=colour, intensity=intensity, range=lamp_range,
+                        inner_cone=inner, outer_cone=outer))  # fmt: skip
+    return out
+
+
+def _placed_lamp(definitions: list, lamp, world: np.ndarray, node_name: str, path: Path, scene_warnings: list):
+    """A node's lamp in world space: at the node's origin, shining along its -Z axis."""
+    if not isinstance(lamp, int) or not 0 <= lamp < len(definitions):
+        _warn(scene_warnings, f"{path}: node {node_name!r} names lamp {lamp!r}, which does not exist; ignored")
+        return None
+    definition = definitions[lamp]
+    if definition is None:
+        return None
+    axis = -world[:3, 2]
+    length = float(np.linalg.norm(axis))
+    if not length > 1e-12:
+        _warn(scene_warnings, f"{path}: lamp node {node_name!r} has a degenerate transform; lamp ignored")
+        return None
+    return PunctualLight(position=world[:3, 3].copy(), direction=axis / length, **definition)
 
 
 def _primitive(

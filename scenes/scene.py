@@ -149,6 +149,27 @@ class SceneCamera:
     fov_y: float
 
 
+LIGHT_TYPES = ("point", "spot", "directional")  # KHR_lights_punctual
+
+
+@dataclass
+class PunctualLight:
+    """A KHR_lights_punctual lamp in world space. ``intensity`` x ``colour`` is the radiant
+    intensity of point and spot lamps (the extension's candela) and the irradiance at normal
+    incidence of directional ones (its lux), in the environment's units: one candela is one
+    unit, as the Khronos Sample Viewer takes it."""
+
+    name: str
+    type: str  # one of LIGHT_TYPES
+    colour: np.ndarray  # linear RGB
+    intensity: float
+    position: np.ndarray  # world space (unused by directional lamps)
+    direction: np.ndarray  # unit vector the lamp shines along (its node's -Z)
+    range: float | None = None  # None: infinite (point and spot lamps)
+    inner_cone: float = 0.0  # spot lamps, radians
+    outer_cone: float = np.pi / 4
+
+
 @dataclass
 class Scene:
     objects: list[SceneObject]
@@ -156,6 +177,7 @@ class Scene:
     cameras: list[SceneCamera] = field(default_factory=list)
     source: str = ""
     warnings: list[str] = field(default_factory=list)
+    lights: list[PunctualLight] = field(default_factory=list)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
