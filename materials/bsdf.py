@@ -135,9 +135,12 @@ class HalfVectorLobe(Component):
 class BSDF:
     """A sum of components with mixture importance sampling."""
 
-    def __init__(self, components: list[Component], name: str = "bsdf"):
+    def __init__(self, components: list[Component], name: str = "bsdf", tangent_rotation: float = 0.0):
         self.components = list(components)
         self.name = name
+        # Radians by which the surface's tangent frame turns about the normal before this BSDF's
+        # local frame (x = tangent) applies: KHR_materials_anisotropy's rotation.
+        self.tangent_rotation = float(tangent_rotation)
         weights = np.array([max(c.selection_weight, 0.0) for c in self.components], dtype=float)
         total = weights.sum()
         self.selection_probabilities = weights / total if total > 0 else np.zeros_like(weights)

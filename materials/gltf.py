@@ -13,6 +13,12 @@ Smith visibility G2 / (4 |N.L| |N.V|). Expanded, that is a diffuse term
 
 The roughness -> alpha mapping (alpha = roughness^2) is defined here and nowhere else; alpha is
 clamped to ALPHA_MIN (roughness 0.01) because a perfect mirror has no density to sample.
+
+KHR_materials_anisotropy stretches the GGX lobe along the anisotropy direction, the tangent
+rotated by ``anisotropy_rotation`` about the normal (counter-clockwise towards the bitangent):
+alpha_t = mix(alpha, 1, strength^2) along it, alpha_b = alpha across (the extension's
+definition). Here the BSDF's local x axis is that direction; :func:`anisotropy_frame` (numpy)
+and ``rotate_tangent`` (shaders/frame.glsl) turn the mesh's tangent frame into it.
 """
 
 from __future__ import annotations
@@ -31,6 +37,20 @@ DIELECTRIC_F0 = 0.04
 def roughness_to_alpha(roughness: float) -> float:
     """glTF perceptual roughness -> GGX alpha (spec Appendix B: alpha = roughness^2)."""
     return max(float(roughness) ** 2, ALPHA_MIN)
+
+
+def anisotropic_alphas(roughness: float, anisotropy: float = 0.0) -> tuple[float, float]:
+    """(alpha_t, alpha_b) of KHR_materials_anisotropy: alpha_t = mix(alpha, 1, strength^2)."""
+    alpha = roughness_to_alpha(roughness)
+    return alpha + (1.0 - alpha) * float(anisotropy) ** 2, alpha
+
+
+def anisotropy_frame(frame: np.ndarray, rotation: float) -> np.ndarray:
+    """The (3, 3) frame (columns tangent, bitangent, normal) turned by ``rotation`` radians about
+    its normal: the new tangent is cos r t + sin r b, the anisotropy direction."""
+    c, s = np.cos(rotation), np.sin(rotation)
+    t, b, n = frame[:, 0], frame[:, 1], frame[:, 2]
+    return np.stack([c * t + s * b, -s * t + c * b, n], axis=1)
 
 
 def _dielectric_fresnel(wo_h: np.ndarray) -> np.ndarray:
@@ -59,8 +79,9 @@ class GltfDiffuse(CosineSampled):
 class GltfSpecular(MicrofacetReflection):
     name = "glTF specular"
 
-    def __init__(self, base_color: np.ndarray, metallic: float, alpha: float):
-        super().__init__(MicrofacetDistribution("ggx", alpha, alpha), Fresnel("none"))
+    def __init__(self, base_color: np.ndarray, metallic: float, alpha: float, alpha_b: float | None = None):
+        alpha_b = alpha if alpha_b is None else alpha_b
+        super().__init__(MicrofacetDistribution("ggx", alpha, alpha_b), Fresnel("none"))
         self.base_color = base_color
         self.metallic = metallic
 
@@ -77,10 +98,15 @@ class GltfSpecular(MicrofacetReflection):
         return (1.0 - self.metallic) * f_dielectric + self.metallic * f_metal
 
 
-def gltf_bsdf(base_color, metallic: float, roughness: float) -> BSDF:
+def gltf_bsdf(
+    base_color, metallic: float, roughness: float, anisotropy: float = 0.0, anisotropy_rotation: float = 0.0
+) -> BSDF:
+    """The glTF BRDF; ``anisotropy`` and ``anisotropy_rotation`` are KHR_materials_anisotropy's
+    strength and rotation (the BSDF's local x is the direction; see :func:`anisotropy_frame`)."""
     base = broadcast_rgb(base_color, "base_color")
-    alpha = roughness_to_alpha(roughness)
+    alpha_t, alpha_b = anisotropic_alphas(roughness, anisotropy)
     return BSDF(
-        [GltfDiffuse(base, float(metallic)), GltfSpecular(base, float(metallic), alpha)],
+        [GltfDiffuse(base, float(metallic)), GltfSpecular(base, float(metallic), alpha_t, alpha_b)],
         name="glTF metallic-roughness",
+        tangent_rotation=anisotropy_rotation,
     )

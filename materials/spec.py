@@ -10,7 +10,9 @@ microfacet  {"model": "microfacet", "distribution": "ggx" | "beckmann",
              "fresnel": "none" | {"type": "schlick", "r0": ...}
                                | {"type": "conductor", "eta": [...], "k": [...]},
              "scale": 1.0 | [r, g, b]}
-gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness": r}
+gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness": r,
+             "anisotropy": s, "anisotropy_rotation": radians}   (the last two optional:
+             KHR_materials_anisotropy's strength and rotation)
 
 Every parameter has a documented range (:data:`RANGES`). Out-of-range or non-finite values are
 rejected with a :class:`MaterialError` that names the parameter, the value and the range; no
@@ -52,6 +54,8 @@ RANGES: dict[str, tuple[float, float]] = {
     "base_color": (0.0, 1.0),
     "metallic": (0.0, 1.0),
     "roughness": (0.0, 1.0),
+    "anisotropy": (0.0, 1.0),
+    "anisotropy_rotation": (-2 * math.pi, 2 * math.pi),
 }
 
 
@@ -149,10 +153,14 @@ def validate(desc: Any) -> dict:
         out["fresnel"] = _validate_fresnel(desc.get("fresnel", "none"))
         out["scale"] = _scalar_or_rgb(desc.get("scale", 1.0), "scale", "scale")
     else:
-        _check_keys(desc, common | {"base_color", "metallic", "roughness"}, set(), "glTF material")
+        keys = {"base_color", "metallic", "roughness", "anisotropy", "anisotropy_rotation"}
+        _check_keys(desc, common | keys, set(), "glTF material")
         out["base_color"] = _scalar_or_rgb(desc.get("base_color", [1.0, 1.0, 1.0]), "base_color", "base_color")
         out["metallic"] = _number(desc.get("metallic", 1.0), "metallic", "metallic")
         out["roughness"] = _number(desc.get("roughness", 1.0), "roughness", "roughness")
+        for key in ("anisotropy", "anisotropy_rotation"):  # KHR_materials_anisotropy, kept only when given
+            if key in desc:
+                out[key] = _number(desc[key], key, key)
     return out
 
 
@@ -190,7 +198,9 @@ def build_bsdf(desc: dict) -> BSDF:
             k=fr.get("k", 0.0),
         )
         return microfacet_bsdf(d["distribution"], d["alpha_u"], d["alpha_v"], fresnel, d["scale"])
-    bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"])
+    bsdf = gltf_bsdf(
+        d["base_color"], d["metallic"], d["roughness"], d.get("anisotropy", 0.0), d.get("anisotropy_rotation", 0.0)
+    )
     bsdf.name = name
     return bsdf
 

@@ -60,8 +60,13 @@ from .scene import (
     TextureSlot,
 )
 
-SUPPORTED_EXTENSIONS = {"MOZ_lightmap", "KHR_materials_emissive_strength", "KHR_texture_transform"}
-MATERIAL_EXTENSIONS_USED = {"MOZ_lightmap", "KHR_materials_emissive_strength"}
+SUPPORTED_EXTENSIONS = {
+    "MOZ_lightmap",
+    "KHR_materials_emissive_strength",
+    "KHR_texture_transform",
+    "KHR_materials_anisotropy",
+}
+MATERIAL_EXTENSIONS_USED = {"MOZ_lightmap", "KHR_materials_emissive_strength", "KHR_materials_anisotropy"}
 
 FALLBACKS = {
     "missing image": "the texture is ignored (factor only)",
@@ -417,6 +422,32 @@ def _node_matrix(node) -> np.ndarray:
     return m
 
 
+def _anisotropy(mat, where: str, scene_warnings: list) -> dict:
+    """KHR_materials_anisotropy as the gltf model's ``anisotropy`` (strength) and
+    ``anisotropy_rotation``. The anisotropy texture (per-texel direction and strength) is not
+    used: warned, the factors apply uniformly."""
+    extension = (mat.extensions or {}).get("KHR_materials_anisotropy")
+    if extension is None:
+        return {}
+    try:
+        strength = float(extension.get("anisotropyStrength", 0.0))
+        rotation = float(extension.get("anisotropyRotation", 0.0))
+        if not (np.isfinite(strength) and np.isfinite(rotation)):
+            raise ValueError("non-finite value")
+    except (TypeError, ValueError, AttributeError) as exc:
+        _warn(scene_warnings, f"{where}: KHR_materials_anisotropy unreadable ({exc}); the material is isotropic")
+        return {}
+    if not 0.0 <= strength <= 1.0:
+        _warn(scene_warnings, f"{where}: anisotropyStrength {strength} clamped to [0, 1]")
+        strength = min(max(strength, 0.0), 1.0)
+    if extension.get("anisotropyTexture") is not None:
+        _warn(
+            scene_warnings,
+            f"{where}: anisotropyTexture is not used yet; the strength and rotation factors apply uniformly",
+        )
+    return {"anisotropy": strength, "anisotropy_rotation": float(np.remainder(rotation + np.pi, 2 * np.pi) - np.pi)}
+
+
 def _custom_material(reader: _Reader, custom) -> dict:
     """``extras.lobeview`` of a material: a preset name, a material object, or the name of a JSON
     file in the scene's folder (never a path outside it: the scene file is untrusted)."""
@@ -477,6 +508,7 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
                         ),
                         1.0,
                     ),
+                    **_anisotropy(mat, f"{path}: material {name!r}", scene_warnings),
                 }
             )
     except MaterialError as exc:
@@ -509,6 +541,11 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
         _warn(
             scene_warnings,
             f"{path}: material {name!r}: metallicRoughnessTexture ignored (extras.lobeview replaces the glTF BRDF)",
+        )
+    if not gltf_model and "KHR_materials_anisotropy" in (mat.extensions or {}):
+        _warn(
+            scene_warnings,
+            f"{path}: material {name!r}: KHR_materials_anisotropy ignored (extras.lobeview replaces the glTF BRDF)",
         )
     for slot, (info, fallback) in slots.items():
         texture = _texture_slot(reader, info, slot, name, scene_warnings, fallback)

@@ -88,6 +88,8 @@ def texel_material(material: SceneMaterial, uv0: np.ndarray, uv1: np.ndarray | N
         "normal_texel": texel("normal")[:, :3] if material.texture("normal") is not None else None,
         "occlusion": 1.0 + material.occlusion_strength * (occlusion - 1.0),
         "emission": np.asarray(material.emission, dtype=np.float64) * texel("emissive")[:, :3],
+        "anisotropy": float(desc.get("anisotropy", 0.0)) if gltf_model else 0.0,
+        "anisotropy_rotation": float(desc.get("anisotropy_rotation", 0.0)) if gltf_model else 0.0,
     }
 
 
@@ -106,4 +108,10 @@ def pixel_bsdf(parameters: dict, k: int):
     """The glTF BSDF of pixel ``k`` of :func:`texel_material`'s output (gltf model only)."""
     from lobeview.materials.gltf import gltf_bsdf
 
-    return gltf_bsdf(parameters["base_color"][k], float(parameters["metallic"][k]), float(parameters["roughness"][k]))
+    return gltf_bsdf(
+        parameters["base_color"][k],
+        float(parameters["metallic"][k]),
+        float(parameters["roughness"][k]),
+        float(parameters.get("anisotropy", 0.0)),
+        float(parameters.get("anisotropy_rotation", 0.0)),
+    )

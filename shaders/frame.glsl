@@ -22,6 +22,16 @@ mat3 shading_frame(vec3 normal, vec4 tangent, vec3 geometric_normal) {
     return mat3(t, b, n);
 }
 
+// KHR_materials_anisotropy's direction: the frame turned by `angle` about its normal, tangent
+// towards the bitangent (materials/gltf.py anisotropy_frame). u_tangent_rotation is the
+// material's (PackedMaterial.tangent_rotation); 0 leaves the frame as it is.
+uniform float u_tangent_rotation;
+
+mat3 rotate_tangent(mat3 tbn, float angle) {
+    float c = cos(angle), s = sin(angle);
+    return mat3(c * tbn[0] + s * tbn[1], -s * tbn[0] + c * tbn[1], tbn[2]);
+}
+
 // The viewer direction in the local frame. Surfaces are two-sided: a frame facing away from
 // the viewer is flipped (normal and bitangent), and grazing views are kept just above the
 // horizon so no lobe formula sees wo.z <= 0.

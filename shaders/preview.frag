@@ -16,7 +16,7 @@ layout(location = 3) out vec4 out_tangent;
 
 void main() {
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));
-    mat3 tbn = shading_frame(v_normal, v_tangent, geometric_normal);
+    mat3 tbn = rotate_tangent(shading_frame(v_normal, v_tangent, geometric_normal), u_tangent_rotation);
     vec3 wo = view_in_frame(tbn, normalize(u_camera_position - v_position));
     vec3 radiance = shade(wo, tbn);
     // Never write NaN/Inf into the accumulation buffer: flag it in alpha (tests look for it).

@@ -23,6 +23,7 @@ uniform vec3 u_emission;              // emissive factor x KHR_materials_emissiv
 uniform int u_gltf_model;
 uniform vec4 u_base_color_factor;     // rgb: the material's base colour, a: baseColorFactor alpha
 uniform float u_metallic_factor;
+uniform float u_anisotropy;           // KHR_materials_anisotropy strength (0: isotropic)
 uniform float u_roughness_factor;
 uniform float u_normal_scale;
 uniform float u_occlusion_strength;
@@ -71,6 +72,7 @@ void main() {
         vec3 n = mapped_normal(tbn, normal_texel.rgb, u_normal_scale);
         tbn = shading_frame(n, vec4(tbn[0], v_tangent.w < 0.0 ? -1.0 : 1.0), geometric_normal);
     }
+    tbn = rotate_tangent(tbn, u_tangent_rotation);
     vec3 wo = view_in_frame(tbn, normalize(u_camera_position - v_position));
 
     // Without a lightmap: the environment's irradiance at the shading normal (no occlusion).
@@ -92,10 +94,13 @@ void main() {
     for (int i = 0; i < u_lobe_count; ++i) {
         Lobe l = get_lobe(i);
         if (u_gltf_model == 1 && l.type == LOBE_GLTF_SPECULAR) {
-            // alpha = roughness^2 (materials/gltf.py roughness_to_alpha), per pixel.
+            // alpha = roughness^2 per pixel, stretched along the anisotropy direction (local x)
+            // by KHR_materials_anisotropy (materials/gltf.py anisotropic_alphas).
             l.r0 = base_color;
             l.metallic = metallic;
-            l.ax = l.ay = max(roughness * roughness, ALPHA_MIN);
+            float alpha = max(roughness * roughness, ALPHA_MIN);
+            l.ax = mix(alpha, 1.0, u_anisotropy * u_anisotropy);
+            l.ay = alpha;
         }
         radiance += integrate_lobe(l, i, wo, tbn);
     }

@@ -101,6 +101,7 @@ CASES = [
     ),
     ("gltf-dielectric", lambda: gltf_bsdf([0.6, 0.05, 0.04], 0.0, 0.4), 50, 0, None),
     ("gltf-metal-smooth", lambda: gltf_bsdf([0.9, 0.8, 0.5], 1.0, 0.2), 30, 0, 0.5),
+    ("gltf-anisotropic", lambda: gltf_bsdf([0.9, 0.8, 0.5], 1.0, 0.3, 0.8), 40, 30, None),
 ]
 
 

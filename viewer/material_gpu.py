@@ -28,6 +28,7 @@ class PackedMaterial:
     lobe_count: int
     lobe_distributions: list
     lobe_components: list
+    tangent_rotation: float = 0.0  # BSDF.tangent_rotation (KHR_materials_anisotropy), radians
 
     @property
     def has_diffuse(self) -> bool:
@@ -88,7 +89,9 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
     lobes = np.zeros((MAX_LOBES * LOBE_ROWS, 4), dtype=np.float32)
     if rows:
         lobes[: len(rows) * LOBE_ROWS] = np.asarray(rows, dtype=np.float32).reshape(-1, 4)
-    return PackedMaterial(kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components)
+    return PackedMaterial(
+        kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components, float(bsdf.tangent_rotation)
+    )
 
 
 _ALBEDO_TABLES = BoundedCache(ALBEDO_TABLES_KEPT)

@@ -157,6 +157,7 @@ class RendererBase:
             write_uniform(program, "u_pattern", pack_patterns(material, method.samples, planar))
         set_uniform(program, "u_kd", tuple(float(x) for x in material.kd))
         set_uniform(program, "u_gltf_diffuse", 1.0 if material.gltf_diffuse else 0.0)
+        set_uniform(program, "u_tangent_rotation", float(material.tangent_rotation))
         set_uniform(program, "u_samples", method.samples)
         set_uniform(
             program,

@@ -262,6 +262,7 @@ class SceneRenderer(RendererBase):
         set_uniform(program, "u_base_color_factor", (*(float(c) for c in base), float(mat.base_alpha)))
         set_uniform(program, "u_metallic_factor", float(desc.get("metallic", 0.0)))
         set_uniform(program, "u_roughness_factor", float(desc.get("roughness", 1.0)))
+        set_uniform(program, "u_anisotropy", float(desc.get("anisotropy", 0.0)) if gltf_model else 0.0)
         set_uniform(program, "u_normal_scale", float(mat.normal_scale))
         set_uniform(program, "u_occlusion_strength", float(mat.occlusion_strength))
         set_uniform(program, "u_alpha_mode", ALPHA_MODES[mat.alpha_mode.lower()])
