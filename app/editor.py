@@ -135,6 +135,12 @@ def material_widgets(imgui, desc: dict) -> tuple[bool, dict]:
         for name in ("metallic", "roughness"):
             c, d[name] = _slider(imgui, name, d[name], name)
             changed_any |= c
+        # KHR_materials_anisotropy: written into the description only once moved off zero.
+        for name, label in (("anisotropy", "anisotropy"), ("anisotropy_rotation", "anisotropy rotation")):
+            c, value = _slider(imgui, label, d.get(name, 0.0), name)
+            if c:
+                d[name] = value
+            changed_any |= c
     return changed_any, d
 
 

@@ -170,6 +170,11 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
     bsdf = build_bsdf(load_material(args.material))
     env = load_environment(args.env or PREVIEW_ENV)
     mesh = uv_sphere() if args.object == "sphere" else load_mesh_file(args.object)
+    if str(args.object).lower().endswith((".gltf", ".glb")):
+        print(
+            f"--object renders the file's geometry with --material {args.material}; "
+            f"`lobeview shot {args.object} --out FILE.png` renders it with its own materials and textures"
+        )
     if args.object != "sphere":
         lo, hi = mesh.bounds
         mesh.positions = ((mesh.positions - (lo + hi) / 2) / max(float(np.max(hi - lo)) / 2, 1e-9)).astype(np.float32)

@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from lobeview.app.cli import main
 from lobeview.scenes.hdrio import read_hdr_image, write_hdr_image
+
+ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets" / "gltf"
 
 
 def test_shot_writes_png_exr_and_npy(tmp_path, capsys):
@@ -135,3 +139,36 @@ def test_rgbe_round_trip_and_shared_assets_statistics(tmp_path):
     # RGBE keeps 8 bits of mantissa: relative error below 1/128 of the brightest channel.
     assert np.all(np.abs(back - image) <= image.max(axis=-1, keepdims=True) / 128 + 1e-30)
     assert np.all(back[0, 0] == 0)
+
+
+def test_object_mesh_files_keep_their_surface(tmp_path, capsys):
+    """`shot --object FILE`: a glTF keeps its own normals and UVs (lobeview's loader); an STL
+    triangle soup is welded and smoothed within 30 degrees, so a sphere renders round and a cube
+    keeps its hard edges."""
+    import trimesh
+
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.meshes import load_mesh_file
+
+    soup_sphere = trimesh.creation.icosphere(3)
+    triangles = soup_sphere.vertices[soup_sphere.faces].reshape(-1, 3)
+    soup = trimesh.Trimesh(triangles, np.arange(len(triangles)).reshape(-1, 3), process=False)
+    soup.export(tmp_path / "ball.stl")
+    ball = load_mesh_file(tmp_path / "ball.stl")
+    assert len(ball.positions) == len(soup_sphere.vertices)  # welded
+    radial = ball.positions / np.linalg.norm(ball.positions, axis=1, keepdims=True)
+    assert np.degrees(np.arccos(np.clip(np.sum(radial * ball.normals, axis=1), -1, 1))).max() < 2.0
+
+    trimesh.creation.box().export(tmp_path / "box.stl")
+    box = load_mesh_file(tmp_path / "box.stl")
+    assert np.allclose(np.sort(np.abs(box.normals), axis=1), [0, 0, 1], atol=1e-6)  # faces stay flat
+
+    suzanne = ASSETS / "Suzanne" / "Suzanne.gltf"
+    if suzanne.is_file():
+        mesh = load_mesh_file(suzanne)
+        reference = load_gltf(suzanne).objects[0].mesh
+        np.testing.assert_array_equal(mesh.normals, reference.normals)
+        np.testing.assert_array_equal(mesh.uvs, reference.uvs)
+        args = ["shot", "--object", str(suzanne), "--size", "32x32", "--face-size", "16", "--method", "lobe-5"]
+        assert main(args + ["--out", str(tmp_path / "s.png")]) == 0
+        assert "renders it with its own materials" in capsys.readouterr().out
