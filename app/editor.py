@@ -135,9 +135,10 @@ def material_widgets(imgui, desc: dict) -> tuple[bool, dict]:
         for name in ("metallic", "roughness"):
             c, d[name] = _slider(imgui, name, d[name], name)
             changed_any |= c
-        # KHR_materials_anisotropy: written into the description only once moved off zero.
-        for name, label in (("anisotropy", "anisotropy"), ("anisotropy_rotation", "anisotropy rotation")):
-            c, value = _slider(imgui, label, d.get(name, 0.0), name)
+        # KHR_materials_* factors: written into the description only once moved off the default.
+        for name, default in (("anisotropy", 0.0), ("anisotropy_rotation", 0.0), ("ior", 1.5), ("specular", 1.0),
+                              ("clearcoat", 0.0), ("clearcoat_roughness", 0.0)):  # fmt: skip
+            c, value = _slider(imgui, name.replace("_", " "), d.get(name, default), name)
             if c:
                 d[name] = value
             changed_any |= c

@@ -14,6 +14,18 @@ Smith visibility G2 / (4 |N.L| |N.V|). Expanded, that is a diffuse term
 The roughness -> alpha mapping (alpha = roughness^2) is defined here and nowhere else; alpha is
 clamped to ALPHA_MIN (roughness 0.01) because a perfect mirror has no density to sample.
 
+KHR_materials_ior and KHR_materials_specular replace the dielectric's fixed 0.04 (the
+extensions' fresnel_mix): F_d = f0 + (1 - f0)(1 - |V.H|)^5 with the colour
+f0 = min(((ior - 1) / (ior + 1))^2 specularColor, 1), the dielectric specular weighted by
+``specular`` and the diffuse by 1 - specular max(F_d) (max over RGB). ior 1.5, specular 1 and
+colour 1 give the core model exactly; ior 0 is the extensions' infinite index (f0 = 1).
+
+KHR_materials_clearcoat layers a dielectric GGX coat over everything else (the extension's
+fresnel_coat): coat = clearcoat F_c(N.V) V D with alpha_c = clearcoatRoughness^2 and
+F_c = 0.04 + 0.96 (1 - N.V)^5 (ior 1.5; the extension evaluates the coat's Fresnel at N.V), and
+the base (diffuse and specular) scaled by 1 - clearcoat F_c(N.V). The coat uses the shading
+normal (the extension's clearcoatNormalTexture is not used).
+
 KHR_materials_anisotropy stretches the GGX lobe along the anisotropy direction, the tangent
 rotated by ``anisotropy_rotation`` about the normal (counter-clockwise towards the bitangent):
 alpha_t = mix(alpha, 1, strength^2) along it, alpha_b = alpha across (the extension's
@@ -53,60 +65,132 @@ def anisotropy_frame(frame: np.ndarray, rotation: float) -> np.ndarray:
     return np.stack([c * t + s * b, -s * t + c * b, n], axis=1)
 
 
-def _dielectric_fresnel(wo_h: np.ndarray) -> np.ndarray:
-    return schlick(np.abs(wo_h), np.full(3, DIELECTRIC_F0))
+COAT_F0 = 0.04  # KHR_materials_clearcoat: the coat is a dielectric of ior 1.5
+
+
+def dielectric_f0(ior: float = 1.5, specular_color=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """KHR_materials_ior/_specular: min(((ior - 1) / (ior + 1))^2 specularColor, 1) per channel."""
+    return np.minimum(
+        ((float(ior) - 1.0) / (float(ior) + 1.0)) ** 2 * broadcast_rgb(specular_color, "specular_color"), 1.0
+    )
+
+
+def coat_attenuation(coat: float, cos_o: np.ndarray) -> np.ndarray:
+    """What the clearcoat leaves of the base: 1 - clearcoat F_c(N.V) (scalar per direction)."""
+    return 1.0 - float(coat) * schlick(cos_o, np.full(3, COAT_F0))[..., 0]
 
 
 class GltfDiffuse(CosineSampled):
     name = "glTF diffuse"
 
-    def __init__(self, base_color: np.ndarray, metallic: float):
+    def __init__(self, base_color: np.ndarray, metallic: float, f0=DIELECTRIC_F0, specular: float = 1.0, coat=0.0):
         self.base_color = base_color
         self.metallic = metallic
+        self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
+        self.specular = float(specular)
+        self.coat = float(coat)
         self.diffuse_albedo = (1.0 - metallic) * base_color
 
     @property
     def selection_weight(self) -> float:
         return float(np.mean(self.diffuse_albedo))
 
+    def view_weight(self, cos_o) -> np.ndarray:
+        """The weight of the lightmapped (or environment-irradiance) diffuse in the shaders:
+        eval's weight with V.H taken as N.V, the view-direction approximation (bsdf.glsl
+        diffuse_weight), since the light arrives from every direction at once."""
+        fresnel = schlick(cos_o, self.f0)
+        return (1.0 - self.specular * fresnel.max(axis=-1)) * coat_attenuation(self.coat, cos_o)
+
     def eval(self, wi, wo):
         valid = _valid_pair(wi, wo, False)
         h = normalize(wi + wo)
-        f = (1.0 - self.metallic) * (1.0 - _dielectric_fresnel(dot(wo, h))) * self.base_color / np.pi
+        fresnel = schlick(np.abs(dot(wo, h)), self.f0)
+        weight = (1.0 - self.specular * fresnel.max(axis=-1)) * coat_attenuation(self.coat, wo[..., 2])
+        f = (1.0 - self.metallic) * weight[..., None] * self.base_color / np.pi
         return np.where(valid[..., None], f, 0.0)
 
 
 class GltfSpecular(MicrofacetReflection):
     name = "glTF specular"
 
-    def __init__(self, base_color: np.ndarray, metallic: float, alpha: float, alpha_b: float | None = None):
+    def __init__(
+        self,
+        base_color: np.ndarray,
+        metallic: float,
+        alpha: float,
+        alpha_b: float | None = None,
+        f0=DIELECTRIC_F0,
+        specular: float = 1.0,
+        coat: float = 0.0,
+    ):
         alpha_b = alpha if alpha_b is None else alpha_b
         super().__init__(MicrofacetDistribution("ggx", alpha, alpha_b), Fresnel("none"))
         self.base_color = base_color
         self.metallic = metallic
+        self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
+        self.specular = float(specular)
+        self.coat = float(coat)
 
     @property
     def selection_weight(self) -> float:
         # Specular energy is roughly F0 at normal incidence plus the grazing rise; weight it so
         # glossy dielectrics still send a fair share of samples into the highlight.
-        f0 = (1.0 - self.metallic) * DIELECTRIC_F0 + self.metallic * float(np.mean(self.base_color))
-        return max(f0, 0.25)
+        f0 = (1.0 - self.metallic) * self.specular * float(np.mean(self.f0))
+        return max(f0 + self.metallic * float(np.mean(self.base_color)), 0.25)
+
+    @property
+    def f90(self) -> float:
+        """The Fresnel term's value at grazing: (1 - metallic) specular + metallic."""
+        return (1.0 - self.metallic) * self.specular + self.metallic
 
     def fresnel_term(self, wo_h):
-        f_dielectric = _dielectric_fresnel(wo_h)
+        f_dielectric = self.specular * schlick(np.abs(wo_h), self.f0)
         f_metal = schlick(np.abs(wo_h), self.base_color)
         return (1.0 - self.metallic) * f_dielectric + self.metallic * f_metal
 
+    def eval(self, wi, wo):
+        return super().eval(wi, wo) * coat_attenuation(self.coat, wo[..., 2])[..., None]
+
+
+class GltfClearcoat(MicrofacetReflection):
+    """KHR_materials_clearcoat's layer: clearcoat F_c(N.V) V D (GGX, Fresnel at N.V)."""
+
+    name = "glTF clearcoat"
+
+    def __init__(self, clearcoat: float, alpha: float):
+        super().__init__(MicrofacetDistribution("ggx", alpha, alpha), Fresnel("none"), scale=float(clearcoat))
+        self.clearcoat = float(clearcoat)
+
+    @property
+    def selection_weight(self) -> float:
+        return max(COAT_F0 * self.clearcoat, 0.1 * self.clearcoat)
+
+    def eval(self, wi, wo):
+        return super().eval(wi, wo) * schlick(wo[..., 2], np.full(3, COAT_F0))
+
 
 def gltf_bsdf(
-    base_color, metallic: float, roughness: float, anisotropy: float = 0.0, anisotropy_rotation: float = 0.0
+    base_color,
+    metallic: float,
+    roughness: float,
+    anisotropy: float = 0.0,
+    anisotropy_rotation: float = 0.0,
+    ior: float = 1.5,
+    specular: float = 1.0,
+    specular_color=(1.0, 1.0, 1.0),
+    clearcoat: float = 0.0,
+    clearcoat_roughness: float = 0.0,
 ) -> BSDF:
-    """The glTF BRDF; ``anisotropy`` and ``anisotropy_rotation`` are KHR_materials_anisotropy's
-    strength and rotation (the BSDF's local x is the direction; see :func:`anisotropy_frame`)."""
+    """The glTF BRDF with the KHR_materials_anisotropy (strength, rotation: the BSDF's local x
+    is the direction, see :func:`anisotropy_frame`), _ior, _specular and _clearcoat factors."""
     base = broadcast_rgb(base_color, "base_color")
     alpha_t, alpha_b = anisotropic_alphas(roughness, anisotropy)
-    return BSDF(
-        [GltfDiffuse(base, float(metallic)), GltfSpecular(base, float(metallic), alpha_t, alpha_b)],
-        name="glTF metallic-roughness",
-        tangent_rotation=anisotropy_rotation,
-    )
+    f0 = dielectric_f0(ior, specular_color)
+    components = [
+        GltfDiffuse(base, float(metallic), f0, specular, clearcoat),
+        GltfSpecular(base, float(metallic), alpha_t, alpha_b, f0, specular, clearcoat),
+    ]
+    if clearcoat > 0:
+        components.append(GltfClearcoat(clearcoat, roughness_to_alpha(clearcoat_roughness)))
+    return BSDF(components, name="glTF metallic-roughness", tangent_rotation=anisotropy_rotation)

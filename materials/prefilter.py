@@ -162,6 +162,25 @@ def dfg_lookup(table: np.ndarray, cos_theta_o, roughness) -> np.ndarray:
     return top * (1 - fy) + bottom * fy
 
 
+def dfg_albedo(component, cos_theta_o: float, ab: np.ndarray) -> np.ndarray:
+    """A microfacet lobe's directional albedo from the DFG (A, B) at its roughness: the numpy twin
+    of shaders/bsdf.glsl lobe_dfg_albedo. Schlick Fresnel F = f0 (1 - Fc) + f90 Fc is linear in
+    (f0, f90), so the integral of F V D cos is f0 A + f90 B: for the glTF specular
+    f0 = lobe Fresnel at V.H = 1 and f90 = (1 - metallic) specular + metallic, times the
+    clearcoat's attenuation; for the clearcoat (Fresnel at N.V) clearcoat F_c(N.V) (A + B);
+    otherwise scale (f0 A + B)."""
+    from .gltf import COAT_F0, GltfClearcoat, GltfSpecular, coat_attenuation
+
+    a, b = float(ab[0]), float(ab[1])
+    if isinstance(component, GltfClearcoat):
+        fresnel = COAT_F0 + (1.0 - COAT_F0) * (1.0 - cos_theta_o) ** 5
+        return component.scale * fresnel * (a + b)
+    f0 = component.fresnel_term(np.array(1.0))
+    if isinstance(component, GltfSpecular):
+        return (f0 * a + component.f90 * b) * coat_attenuation(component.coat, np.array(cos_theta_o))
+    return component.scale * (f0 * a + b)
+
+
 # -- brute-force and hierarchical prefiltering on cube maps -------------------------------------
 def cube_texels(size: int) -> tuple[np.ndarray, np.ndarray]:
     """Texel-centre directions (6 size^2, 3) and solid angles (6 size^2,) in face order."""

@@ -11,8 +11,9 @@ microfacet  {"model": "microfacet", "distribution": "ggx" | "beckmann",
                                | {"type": "conductor", "eta": [...], "k": [...]},
              "scale": 1.0 | [r, g, b]}
 gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness": r,
-             "anisotropy": s, "anisotropy_rotation": radians}   (the last two optional:
-             KHR_materials_anisotropy's strength and rotation)
+             "anisotropy": s, "anisotropy_rotation": radians,      (optional, KHR_materials_*:
+             "ior": 1.5, "specular": 1, "specular_color": [r, g, b],  anisotropy, ior, specular,
+             "clearcoat": c, "clearcoat_roughness": r}               clearcoat)
 
 Every parameter has a documented range (:data:`RANGES`). Out-of-range or non-finite values are
 rejected with a :class:`MaterialError` that names the parameter, the value and the range; no
@@ -56,7 +57,15 @@ RANGES: dict[str, tuple[float, float]] = {
     "roughness": (0.0, 1.0),
     "anisotropy": (0.0, 1.0),
     "anisotropy_rotation": (-2 * math.pi, 2 * math.pi),
+    "ior": (1.0, 10.0),  # or exactly 0: the KHR extensions' infinite index (f0 = 1)
+    "specular": (0.0, 1.0),
+    "specular_color": (0.0, 10.0),  # f0 = min(f0(ior) x colour, 1): the extension allows > 1
+    "clearcoat": (0.0, 1.0),
+    "clearcoat_roughness": (0.0, 1.0),
 }
+#: Optional glTF-model parameters (KHR_materials_* factors), kept in a description only when given.
+GLTF_EXTENSION_KEYS = ("anisotropy", "anisotropy_rotation", "ior", "specular", "specular_color", "clearcoat",
+                       "clearcoat_roughness")  # fmt: skip
 
 
 class MaterialError(ValueError):
@@ -153,13 +162,20 @@ def validate(desc: Any) -> dict:
         out["fresnel"] = _validate_fresnel(desc.get("fresnel", "none"))
         out["scale"] = _scalar_or_rgb(desc.get("scale", 1.0), "scale", "scale")
     else:
-        keys = {"base_color", "metallic", "roughness", "anisotropy", "anisotropy_rotation"}
-        _check_keys(desc, common | keys, set(), "glTF material")
+        _check_keys(
+            desc, common | {"base_color", "metallic", "roughness", *GLTF_EXTENSION_KEYS}, set(), "glTF material"
+        )
         out["base_color"] = _scalar_or_rgb(desc.get("base_color", [1.0, 1.0, 1.0]), "base_color", "base_color")
         out["metallic"] = _number(desc.get("metallic", 1.0), "metallic", "metallic")
         out["roughness"] = _number(desc.get("roughness", 1.0), "roughness", "roughness")
-        for key in ("anisotropy", "anisotropy_rotation"):  # KHR_materials_anisotropy, kept only when given
-            if key in desc:
+        for key in GLTF_EXTENSION_KEYS:
+            if key not in desc:
+                continue
+            if key == "specular_color":
+                out[key] = _scalar_or_rgb(desc[key], key, key)
+            elif key == "ior" and desc[key] == 0:
+                out[key] = 0.0
+            else:
                 out[key] = _number(desc[key], key, key)
     return out
 
@@ -198,9 +214,7 @@ def build_bsdf(desc: dict) -> BSDF:
             k=fr.get("k", 0.0),
         )
         return microfacet_bsdf(d["distribution"], d["alpha_u"], d["alpha_v"], fresnel, d["scale"])
-    bsdf = gltf_bsdf(
-        d["base_color"], d["metallic"], d["roughness"], d.get("anisotropy", 0.0), d.get("anisotropy_rotation", 0.0)
-    )
+    bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"], **{k: d[k] for k in GLTF_EXTENSION_KEYS if k in d})
     bsdf.name = name
     return bsdf
 

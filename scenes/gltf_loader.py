@@ -60,13 +60,35 @@ from .scene import (
     TextureSlot,
 )
 
+# glTF material extensions lobeview maps onto the gltf model: extension -> {glTF field: (desc
+# key, default, (low, high))}; their textures are named in EXTENSION_TEXTURES (warned, unused).
+GLTF_MODEL_EXTENSIONS = {
+    "KHR_materials_anisotropy": {
+        "anisotropyStrength": ("anisotropy", 0.0, (0.0, 1.0)),
+        "anisotropyRotation": ("anisotropy_rotation", 0.0, None),
+    },
+    "KHR_materials_ior": {"ior": ("ior", 1.5, None)},
+    "KHR_materials_specular": {
+        "specularFactor": ("specular", 1.0, (0.0, 1.0)),
+        "specularColorFactor": ("specular_color", [1.0, 1.0, 1.0], (0.0, 10.0)),
+    },
+    "KHR_materials_clearcoat": {
+        "clearcoatFactor": ("clearcoat", 0.0, (0.0, 1.0)),
+        "clearcoatRoughnessFactor": ("clearcoat_roughness", 0.0, (0.0, 1.0)),
+    },
+}
+EXTENSION_TEXTURES = {
+    "KHR_materials_anisotropy": ("anisotropyTexture",),
+    "KHR_materials_specular": ("specularTexture", "specularColorTexture"),
+    "KHR_materials_clearcoat": ("clearcoatTexture", "clearcoatRoughnessTexture", "clearcoatNormalTexture"),
+}
 SUPPORTED_EXTENSIONS = {
     "MOZ_lightmap",
     "KHR_materials_emissive_strength",
     "KHR_texture_transform",
-    "KHR_materials_anisotropy",
+    *GLTF_MODEL_EXTENSIONS,
 }
-MATERIAL_EXTENSIONS_USED = {"MOZ_lightmap", "KHR_materials_emissive_strength", "KHR_materials_anisotropy"}
+MATERIAL_EXTENSIONS_USED = {"MOZ_lightmap", "KHR_materials_emissive_strength", *GLTF_MODEL_EXTENSIONS}
 
 FALLBACKS = {
     "missing image": "the texture is ignored (factor only)",
@@ -422,30 +444,44 @@ def _node_matrix(node) -> np.ndarray:
     return m
 
 
-def _anisotropy(mat, where: str, scene_warnings: list) -> dict:
-    """KHR_materials_anisotropy as the gltf model's ``anisotropy`` (strength) and
-    ``anisotropy_rotation``. The anisotropy texture (per-texel direction and strength) is not
-    used: warned, the factors apply uniformly."""
-    extension = (mat.extensions or {}).get("KHR_materials_anisotropy")
-    if extension is None:
-        return {}
-    try:
-        strength = float(extension.get("anisotropyStrength", 0.0))
-        rotation = float(extension.get("anisotropyRotation", 0.0))
-        if not (np.isfinite(strength) and np.isfinite(rotation)):
-            raise ValueError("non-finite value")
-    except (TypeError, ValueError, AttributeError) as exc:
-        _warn(scene_warnings, f"{where}: KHR_materials_anisotropy unreadable ({exc}); the material is isotropic")
-        return {}
-    if not 0.0 <= strength <= 1.0:
-        _warn(scene_warnings, f"{where}: anisotropyStrength {strength} clamped to [0, 1]")
-        strength = min(max(strength, 0.0), 1.0)
-    if extension.get("anisotropyTexture") is not None:
-        _warn(
-            scene_warnings,
-            f"{where}: anisotropyTexture is not used yet; the strength and rotation factors apply uniformly",
-        )
-    return {"anisotropy": strength, "anisotropy_rotation": float(np.remainder(rotation + np.pi, 2 * np.pi) - np.pi)}
+def _model_extensions(mat, where: str, scene_warnings: list) -> dict:
+    """KHR_materials_anisotropy/_ior/_specular/_clearcoat as the gltf model's optional keys
+    (materials/spec.py GLTF_EXTENSION_KEYS). Out-of-range factors are clamped with a warning;
+    the extensions' textures are not used (warned: the factors apply uniformly)."""
+    out: dict = {}
+    for extension, fields in GLTF_MODEL_EXTENSIONS.items():
+        data = (mat.extensions or {}).get(extension)
+        if data is None:
+            continue
+        if not isinstance(data, dict):
+            _warn(scene_warnings, f"{where}: {extension} is not an object; ignored")
+            continue
+        for field, (key, default, limits) in fields.items():
+            value = data.get(field, default)
+            try:
+                array = np.asarray(value, dtype=np.float64)
+                if array.shape != np.shape(default) or not np.all(np.isfinite(array)):
+                    raise ValueError(f"{value!r}")
+            except (TypeError, ValueError) as exc:
+                _warn(scene_warnings, f"{where}: {extension}.{field} {exc} is unusable; {default} used")
+                array = np.asarray(default, dtype=np.float64)
+            if limits is not None and (np.any(array < limits[0]) or np.any(array > limits[1])):
+                _warn(scene_warnings, f"{where}: {extension}.{field} {array.tolist()} clamped to {list(limits)}")
+                array = np.clip(array, *limits)
+            out[key] = array.tolist() if array.ndim else float(array)
+        unused = [name for name in EXTENSION_TEXTURES.get(extension, ()) if data.get(name) is not None]
+        if unused:
+            _warn(
+                scene_warnings,
+                f"{where}: {extension} {', '.join(unused)} not used yet; its factors apply uniformly",
+            )
+    if "anisotropy_rotation" in out:
+        out["anisotropy_rotation"] = float(np.remainder(out["anisotropy_rotation"] + np.pi, 2 * np.pi) - np.pi)
+    ior = out.get("ior")
+    if ior is not None and not (ior == 0.0 or 1.0 <= ior <= 10.0):
+        _warn(scene_warnings, f"{where}: KHR_materials_ior ior {ior} is neither 0 nor in [1, 10]; 1.5 used")
+        out["ior"] = 1.5
+    return out
 
 
 def _custom_material(reader: _Reader, custom) -> dict:
@@ -508,7 +544,7 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
                         ),
                         1.0,
                     ),
-                    **_anisotropy(mat, f"{path}: material {name!r}", scene_warnings),
+                    **_model_extensions(mat, f"{path}: material {name!r}", scene_warnings),
                 }
             )
     except MaterialError as exc:
@@ -542,10 +578,10 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
             scene_warnings,
             f"{path}: material {name!r}: metallicRoughnessTexture ignored (extras.lobeview replaces the glTF BRDF)",
         )
-    if not gltf_model and "KHR_materials_anisotropy" in (mat.extensions or {}):
+    for extension in sorted(set(mat.extensions or {}) & set(GLTF_MODEL_EXTENSIONS) if not gltf_model else ()):
         _warn(
             scene_warnings,
-            f"{path}: material {name!r}: KHR_materials_anisotropy ignored (extras.lobeview replaces the glTF BRDF)",
+            f"{path}: material {name!r}: {extension} ignored (extras.lobeview replaces the glTF BRDF)",
         )
     for slot, (info, fallback) in slots.items():
         texture = _texture_slot(reader, info, slot, name, scene_warnings, fallback)

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from lobeview.materials.spec import GLTF_EXTENSION_KEYS
+
 from .scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, NEAREST, SceneMaterial, TextureSlot
 
 
@@ -88,8 +90,8 @@ def texel_material(material: SceneMaterial, uv0: np.ndarray, uv1: np.ndarray | N
         "normal_texel": texel("normal")[:, :3] if material.texture("normal") is not None else None,
         "occlusion": 1.0 + material.occlusion_strength * (occlusion - 1.0),
         "emission": np.asarray(material.emission, dtype=np.float64) * texel("emissive")[:, :3],
-        "anisotropy": float(desc.get("anisotropy", 0.0)) if gltf_model else 0.0,
-        "anisotropy_rotation": float(desc.get("anisotropy_rotation", 0.0)) if gltf_model else 0.0,
+        # KHR_materials_* factors (per material, no textures): passed to gltf_bsdf as they are.
+        "extensions": {k: desc[k] for k in GLTF_EXTENSION_KEYS if k in desc} if gltf_model else {},
     }
 
 
@@ -112,6 +114,5 @@ def pixel_bsdf(parameters: dict, k: int):
         parameters["base_color"][k],
         float(parameters["metallic"][k]),
         float(parameters["roughness"][k]),
-        float(parameters.get("anisotropy", 0.0)),
-        float(parameters.get("anisotropy_rotation", 0.0)),
+        **parameters.get("extensions", {}),
     )

@@ -22,6 +22,11 @@ struct Lobe {
     vec3 eta;
     float metallic;
     vec3 kappa;
+    // glTF specular (KHR_materials_ior/_specular/_clearcoat; materials/gltf.py): the dielectric
+    // f0 colour, the specular weight and the clearcoat factor over the lobe.
+    vec3 dielectric_f0;
+    float specular_weight;
+    float coat;
 };
 
 uniform int u_lobe_count;
@@ -45,6 +50,9 @@ Lobe get_lobe(int i) {
     l.eta = d.rgb;
     l.metallic = d.w;
     l.kappa = e.rgb;
+    l.dielectric_f0 = d.rgb;
+    l.specular_weight = b.w;
+    l.coat = e.w;
     return l;
 }
 
@@ -162,11 +170,32 @@ vec3 fresnel_conductor(float cos_theta, vec3 eta, vec3 k) {
 
 vec3 lobe_fresnel(Lobe l, float wo_h) {
     if (l.type == LOBE_GLTF_SPECULAR) {
-        return (1.0 - l.metallic) * schlick(abs(wo_h), vec3(0.04)) + l.metallic * schlick(abs(wo_h), l.r0);
+        return (1.0 - l.metallic) * l.specular_weight * schlick(abs(wo_h), l.dielectric_f0) +
+               l.metallic * schlick(abs(wo_h), l.r0);
     }
     if (l.fresnel == FRESNEL_SCHLICK) return schlick(wo_h, l.r0);
     if (l.fresnel == FRESNEL_CONDUCTOR) return fresnel_conductor(wo_h, l.eta, l.kappa);
     return vec3(1.0);
+}
+
+// The Fresnel value at grazing (V.H = 0) of lobe_fresnel's Schlick mix: the B term of the DFG
+// split (integral of F f cos = f0 A + f90 B).
+float lobe_f90(Lobe l) {
+    return l.type == LOBE_GLTF_SPECULAR ? (1.0 - l.metallic) * l.specular_weight + l.metallic : 1.0;
+}
+
+// KHR_materials_clearcoat: what the coat leaves of the glTF base, 1 - clearcoat F_c(N.V).
+float gltf_coat_attenuation(Lobe l, float cos_o) {
+    return l.type == LOBE_GLTF_SPECULAR ? 1.0 - l.coat * schlick(cos_o, vec3(0.04)).x : 1.0;
+}
+
+// A lobe's directional albedo from the DFG table's (A, B) at its roughness (split-sum and the
+// per-pixel glTF albedo): f0 A + f90 B times its scale; the clearcoat's Fresnel is at N.V, so
+// its albedo is clearcoat F_c(N.V) (A + B).
+vec3 lobe_dfg_albedo(Lobe l, vec2 ab, float cos_o) {
+    if (l.type == LOBE_GLTF_CLEARCOAT) return l.k * schlick(cos_o, l.r0) * (ab.x + ab.y);
+    vec3 scale = l.type == LOBE_GLTF_SPECULAR ? vec3(gltf_coat_attenuation(l, cos_o)) : l.k;
+    return (lobe_fresnel(l, 1.0) * ab.x + lobe_f90(l) * ab.y) * scale;
 }
 
 // ---- lobes (thesis.py, conductor.py, gltf.py) -----------------------------------------------
@@ -189,7 +218,9 @@ vec3 lobe_eval(Lobe l, vec3 wi, vec3 wo) {
     }
     float g2 = 1.0 / (1.0 + lambda_smith(l, wr) + lambda_smith(l, wo));
     if (dot(wr, h) <= 0.0) g2 = 0.0;
-    return l.k * lobe_fresnel(l, wo_h) * (d * g2 / (4.0 * wr.z * wo.z));
+    // The clearcoat's Fresnel is evaluated at N.V (KHR_materials_clearcoat), the others' at V.H.
+    vec3 fresnel = l.type == LOBE_GLTF_CLEARCOAT ? schlick(wo.z, l.r0) : lobe_fresnel(l, wo_h);
+    return l.k * fresnel * (d * g2 / (4.0 * wr.z * wo.z)) * gltf_coat_attenuation(l, wo.z);
 }
 
 // Half-vector density D(h) cos(theta_h) / (4 wo.h) (Eq. 4.9), mirrored for transmission.
@@ -201,7 +232,8 @@ float lobe_half_pdf(Lobe l, vec3 wi, vec3 wo) {
 }
 
 bool lobe_uses_vndf(Lobe l) {
-    return (l.type == LOBE_MICROFACET || l.type == LOBE_GLTF_SPECULAR) && l.dist == DIST_GGX;
+    return (l.type == LOBE_MICROFACET || l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_CLEARCOAT) &&
+           l.dist == DIST_GGX;
 }
 
 // Density of lobe_sample().
@@ -224,10 +256,17 @@ vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
 // ---- glTF diffuse (gltf.py GltfDiffuse) -------------------------------------------------------
 
 uniform float u_gltf_diffuse;  // 1: the material's diffuse is glTF's, under a dielectric layer
+uniform vec3 u_dielectric_f0;  // KHR_materials_ior/_specular f0 (0.04 without them)
+uniform float u_specular_weight;
+uniform float u_clearcoat;
 
-// The weight of the diffuse term: glTF's (1 - F_dielectric(V.H)) with F0 = 0.04 (glTF 2.0
-// Appendix B fresnel_mix), 1 for every other model. The estimators that do not sample wi pass
-// V.N, the view-direction approximation.
-vec3 diffuse_weight(float v_dot_h) {
-    return u_gltf_diffuse > 0.5 ? 1.0 - schlick(v_dot_h, vec3(0.04)) : vec3(1.0);
+// The weight of the diffuse term: glTF's 1 - specular max(F_d(V.H)) (Appendix B fresnel_mix, with
+// the KHR_materials_ior/_specular f0 and weight) times the clearcoat's 1 - clearcoat F_c(N.V);
+// 1 for every other model. The estimators that do not sample wi pass V.N as V.H (the
+// view-direction approximation).
+vec3 diffuse_weight(float v_dot_h, float n_dot_v) {
+    if (u_gltf_diffuse <= 0.5) return vec3(1.0);
+    vec3 f = schlick(v_dot_h, u_dielectric_f0);
+    float coat = 1.0 - u_clearcoat * schlick(n_dot_v, vec3(0.04)).x;
+    return vec3((1.0 - u_specular_weight * max(f.r, max(f.g, f.b))) * coat);
 }

@@ -34,16 +34,17 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
 const int ALBEDO_ROWS = ALBEDO_PHI + 1;
 uniform sampler2D u_albedo;
 // A glTF lobe whose base colour, metallic or roughness come from textures has its own albedo
-// at every pixel: integral of f cos = F0 A + B with (A, B) from the GGX DFG table
-// (materials/prefilter.py dfg_table; Schlick Fresnel is linear in F0), F0 = lobe_fresnel(l, 1).
+// at every pixel: integral of f cos = F0 A + F90 B with (A, B) from the GGX DFG table
+// (materials/prefilter.py dfg_table; Schlick Fresnel is linear in F0), bsdf.glsl lobe_dfg_albedo;
+// an anisotropic lobe is read at the roughness of its geometric-mean alpha.
 uniform int u_albedo_per_pixel;
 uniform sampler2D u_dfg;                // rg: Beckmann (A, B), ba: GGX; x = cos, y = roughness
 
 vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
     if (u_albedo_per_pixel == 1 && l.type == LOBE_GLTF_SPECULAR) {
-        vec4 dfg = texture(u_dfg, vec2(wo.z, sqrt(l.ax)));  // perceptual roughness = sqrt(alpha)
+        vec4 dfg = texture(u_dfg, vec2(wo.z, sqrt(sqrt(l.ax * l.ay))));  // roughness = sqrt(alpha)
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
-        return lobe_fresnel(l, 1.0) * ab.x + ab.y;
+        return lobe_dfg_albedo(l, ab, wo.z);
     }
     float phi = atan(wo.y, wo.x) / (2.0 * PI);
     phi = phi - floor(phi);

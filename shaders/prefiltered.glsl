@@ -55,9 +55,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         vec3 radiance = textureLod(u_split_sum[l.dist], r, roughness * u_split_sum_max_level).rgb;
         vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
-        vec3 f0 = lobe_fresnel(l, 1.0);
-        vec3 scale = l.type == LOBE_GLTF_SPECULAR ? vec3(1.0) : l.k;
-        return radiance * (f0 * ab.x + ab.y) * scale;
+        return radiance * lobe_dfg_albedo(l, ab, wo.z);
     }
     if (u_lobe_map_mode[lobe_index] == LOBE_MAP_BANKS) return banks_lookup(lobe_index, wo, tbn);
     float s = sqrt(clamp(wo.z, 0.0, 1.0)) * float(LOBE_SLICES - 1);  // lobe_fit.slice_coordinate

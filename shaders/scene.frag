@@ -88,7 +88,7 @@ void main() {
     float roughness = clamp(u_roughness_factor * mr_texel.g, 0.0, 1.0);
     vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * base_color : u_kd * base_texel.rgb;
     vec3 diffuse = albedo / PI * irradiance;
-    diffuse *= diffuse_weight(wo.z);
+    diffuse *= diffuse_weight(wo.z, wo.z);
     vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)
     for (int i = 0; i < u_lobe_count; ++i) {

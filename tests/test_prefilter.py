@@ -274,3 +274,38 @@ def test_banks_fit_of_brushed_steel():
     assert np.allclose(fit.energy_at(c, np.pi - phi), fit.energy_at(c, phi))
     with pytest.raises(ValueError, match="anisotropic"):
         fit_banks(_lobes("plastic")[0])
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        dict(
+            base_color=[0.8, 0.3, 0.2],
+            metallic=0.0,
+            roughness=0.4,
+            ior=1.8,
+            specular=0.6,
+            specular_color=[1.5, 1.0, 0.5],
+        ),
+        dict(base_color=[0.9, 0.7, 0.3], metallic=0.5, roughness=0.3, clearcoat=0.8, clearcoat_roughness=0.2),
+        dict(base_color=[0.5, 0.5, 0.5], metallic=0.0, roughness=0.6, ior=0.0),
+    ],
+)
+def test_dfg_albedo_of_glTF_extension_lobes_matches_quadrature(params):
+    """f0 A + f90 B (and the clearcoat's F(N.V) (A + B)) against the lobes' own albedo by
+    quadrature: the split-sum and per-pixel albedo twins hold for KHR_materials_ior/_specular/
+    _clearcoat."""
+    from lobeview.materials.bsdf import BSDF
+    from lobeview.materials.gltf import gltf_bsdf
+    from lobeview.materials.patterns import specular_lobes
+    from lobeview.materials.prefilter import dfg_albedo
+
+    table = pf.dfg_table("ggx", size=32, order=48)
+    bsdf = gltf_bsdf(**params)
+    for lobe in specular_lobes(bsdf):
+        alpha = lobe.distribution.alpha_x
+        for cos_o in (0.9, 0.5, 0.2):
+            wo = np.array([np.sqrt(1 - cos_o**2), 0.0, cos_o])
+            reflected, _ = BSDF([lobe]).albedo(wo, order=96)
+            ab = pf.dfg_lookup(table, cos_o, np.sqrt(alpha))
+            np.testing.assert_allclose(dfg_albedo(lobe, cos_o, ab), reflected, rtol=0.03, atol=2e-3)

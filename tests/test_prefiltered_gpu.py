@@ -110,6 +110,33 @@ def test_split_sum_render_matches_numpy_twin(gl):
         assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
 
 
+def test_split_sum_of_a_clearcoated_glTF_metal_matches_numpy_twin(gl):
+    """KHR_materials_clearcoat under `prefiltered`: each lobe reads the split-sum cube at its own
+    roughness and scales it by materials/prefilter.py dfg_albedo (base: (f0 A + f90 B) times the
+    coat's attenuation; coat: clearcoat F_c(N.V) (A + B))."""
+    from lobeview.materials.patterns import specular_lobes
+
+    renderer, lookup = gl
+    desc = {"model": "gltf", "base_color": [0.95, 0.6, 0.3], "metallic": 1.0, "roughness": 0.45,
+            "clearcoat": 0.8, "clearcoat_roughness": 0.1}  # fmt: skip
+    bsdf = build_bsdf(desc)
+    lobes = specular_lobes(bsdf)
+    assert [type(lobe).__name__ for lobe in lobes] == ["GltfSpecular", "GltfClearcoat"]
+    result = renderer.render(CAMERA, bsdf, "prefiltered", background=False)
+    assert not result.invalid.any()
+    cube = renderer.cubes.prefiltered_maps().split_sum("ggx")
+    table = pf.dfg_table("ggx")
+    for y, x in _pixels(result, count=16):
+        frame, wo = _frame(result, y, x)
+        r = frame @ np.array([-wo[0], -wo[1], wo[2]])
+        expected = np.zeros(3)
+        for lobe in lobes:
+            roughness = np.sqrt(lobe.distribution.alpha_x)
+            radiance = lookup(cube, r[None], roughness * (pf.SPLIT_SUM_LEVELS - 1))[0]
+            expected += radiance * pf.dfg_albedo(lobe, wo[2], pf.dfg_lookup(table, wo[2], roughness))
+        assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
+
+
 def _slice_position(wo):
     """(lower slice, interpolation weight) of a view elevation, as the shader computes it."""
     slices = len(slice_cosines())

@@ -40,16 +40,18 @@ class UniformError(KeyError):
 
 
 # -- the packed lobe ---------------------------------------------------------------------------
-LOBE_TYPES = {"kurt reflection": 0, "kurt transmission": 1, "microfacet": 2, "gltf specular": 3}
+LOBE_TYPES = {"kurt reflection": 0, "kurt transmission": 1, "microfacet": 2, "gltf specular": 3, "gltf clearcoat": 4}
 DISTRIBUTIONS = {"beckmann": 0, "ggx": 1}
 FRESNEL_TYPES = {"none": 0, "schlick": 1, "conductor": 2}
 #: (x, y, z, w) of each vec4 row of a packed lobe, as shaders/bsdf.glsl get_lobe reads them
 LOBE_LAYOUT = (
     ("type", "distribution", "alpha_x", "alpha_y"),
-    ("k.r", "k.g", "k.b", "alpha"),  # ks / kt / scale (glTF: 1), thesis shadowing exponent
+    # ks / kt / scale (glTF specular: 1, clearcoat: its factor); thesis shadowing exponent or
+    # glTF KHR_materials_specular's weight
+    ("k.r", "k.g", "k.b", "alpha | specular_weight"),
     ("r0.r", "r0.g", "r0.b", "fresnel"),  # Schlick r0, or the glTF base colour
-    ("eta.r", "eta.g", "eta.b", "metallic"),
-    ("kappa.r", "kappa.g", "kappa.b", "unused"),
+    ("eta.r | f0.r", "eta.g | f0.g", "eta.b | f0.b", "metallic"),  # glTF: the dielectric f0
+    ("kappa.r", "kappa.g", "kappa.b", "coat"),  # glTF specular: the clearcoat over it
 )
 LOBE_ROWS = len(LOBE_LAYOUT)
 

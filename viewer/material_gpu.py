@@ -11,7 +11,7 @@ from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
 from lobeview.materials.bsdf import BSDF, CosineSampled, diffuse_albedo
 from lobeview.materials.conductor import MicrofacetReflection
-from lobeview.materials.gltf import GltfDiffuse, GltfSpecular
+from lobeview.materials.gltf import COAT_F0, GltfClearcoat, GltfDiffuse, GltfSpecular
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, pattern_xi
 from lobeview.materials.thesis import KurtLobe
 
@@ -29,6 +29,11 @@ class PackedMaterial:
     lobe_distributions: list
     lobe_components: list
     tangent_rotation: float = 0.0  # BSDF.tangent_rotation (KHR_materials_anisotropy), radians
+    # The glTF diffuse's weight (shaders/bsdf.glsl diffuse_weight): 1 - specular max(F_d(f0)),
+    # times 1 - clearcoat F_c(N.V) (KHR_materials_specular/_ior/_clearcoat).
+    dielectric_f0: tuple = (0.04, 0.04, 0.04)
+    specular_weight: float = 1.0
+    clearcoat: float = 0.0
 
     @property
     def has_diffuse(self) -> bool:
@@ -65,9 +70,17 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
         elif isinstance(comp, GltfSpecular):
             row = [
                 [LOBE_TYPES["gltf specular"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
-                [1, 1, 1, 0],
+                [1, 1, 1, comp.specular],
                 [*comp.base_color, 0],
-                [0, 0, 0, comp.metallic],
+                [*comp.f0, comp.metallic],
+                [0, 0, 0, comp.coat],
+            ]
+        elif isinstance(comp, GltfClearcoat):
+            row = [
+                [LOBE_TYPES["gltf clearcoat"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
+                [*comp.scale, 0],
+                [COAT_F0, COAT_F0, COAT_F0, FRESNEL_TYPES["schlick"]],
+                [0, 0, 0, 0],
                 [0, 0, 0, 0],
             ]
         elif isinstance(comp, MicrofacetReflection):
@@ -89,8 +102,13 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
     lobes = np.zeros((MAX_LOBES * LOBE_ROWS, 4), dtype=np.float32)
     if rows:
         lobes[: len(rows) * LOBE_ROWS] = np.asarray(rows, dtype=np.float32).reshape(-1, 4)
+    diffuse = next((comp for comp in bsdf.components if isinstance(comp, GltfDiffuse)), None)
+    extra = {}
+    if diffuse is not None:
+        extra = dict(dielectric_f0=tuple(map(float, diffuse.f0)), specular_weight=diffuse.specular,
+                     clearcoat=diffuse.coat)  # fmt: skip
     return PackedMaterial(
-        kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components, float(bsdf.tangent_rotation)
+        kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components, float(bsdf.tangent_rotation), **extra
     )
 
 
@@ -104,7 +122,7 @@ def _lobe_key(comp) -> tuple:
 
 def pack_material_row_key(comp) -> tuple:
     values = []
-    for name in ("k", "r0", "alpha", "transmission", "scale", "base_color", "metallic"):
+    for name in ("k", "r0", "alpha", "transmission", "scale", "base_color", "metallic", "f0", "specular", "coat"):
         v = getattr(comp, name, None)
         values.append(None if v is None else tuple(np.atleast_1d(np.asarray(v, float)).tolist()))
     fresnel = getattr(comp, "fresnel", None)

@@ -158,6 +158,9 @@ class RendererBase:
         set_uniform(program, "u_kd", tuple(float(x) for x in material.kd))
         set_uniform(program, "u_gltf_diffuse", 1.0 if material.gltf_diffuse else 0.0)
         set_uniform(program, "u_tangent_rotation", float(material.tangent_rotation))
+        set_uniform(program, "u_dielectric_f0", tuple(float(x) for x in material.dielectric_f0))
+        set_uniform(program, "u_specular_weight", float(material.specular_weight))
+        set_uniform(program, "u_clearcoat", float(material.clearcoat))
         set_uniform(program, "u_samples", method.samples)
         set_uniform(
             program,
