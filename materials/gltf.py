@@ -26,6 +26,13 @@ F_c = 0.04 + 0.96 (1 - N.V)^5 (ior 1.5; the extension evaluates the coat's Fresn
 the base (diffuse and specular) scaled by 1 - clearcoat F_c(N.V). The coat uses the shading
 normal (the extension's clearcoatNormalTexture is not used).
 
+KHR_materials_transmission (thin-walled: KHR_materials_volume's thickness 0) moves the fraction
+``transmission`` of the dielectric's diffuse into a GGX transmission lobe with the same alpha,
+tinted by the base colour: (1 - metallic) transmission baseColor (1 - specular max(F_d)) V D,
+evaluated like thesis Eq. 3.5 with the incident direction mirrored through the surface (a thin
+wall does not bend light: the lobe is centred on the straight-through direction -V), as the
+Khronos Sample Viewer's thin-walled transmission does. The diffuse keeps 1 - transmission.
+
 KHR_materials_anisotropy stretches the GGX lobe along the anisotropy direction, the tangent
 rotated by ``anisotropy_rotation`` about the normal (counter-clockwise towards the bitangent):
 alpha_t = mix(alpha, 1, strength^2) along it, alpha_b = alpha across (the extension's
@@ -41,7 +48,7 @@ from .bsdf import BSDF, CosineSampled, _valid_pair
 from .conductor import MicrofacetReflection
 from .fresnel import Fresnel, schlick
 from .microfacet import ALPHA_MIN, MicrofacetDistribution
-from .vec import broadcast_rgb, dot, normalize
+from .vec import broadcast_rgb, dot, mirror_z, normalize
 
 DIELECTRIC_F0 = 0.04
 
@@ -83,13 +90,22 @@ def coat_attenuation(coat: float, cos_o: np.ndarray) -> np.ndarray:
 class GltfDiffuse(CosineSampled):
     name = "glTF diffuse"
 
-    def __init__(self, base_color: np.ndarray, metallic: float, f0=DIELECTRIC_F0, specular: float = 1.0, coat=0.0):
+    def __init__(
+        self,
+        base_color: np.ndarray,
+        metallic: float,
+        f0=DIELECTRIC_F0,
+        specular: float = 1.0,
+        coat=0.0,
+        transmission: float = 0.0,
+    ):
         self.base_color = base_color
         self.metallic = metallic
+        self.transmission = float(transmission)
         self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
         self.specular = float(specular)
         self.coat = float(coat)
-        self.diffuse_albedo = (1.0 - metallic) * base_color
+        self.diffuse_albedo = (1.0 - metallic) * (1.0 - self.transmission) * base_color
 
     @property
     def selection_weight(self) -> float:
@@ -107,7 +123,7 @@ class GltfDiffuse(CosineSampled):
         h = normalize(wi + wo)
         fresnel = schlick(np.abs(dot(wo, h)), self.f0)
         weight = (1.0 - self.specular * fresnel.max(axis=-1)) * coat_attenuation(self.coat, wo[..., 2])
-        f = (1.0 - self.metallic) * weight[..., None] * self.base_color / np.pi
+        f = weight[..., None] * self.diffuse_albedo / np.pi
         return np.where(valid[..., None], f, 0.0)
 
 
@@ -153,6 +169,52 @@ class GltfSpecular(MicrofacetReflection):
         return super().eval(wi, wo) * coat_attenuation(self.coat, wo[..., 2])[..., None]
 
 
+class GltfTransmission(MicrofacetReflection):
+    """KHR_materials_transmission, thin-walled: (1 - metallic) transmission baseColor
+    (1 - specular max F_d(V.H)) V D with wi mirrored through the surface (Eq. 3.5's mirroring),
+    times the clearcoat's attenuation; GGX visible normals sampled and mirrored."""
+
+    name = "glTF transmission"
+    transmission = True
+    hemisphere = "transmission"
+
+    def __init__(self, base_color, metallic: float, transmission: float, alpha_t: float, alpha_b: float,
+                 f0=DIELECTRIC_F0, specular: float = 1.0, coat: float = 0.0):  # fmt: skip
+        super().__init__(MicrofacetDistribution("ggx", alpha_t, alpha_b), Fresnel("none"))
+        self.base_color = base_color
+        self.metallic = float(metallic)
+        self.amount = float(transmission)
+        self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
+        self.specular = float(specular)
+        self.coat = float(coat)
+        self.tint = (1.0 - self.metallic) * self.amount * np.asarray(base_color, dtype=np.float64)
+
+    @property
+    def selection_weight(self) -> float:
+        return float(np.mean(self.tint))
+
+    def eval(self, wi, wo):
+        wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64))
+        valid = _valid_pair(wi, wo, True)
+        wr = mirror_z(wi)
+        lobe = super().eval(wr, wo)  # V D of the mirrored pair (Fresnel 'none', scale 1)
+        h = normalize(wr + wo)
+        kept = 1.0 - self.specular * schlick(np.abs(dot(wo, h)), self.f0).max(axis=-1)
+        f = self.tint * (kept * coat_attenuation(self.coat, wo[..., 2]))[..., None] * lobe
+        return np.where(valid[..., None], f, 0.0)
+
+    def pdf(self, wi, wo):
+        wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64))
+        return np.where(_valid_pair(wi, wo, True), super().pdf(mirror_z(wi), wo), 0.0)
+
+    def lobe_pdf(self, wi, wo):
+        wi, wo = np.broadcast_arrays(np.asarray(wi, dtype=np.float64), np.asarray(wo, dtype=np.float64))
+        return np.where(_valid_pair(wi, wo, True), super().lobe_pdf(mirror_z(wi), wo), 0.0)
+
+    def sample_wi(self, u1, u2, wo):
+        return mirror_z(super().sample_wi(u1, u2, wo))
+
+
 class GltfClearcoat(MicrofacetReflection):
     """KHR_materials_clearcoat's layer: clearcoat F_c(N.V) V D (GGX, Fresnel at N.V)."""
 
@@ -181,16 +243,20 @@ def gltf_bsdf(
     specular_color=(1.0, 1.0, 1.0),
     clearcoat: float = 0.0,
     clearcoat_roughness: float = 0.0,
+    transmission: float = 0.0,
 ) -> BSDF:
-    """The glTF BRDF with the KHR_materials_anisotropy (strength, rotation: the BSDF's local x
-    is the direction, see :func:`anisotropy_frame`), _ior, _specular and _clearcoat factors."""
+    """The glTF BSDF with the KHR_materials_anisotropy (strength, rotation: the BSDF's local x
+    is the direction, see :func:`anisotropy_frame`), _ior, _specular, _clearcoat and
+    _transmission (thin-walled) factors."""
     base = broadcast_rgb(base_color, "base_color")
     alpha_t, alpha_b = anisotropic_alphas(roughness, anisotropy)
     f0 = dielectric_f0(ior, specular_color)
     components = [
-        GltfDiffuse(base, float(metallic), f0, specular, clearcoat),
+        GltfDiffuse(base, float(metallic), f0, specular, clearcoat, transmission),
         GltfSpecular(base, float(metallic), alpha_t, alpha_b, f0, specular, clearcoat),
     ]
+    if transmission > 0:
+        components.append(GltfTransmission(base, metallic, transmission, alpha_t, alpha_b, f0, specular, clearcoat))
     if clearcoat > 0:
         components.append(GltfClearcoat(clearcoat, roughness_to_alpha(clearcoat_roughness)))
     return BSDF(components, name="glTF metallic-roughness", tangent_rotation=anisotropy_rotation)

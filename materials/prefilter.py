@@ -167,11 +167,17 @@ def dfg_albedo(component, cos_theta_o: float, ab: np.ndarray) -> np.ndarray:
     of shaders/bsdf.glsl lobe_dfg_albedo. Schlick Fresnel F = f0 (1 - Fc) + f90 Fc is linear in
     (f0, f90), so the integral of F V D cos is f0 A + f90 B: for the glTF specular
     f0 = lobe Fresnel at V.H = 1 and f90 = (1 - metallic) specular + metallic, times the
-    clearcoat's attenuation; for the clearcoat (Fresnel at N.V) clearcoat F_c(N.V) (A + B);
-    otherwise scale (f0 A + B)."""
-    from .gltf import COAT_F0, GltfClearcoat, GltfSpecular, coat_attenuation
+    clearcoat's attenuation; for the clearcoat (Fresnel at N.V) clearcoat F_c(N.V) (A + B); for
+    the thin-walled transmission tint ((A + B) - specular (max f0 A + B)); otherwise
+    scale (f0 A + B)."""
+    from .gltf import COAT_F0, GltfClearcoat, GltfSpecular, GltfTransmission, coat_attenuation
 
     a, b = float(ab[0]), float(ab[1])
+    if isinstance(component, GltfTransmission):
+        # tint (1 - specular max F) V D: max over channels of a Schlick F is the Schlick F of
+        # the largest f0, so the integral is tint ((A + B) - specular (max f0 A + B)).
+        kept = (a + b) - component.specular * (float(np.max(component.f0)) * a + b)
+        return component.tint * kept * coat_attenuation(component.coat, np.array(cos_theta_o))
     if isinstance(component, GltfClearcoat):
         fresnel = COAT_F0 + (1.0 - COAT_F0) * (1.0 - cos_theta_o) ** 5
         return component.scale * fresnel * (a + b)

@@ -13,7 +13,8 @@ microfacet  {"model": "microfacet", "distribution": "ggx" | "beckmann",
 gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness": r,
              "anisotropy": s, "anisotropy_rotation": radians,      (optional, KHR_materials_*:
              "ior": 1.5, "specular": 1, "specular_color": [r, g, b],  anisotropy, ior, specular,
-             "clearcoat": c, "clearcoat_roughness": r}               clearcoat)
+             "clearcoat": c, "clearcoat_roughness": r,               clearcoat, transmission)
+             "transmission": t}
 
 Every parameter has a documented range (:data:`RANGES`). Out-of-range or non-finite values are
 rejected with a :class:`MaterialError` that names the parameter, the value and the range; no
@@ -62,10 +63,11 @@ RANGES: dict[str, tuple[float, float]] = {
     "specular_color": (0.0, 10.0),  # f0 = min(f0(ior) x colour, 1): the extension allows > 1
     "clearcoat": (0.0, 1.0),
     "clearcoat_roughness": (0.0, 1.0),
+    "transmission": (0.0, 1.0),
 }
 #: Optional glTF-model parameters (KHR_materials_* factors), kept in a description only when given.
 GLTF_EXTENSION_KEYS = ("anisotropy", "anisotropy_rotation", "ior", "specular", "specular_color", "clearcoat",
-                       "clearcoat_roughness")  # fmt: skip
+                       "clearcoat_roughness", "transmission")  # fmt: skip
 
 
 class MaterialError(ValueError):

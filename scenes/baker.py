@@ -172,7 +172,8 @@ def bake_lightmap(
 
     # Ray-casting geometry: everything that is not a thin transmissive pane.
     def transmissive(obj):
-        return bool(scene.materials[obj.material].desc.get("transmission_lobes"))
+        desc = scene.materials[obj.material].desc
+        return bool(desc.get("transmission_lobes")) or desc.get("transmission", 0.0) > 0
 
     blockers = [o for o in scene.objects if not transmissive(o)]
     offsets = np.cumsum([0] + [len(o.mesh.positions) for o in blockers])

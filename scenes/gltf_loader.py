@@ -76,11 +76,17 @@ GLTF_MODEL_EXTENSIONS = {
         "clearcoatFactor": ("clearcoat", 0.0, (0.0, 1.0)),
         "clearcoatRoughnessFactor": ("clearcoat_roughness", 0.0, (0.0, 1.0)),
     },
+    "KHR_materials_transmission": {"transmissionFactor": ("transmission", 0.0, (0.0, 1.0))},
+    # Read for what it says about the wall: lobeview's transmission is thin-walled, so a volume
+    # (thickness > 0, attenuation) is said to be ignored, not silently dropped.
+    "KHR_materials_volume": {},
 }
 EXTENSION_TEXTURES = {
     "KHR_materials_anisotropy": ("anisotropyTexture",),
     "KHR_materials_specular": ("specularTexture", "specularColorTexture"),
     "KHR_materials_clearcoat": ("clearcoatTexture", "clearcoatRoughnessTexture", "clearcoatNormalTexture"),
+    "KHR_materials_transmission": ("transmissionTexture",),
+    "KHR_materials_volume": ("thicknessTexture",),
 }
 SUPPORTED_EXTENSIONS = {
     "MOZ_lightmap",
@@ -474,6 +480,15 @@ def _model_extensions(mat, where: str, scene_warnings: list) -> dict:
             _warn(
                 scene_warnings,
                 f"{where}: {extension} {', '.join(unused)} not used yet; its factors apply uniformly",
+            )
+    volume = (mat.extensions or {}).get("KHR_materials_volume")
+    if isinstance(volume, dict):
+        thick = volume.get("thicknessFactor", 0.0)
+        if not (isinstance(thick, (int, float)) and thick == 0) or "attenuationColor" in volume:
+            _warn(
+                scene_warnings,
+                f"{where}: KHR_materials_volume (thickness {thick}) is rendered thin-walled: no refraction "
+                "through the volume, no attenuation",
             )
     if "anisotropy_rotation" in out:
         out["anisotropy_rotation"] = float(np.remainder(out["anisotropy_rotation"] + np.pi, 2 * np.pi) - np.pi)

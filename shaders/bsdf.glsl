@@ -56,7 +56,7 @@ Lobe get_lobe(int i) {
     return l;
 }
 
-bool lobe_is_transmission(Lobe l) { return l.type == LOBE_KURT_TRANSMISSION; }
+bool lobe_is_transmission(Lobe l) { return l.type == LOBE_KURT_TRANSMISSION || l.type == LOBE_GLTF_TRANSMISSION; }
 
 // ---- microfacet distribution (microfacet.py) ----------------------------------------------
 
@@ -173,6 +173,11 @@ vec3 lobe_fresnel(Lobe l, float wo_h) {
         return (1.0 - l.metallic) * l.specular_weight * schlick(abs(wo_h), l.dielectric_f0) +
                l.metallic * schlick(abs(wo_h), l.r0);
     }
+    if (l.type == LOBE_GLTF_TRANSMISSION) {
+        // What the dielectric's reflection leaves, tinted (l.k holds the transmission factor).
+        vec3 f = schlick(abs(wo_h), l.dielectric_f0);
+        return (1.0 - l.metallic) * l.r0 * (1.0 - l.specular_weight * max(f.r, max(f.g, f.b)));
+    }
     if (l.fresnel == FRESNEL_SCHLICK) return schlick(wo_h, l.r0);
     if (l.fresnel == FRESNEL_CONDUCTOR) return fresnel_conductor(wo_h, l.eta, l.kappa);
     return vec3(1.0);
@@ -186,7 +191,8 @@ float lobe_f90(Lobe l) {
 
 // KHR_materials_clearcoat: what the coat leaves of the glTF base, 1 - clearcoat F_c(N.V).
 float gltf_coat_attenuation(Lobe l, float cos_o) {
-    return l.type == LOBE_GLTF_SPECULAR ? 1.0 - l.coat * schlick(cos_o, vec3(0.04)).x : 1.0;
+    bool base = l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION;
+    return base ? 1.0 - l.coat * schlick(cos_o, vec3(0.04)).x : 1.0;
 }
 
 // A lobe's directional albedo from the DFG table's (A, B) at its roughness (split-sum and the
@@ -194,6 +200,12 @@ float gltf_coat_attenuation(Lobe l, float cos_o) {
 // its albedo is clearcoat F_c(N.V) (A + B).
 vec3 lobe_dfg_albedo(Lobe l, vec2 ab, float cos_o) {
     if (l.type == LOBE_GLTF_CLEARCOAT) return l.k * schlick(cos_o, l.r0) * (ab.x + ab.y);
+    if (l.type == LOBE_GLTF_TRANSMISSION) {
+        // tint (1 - specular max F): max over channels of Schlick is Schlick of the largest f0.
+        float f0 = max(l.dielectric_f0.r, max(l.dielectric_f0.g, l.dielectric_f0.b));
+        float kept = (ab.x + ab.y) - l.specular_weight * (f0 * ab.x + ab.y);
+        return l.k * (1.0 - l.metallic) * l.r0 * kept * gltf_coat_attenuation(l, cos_o);
+    }
     vec3 scale = l.type == LOBE_GLTF_SPECULAR ? vec3(gltf_coat_attenuation(l, cos_o)) : l.k;
     return (lobe_fresnel(l, 1.0) * ab.x + lobe_f90(l) * ab.y) * scale;
 }
@@ -232,15 +244,16 @@ float lobe_half_pdf(Lobe l, vec3 wi, vec3 wo) {
 }
 
 bool lobe_uses_vndf(Lobe l) {
-    return (l.type == LOBE_MICROFACET || l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_CLEARCOAT) &&
-           l.dist == DIST_GGX;
+    return (l.type == LOBE_MICROFACET || l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_CLEARCOAT ||
+            l.type == LOBE_GLTF_TRANSMISSION) && l.dist == DIST_GGX;
 }
 
 // Density of lobe_sample().
 float lobe_sample_pdf(Lobe l, vec3 wi, vec3 wo) {
     if (!lobe_uses_vndf(l)) return lobe_half_pdf(l, wi, wo);
-    if (wo.z <= COS_EPS || wi.z <= COS_EPS) return 0.0;
-    vec3 h = normalize(wi + wo);
+    vec3 wr = reflected_wi(l, wi);  // a transmission lobe's samples are mirrored reflections
+    if (wo.z <= COS_EPS || wr.z <= COS_EPS) return 0.0;
+    vec3 h = normalize(wr + wo);
     float wo_h = max(dot(wo, h), COS_EPS);
     float d_vis = G1_smith(l, wo) * wo_h * D_eval(l, h) / wo.z;
     return d_vis / (4.0 * wo_h);
@@ -259,6 +272,7 @@ uniform float u_gltf_diffuse;  // 1: the material's diffuse is glTF's, under a d
 uniform vec3 u_dielectric_f0;  // KHR_materials_ior/_specular f0 (0.04 without them)
 uniform float u_specular_weight;
 uniform float u_clearcoat;
+uniform float u_transmission;  // KHR_materials_transmission: the diffuse keeps 1 - transmission
 
 // The weight of the diffuse term: glTF's 1 - specular max(F_d(V.H)) (Appendix B fresnel_mix, with
 // the KHR_materials_ior/_specular f0 and weight) times the clearcoat's 1 - clearcoat F_c(N.V);

@@ -41,7 +41,7 @@ uniform int u_albedo_per_pixel;
 uniform sampler2D u_dfg;                // rg: Beckmann (A, B), ba: GGX; x = cos, y = roughness
 
 vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
-    if (u_albedo_per_pixel == 1 && l.type == LOBE_GLTF_SPECULAR) {
+    if (u_albedo_per_pixel == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
         vec4 dfg = texture(u_dfg, vec2(wo.z, sqrt(sqrt(l.ax * l.ay))));  // roughness = sqrt(alpha)
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
         return lobe_dfg_albedo(l, ab, wo.z);

@@ -46,7 +46,8 @@ vec3 banks_lookup(int lobe_index, vec3 wo, mat3 tbn) {
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     if (wo.z <= 0.0) return vec3(0.0);
     if (u_lobe_map_mode[lobe_index] == LOBE_MAP_SPLITSUM) {
-        vec3 r = tbn * vec3(-wo.xy, wo.z);
+        // The mirror direction, or for a thin transmission lobe its mirror image: straight through.
+        vec3 r = tbn * vec3(-wo.xy, lobe_is_transmission(l) ? -wo.z : wo.z);
 #if defined(PARALLAX)
         float unused_offset;
         r = proxy_direction(r, unused_offset);

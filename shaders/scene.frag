@@ -86,14 +86,14 @@ void main() {
     vec3 base_color = u_base_color_factor.rgb * base_texel.rgb;
     float metallic = clamp(u_metallic_factor * mr_texel.b, 0.0, 1.0);
     float roughness = clamp(u_roughness_factor * mr_texel.g, 0.0, 1.0);
-    vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * base_color : u_kd * base_texel.rgb;
+    vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * (1.0 - u_transmission) * base_color : u_kd * base_texel.rgb;
     vec3 diffuse = albedo / PI * irradiance;
     diffuse *= diffuse_weight(wo.z, wo.z);
     vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)
     for (int i = 0; i < u_lobe_count; ++i) {
         Lobe l = get_lobe(i);
-        if (u_gltf_model == 1 && l.type == LOBE_GLTF_SPECULAR) {
+        if (u_gltf_model == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
             // alpha = roughness^2 per pixel, stretched along the anisotropy direction (local x)
             // by KHR_materials_anisotropy (materials/gltf.py anisotropic_alphas).
             l.r0 = base_color;

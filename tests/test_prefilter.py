@@ -289,6 +289,7 @@ def test_banks_fit_of_brushed_steel():
         ),
         dict(base_color=[0.9, 0.7, 0.3], metallic=0.5, roughness=0.3, clearcoat=0.8, clearcoat_roughness=0.2),
         dict(base_color=[0.5, 0.5, 0.5], metallic=0.0, roughness=0.6, ior=0.0),
+        dict(base_color=[0.7, 0.9, 0.8], metallic=0.2, roughness=0.3, transmission=0.9, ior=1.6, clearcoat=0.5),
     ],
 )
 def test_dfg_albedo_of_glTF_extension_lobes_matches_quadrature(params):
@@ -306,6 +307,6 @@ def test_dfg_albedo_of_glTF_extension_lobes_matches_quadrature(params):
         alpha = lobe.distribution.alpha_x
         for cos_o in (0.9, 0.5, 0.2):
             wo = np.array([np.sqrt(1 - cos_o**2), 0.0, cos_o])
-            reflected, _ = BSDF([lobe]).albedo(wo, order=96)
+            reflected, transmitted = BSDF([lobe]).albedo(wo, order=96)
             ab = pf.dfg_lookup(table, cos_o, np.sqrt(alpha))
-            np.testing.assert_allclose(dfg_albedo(lobe, cos_o, ab), reflected, rtol=0.03, atol=2e-3)
+            np.testing.assert_allclose(dfg_albedo(lobe, cos_o, ab), reflected + transmitted, rtol=0.03, atol=2e-3)

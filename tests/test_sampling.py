@@ -102,6 +102,20 @@ CASES = [
     ("gltf-dielectric", lambda: gltf_bsdf([0.6, 0.05, 0.04], 0.0, 0.4), 50, 0, None),
     ("gltf-metal-smooth", lambda: gltf_bsdf([0.9, 0.8, 0.5], 1.0, 0.2), 30, 0, 0.5),
     ("gltf-anisotropic", lambda: gltf_bsdf([0.9, 0.8, 0.5], 1.0, 0.3, 0.8), 40, 30, None),
+    (
+        "gltf-thin-transmission",
+        lambda: BSDF([gltf_bsdf([0.8, 0.9, 0.7], 0.0, 0.4, transmission=1.0, ior=1.5).components[2]]),
+        40,
+        0,
+        None,
+    ),
+    (
+        "gltf-clearcoat",
+        lambda: BSDF([gltf_bsdf([0.5] * 3, 0.0, 0.5, clearcoat=1.0, clearcoat_roughness=0.2).components[2]]),
+        30,
+        0,
+        None,
+    ),  # fmt: skip
 ]
 
 

@@ -431,8 +431,9 @@ def test_loader_maps_khr_materials_anisotropy(tmp_path):
         {"metallic": 0.0, "roughness": 0.5, "clearcoat": 0.9, "clearcoat_roughness": 0.15},
         {"metallic": 1.0, "roughness": 0.4, "clearcoat": 0.6, "clearcoat_roughness": 0.05, "ior": 1.3},
         {"metallic": 0.0, "roughness": 0.35},
+        {"metallic": 0.0, "roughness": 0.3, "transmission": 0.85, "ior": 1.6, "clearcoat": 0.4},
     ],
-    ids=["ior-specular", "clearcoat-dielectric", "clearcoat-metal", "core"],
+    ids=["ior-specular", "clearcoat-dielectric", "clearcoat-metal", "core", "thin-transmission"],
 )
 def test_khr_material_extensions_match_numpy_per_pixel(extensions):
     """KHR_materials_ior/_specular/_clearcoat through the real pipeline (lobe-7, per-pixel glTF
@@ -476,6 +477,7 @@ def test_khr_material_extensions_match_numpy_per_pixel(extensions):
             expected += diffuse.diffuse_albedo / np.pi * irradiance * diffuse.view_weight(np.array(wo[2]))
             np.testing.assert_allclose(result.radiance[y, x], expected, rtol=1e-2, atol=1e-3)
         assert ("GltfClearcoat" in lobes_seen) == ("clearcoat" in extensions)
+        assert ("GltfTransmission" in lobes_seen) == ("transmission" in extensions)
     finally:
         renderer.release()
         ctx.release()
@@ -507,3 +509,23 @@ def test_loader_maps_ior_specular_and_clearcoat(tmp_path):
     np.testing.assert_allclose(bsdf.components[0].f0, np.minimum((0.7 / 2.7) ** 2 * np.array([2.0, 1.0, 0.5]), 1))
     np.testing.assert_allclose(dielectric_f0(1.5), 0.04)
     assert isinstance(bsdf.components[2], GltfClearcoat) and bsdf.components[2].clearcoat == 1.0
+
+
+def test_loader_maps_transmission_and_says_volumes_are_thin(tmp_path):
+    material = {
+        "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.1},
+        "extensions": {
+            "KHR_materials_transmission": {"transmissionFactor": 0.95},
+            "KHR_materials_volume": {"thicknessFactor": 0.02, "attenuationColor": [0.9, 1.0, 0.9]},
+        },
+    }
+    with pytest.warns(UserWarning, match="rendered thin-walled"):
+        scene = load_gltf(_textured_gltf(tmp_path, material, [np.zeros((2, 2, 4), np.uint8)]))
+    desc = scene.materials[0].desc
+    assert desc["transmission"] == 0.95
+    from lobeview.materials.gltf import GltfTransmission
+    from lobeview.materials.spec import build_bsdf
+    from lobeview.scenes.analysis import analyse
+
+    assert any(isinstance(c, GltfTransmission) for c in build_bsdf(desc).components)
+    assert analyse(scene).objects[0].transmission_lobes == 1

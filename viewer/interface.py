@@ -40,18 +40,25 @@ class UniformError(KeyError):
 
 
 # -- the packed lobe ---------------------------------------------------------------------------
-LOBE_TYPES = {"kurt reflection": 0, "kurt transmission": 1, "microfacet": 2, "gltf specular": 3, "gltf clearcoat": 4}
+LOBE_TYPES = {
+    "kurt reflection": 0,
+    "kurt transmission": 1,
+    "microfacet": 2,
+    "gltf specular": 3,
+    "gltf clearcoat": 4,
+    "gltf transmission": 5,
+}
 DISTRIBUTIONS = {"beckmann": 0, "ggx": 1}
 FRESNEL_TYPES = {"none": 0, "schlick": 1, "conductor": 2}
 #: (x, y, z, w) of each vec4 row of a packed lobe, as shaders/bsdf.glsl get_lobe reads them
 LOBE_LAYOUT = (
     ("type", "distribution", "alpha_x", "alpha_y"),
-    # ks / kt / scale (glTF specular: 1, clearcoat: its factor); thesis shadowing exponent or
-    # glTF KHR_materials_specular's weight
+    # ks / kt / scale (glTF specular: 1, clearcoat and transmission: their factor); thesis
+    # shadowing exponent or glTF KHR_materials_specular's weight
     ("k.r", "k.g", "k.b", "alpha | specular_weight"),
     ("r0.r", "r0.g", "r0.b", "fresnel"),  # Schlick r0, or the glTF base colour
     ("eta.r | f0.r", "eta.g | f0.g", "eta.b | f0.b", "metallic"),  # glTF: the dielectric f0
-    ("kappa.r", "kappa.g", "kappa.b", "coat"),  # glTF specular: the clearcoat over it
+    ("kappa.r", "kappa.g", "kappa.b", "coat"),  # glTF specular/transmission: the clearcoat over it
 )
 LOBE_ROWS = len(LOBE_LAYOUT)
 

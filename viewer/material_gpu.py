@@ -11,7 +11,7 @@ from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
 from lobeview.materials.bsdf import BSDF, CosineSampled, diffuse_albedo
 from lobeview.materials.conductor import MicrofacetReflection
-from lobeview.materials.gltf import COAT_F0, GltfClearcoat, GltfDiffuse, GltfSpecular
+from lobeview.materials.gltf import COAT_F0, GltfClearcoat, GltfDiffuse, GltfSpecular, GltfTransmission
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, pattern_xi
 from lobeview.materials.thesis import KurtLobe
 
@@ -34,6 +34,7 @@ class PackedMaterial:
     dielectric_f0: tuple = (0.04, 0.04, 0.04)
     specular_weight: float = 1.0
     clearcoat: float = 0.0
+    transmission: float = 0.0  # KHR_materials_transmission: the diffuse keeps 1 - transmission
 
     @property
     def has_diffuse(self) -> bool:
@@ -75,6 +76,14 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                 [*comp.f0, comp.metallic],
                 [0, 0, 0, comp.coat],
             ]
+        elif isinstance(comp, GltfTransmission):
+            row = [
+                [LOBE_TYPES["gltf transmission"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
+                [comp.amount, comp.amount, comp.amount, comp.specular],
+                [*comp.base_color, 0],
+                [*comp.f0, comp.metallic],
+                [0, 0, 0, comp.coat],
+            ]
         elif isinstance(comp, GltfClearcoat):
             row = [
                 [LOBE_TYPES["gltf clearcoat"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
@@ -106,7 +115,7 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
     extra = {}
     if diffuse is not None:
         extra = dict(dielectric_f0=tuple(map(float, diffuse.f0)), specular_weight=diffuse.specular,
-                     clearcoat=diffuse.coat)  # fmt: skip
+                     clearcoat=diffuse.coat, transmission=diffuse.transmission)  # fmt: skip
     return PackedMaterial(
         kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components, float(bsdf.tangent_rotation), **extra
     )
@@ -122,7 +131,8 @@ def _lobe_key(comp) -> tuple:
 
 def pack_material_row_key(comp) -> tuple:
     values = []
-    for name in ("k", "r0", "alpha", "transmission", "scale", "base_color", "metallic", "f0", "specular", "coat"):
+    for name in ("k", "r0", "alpha", "transmission", "scale", "base_color", "metallic", "f0", "specular", "coat",
+                 "amount"):  # fmt: skip
         v = getattr(comp, name, None)
         values.append(None if v is None else tuple(np.atleast_1d(np.asarray(v, float)).tolist()))
     fresnel = getattr(comp, "fresnel", None)

@@ -161,6 +161,7 @@ class RendererBase:
         set_uniform(program, "u_dielectric_f0", tuple(float(x) for x in material.dielectric_f0))
         set_uniform(program, "u_specular_weight", float(material.specular_weight))
         set_uniform(program, "u_clearcoat", float(material.clearcoat))
+        set_uniform(program, "u_transmission", float(material.transmission))
         set_uniform(program, "u_samples", method.samples)
         set_uniform(
             program,
