@@ -175,7 +175,7 @@ def validate(desc: Any) -> dict:
                 continue
             if key == "specular_color":
                 out[key] = _scalar_or_rgb(desc[key], key, key)
-            elif key == "ior" and desc[key] == 0:
+            elif key == "ior" and not isinstance(desc[key], bool) and desc[key] == 0:
                 out[key] = 0.0
             else:
                 out[key] = _number(desc[key], key, key)
