@@ -32,6 +32,12 @@ def add_arguments(p) -> None:
         default=32,
         help="shadow rays per texel towards emissive surfaces (default 32)",
     )
+    p.add_argument(
+        "--env-samples",
+        type=int,
+        default=32,
+        help="importance samples of the environment per texel, combined with the rays by MIS (default 32; 0: off)",
+    )
     p.add_argument("--out", help="output .glb (default: SCENE_baked.glb in the current folder)")
     p.add_argument(
         "--external-lightmap",
@@ -55,6 +61,8 @@ def run(args) -> int:
     for name in ("resolution", "rays", "bounces"):
         if getattr(args, name) < 1:
             raise ValueError(f"--{name} must be at least 1")
+    if args.env_samples < 0 or args.light_samples < 0:
+        raise ValueError("--env-samples and --light-samples must not be negative")
     if not 16 <= args.resolution <= 8192:
         raise ValueError("--resolution must be in [16, 8192]")
     check_environment_option(args.env)
@@ -86,6 +94,7 @@ def run(args) -> int:
         args.rays,
         args.bounces,
         light_samples=args.light_samples,
+        env_samples=args.env_samples,
     )
     written = write_baked_gltf(source, scene, lightmap, out, limits, external_lightmap=args.external_lightmap)
     print(f"wrote {' and '.join(str(p) for p in written)} in {time.perf_counter() - t0:.1f} s")

@@ -2,7 +2,10 @@
 
 For every texel covered by a triangle in TEXCOORD_1 space, ``rays`` cosine-distributed
 directions are traced from the texel's surface point (embree through trimesh/embreex). A ray
-that leaves the scene returns the environment radiance; a ray that hits a surface returns its
+that leaves the scene returns the environment radiance, weighted by the balance heuristic
+against ``env_samples`` importance samples of the environment (env_sampling.EquirectImportance:
+its bright texels, a sun) traced as shadow rays, so a sun-bearing HDR does not leave a few
+texels with most of the energy; a ray that hits a surface returns its
 diffuse reflection kd E / pi of the previous bounce's irradiance (Eq. 4.1). Irradiance is
 E = pi * mean(L_in) (cosine-weighted estimator of integral L cos d omega), iterated for
 ``bounces`` passes. Emissive surfaces are sampled directly (next-event estimation):
@@ -28,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import qmc
 
+from .env_sampling import EquirectImportance
 from .envmap import EnvironmentMap
 from .scene import Scene
 
@@ -160,6 +164,7 @@ def bake_lightmap(
     progress: bool = True,
     seed: int = 7,
     light_samples: int = 32,
+    env_samples: int = 32,
 ) -> np.ndarray:
     """Bake one shared atlas for all objects with TEXCOORD_1; returns (res, res, 3) irradiance."""
     from lobeview.materials.bsdf import diffuse_albedo
@@ -231,6 +236,23 @@ def bake_lightmap(
     rotation = rng.random((len(pixel), 2))
 
     direct = _direct_emission(mesh, intersector, faces, emission_face, origin, normal, light_samples, seed)
+    importance = None
+    if environment is not None and env_samples > 0:
+        # Environment light by importance (its bright texels, a sun), combined with the cosine
+        # rays' escapes by the balance heuristic: escapes below weigh n_cos p_cos / (n_cos p_cos
+        # + n_env p_env), these samples the complement.
+        t_env = time.perf_counter()
+        importance = EquirectImportance.from_environment(environment)
+        direct = direct + _environment_light(
+            environment, importance, intersector, origin, normal, rays, env_samples, seed
+        )
+        if progress:
+            print(
+                f"[bake] environment: {env_samples} importance samples per texel (MIS with the cosine rays): "
+                f"{time.perf_counter() - t_env:.1f} s",
+                file=sys.stderr,
+                flush=True,
+            )
     if scene.lights:
         t_lamps = time.perf_counter()
         direct = direct + _lamp_light(scene.lights, mesh, intersector, origin, normal, extent)
@@ -262,7 +284,11 @@ def bake_lightmap(
                 escape = tri < 0
                 radiance = np.zeros((len(pixel), 3))
                 if environment is not None and np.any(escape):
-                    radiance[escape] = environment.lookup(direction[escape])
+                    radiance[escape] = environment.lookup_nearest(direction[escape])
+                    if importance is not None:
+                        p_cos = local[escape, 2] / np.pi
+                        p_env = importance.pdf(direction[escape])
+                        radiance[escape] *= (rays * p_cos / (rays * p_cos + env_samples * p_env))[:, None]
                 hit = ~escape
                 # Remember the hit point in uv1 for later bounces.
                 uv_hit = np.full((len(pixel), 2), -1.0)
@@ -300,6 +326,29 @@ def bake_lightmap(
     if progress:
         print(f"[bake] done in {time.perf_counter() - t_start:.1f} s", file=sys.stderr, flush=True)
     return lightmap.astype(np.float32)
+
+
+def _environment_light(environment, importance, intersector, origin, normal, rays: int, samples: int, seed: int):
+    """The environment's irradiance by importance samples with shadow rays, each weighted by
+    the balance heuristic against the ``rays`` cosine rays: sum w_env L cos / p_env / samples,
+    w_env = samples p_env / (rays p_cos + samples p_env), p_cos = cos / pi."""
+    out = np.zeros((len(origin), 3))
+    points = qmc.Sobol(d=2, scramble=True, seed=seed + 3).random(samples)
+    rotation = np.random.default_rng(seed + 4).random((len(origin), 2))
+    for s in range(samples):
+        u = (points[s][None, :] + rotation) % 1.0
+        direction = importance.sample(u[:, 0], u[:, 1])
+        cos = np.sum(normal * direction, axis=1)
+        idx = np.flatnonzero(cos > 0)
+        if len(idx) == 0:
+            continue
+        first = intersector.intersects_first(origin[idx], np.ascontiguousarray(direction[idx]))
+        free = idx[first < 0]
+        p_env = importance.pdf(direction[free])
+        p_cos = cos[free] / np.pi
+        weight = samples * p_env / (rays * p_cos + samples * p_env)
+        out[free] += environment.lookup_nearest(direction[free]) * (weight * cos[free] / p_env)[:, None]
+    return out / samples
 
 
 def _direct_emission(mesh, intersector, faces, emission_face, origin, normal, samples, seed):

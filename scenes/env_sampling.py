@@ -90,3 +90,72 @@ class CubeImportance:
             if np.any(sel):
                 out[sel] = face_point_directions(f, sc[sel], tc[sel])
         return out
+
+
+@dataclass
+class EquirectImportance:
+    """Importance sampling of an equirectangular environment (the baker's light samples): a
+    texel of a grid of at most ``max_height`` rows is chosen with probability P_t proportional to
+    a conservative luminance times its solid angle (plus ``uniform_fraction`` spread by solid
+    angle, so every direction keeps a positive density), then a point uniform in the texel's
+    (u, v) rectangle. With theta = pi v and phi = 2 pi u, d(omega) = 2 pi^2 sin(theta) du dv, so
+    the density per solid angle is
+
+        pdf(w) = P_t(w) H W / (2 pi^2 sin theta).
+
+    Made for :meth:`EnvironmentMap.lookup_nearest` (the baker's lookups): at full resolution the
+    density is proportional to the radiance a sample returns, texel by texel, so a 0.6-degree
+    sun costs no more variance than the sky. A map taller than ``max_height`` is pooled with the
+    maximum, not the mean, of the texels a grid texel covers: L / pdf stays bounded (a mean
+    would give a sample landing on a sun the density of the sky around it: unbiased still, but
+    with a variance no ray count tames).
+    """
+
+    probabilities: np.ndarray  # (H, W) texel probabilities, sum 1
+
+    @classmethod
+    def from_environment(cls, env, max_height: int = 1024, uniform_fraction: float = 0.02) -> EquirectImportance:
+        luminance = np.maximum(env.image.astype(np.float64) @ LUMINANCE, 0.0)
+        height, width = luminance.shape
+        factor = 1
+        while height // factor > max_height and height % (factor * 2) == 0 and width % (factor * 2) == 0:
+            factor *= 2
+        pooled = luminance.reshape(height // factor, factor, width // factor, factor).max(axis=(1, 3))
+        edges = np.linspace(0.0, np.pi, pooled.shape[0] + 1)
+        omega = (2.0 * np.pi / pooled.shape[1]) * (np.cos(edges[:-1]) - np.cos(edges[1:]))
+        omega = np.broadcast_to(omega[:, None], pooled.shape)
+        weight = pooled * omega
+        total = weight.sum()
+        uniform = omega / omega.sum()
+        if total <= 0 or not np.isfinite(total):
+            probabilities = uniform
+        else:
+            probabilities = (1.0 - uniform_fraction) * weight / total + uniform_fraction * uniform
+        return cls(np.ascontiguousarray(probabilities / probabilities.sum()))
+
+    def pdf(self, dirs: np.ndarray) -> np.ndarray:
+        from .envmap import direction_to_equirect
+
+        height, width = self.probabilities.shape
+        u, v = direction_to_equirect(dirs)
+        col = np.clip((u * width).astype(np.int64), 0, width - 1)
+        row = np.clip((v * height).astype(np.int64), 0, height - 1)
+        sin_theta = np.sin(np.pi * v)
+        return self.probabilities[row, col] * height * width / (2.0 * np.pi**2 * np.maximum(sin_theta, 1e-12))
+
+    def sample(self, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+        """Directions for uniform numbers in [0, 1): u1 picks the texel (and, rescaled, the
+        position along u), u2 the position along v."""
+        from .envmap import equirect_direction
+
+        height, width = self.probabilities.shape
+        u1 = np.asarray(u1, dtype=np.float64)
+        u2 = np.asarray(u2, dtype=np.float64)
+        cdf = np.cumsum(self.probabilities.ravel())
+        cdf[-1] = 1.0
+        index = np.minimum(np.searchsorted(cdf, u1, side="right"), len(cdf) - 1)
+        lower = np.where(index > 0, cdf[np.maximum(index - 1, 0)], 0.0)
+        p = self.probabilities.ravel()[index]
+        along = np.clip((u1 - lower) / np.maximum(p, 1e-300), 0.0, 1.0 - 1e-12)
+        row, col = index // width, index % width
+        return equirect_direction((col + along) / width, (row + u2) / height)

@@ -102,6 +102,15 @@ class EnvironmentMap:
         bottom = img[y1, x0] * (1 - fx) + img[y1, x1] * fx
         return top * (1 - fy) + bottom * fy
 
+    def lookup_nearest(self, d: np.ndarray) -> np.ndarray:
+        """The texel containing direction(s) ``d``: the map as piecewise-constant radiance, the
+        function the texel quadrature integrates exactly and importance sampling by texel
+        (env_sampling.EquirectImportance) matches texel by texel (the baker's lookups)."""
+        u, v = direction_to_equirect(d)
+        col = np.clip((u * self.width).astype(np.int64), 0, self.width - 1)
+        row = np.clip((v * self.height).astype(np.int64), 0, self.height - 1)
+        return self.image[row, col]
+
     def downsampled(self, height: int) -> EnvironmentMap:
         """Box-filtered copy with the given height (must divide the current height)."""
         factor = self.height // height

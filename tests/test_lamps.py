@@ -202,3 +202,33 @@ def test_loader_places_lamps_on_their_nodes_and_warns_about_bad_ones(tmp_path):
     text = "\n".join(scene.warnings)
     for expected in ("'light2'", "'light3'", "lamp 9", "bakes their light"):
         assert expected in text, expected
+
+
+def test_environment_importance_sampling_tames_a_sun():
+    """An open floor under builtin:sky (a 2e4 sun of 0.6 degrees): every texel's irradiance is
+    the environment's, E = integral L cos (brute force over the map). Cosine rays alone leave
+    most texels without the sun and a few with far too much; importance samples combined by MIS
+    give every texel the sun, at the same ray count."""
+    from lobeview.scenes.builtin_env import load_environment
+
+    env = load_environment("builtin:sky")
+    scene = _scene([])
+    pixel, _ = _floor_texels(scene)
+    # The floor faces +z; the sky's up is +y in envmap.py: turn the scene so the floor faces up.
+    for obj in scene.objects:
+        obj.mesh.positions = obj.mesh.positions[:, [0, 2, 1]] * np.array([1, 1, -1], np.float32)
+        obj.mesh.normals = np.tile(np.array([[0, 1, 0]], np.float32), (len(obj.mesh.normals), 1))
+    exact = env.irradiance(np.array([[0.0, 1.0, 0.0]]), source_height=512)[0]
+
+    def bake(rays, env_samples):
+        return bake_lightmap(scene, env, RES, rays=rays, bounces=1, progress=False, light_samples=0,
+                             env_samples=env_samples)[pixel[:, 0], pixel[:, 1]]  # fmt: skip
+
+    cosine_only = np.abs(bake(16, 0) / exact - 1).mean(axis=1)
+    mis_baked = bake(8, 8)
+    mis = np.abs(mis_baked / exact - 1).mean(axis=1)
+    # Measured: cosine-only 16 rays median 55 % (the sun is most of the light, most texels miss
+    # it); 8 + 8 with MIS median 3.8 %, 99th percentile 18 %; 32 + 32: 0.8 % and 5 %.
+    assert np.median(cosine_only) > 0.5
+    assert np.median(mis) < 0.1 and np.percentile(mis, 99) < 0.5, (np.median(mis), np.percentile(mis, 99))
+    np.testing.assert_allclose(mis_baked.mean(axis=0), exact, rtol=0.02)  # unbiased
