@@ -11,7 +11,8 @@ E = pi * mean(L_in) (cosine-weighted estimator of integral L cos d omega), itera
 ``bounces`` passes. Emissive surfaces are sampled directly (next-event estimation):
 ``light_samples`` points uniform over the emitters' area, each with a shadow ray, give
 E_direct = A / S * sum L_e cos(theta_r) cos(theta_e) / d^2, so small lamps do not turn into
-noise; cosine rays that hit an emitter count only its reflected light. KHR_lights_punctual lamps
+noise; cosine rays that hit an emitter count only its reflected light. Alpha-masked materials
+(MASK, and BLEND at 0.5 coverage) let rays through their cut-outs (AlphaTestedIntersector). KHR_lights_punctual lamps
 add their irradiance (:func:`lamp_irradiance`, the extension's falloff and spot cone) with one
 exact shadow ray per texel and lamp, before the bounces, so their light is reflected too. Thin
 transmissive objects (glass panes) are left out of the ray casting: they cast no shadow, a
@@ -201,7 +202,7 @@ def bake_lightmap(
     kd_face = np.concatenate(kd_face)
     emission_face = np.concatenate(emission_face)
     mesh = trimesh.Trimesh(vertices, faces, process=False)
-    intersector = mesh.ray
+    intersector = AlphaTestedIntersector(mesh, scene, blockers)
 
     texels = []
     for o in objects:
@@ -326,6 +327,73 @@ def bake_lightmap(
     if progress:
         print(f"[bake] done in {time.perf_counter() - t_start:.1f} s", file=sys.stderr, flush=True)
     return lightmap.astype(np.float32)
+
+
+class AlphaTestedIntersector:
+    """Embree's first hit, seeing through the cut-outs of alpha-masked materials: a ray that
+    hits a MASK (or BLEND) triangle where the base colour's alpha (factor x texture at the hit's
+    TEXCOORD_0) is below the cutoff (BLEND: 0.5) goes on from just past the hit, up to
+    ``MAX_LAYERS`` times. Opaque scenes cost one cast, as before."""
+
+    MAX_LAYERS = 16
+
+    def __init__(self, mesh, scene: Scene, blockers: list):
+        self.mesh = mesh
+        self.ray = mesh.ray
+        counts = [len(o.mesh.indices) for o in blockers]
+        self.face_object = np.repeat(np.arange(len(blockers)), counts)
+        self.face_start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        self.blockers = blockers
+        self.materials = [scene.materials[o.material] for o in blockers]
+        masked = [m.alpha_mode in ("MASK", "BLEND") for m in self.materials]
+        self.masked_face = np.repeat(np.asarray(masked, dtype=bool), counts) if counts else np.zeros(0, bool)
+        self.extent = float(np.max(mesh.vertices.max(0) - mesh.vertices.min(0))) if len(mesh.vertices) else 1.0
+
+    def _alpha(self, tri: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """Coverage at hit points on masked triangles (as shaders/scene.frag computes it)."""
+        from .texturing import sample_slot
+
+        out = np.ones(len(tri))
+        objects = self.face_object[tri]
+        for index in np.unique(objects):
+            sel = objects == index
+            obj, material = self.blockers[index], self.materials[index]
+            local = tri[sel] - self.face_start[index]
+            corners = obj.mesh.indices.reshape(-1, 3)[local]
+            bary = trimesh.triangles.points_to_barycentric(obj.mesh.positions[corners].astype(np.float64), points[sel])
+            uv0 = np.einsum("ij,ijk->ik", bary, obj.mesh.uvs[corners].astype(np.float64))
+            uv1 = None if obj.uv1 is None else np.einsum("ij,ijk->ik", bary, obj.uv1[corners].astype(np.float64))
+            slot = material.texture("base_color")
+            alpha = np.full(int(sel.sum()), float(material.base_alpha))
+            if slot is not None:
+                alpha = alpha * sample_slot(slot, uv0, uv1)[:, 3]
+            cutoff = material.alpha_cutoff if material.alpha_mode == "MASK" else 0.5
+            out[sel] = np.where(alpha < cutoff, 0.0, 1.0)
+        return out
+
+    def intersects_first(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        origins = np.asarray(origins, dtype=np.float64)
+        directions = np.ascontiguousarray(directions, dtype=np.float64)
+        tri = self.ray.intersects_first(origins, directions)
+        if not np.any(self.masked_face):
+            return tri
+        pending = np.flatnonzero(tri >= 0)
+        pending = pending[self.masked_face[tri[pending]]]
+        start = origins.copy()
+        for _ in range(self.MAX_LAYERS):
+            if len(pending) == 0:
+                break
+            points = _hit_points(self.mesh, start[pending], directions[pending], tri[pending])
+            see_through = self._alpha(tri[pending], points) == 0.0
+            pending = pending[see_through]
+            if len(pending) == 0:
+                break
+            # Go on from just past the cut-out (relative to the scene, as the texel lift is).
+            start[pending] = points[see_through] + directions[pending] * (1e-5 * self.extent)
+            tri[pending] = self.ray.intersects_first(start[pending], directions[pending])
+            pending = pending[tri[pending] >= 0]
+            pending = pending[self.masked_face[tri[pending]]]
+        return tri
 
 
 def _environment_light(environment, importance, intersector, origin, normal, rays: int, samples: int, seed: int):

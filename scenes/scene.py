@@ -68,9 +68,20 @@ class TextureSlot:
     min_filter: int = LINEAR_MIPMAP_LINEAR
     transform: np.ndarray = field(default_factory=lambda: np.eye(3))  # uv' = (T @ [u, v, 1])[:2]
     source: str = ""
+    # linear()'s result for the image it was made from (the baker samples a mask per ray batch).
+    _linear: tuple | None = field(default=None, repr=False, compare=False)
 
     def linear(self) -> np.ndarray:
-        """(H, W, 4) float32 linear values (sRGB decoded, alpha linear; alpha 1 if absent)."""
+        """(H, W, 4) float32 linear values (sRGB decoded, alpha linear; alpha 1 if absent);
+        decoded once per image and srgb flag (read-only result)."""
+        if self._linear is not None and self._linear[0] is self.image and self._linear[1] == self.srgb:
+            return self._linear[2]
+        values = self._decode()
+        values.setflags(write=False)
+        self._linear = (self.image, self.srgb, values)
+        return values
+
+    def _decode(self) -> np.ndarray:
         image = self.image
         if image.dtype == np.uint8:
             values = image.astype(np.float32) / 255.0

@@ -42,7 +42,7 @@ def _texel_index(index: np.ndarray, size: int, wrap: int) -> np.ndarray:
 
 def sample_slot(slot: TextureSlot, uv0: np.ndarray, uv1: np.ndarray | None = None) -> np.ndarray:
     """(N, 4) linear RGBA of the slot at the given vertex coordinates (MIP level 0)."""
-    texels = slot.linear().astype(np.float64)
+    texels = slot.linear()  # float32, decoded once per slot; only the gathered texels widen
     height, width = texels.shape[:2]
     uv = transformed_uv(slot, uv0, uv1)
     u, v = _fold(uv[:, 0], slot.wrap_s), _fold(uv[:, 1], slot.wrap_t)
@@ -50,13 +50,17 @@ def sample_slot(slot: TextureSlot, uv0: np.ndarray, uv1: np.ndarray | None = Non
     if slot.mag_filter == NEAREST:
         xi = _texel_index(np.floor(x + 0.5).astype(np.int64), width, slot.wrap_s)
         yi = _texel_index(np.floor(y + 0.5).astype(np.int64), height, slot.wrap_t)
-        return texels[yi, xi]
+        return texels[yi, xi].astype(np.float64)
     x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
     fx, fy = (x - x0)[:, None], (y - y0)[:, None]
     xa, xb = _texel_index(x0, width, slot.wrap_s), _texel_index(x0 + 1, width, slot.wrap_s)
     ya, yb = _texel_index(y0, height, slot.wrap_t), _texel_index(y0 + 1, height, slot.wrap_t)
-    top = texels[ya, xa] * (1 - fx) + texels[ya, xb] * fx
-    bottom = texels[yb, xa] * (1 - fx) + texels[yb, xb] * fx
+
+    def texel(row, col):
+        return texels[row, col].astype(np.float64)
+
+    top = texel(ya, xa) * (1 - fx) + texel(ya, xb) * fx
+    bottom = texel(yb, xa) * (1 - fx) + texel(yb, xb) * fx
     return top * (1 - fy) + bottom * fy
 
 

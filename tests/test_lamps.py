@@ -232,3 +232,35 @@ def test_environment_importance_sampling_tames_a_sun():
     assert np.median(cosine_only) > 0.5
     assert np.median(mis) < 0.1 and np.percentile(mis, 99) < 0.5, (np.median(mis), np.percentile(mis, 99))
     np.testing.assert_allclose(mis_baked.mean(axis=0), exact, rtol=0.02)  # unbiased
+
+
+def test_alpha_masked_cutouts_let_light_through():
+    """A MASK quad over the floor whose texture is transparent on its left half and opaque on its
+    right: under a sun from straight above, only the right half's footprint is in shadow (the
+    cut-out passes rays, AlphaTestedIntersector); an opaque material shadows the whole."""
+    from lobeview.scenes.scene import TextureSlot
+
+    sun = _lamp("directional", intensity=3.0, direction=np.array([0.0, 0.0, -1.0]))
+    scene = _scene([sun], blocker=True)
+    pixel, position = _floor_texels(scene)
+    mask = np.zeros((4, 4, 4), np.uint8)
+    mask[..., :3] = 200
+    mask[:, 2:, 3] = 255  # u >= 0.5: opaque
+    slot = TextureSlot(mask, srgb=True, mag_filter=9728, min_filter=9728)
+    cutout = SceneMaterial("leaf", scene.materials[0].desc, alpha_mode="MASK", textures={"base_color": slot})
+    scene.materials.append(cutout)
+    blocker = scene.objects[1]
+    blocker.material = 1
+    # The blocker's TEXCOORD_0 runs u from 0 at x = -0.5 to 1 at x = +0.5.
+    blocker.mesh.uvs = np.array([[0, 1], [1, 1], [1, 0], [0, 0]], np.float32)
+    baked = _bake(scene)[pixel[:, 0], pixel[:, 1], 0]
+    texel = 4.0 / (RES / 2)
+    inner_y = np.abs(position[:, 1]) < 0.5 - 1.5 * texel
+    under_opaque = inner_y & (position[:, 0] > 1.5 * texel) & (position[:, 0] < 0.5 - 1.5 * texel)
+    under_cutout = inner_y & (position[:, 0] < -1.5 * texel) & (position[:, 0] > -0.5 + 1.5 * texel)
+    assert under_opaque.sum() > 4 and under_cutout.sum() > 4
+    assert np.all(baked[under_opaque] == 0)
+    np.testing.assert_allclose(baked[under_cutout], 3.0, rtol=1e-6)
+    scene.materials[1].alpha_mode = "OPAQUE"
+    opaque = _bake(scene)[pixel[:, 0], pixel[:, 1], 0]
+    assert np.all(opaque[under_cutout] == 0)
