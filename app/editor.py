@@ -137,7 +137,7 @@ def material_widgets(imgui, desc: dict) -> tuple[bool, dict]:
             changed_any |= c
         # KHR_materials_* factors: written into the description only once moved off the default.
         for name, default in (("anisotropy", 0.0), ("anisotropy_rotation", 0.0), ("ior", 1.5), ("specular", 1.0),
-                              ("clearcoat", 0.0), ("clearcoat_roughness", 0.0), ("transmission", 0.0)):  # fmt: skip
+                              ("clearcoat", 0.0), ("clearcoat_roughness", 0.0), ("transmission", 0.0), ("sheen_roughness", 0.0)):  # fmt: skip
             c, value = _slider(imgui, name.replace("_", " "), d.get(name, default), name)
             if c:
                 d[name] = value

@@ -33,6 +33,14 @@ evaluated like thesis Eq. 3.5 with the incident direction mirrored through the s
 wall does not bend light: the lobe is centred on the straight-through direction -V), as the
 Khronos Sample Viewer's thin-walled transmission does. The diffuse keeps 1 - transmission.
 
+KHR_materials_sheen is approximated (documented): the sheen lobe sheenColor D_Charlie(alpha_s)
+V_Neubelt (alpha_s = sheenRoughness^2; V_Neubelt = 1 / (4 (N.L + N.V - N.L N.V)) includes the
+1 / (4 |N.L| |N.V|)) is replaced by a term with the same directional albedo that takes its light
+like the diffuse, sheenColor E_s(N.V) / pi (E_s: the white sheen lobe's albedo by
+quadrature, a 16-entry table over N.V); the base keeps 1 - max(sheenColor) E_s(N.V) (the
+extension's albedo scaling). What this loses: the sheen lobe's direction (its grazing
+retro-reflection of a bright source); what it keeps: its energy at every view angle.
+
 KHR_materials_anisotropy stretches the GGX lobe along the anisotropy direction, the tangent
 rotated by ``anisotropy_rotation`` about the normal (counter-clockwise towards the bitangent):
 alpha_t = mix(alpha, 1, strength^2) along it, alpha_b = alpha across (the extension's
@@ -82,9 +90,104 @@ def dielectric_f0(ior: float = 1.5, specular_color=(1.0, 1.0, 1.0)) -> np.ndarra
     )
 
 
-def coat_attenuation(coat: float, cos_o: np.ndarray) -> np.ndarray:
-    """What the clearcoat leaves of the base: 1 - clearcoat F_c(N.V) (scalar per direction)."""
+def coat_attenuation(coat, cos_o: np.ndarray) -> np.ndarray:
+    """What the layers over the base leave of it (scalar per direction): 1 - clearcoat F_c(N.V)
+    for a clearcoat factor, or a :class:`BaseLayers`' attenuation (clearcoat and sheen)."""
+    if isinstance(coat, BaseLayers):
+        return coat.attenuation(cos_o)
     return 1.0 - float(coat) * schlick(cos_o, np.full(3, COAT_F0))[..., 0]
+
+
+SHEEN_TABLE_SIZE = 16  # E_s(N.V) samples at N.V = (i + 0.5) / 16 (shaders/bsdf.glsl sheen_albedo)
+
+
+def charlie_d(cos_h: np.ndarray, sheen_roughness: float) -> np.ndarray:
+    """KHR_materials_sheen's Charlie distribution (Estevez and Kulla 2017):
+    D(h) = (2 + 1/alpha) sin(theta_h)^(1/alpha) / (2 pi), alpha = sheenRoughness^2 (>= 1e-3)."""
+    alpha = max(float(sheen_roughness) ** 2, 1e-3)
+    sin_h = np.sqrt(np.clip(1.0 - np.asarray(cos_h, dtype=np.float64) ** 2, 0.0, 1.0))
+    return (2.0 + 1.0 / alpha) * sin_h ** (1.0 / alpha) / (2.0 * np.pi)
+
+
+class GltfSheenLobe(CosineSampled):
+    """The extension's sheen BRDF, white: D_Charlie(h) V_Neubelt with V = 1 / (4 (N.L + N.V -
+    N.L N.V)) (the extension's cheaper visibility). Used for its albedo; not rendered."""
+
+    name = "glTF sheen lobe"
+
+    def __init__(self, sheen_roughness: float):
+        self.sheen_roughness = float(sheen_roughness)
+        self.diffuse_albedo = np.zeros(3)
+
+    @property
+    def selection_weight(self) -> float:
+        return 1.0
+
+    def eval(self, wi, wo):
+        valid = _valid_pair(wi, wo, False)
+        h = normalize(wi + wo)
+        n_l, n_v = np.abs(wi[..., 2]), np.abs(wo[..., 2])
+        value = charlie_d(h[..., 2], self.sheen_roughness) / (4.0 * (n_l + n_v - n_l * n_v))
+        return np.where(valid[..., None], value[..., None] * np.ones(3), 0.0)
+
+
+def sheen_albedo_table(sheen_roughness: float, order: int = 64) -> np.ndarray:
+    """(SHEEN_TABLE_SIZE,) directional albedo of the white sheen lobe at N.V = (i + 0.5) / size."""
+    lobe = BSDF([GltfSheenLobe(sheen_roughness)])
+    table = np.empty(SHEEN_TABLE_SIZE)
+    for i in range(SHEEN_TABLE_SIZE):
+        mu = (i + 0.5) / SHEEN_TABLE_SIZE
+        reflected, _ = lobe.albedo(np.array([np.sqrt(1.0 - mu * mu), 0.0, mu]), order)
+        table[i] = reflected[0]
+    return table
+
+
+class BaseLayers:
+    """What lies over the glTF base (diffuse, specular, transmission): the clearcoat and the
+    sheen; ``attenuation(N.V)`` = (1 - clearcoat F_c(N.V)) (1 - max(sheenColor) E_s(N.V))."""
+
+    def __init__(self, coat: float = 0.0, sheen_color=(0.0, 0.0, 0.0), sheen_roughness: float = 0.0):
+        self.coat = float(coat)
+        self.sheen_color = broadcast_rgb(sheen_color, "sheen_color")
+        self.sheen_roughness = float(sheen_roughness)
+        self.sheen_table = (
+            sheen_albedo_table(sheen_roughness) if np.any(self.sheen_color > 0) else np.zeros(SHEEN_TABLE_SIZE)
+        )
+
+    def sheen_albedo(self, cos_o) -> np.ndarray:
+        """E_s(N.V), linear between table entries, clamped at the ends (a GL_LINEAR lookup)."""
+        x = np.clip(np.asarray(cos_o, dtype=np.float64) * SHEEN_TABLE_SIZE - 0.5, 0.0, SHEEN_TABLE_SIZE - 1.0)
+        i0 = np.minimum(np.floor(x).astype(np.int64), SHEEN_TABLE_SIZE - 2)
+        f = x - i0
+        return self.sheen_table[i0] * (1.0 - f) + self.sheen_table[i0 + 1] * f
+
+    def attenuation(self, cos_o) -> np.ndarray:
+        coat = 1.0 - self.coat * schlick(cos_o, np.full(3, COAT_F0))[..., 0]
+        return coat * (1.0 - float(np.max(self.sheen_color)) * self.sheen_albedo(cos_o))
+
+
+class GltfSheen(CosineSampled):
+    """KHR_materials_sheen, approximated: sheenColor E_s(N.V) / pi, lit like the diffuse (the
+    lightmap or the environment's irradiance), cosine-sampled. ``diffuse_albedo`` is 0: the
+    shaders add it from u_sheen_color and the E_s table (bsdf.glsl sheen_term)."""
+
+    name = "glTF sheen"
+
+    def __init__(self, layers: BaseLayers):
+        self.layers = layers
+        self.diffuse_albedo = np.zeros(3)
+
+    @property
+    def selection_weight(self) -> float:
+        return float(np.mean(self.layers.sheen_color)) * 0.5
+
+    def view_albedo(self, cos_o) -> np.ndarray:
+        """sheenColor E_s(N.V): the term's radiance under irradiance pi (what it adds)."""
+        return self.layers.sheen_color * np.asarray(self.layers.sheen_albedo(cos_o))[..., None]
+
+    def eval(self, wi, wo):
+        valid = _valid_pair(wi, wo, False)
+        return np.where(valid[..., None], self.view_albedo(wo[..., 2]) / np.pi, 0.0)
 
 
 class GltfDiffuse(CosineSampled):
@@ -104,7 +207,7 @@ class GltfDiffuse(CosineSampled):
         self.transmission = float(transmission)
         self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
         self.specular = float(specular)
-        self.coat = float(coat)
+        self.coat = coat if isinstance(coat, BaseLayers) else BaseLayers(coat)
         self.diffuse_albedo = (1.0 - metallic) * (1.0 - self.transmission) * base_color
 
     @property
@@ -146,7 +249,7 @@ class GltfSpecular(MicrofacetReflection):
         self.metallic = metallic
         self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
         self.specular = float(specular)
-        self.coat = float(coat)
+        self.coat = coat if isinstance(coat, BaseLayers) else BaseLayers(coat)
 
     @property
     def selection_weight(self) -> float:
@@ -186,7 +289,7 @@ class GltfTransmission(MicrofacetReflection):
         self.amount = float(transmission)
         self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
         self.specular = float(specular)
-        self.coat = float(coat)
+        self.coat = coat if isinstance(coat, BaseLayers) else BaseLayers(coat)
         self.tint = (1.0 - self.metallic) * self.amount * np.asarray(base_color, dtype=np.float64)
 
     @property
@@ -244,19 +347,24 @@ def gltf_bsdf(
     clearcoat: float = 0.0,
     clearcoat_roughness: float = 0.0,
     transmission: float = 0.0,
+    sheen_color=(0.0, 0.0, 0.0),
+    sheen_roughness: float = 0.0,
 ) -> BSDF:
     """The glTF BSDF with the KHR_materials_anisotropy (strength, rotation: the BSDF's local x
-    is the direction, see :func:`anisotropy_frame`), _ior, _specular, _clearcoat and
-    _transmission (thin-walled) factors."""
+    is the direction, see :func:`anisotropy_frame`), _ior, _specular, _clearcoat,
+    _transmission (thin-walled) and _sheen (approximated) factors."""
     base = broadcast_rgb(base_color, "base_color")
     alpha_t, alpha_b = anisotropic_alphas(roughness, anisotropy)
     f0 = dielectric_f0(ior, specular_color)
+    layers = BaseLayers(clearcoat, sheen_color, sheen_roughness)
     components = [
-        GltfDiffuse(base, float(metallic), f0, specular, clearcoat, transmission),
-        GltfSpecular(base, float(metallic), alpha_t, alpha_b, f0, specular, clearcoat),
+        GltfDiffuse(base, float(metallic), f0, specular, layers, transmission),
+        GltfSpecular(base, float(metallic), alpha_t, alpha_b, f0, specular, layers),
     ]
     if transmission > 0:
-        components.append(GltfTransmission(base, metallic, transmission, alpha_t, alpha_b, f0, specular, clearcoat))
+        components.append(GltfTransmission(base, metallic, transmission, alpha_t, alpha_b, f0, specular, layers))
+    if np.any(layers.sheen_color > 0):
+        components.append(GltfSheen(layers))
     if clearcoat > 0:
         components.append(GltfClearcoat(clearcoat, roughness_to_alpha(clearcoat_roughness)))
     return BSDF(components, name="glTF metallic-roughness", tangent_rotation=anisotropy_rotation)

@@ -14,7 +14,7 @@ gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness
              "anisotropy": s, "anisotropy_rotation": radians,      (optional, KHR_materials_*:
              "ior": 1.5, "specular": 1, "specular_color": [r, g, b],  anisotropy, ior, specular,
              "clearcoat": c, "clearcoat_roughness": r,               clearcoat, transmission)
-             "transmission": t}
+             "transmission": t, "sheen_color": [r, g, b], "sheen_roughness": r}
 
 Every parameter has a documented range (:data:`RANGES`). Out-of-range or non-finite values are
 rejected with a :class:`MaterialError` that names the parameter, the value and the range; no
@@ -64,10 +64,12 @@ RANGES: dict[str, tuple[float, float]] = {
     "clearcoat": (0.0, 1.0),
     "clearcoat_roughness": (0.0, 1.0),
     "transmission": (0.0, 1.0),
+    "sheen_color": (0.0, 1.0),
+    "sheen_roughness": (0.0, 1.0),
 }
 #: Optional glTF-model parameters (KHR_materials_* factors), kept in a description only when given.
 GLTF_EXTENSION_KEYS = ("anisotropy", "anisotropy_rotation", "ior", "specular", "specular_color", "clearcoat",
-                       "clearcoat_roughness", "transmission")  # fmt: skip
+                       "clearcoat_roughness", "transmission", "sheen_color", "sheen_roughness")  # fmt: skip
 
 
 class MaterialError(ValueError):
@@ -173,7 +175,7 @@ def validate(desc: Any) -> dict:
         for key in GLTF_EXTENSION_KEYS:
             if key not in desc:
                 continue
-            if key == "specular_color":
+            if key in ("specular_color", "sheen_color"):
                 out[key] = _scalar_or_rgb(desc[key], key, key)
             elif key == "ior" and not isinstance(desc[key], bool) and desc[key] == 0:
                 out[key] = 0.0

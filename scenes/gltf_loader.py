@@ -77,6 +77,10 @@ GLTF_MODEL_EXTENSIONS = {
         "clearcoatRoughnessFactor": ("clearcoat_roughness", 0.0, (0.0, 1.0)),
     },
     "KHR_materials_transmission": {"transmissionFactor": ("transmission", 0.0, (0.0, 1.0))},
+    "KHR_materials_sheen": {
+        "sheenColorFactor": ("sheen_color", [0.0, 0.0, 0.0], (0.0, 1.0)),
+        "sheenRoughnessFactor": ("sheen_roughness", 0.0, (0.0, 1.0)),
+    },
     # Read for what it says about the wall: lobeview's transmission is thin-walled, so a volume
     # (thickness > 0, attenuation) is said to be ignored, not silently dropped.
     "KHR_materials_volume": {},
@@ -86,6 +90,7 @@ EXTENSION_TEXTURES = {
     "KHR_materials_specular": ("specularTexture", "specularColorTexture"),
     "KHR_materials_clearcoat": ("clearcoatTexture", "clearcoatRoughnessTexture", "clearcoatNormalTexture"),
     "KHR_materials_transmission": ("transmissionTexture",),
+    "KHR_materials_sheen": ("sheenColorTexture", "sheenRoughnessTexture"),
     "KHR_materials_volume": ("thicknessTexture",),
 }
 SUPPORTED_EXTENSIONS = {

@@ -189,10 +189,30 @@ float lobe_f90(Lobe l) {
     return l.type == LOBE_GLTF_SPECULAR ? (1.0 - l.metallic) * l.specular_weight + l.metallic : 1.0;
 }
 
-// KHR_materials_clearcoat: what the coat leaves of the glTF base, 1 - clearcoat F_c(N.V).
+// KHR_materials_sheen, approximated (materials/gltf.py GltfSheen): sheenColor E_s(N.V) / pi lit
+// like the diffuse, E_s the white sheen lobe's albedo at N.V = (i + 0.5) / SHEEN_TABLE_SIZE.
+uniform vec3 u_sheen_color;
+uniform float u_sheen_albedo[SHEEN_TABLE_SIZE];
+
+float sheen_albedo(float cos_o) {
+    float x = clamp(cos_o * float(SHEEN_TABLE_SIZE) - 0.5, 0.0, float(SHEEN_TABLE_SIZE - 1));
+    int i0 = min(int(floor(x)), SHEEN_TABLE_SIZE - 2);
+    return mix(u_sheen_albedo[i0], u_sheen_albedo[i0 + 1], x - float(i0));
+}
+
+// sheenColor E_s(N.V): the sheen's radiance under irradiance pi.
+vec3 sheen_term(float cos_o) { return u_sheen_color * sheen_albedo(cos_o); }
+
+// What the sheen leaves of the base: 1 - max(sheenColor) E_s(N.V) (the extension's scaling).
+float sheen_attenuation(float cos_o) {
+    return 1.0 - max(u_sheen_color.r, max(u_sheen_color.g, u_sheen_color.b)) * sheen_albedo(cos_o);
+}
+
+// What the layers leave of the glTF base: 1 - clearcoat F_c(N.V) (KHR_materials_clearcoat)
+// times the sheen's attenuation.
 float gltf_coat_attenuation(Lobe l, float cos_o) {
     bool base = l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION;
-    return base ? 1.0 - l.coat * schlick(cos_o, vec3(0.04)).x : 1.0;
+    return base ? (1.0 - l.coat * schlick(cos_o, vec3(0.04)).x) * sheen_attenuation(cos_o) : 1.0;
 }
 
 // A lobe's directional albedo from the DFG table's (A, B) at its roughness (split-sum and the
@@ -281,6 +301,6 @@ uniform float u_transmission;  // KHR_materials_transmission: the diffuse keeps 
 vec3 diffuse_weight(float v_dot_h, float n_dot_v) {
     if (u_gltf_diffuse <= 0.5) return vec3(1.0);
     vec3 f = schlick(v_dot_h, u_dielectric_f0);
-    float coat = 1.0 - u_clearcoat * schlick(n_dot_v, vec3(0.04)).x;
+    float coat = (1.0 - u_clearcoat * schlick(n_dot_v, vec3(0.04)).x) * sheen_attenuation(n_dot_v);
     return vec3((1.0 - u_specular_weight * max(f.r, max(f.g, f.b))) * coat);
 }

@@ -50,7 +50,7 @@ vec2 sobol_point(int index) { return sobol_point4(index).xy; }
 
 vec3 diffuse_eval(vec3 wi, vec3 wo) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
-    return u_kd / PI * diffuse_weight(abs(dot(wo, normalize(wi + wo))), wo.z);
+    return (u_kd * diffuse_weight(abs(dot(wo, normalize(wi + wo))), wo.z) + sheen_term(wo.z)) / PI;
 }
 
 vec3 cosine_hemisphere(vec2 u) {
@@ -201,7 +201,7 @@ vec3 integrate_diffuse(vec3 wo, mat3 tbn) {
     // kd E / pi (Eq. 4.1) with E from the irradiance map; glTF's (1 - F(V.H)) factor is
     // approximated at the view direction.
     vec3 e = textureLod(u_irradiance, tbn[2], 0.0).rgb;
-    return u_kd / PI * diffuse_weight(wo.z, wo.z) * e;
+    return (u_kd * diffuse_weight(wo.z, wo.z) + sheen_term(wo.z)) / PI * e;
 #endif
 }
 

@@ -89,6 +89,7 @@ void main() {
     vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * (1.0 - u_transmission) * base_color : u_kd * base_texel.rgb;
     vec3 diffuse = albedo / PI * irradiance;
     diffuse *= diffuse_weight(wo.z, wo.z);
+    diffuse += sheen_term(wo.z) / PI * irradiance;  // KHR_materials_sheen, lit like the diffuse
     vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)
     for (int i = 0; i < u_lobe_count; ++i) {

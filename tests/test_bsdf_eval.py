@@ -317,3 +317,38 @@ def test_gltf_thin_transmission_matches_the_sample_viewer_and_conserves_energy()
         # Most of it passes, less at grazing where the Fresnel reflection grows (0.41 at 80 degrees).
         assert np.all(reflected + transmitted <= 1.0 + 2e-3), (theta, reflected, transmitted)
         assert transmitted.mean() > (0.7 if theta <= 60 else 0.5), (theta, transmitted)
+
+
+@pytest.mark.parametrize("sheen_roughness", [0.2, 0.5, 1.0])
+def test_charlie_distribution_is_normalised(sheen_roughness):
+    """KHR_materials_sheen's D_Charlie: integral of D(h) cos(theta_h) over the hemisphere = 1
+    (midpoint quadrature in theta_h)."""
+    from lobeview.materials.gltf import charlie_d
+
+    theta = (np.arange(20000) + 0.5) / 20000 * (np.pi / 2)
+    integral = np.sum(charlie_d(np.cos(theta), sheen_roughness) * np.cos(theta) * np.sin(theta)) * 2 * np.pi
+    assert integral * (np.pi / 2) / 20000 == pytest.approx(1.0, rel=1e-4)
+
+
+def test_sheen_approximation_keeps_the_lobes_albedo_and_the_base_gives_way():
+    """GltfSheen (sheenColor E_s(N.V) / pi) reflects what the extension's sheen lobe reflects
+    (its albedo by quadrature, per view angle), and the base is scaled by 1 - max(sheenColor)
+    E_s so that a white sheen over a white diffuse never exceeds 1."""
+    from lobeview.materials.bsdf import BSDF
+    from lobeview.materials.gltf import SHEEN_TABLE_SIZE, GltfSheen, GltfSheenLobe
+
+    colour = np.array([0.9, 0.5, 0.7])
+    bsdf = gltf_bsdf([1.0, 1.0, 1.0], 0.0, 0.6, sheen_color=colour, sheen_roughness=0.4)
+    sheen = next(c for c in bsdf.components if isinstance(c, GltfSheen))
+    lobe = BSDF([GltfSheenLobe(0.4)])
+    for i in (0, 5, 15):
+        mu = (i + 0.5) / SHEEN_TABLE_SIZE
+        wo = np.array([np.sqrt(1 - mu * mu), 0.0, mu])
+        true_albedo, _ = lobe.albedo(wo, order=96)
+        np.testing.assert_allclose(sheen.view_albedo(np.array(mu)), colour * true_albedo[0], rtol=2e-3)
+        approx_albedo, _ = BSDF([sheen]).albedo(wo, order=96)
+        np.testing.assert_allclose(approx_albedo, colour * true_albedo[0], rtol=2e-3)
+    white = gltf_bsdf([1.0, 1.0, 1.0], 0.0, 0.8, sheen_color=[1.0, 1.0, 1.0], sheen_roughness=0.3)
+    for theta in (0, 45, 80):
+        reflected, _ = white.albedo(direction_from_angles_deg(theta), order=96)
+        assert np.all(reflected <= 1.0 + 5e-3), (theta, reflected)

@@ -309,9 +309,9 @@ def test_textured_glTF_material_matches_numpy_per_pixel(rendered, method, normal
 def test_unsupported_material_extensions_are_named_not_dropped_silently(tmp_path):
     material = {
         "pbrMetallicRoughness": {"baseColorFactor": [1, 1, 1, 1]},
-        "extensions": {"KHR_materials_sheen": {"sheenColorFactor": [1, 1, 1]}, "KHR_materials_emissive_strength": {}},
+        "extensions": {"KHR_materials_iridescence": {"iridescenceFactor": 1.0}, "KHR_materials_emissive_strength": {}},
     }
-    with pytest.warns(UserWarning, match="KHR_materials_sheen is not supported yet") as caught:
+    with pytest.warns(UserWarning, match="KHR_materials_iridescence is not supported yet") as caught:
         load_gltf(_textured_gltf(tmp_path, material, [np.zeros((2, 2, 4), np.uint8)]))
     assert not any("emissive_strength" in str(w.message) for w in caught)
 
@@ -432,15 +432,16 @@ def test_loader_maps_khr_materials_anisotropy(tmp_path):
         {"metallic": 1.0, "roughness": 0.4, "clearcoat": 0.6, "clearcoat_roughness": 0.05, "ior": 1.3},
         {"metallic": 0.0, "roughness": 0.35},
         {"metallic": 0.0, "roughness": 0.3, "transmission": 0.85, "ior": 1.6, "clearcoat": 0.4},
+        {"metallic": 0.0, "roughness": 0.6, "sheen_color": [0.9, 0.5, 0.7], "sheen_roughness": 0.4},
     ],
-    ids=["ior-specular", "clearcoat-dielectric", "clearcoat-metal", "core", "thin-transmission"],
+    ids=["ior-specular", "clearcoat-dielectric", "clearcoat-metal", "core", "thin-transmission", "sheen"],
 )
 def test_khr_material_extensions_match_numpy_per_pixel(extensions):
     """KHR_materials_ior/_specular/_clearcoat through the real pipeline (lobe-7, per-pixel glTF
     path with a base-colour texture) against the numpy twin: every lobe by the same pattern
     quadrature, the diffuse by SH9 irradiance times GltfDiffuse.view_weight."""
     from lobeview.bench.testing import CubeLookup
-    from lobeview.materials.gltf import GltfDiffuse
+    from lobeview.materials.gltf import GltfDiffuse, GltfSheen
     from lobeview.scenes.envmap import EnvironmentMap, eval_sh9
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
@@ -475,9 +476,13 @@ def test_khr_material_extensions_match_numpy_per_pixel(extensions):
             diffuse = next(c for c in bsdf.components if isinstance(c, GltfDiffuse))
             irradiance = eval_sh9(renderer.environment_sh9, frame[:, 2])
             expected += diffuse.diffuse_albedo / np.pi * irradiance * diffuse.view_weight(np.array(wo[2]))
+            for sheen in (c for c in bsdf.components if isinstance(c, GltfSheen)):
+                lobes_seen.add("GltfSheen")
+                expected += sheen.view_albedo(np.array(wo[2])) / np.pi * irradiance
             np.testing.assert_allclose(result.radiance[y, x], expected, rtol=1e-2, atol=1e-3)
         assert ("GltfClearcoat" in lobes_seen) == ("clearcoat" in extensions)
         assert ("GltfTransmission" in lobes_seen) == ("transmission" in extensions)
+        assert ("GltfSheen" in lobes_seen) == ("sheen_color" in extensions)
     finally:
         renderer.release()
         ctx.release()
@@ -529,3 +534,12 @@ def test_loader_maps_transmission_and_says_volumes_are_thin(tmp_path):
 
     assert any(isinstance(c, GltfTransmission) for c in build_bsdf(desc).components)
     assert analyse(scene).objects[0].transmission_lobes == 1
+
+
+def test_loader_maps_sheen(tmp_path):
+    material = {"extensions": {"KHR_materials_sheen": {"sheenColorFactor": [0.8, 0.2, 0.4], "sheenRoughnessFactor": 0.3,
+                                                       "sheenColorTexture": {"index": 0}}}}  # fmt: skip
+    with pytest.warns(UserWarning, match="sheenColorTexture not used yet"):
+        scene = load_gltf(_textured_gltf(tmp_path, material, [np.zeros((2, 2, 4), np.uint8)]))
+    desc = scene.materials[0].desc
+    assert desc["sheen_color"] == [0.8, 0.2, 0.4] and desc["sheen_roughness"] == 0.3

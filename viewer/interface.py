@@ -24,6 +24,7 @@ import numpy as np
 
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN, Method
 from lobeview.materials.banks import BANKS_AZIMUTHS
+from lobeview.materials.gltf import SHEEN_TABLE_SIZE
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
 from lobeview.materials.microfacet import ALPHA_MIN
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, MAX_ELLIPSE_ANGLE, XI_BORDER
@@ -92,6 +93,7 @@ SHADER_CONSTANTS: dict = {
     **_defines_of("ALPHA", ALPHA_MODES),
     **_defines_of("MAP", MAP_SLOTS),
     "MATERIAL_MAPS": len(MAP_SLOTS),
+    "SHEEN_TABLE_SIZE": SHEEN_TABLE_SIZE,  # materials/gltf.py: E_s(N.V) entries of u_sheen_albedo
     "ALPHA_MIN": float(ALPHA_MIN),  # materials/microfacet.py: the smallest GGX alpha
     "LOBE_SLICES": LOBE_SLICES,
     "LOBE_TABLE_ROWS": LOBE_TABLE_ROWS,

@@ -11,7 +11,15 @@ from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
 from lobeview.materials.bsdf import BSDF, CosineSampled, diffuse_albedo
 from lobeview.materials.conductor import MicrofacetReflection
-from lobeview.materials.gltf import COAT_F0, GltfClearcoat, GltfDiffuse, GltfSpecular, GltfTransmission
+from lobeview.materials.gltf import (
+    COAT_F0,
+    SHEEN_TABLE_SIZE,
+    BaseLayers,
+    GltfClearcoat,
+    GltfDiffuse,
+    GltfSpecular,
+    GltfTransmission,
+)
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, pattern_xi
 from lobeview.materials.thesis import KurtLobe
 
@@ -35,10 +43,14 @@ class PackedMaterial:
     specular_weight: float = 1.0
     clearcoat: float = 0.0
     transmission: float = 0.0  # KHR_materials_transmission: the diffuse keeps 1 - transmission
+    # KHR_materials_sheen (approximated, materials/gltf.py GltfSheen): colour and E_s(N.V) table.
+    sheen_color: tuple = (0.0, 0.0, 0.0)
+    sheen_table: tuple = (0.0,) * SHEEN_TABLE_SIZE
 
     @property
     def has_diffuse(self) -> bool:
-        return bool(np.any(self.kd > 0))
+        """Whether the diffuse-like terms (kd, and the sheen lit like it) need the irradiance."""
+        return bool(np.any(self.kd > 0) or any(c > 0 for c in self.sheen_color))
 
     @property
     def lobes_key(self) -> tuple:
@@ -74,7 +86,7 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                 [1, 1, 1, comp.specular],
                 [*comp.base_color, 0],
                 [*comp.f0, comp.metallic],
-                [0, 0, 0, comp.coat],
+                [0, 0, 0, comp.coat.coat],
             ]
         elif isinstance(comp, GltfTransmission):
             row = [
@@ -82,7 +94,7 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                 [comp.amount, comp.amount, comp.amount, comp.specular],
                 [*comp.base_color, 0],
                 [*comp.f0, comp.metallic],
-                [0, 0, 0, comp.coat],
+                [0, 0, 0, comp.coat.coat],
             ]
         elif isinstance(comp, GltfClearcoat):
             row = [
@@ -114,8 +126,11 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
     diffuse = next((comp for comp in bsdf.components if isinstance(comp, GltfDiffuse)), None)
     extra = {}
     if diffuse is not None:
+        layers = diffuse.coat
         extra = dict(dielectric_f0=tuple(map(float, diffuse.f0)), specular_weight=diffuse.specular,
-                     clearcoat=diffuse.coat, transmission=diffuse.transmission)  # fmt: skip
+                     clearcoat=layers.coat, transmission=diffuse.transmission,
+                     sheen_color=tuple(map(float, layers.sheen_color)),
+                     sheen_table=tuple(map(float, layers.sheen_table)))  # fmt: skip
     return PackedMaterial(
         kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components, float(bsdf.tangent_rotation), **extra
     )
@@ -134,6 +149,8 @@ def pack_material_row_key(comp) -> tuple:
     for name in ("k", "r0", "alpha", "transmission", "scale", "base_color", "metallic", "f0", "specular", "coat",
                  "amount"):  # fmt: skip
         v = getattr(comp, name, None)
+        if isinstance(v, BaseLayers):
+            v = (v.coat, *v.sheen_color, v.sheen_roughness)
         values.append(None if v is None else tuple(np.atleast_1d(np.asarray(v, float)).tolist()))
     fresnel = getattr(comp, "fresnel", None)
     if fresnel is not None:

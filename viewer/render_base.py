@@ -162,6 +162,9 @@ class RendererBase:
         set_uniform(program, "u_specular_weight", float(material.specular_weight))
         set_uniform(program, "u_clearcoat", float(material.clearcoat))
         set_uniform(program, "u_transmission", float(material.transmission))
+        set_uniform(program, "u_sheen_color", tuple(float(x) for x in material.sheen_color))
+        if "u_sheen_albedo" in program:
+            write_uniform(program, "u_sheen_albedo", np.asarray(material.sheen_table, dtype=np.float32))
         set_uniform(program, "u_samples", method.samples)
         set_uniform(
             program,
