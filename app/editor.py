@@ -92,6 +92,19 @@ def _scalar_or_rgb_slider(imgui, label: str, value, key: str):
     return _slider(imgui, label, value, key)
 
 
+# The KHR_materials_* factors the panel offers for glTF materials, with their defaults.
+GLTF_EXTENSION_SLIDERS = (
+    ("anisotropy", 0.0),
+    ("anisotropy_rotation", 0.0),
+    ("ior", 1.5),
+    ("specular", 1.0),
+    ("clearcoat", 0.0),
+    ("clearcoat_roughness", 0.0),
+    ("transmission", 0.0),
+    ("sheen_roughness", 0.0),
+)
+
+
 def material_widgets(imgui, desc: dict) -> tuple[bool, dict]:
     """ImGui widgets for every parameter of the three models; returns (changed, new desc)."""
     changed_any = False
@@ -136,8 +149,7 @@ def material_widgets(imgui, desc: dict) -> tuple[bool, dict]:
             c, d[name] = _slider(imgui, name, d[name], name)
             changed_any |= c
         # KHR_materials_* factors: written into the description only once moved off the default.
-        for name, default in (("anisotropy", 0.0), ("anisotropy_rotation", 0.0), ("ior", 1.5), ("specular", 1.0),
-                              ("clearcoat", 0.0), ("clearcoat_roughness", 0.0), ("transmission", 0.0), ("sheen_roughness", 0.0)):  # fmt: skip
+        for name, default in GLTF_EXTENSION_SLIDERS:
             c, value = _slider(imgui, name.replace("_", " "), d.get(name, default), name)
             if c:
                 d[name] = value
