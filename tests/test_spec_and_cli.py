@@ -141,3 +141,31 @@ def test_cli_material_plot_writes_png(tmp_path):
     assert image.size[0] > 1000 and image.size[1] > 700
     pixels = np.asarray(image.convert("L"), dtype=float)
     assert pixels.std() > 10  # not a blank canvas
+
+
+def test_panel_offers_the_gltf_extension_factors_and_writes_only_moved_ones():
+    """The material panel's glTF widgets (app/editor.py) with a stand-in imgui: every
+    KHR_materials_* factor gets a slider; only the one moved enters the description, which
+    still validates."""
+    import types
+
+    from lobeview.app.editor import GLTF_EXTENSION_SLIDERS, material_widgets
+
+    labels = []
+
+    def slider_float(label, value, low, high, fmt, flags):
+        labels.append(label)
+        return (label == "clearcoat", 0.7 if label == "clearcoat" else value)
+
+    imgui = types.SimpleNamespace(
+        SliderFlags_=types.SimpleNamespace(logarithmic=types.SimpleNamespace(value=32)),
+        slider_float=slider_float,
+        color_edit3=lambda label, value: (False, value),
+        slider_float3=lambda label, value, low, high: (False, value),
+    )
+    desc = {"model": "gltf", "base_color": [0.5, 0.5, 0.5], "metallic": 0.0, "roughness": 0.5}
+    changed, edited = material_widgets(imgui, desc)
+    assert changed and edited["clearcoat"] == 0.7
+    assert set(edited) - set(desc) == {"clearcoat"}
+    assert [name.replace("_", " ") for name, _ in GLTF_EXTENSION_SLIDERS] == labels[2:]
+    assert validate(edited)["clearcoat"] == 0.7
