@@ -30,6 +30,18 @@ def box_downsample_faces(faces: np.ndarray, size: int) -> np.ndarray:
     return faces.reshape(6, size, factor, size, factor, -1).mean(axis=(2, 4))
 
 
+def _mixed_probabilities(weight: np.ndarray, omega: np.ndarray, uniform_fraction: float) -> np.ndarray:
+    """Texel probabilities: (1 - f) weight / sum + f omega / sum (every direction keeps a
+    density); by solid angle alone when the weights are all zero or not finite."""
+    total = weight.sum()
+    uniform = omega / omega.sum()
+    if total <= 0 or not np.isfinite(total):
+        probabilities = uniform
+    else:
+        probabilities = (1.0 - uniform_fraction) * weight / total + uniform_fraction * uniform
+    return probabilities / probabilities.sum()
+
+
 @dataclass
 class CubeImportance:
     probabilities: np.ndarray  # (6, size, size) discrete texel probabilities P_t, sum 1
@@ -42,13 +54,7 @@ class CubeImportance:
         # Texel solid angles are symmetric in sc and tc, so the (row, col) order does not matter.
         omega = texel_solid_angles(size)[None].repeat(6, axis=0)
         weight = np.maximum(coarse @ LUMINANCE, 0.0) * omega
-        total = weight.sum()
-        uniform = omega / omega.sum()
-        if total <= 0 or not np.isfinite(total):
-            probabilities = uniform
-        else:
-            probabilities = (1.0 - uniform_fraction) * weight / total + uniform_fraction * uniform
-        return cls(probabilities / probabilities.sum(), size)
+        return cls(_mixed_probabilities(weight, omega, uniform_fraction), size)
 
     @property
     def cdf(self) -> np.ndarray:
@@ -124,14 +130,7 @@ class EquirectImportance:
         edges = np.linspace(0.0, np.pi, pooled.shape[0] + 1)
         omega = (2.0 * np.pi / pooled.shape[1]) * (np.cos(edges[:-1]) - np.cos(edges[1:]))
         omega = np.broadcast_to(omega[:, None], pooled.shape)
-        weight = pooled * omega
-        total = weight.sum()
-        uniform = omega / omega.sum()
-        if total <= 0 or not np.isfinite(total):
-            probabilities = uniform
-        else:
-            probabilities = (1.0 - uniform_fraction) * weight / total + uniform_fraction * uniform
-        return cls(np.ascontiguousarray(probabilities / probabilities.sum()))
+        return cls(np.ascontiguousarray(_mixed_probabilities(pooled * omega, omega, uniform_fraction)))
 
     def pdf(self, dirs: np.ndarray) -> np.ndarray:
         from .envmap import direction_to_equirect
