@@ -193,12 +193,9 @@ def bake_lightmap(
     kd_face, emission_face = [], []
     for o in blockers:
         mat = scene.materials[o.material]
-        kd = diffuse_albedo(build_bsdf(mat.desc))
-        base = mat.texture("base_color")
-        if base is not None:  # the bake's bounces use the texture's mean colour (per face: future work)
-            kd = kd * base.linear()[..., :3].reshape(-1, 3).mean(axis=0)
-        kd_face.append(np.broadcast_to(kd, (len(o.mesh.indices), 3)))
-        emission_face.append(np.broadcast_to(mat.emission, (len(o.mesh.indices), 3)))
+        kd, emission = _face_albedo_and_emission(o, mat, diffuse_albedo(build_bsdf(mat.desc)))
+        kd_face.append(kd)
+        emission_face.append(emission)
     kd_face = np.concatenate(kd_face)
     emission_face = np.concatenate(emission_face)
     mesh = trimesh.Trimesh(vertices, faces, process=False)
@@ -327,6 +324,48 @@ def bake_lightmap(
     if progress:
         print(f"[bake] done in {time.perf_counter() - t_start:.1f} s", file=sys.stderr, flush=True)
     return lightmap.astype(np.float32)
+
+
+# Barycentric points at which a face's textures are averaged (a 4 x 4 stratified set folded
+# into the triangle), for the bake's per-face diffuse albedo and emission.
+_FACE_POINTS = np.array([((i + 0.5) / 4, (j + 0.5) / 4) for i in range(4) for j in range(4)])
+_FACE_BARY = np.stack(
+    [
+        1 - np.sqrt(_FACE_POINTS[:, 0]),
+        np.sqrt(_FACE_POINTS[:, 0]) * (1 - _FACE_POINTS[:, 1]),
+        np.sqrt(_FACE_POINTS[:, 0]) * _FACE_POINTS[:, 1],
+    ],
+    axis=1,
+)
+
+
+def _face_albedo_and_emission(obj, material, kd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 3) diffuse albedo and emitted radiance per face of ``obj``: the material's kd and
+    emission, with its textures (base colour, metallic, emissive) averaged over each face at 16
+    stratified points (shaders/scene.frag's per-pixel inputs, scenes/texturing.py), so a bounce
+    off a textured floor carries the colour of the part it hit, not the texture's mean."""
+    faces = obj.mesh.indices.reshape(-1, 3)
+    count = len(faces)
+    if not any(material.texture(slot) is not None for slot in ("base_color", "metallic_roughness", "emissive")):
+        return np.broadcast_to(kd, (count, 3)), np.broadcast_to(material.emission, (count, 3))
+    from .texturing import texel_material
+
+    def at_points(values):  # (V, 2) vertex values -> (F * 16, 2) at the face points
+        v = np.asarray(values, dtype=np.float64)[faces]  # (F, 3, 2)
+        return np.einsum("pk,fkc->fpc", _FACE_BARY, v).reshape(-1, 2)
+
+    uv1 = None if obj.uv1 is None else at_points(obj.uv1)
+    inputs = texel_material(material, at_points(obj.mesh.uvs), uv1)
+    points = len(_FACE_BARY)
+    if inputs["gltf_model"]:
+        # kd = (1 - metallic)(1 - transmission) baseColor (materials/gltf.py GltfDiffuse), per point.
+        transmission = float(material.desc.get("transmission", 0.0))
+        point_kd = ((1.0 - inputs["metallic"]) * (1.0 - transmission))[:, None] * inputs["base_color"]
+    else:
+        point_kd = np.asarray(kd) * inputs["base_texel"]
+    kd_face = point_kd.reshape(count, points, 3).mean(axis=1)
+    emission_face = inputs["emission"].reshape(count, points, 3).mean(axis=1)
+    return kd_face, emission_face
 
 
 class AlphaTestedIntersector:

@@ -264,3 +264,50 @@ def test_alpha_masked_cutouts_let_light_through():
     scene.materials[1].alpha_mode = "OPAQUE"
     opaque = _bake(scene)[pixel[:, 0], pixel[:, 1], 0]
     assert np.all(opaque[under_cutout] == 0)
+
+
+def test_bounce_light_takes_the_colour_of_the_texel_it_hit():
+    """A floor textured red on its left half and green on its right, lit by a sun; a white
+    ceiling above it receives only bounced light. Over the red half the ceiling turns red, over
+    the green half green: the bake's per-face albedo follows the texture (the texture's mean
+    would give both halves the same olive)."""
+    from lobeview.materials.spec import validate
+    from lobeview.scenes.meshes import quad
+    from lobeview.scenes.scene import TextureSlot
+
+    texture = np.zeros((2, 2, 4), np.uint8)
+    texture[:, 0] = [255, 0, 0, 255]
+    texture[:, 1] = [0, 255, 0, 255]
+    floor_material = SceneMaterial(
+        "floor", validate({"model": "gltf", "base_color": [1, 1, 1], "metallic": 0.0, "roughness": 1.0}),
+        textures={"base_color": TextureSlot(texture, srgb=True, mag_filter=9728, min_filter=9728)},
+    )  # fmt: skip
+    white = SceneMaterial("white", validate({"model": "gltf", "base_color": [1, 1, 1], "metallic": 0.0,
+                                             "roughness": 1.0}))  # fmt: skip
+    # The floor is two quads (left, right) so faces do not straddle the colour edge.
+    left = quad([-2.0, -2.0, 0.0], [2.0, 0.0, 0.0], [0.0, 4.0, 0.0])
+    right = quad([0.0, -2.0, 0.0], [2.0, 0.0, 0.0], [0.0, 4.0, 0.0])
+    left.uvs = np.array([[0.1, 0.5], [0.4, 0.5], [0.4, 0.5], [0.1, 0.5]], np.float32)
+    right.uvs = np.array([[0.6, 0.5], [0.9, 0.5], [0.9, 0.5], [0.6, 0.5]], np.float32)
+    ceiling = quad([-2.0, 2.0, 0.3], [4.0, 0.0, 0.0], [0.0, -4.0, 0.0])  # at z = 0.3, facing down
+    objects = []
+    parts = [("left", left, 0, (0.0, 0.0, 0.5, 0.5)), ("right", right, 0, (0.5, 0.0, 1.0, 0.5)),
+             ("ceiling", ceiling, 1, (0.0, 0.5, 1.0, 1.0))]  # fmt: skip
+    for name, mesh, material, box in parts:
+        u0, v0, u1, v1 = box
+        uv1 = np.array([[u0, v1], [u1, v1], [u1, v0], [u0, v0]], np.float32)
+        objects.append(SceneObject(name, mesh, material, uv1))
+    # A lamp between floor and ceiling lights both directly; the ceiling's bounce comes from the floor.
+    lamp = _lamp("point", intensity=2.0, colour=np.array([1.0, 1.0, 1.0]), position=np.array([0.0, 0.0, 0.15]))
+    scene = Scene(objects, [floor_material, white], lights=[lamp])
+    baked = bake_lightmap(scene, None, 64, rays=64, bounces=2, progress=False, light_samples=0, env_samples=0)
+    ceiling_obj = objects[2]
+    mesh = ceiling_obj.mesh
+    samples = rasterize_uv(ceiling_obj.uv1.astype(np.float64), mesh.positions.astype(np.float64),
+                           mesh.normals.astype(np.float64), mesh.indices.reshape(-1, 3), 64)  # fmt: skip
+    # Bounce 2 minus bounce 1 at the ceiling: what the floor sent up. Compare the two halves.
+    direct = bake_lightmap(scene, None, 64, rays=64, bounces=1, progress=False, light_samples=0, env_samples=0)
+    bounce = (baked - direct)[samples.pixel[:, 0], samples.pixel[:, 1]]
+    x = samples.position[:, 0]
+    over_red, over_green = bounce[x < -0.5].mean(axis=0), bounce[x > 0.5].mean(axis=0)
+    assert over_red[0] > 2 * over_red[1] and over_green[1] > 2 * over_green[0], (over_red, over_green)
