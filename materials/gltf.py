@@ -90,14 +90,6 @@ def dielectric_f0(ior: float = 1.5, specular_color=(1.0, 1.0, 1.0)) -> np.ndarra
     )
 
 
-def coat_attenuation(coat, cos_o: np.ndarray) -> np.ndarray:
-    """What the layers over the base leave of it (scalar per direction): 1 - clearcoat F_c(N.V)
-    for a clearcoat factor, or a :class:`BaseLayers`' attenuation (clearcoat and sheen)."""
-    if isinstance(coat, BaseLayers):
-        return coat.attenuation(cos_o)
-    return 1.0 - float(coat) * schlick(cos_o, np.full(3, COAT_F0))[..., 0]
-
-
 SHEEN_TABLE_SIZE = 16  # E_s(N.V) samples at N.V = (i + 0.5) / 16 (shaders/bsdf.glsl sheen_albedo)
 
 
@@ -162,8 +154,24 @@ class BaseLayers:
         return self.sheen_table[i0] * (1.0 - f) + self.sheen_table[i0 + 1] * f
 
     def attenuation(self, cos_o) -> np.ndarray:
+        """What the layers leave of the base (scalar per direction; bsdf.glsl base_attenuation)."""
         coat = 1.0 - self.coat * schlick(cos_o, np.full(3, COAT_F0))[..., 0]
         return coat * (1.0 - float(np.max(self.sheen_color)) * self.sheen_albedo(cos_o))
+
+
+class _GltfDielectric:
+    """What the glTF base components share: the dielectric's f0 and specular weight
+    (KHR_materials_ior/_specular) and the layers over them (clearcoat, sheen)."""
+
+    def _set_dielectric(self, f0, specular: float, layers: BaseLayers | None) -> None:
+        self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
+        self.specular = float(specular)
+        self.layers = layers if layers is not None else BaseLayers()
+
+    def kept(self, cos_h) -> np.ndarray:
+        """What the dielectric's reflection leaves: 1 - specular max(F_d(V.H)) (fresnel_mix;
+        bsdf.glsl dielectric_kept)."""
+        return 1.0 - self.specular * schlick(cos_h, self.f0).max(axis=-1)
 
 
 class GltfSheen(CosineSampled):
@@ -190,7 +198,7 @@ class GltfSheen(CosineSampled):
         return np.where(valid[..., None], self.view_albedo(wo[..., 2]) / np.pi, 0.0)
 
 
-class GltfDiffuse(CosineSampled):
+class GltfDiffuse(_GltfDielectric, CosineSampled):
     name = "glTF diffuse"
 
     def __init__(
@@ -199,15 +207,13 @@ class GltfDiffuse(CosineSampled):
         metallic: float,
         f0=DIELECTRIC_F0,
         specular: float = 1.0,
-        coat=0.0,
+        layers: BaseLayers | None = None,
         transmission: float = 0.0,
     ):
         self.base_color = base_color
         self.metallic = metallic
         self.transmission = float(transmission)
-        self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
-        self.specular = float(specular)
-        self.coat = coat if isinstance(coat, BaseLayers) else BaseLayers(coat)
+        self._set_dielectric(f0, specular, layers)
         self.diffuse_albedo = (1.0 - metallic) * (1.0 - self.transmission) * base_color
 
     @property
@@ -218,19 +224,17 @@ class GltfDiffuse(CosineSampled):
         """The weight of the lightmapped (or environment-irradiance) diffuse in the shaders:
         eval's weight with V.H taken as N.V, the view-direction approximation (bsdf.glsl
         diffuse_weight), since the light arrives from every direction at once."""
-        fresnel = schlick(cos_o, self.f0)
-        return (1.0 - self.specular * fresnel.max(axis=-1)) * coat_attenuation(self.coat, cos_o)
+        return self.kept(cos_o) * self.layers.attenuation(cos_o)
 
     def eval(self, wi, wo):
         valid = _valid_pair(wi, wo, False)
         h = normalize(wi + wo)
-        fresnel = schlick(np.abs(dot(wo, h)), self.f0)
-        weight = (1.0 - self.specular * fresnel.max(axis=-1)) * coat_attenuation(self.coat, wo[..., 2])
+        weight = self.kept(np.abs(dot(wo, h))) * self.layers.attenuation(wo[..., 2])
         f = weight[..., None] * self.diffuse_albedo / np.pi
         return np.where(valid[..., None], f, 0.0)
 
 
-class GltfSpecular(MicrofacetReflection):
+class GltfSpecular(_GltfDielectric, MicrofacetReflection):
     name = "glTF specular"
 
     def __init__(
@@ -241,15 +245,13 @@ class GltfSpecular(MicrofacetReflection):
         alpha_b: float | None = None,
         f0=DIELECTRIC_F0,
         specular: float = 1.0,
-        coat: float = 0.0,
+        layers: BaseLayers | None = None,
     ):
         alpha_b = alpha if alpha_b is None else alpha_b
         super().__init__(MicrofacetDistribution("ggx", alpha, alpha_b), Fresnel("none"))
         self.base_color = base_color
         self.metallic = metallic
-        self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
-        self.specular = float(specular)
-        self.coat = coat if isinstance(coat, BaseLayers) else BaseLayers(coat)
+        self._set_dielectric(f0, specular, layers)
 
     @property
     def selection_weight(self) -> float:
@@ -269,10 +271,10 @@ class GltfSpecular(MicrofacetReflection):
         return (1.0 - self.metallic) * f_dielectric + self.metallic * f_metal
 
     def eval(self, wi, wo):
-        return super().eval(wi, wo) * coat_attenuation(self.coat, wo[..., 2])[..., None]
+        return super().eval(wi, wo) * self.layers.attenuation(wo[..., 2])[..., None]
 
 
-class GltfTransmission(MicrofacetReflection):
+class GltfTransmission(_GltfDielectric, MicrofacetReflection):
     """KHR_materials_transmission, thin-walled: (1 - metallic) transmission baseColor
     (1 - specular max F_d(V.H)) V D with wi mirrored through the surface (Eq. 3.5's mirroring),
     times the clearcoat's attenuation; GGX visible normals sampled and mirrored."""
@@ -282,14 +284,12 @@ class GltfTransmission(MicrofacetReflection):
     hemisphere = "transmission"
 
     def __init__(self, base_color, metallic: float, transmission: float, alpha_t: float, alpha_b: float,
-                 f0=DIELECTRIC_F0, specular: float = 1.0, coat: float = 0.0):  # fmt: skip
+                 f0=DIELECTRIC_F0, specular: float = 1.0, layers: BaseLayers | None = None):  # fmt: skip
         super().__init__(MicrofacetDistribution("ggx", alpha_t, alpha_b), Fresnel("none"))
         self.base_color = base_color
         self.metallic = float(metallic)
         self.amount = float(transmission)
-        self.f0 = np.broadcast_to(np.asarray(f0, dtype=np.float64), (3,)).copy()
-        self.specular = float(specular)
-        self.coat = coat if isinstance(coat, BaseLayers) else BaseLayers(coat)
+        self._set_dielectric(f0, specular, layers)
         self.tint = (1.0 - self.metallic) * self.amount * np.asarray(base_color, dtype=np.float64)
 
     @property
@@ -302,8 +302,8 @@ class GltfTransmission(MicrofacetReflection):
         wr = mirror_z(wi)
         lobe = super().eval(wr, wo)  # V D of the mirrored pair (Fresnel 'none', scale 1)
         h = normalize(wr + wo)
-        kept = 1.0 - self.specular * schlick(np.abs(dot(wo, h)), self.f0).max(axis=-1)
-        f = self.tint * (kept * coat_attenuation(self.coat, wo[..., 2]))[..., None] * lobe
+        kept = self.kept(np.abs(dot(wo, h))) * self.layers.attenuation(wo[..., 2])
+        f = self.tint * kept[..., None] * lobe
         return np.where(valid[..., None], f, 0.0)
 
     def pdf(self, wi, wo):
@@ -325,14 +325,21 @@ class GltfClearcoat(MicrofacetReflection):
 
     def __init__(self, clearcoat: float, alpha: float):
         super().__init__(MicrofacetDistribution("ggx", alpha, alpha), Fresnel("none"), scale=float(clearcoat))
-        self.clearcoat = float(clearcoat)
+
+    @property
+    def clearcoat(self) -> float:
+        return float(self.scale[0])
+
+    def coat_fresnel(self, cos_o) -> np.ndarray:
+        """F_c(N.V): the coat's Schlick Fresnel at the view direction (ior 1.5)."""
+        return schlick(cos_o, np.full(3, COAT_F0))
 
     @property
     def selection_weight(self) -> float:
         return max(COAT_F0 * self.clearcoat, 0.1 * self.clearcoat)
 
     def eval(self, wi, wo):
-        return super().eval(wi, wo) * schlick(wo[..., 2], np.full(3, COAT_F0))
+        return super().eval(wi, wo) * self.coat_fresnel(wo[..., 2])
 
 
 def gltf_bsdf(

@@ -170,20 +170,20 @@ def dfg_albedo(component, cos_theta_o: float, ab: np.ndarray) -> np.ndarray:
     clearcoat's attenuation; for the clearcoat (Fresnel at N.V) clearcoat F_c(N.V) (A + B); for
     the thin-walled transmission tint ((A + B) - specular (max f0 A + B)); otherwise
     scale (f0 A + B)."""
-    from .gltf import COAT_F0, GltfClearcoat, GltfSpecular, GltfTransmission, coat_attenuation
+    from .gltf import GltfClearcoat, GltfSpecular, GltfTransmission
 
     a, b = float(ab[0]), float(ab[1])
+    cos_o = np.array(cos_theta_o, dtype=np.float64)
     if isinstance(component, GltfTransmission):
         # tint (1 - specular max F) V D: max over channels of a Schlick F is the Schlick F of
         # the largest f0, so the integral is tint ((A + B) - specular (max f0 A + B)).
         kept = (a + b) - component.specular * (float(np.max(component.f0)) * a + b)
-        return component.tint * kept * coat_attenuation(component.coat, np.array(cos_theta_o))
+        return component.tint * kept * component.layers.attenuation(cos_o)
     if isinstance(component, GltfClearcoat):
-        fresnel = COAT_F0 + (1.0 - COAT_F0) * (1.0 - cos_theta_o) ** 5
-        return component.scale * fresnel * (a + b)
+        return component.scale * component.coat_fresnel(cos_o) * (a + b)
     f0 = component.fresnel_term(np.array(1.0))
     if isinstance(component, GltfSpecular):
-        return (f0 * a + component.f90 * b) * coat_attenuation(component.coat, np.array(cos_theta_o))
+        return (f0 * a + component.f90 * b) * component.layers.attenuation(cos_o)
     return component.scale * (f0 * a + b)
 
 

@@ -199,7 +199,7 @@ def bake_lightmap(
     kd_face = np.concatenate(kd_face)
     emission_face = np.concatenate(emission_face)
     mesh = trimesh.Trimesh(vertices, faces, process=False)
-    intersector = AlphaTestedIntersector(mesh, scene, blockers)
+    intersector = AlphaTestedIntersector(mesh, faces, scene, blockers)
 
     texels = []
     for o in objects:
@@ -284,16 +284,15 @@ def bake_lightmap(
                 if environment is not None and np.any(escape):
                     radiance[escape] = environment.lookup_nearest(direction[escape])
                     if importance is not None:
-                        p_cos = local[escape, 2] / np.pi
-                        p_env = importance.pdf(direction[escape])
-                        radiance[escape] *= (rays * p_cos / (rays * p_cos + env_samples * p_env))[:, None]
+                        weight = balance_heuristic(rays, local[escape, 2] / np.pi, env_samples,
+                                                   importance.pdf(direction[escape]))  # fmt: skip
+                        radiance[escape] *= weight[:, None]
                 hit = ~escape
                 # Remember the hit point in uv1 for later bounces.
                 uv_hit = np.full((len(pixel), 2), -1.0)
                 if np.any(hit):
                     locs = _hit_points(mesh, origin[hit], direction[hit], tri[hit])
-                    bary = trimesh.triangles.points_to_barycentric(mesh.triangles[tri[hit]], locs)
-                    uv_hit[hit] = np.einsum("ij,ijk->ik", bary, uv1_all[faces[tri[hit]]])
+                    uv_hit[hit] = _at_hits(mesh, faces, uv1_all, tri[hit], locs)
                 if r == 0:
                     # 24 bytes per ray and texel kept for the later bounces (int32/float32:
                     # a 200k-texel atlas at 128 rays holds 0.6 GB instead of 1 GB).
@@ -376,14 +375,18 @@ class AlphaTestedIntersector:
 
     MAX_LAYERS = 16
 
-    def __init__(self, mesh, scene: Scene, blockers: list):
+    def __init__(self, mesh, faces: np.ndarray, scene: Scene, blockers: list):
         self.mesh = mesh
+        self.faces = faces
         self.ray = mesh.ray
         counts = [len(o.mesh.indices) for o in blockers]
         self.face_object = np.repeat(np.arange(len(blockers)), counts)
-        self.face_start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
         self.blockers = blockers
         self.materials = [scene.materials[o.material] for o in blockers]
+        # TEXCOORD_0 and _1 of the ray-casting mesh's vertices (objects without a TEXCOORD_1
+        # sample their masks through TEXCOORD_0, as texturing.transformed_uv does).
+        self.uv0 = np.concatenate([o.mesh.uvs for o in blockers]) if blockers else np.zeros((0, 2))
+        self.uv1 = np.concatenate([o.mesh.uvs if o.uv1 is None else o.uv1 for o in blockers]) if blockers else None
         masked = [m.alpha_mode in ("MASK", "BLEND") for m in self.materials]
         self.masked_face = np.repeat(np.asarray(masked, dtype=bool), counts) if counts else np.zeros(0, bool)
         self.extent = float(np.max(mesh.vertices.max(0) - mesh.vertices.min(0))) if len(mesh.vertices) else 1.0
@@ -396,15 +399,12 @@ class AlphaTestedIntersector:
         objects = self.face_object[tri]
         for index in np.unique(objects):
             sel = objects == index
-            obj, material = self.blockers[index], self.materials[index]
-            local = tri[sel] - self.face_start[index]
-            corners = obj.mesh.indices.reshape(-1, 3)[local]
-            bary = trimesh.triangles.points_to_barycentric(obj.mesh.positions[corners].astype(np.float64), points[sel])
-            uv0 = np.einsum("ij,ijk->ik", bary, obj.mesh.uvs[corners].astype(np.float64))
-            uv1 = None if obj.uv1 is None else np.einsum("ij,ijk->ik", bary, obj.uv1[corners].astype(np.float64))
+            material = self.materials[index]
             slot = material.texture("base_color")
             alpha = np.full(int(sel.sum()), float(material.base_alpha))
             if slot is not None:
+                uv0 = _at_hits(self.mesh, self.faces, self.uv0, tri[sel], points[sel])
+                uv1 = _at_hits(self.mesh, self.faces, self.uv1, tri[sel], points[sel])
                 alpha = alpha * sample_slot(slot, uv0, uv1)[:, 3]
             cutoff = material.alpha_cutoff if material.alpha_mode == "MASK" else 0.5
             out[sel] = np.where(alpha < cutoff, 0.0, 1.0)
@@ -435,6 +435,12 @@ class AlphaTestedIntersector:
         return tri
 
 
+def balance_heuristic(count: int, pdf: np.ndarray, other_count: int, other_pdf: np.ndarray) -> np.ndarray:
+    """Veach's balance heuristic: the weight n p / (n p + m q) of a sample of one strategy
+    (``count`` samples of density ``pdf``) against another (``other_count`` of ``other_pdf``)."""
+    return count * pdf / (count * pdf + other_count * other_pdf)
+
+
 def _environment_light(environment, importance, intersector, origin, normal, rays: int, samples: int, seed: int):
     """The environment's irradiance by importance samples with shadow rays, each weighted by
     the balance heuristic against the ``rays`` cosine rays: sum w_env L cos / p_env / samples,
@@ -452,8 +458,7 @@ def _environment_light(environment, importance, intersector, origin, normal, ray
         first = intersector.intersects_first(origin[idx], np.ascontiguousarray(direction[idx]))
         free = idx[first < 0]
         p_env = importance.pdf(direction[free])
-        p_cos = cos[free] / np.pi
-        weight = samples * p_env / (rays * p_cos + samples * p_env)
+        weight = balance_heuristic(samples, p_env, rays, cos[free] / np.pi)
         out[free] += environment.lookup_nearest(direction[free]) * (weight * cos[free] / p_env)[:, None]
     return out / samples
 
@@ -545,6 +550,13 @@ def _lamp_light(lights, mesh, intersector, origin, normal, extent: float) -> np.
             blocked[np.flatnonzero(blocked)] = hit_dist < dist[blocked] - 1e-6 * extent
         out[lit[~blocked]] += e[lit[~blocked]]
     return out
+
+
+def _at_hits(mesh, faces: np.ndarray, values: np.ndarray, tris: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Per-vertex ``values`` (V, C) interpolated at hit ``points`` on triangles ``tris`` of the
+    ray-casting mesh (barycentric coordinates of the points in their triangles)."""
+    bary = trimesh.triangles.points_to_barycentric(mesh.triangles[tris], points)
+    return np.einsum("ij,ijk->ik", bary, np.asarray(values, dtype=np.float64)[faces[tris]])
 
 
 def _hit_points(mesh, origins, directions, tris):

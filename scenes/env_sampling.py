@@ -20,6 +20,8 @@ import numpy as np
 
 from lobeview.core.cube_layout import direction_to_face, face_point_directions, texel_solid_angles
 
+from .envmap import equirect_direction, equirect_row_solid_angles, equirect_texel
+
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
@@ -40,6 +42,15 @@ def _mixed_probabilities(weight: np.ndarray, omega: np.ndarray, uniform_fraction
     else:
         probabilities = (1.0 - uniform_fraction) * weight / total + uniform_fraction * uniform
     return probabilities / probabilities.sum()
+
+
+def _pick_texel(probabilities: np.ndarray, cdf: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(texel index, position in [0, 1) inside it) for uniform numbers ``u``: the texel by
+    inverting the discrete ``cdf``, the position from what of ``u`` is left within its step."""
+    index = np.minimum(np.searchsorted(cdf, u, side="right"), len(cdf) - 1)
+    lower = np.where(index > 0, cdf[np.maximum(index - 1, 0)], 0.0)
+    along = np.clip((u - lower) / np.maximum(probabilities[index], 1e-300), 0.0, 1.0 - 1e-12)
+    return index, along
 
 
 @dataclass
@@ -80,11 +91,7 @@ class CubeImportance:
         position along s), u2 the position along t."""
         u1 = np.asarray(u1, dtype=np.float64)
         u2 = np.asarray(u2, dtype=np.float64)
-        cdf = self.cdf
-        index = np.minimum(np.searchsorted(cdf, u1, side="right"), len(cdf) - 1)
-        lower = np.where(index > 0, cdf[np.maximum(index - 1, 0)], 0.0)
-        p = self.probabilities.ravel()[index]
-        s_in = np.clip((u1 - lower) / np.maximum(p, 1e-300), 0.0, 1.0 - 1e-12)
+        index, s_in = _pick_texel(self.probabilities.ravel(), self.cdf, u1)
         face = index // (self.size * self.size)
         row = (index // self.size) % self.size
         col = index % self.size
@@ -119,6 +126,11 @@ class EquirectImportance:
 
     probabilities: np.ndarray  # (H, W) texel probabilities, sum 1
 
+    def __post_init__(self):
+        # Built once: the baker draws env_samples batches from one sampler.
+        self.cdf = np.cumsum(self.probabilities.ravel())
+        self.cdf[-1] = 1.0
+
     @classmethod
     def from_environment(cls, env, max_height: int = 1024, uniform_fraction: float = 0.02) -> EquirectImportance:
         luminance = np.maximum(env.image.astype(np.float64) @ LUMINANCE, 0.0)
@@ -127,34 +139,20 @@ class EquirectImportance:
         while height // factor > max_height and height % (factor * 2) == 0 and width % (factor * 2) == 0:
             factor *= 2
         pooled = luminance.reshape(height // factor, factor, width // factor, factor).max(axis=(1, 3))
-        edges = np.linspace(0.0, np.pi, pooled.shape[0] + 1)
-        omega = (2.0 * np.pi / pooled.shape[1]) * (np.cos(edges[:-1]) - np.cos(edges[1:]))
-        omega = np.broadcast_to(omega[:, None], pooled.shape)
+        omega = np.broadcast_to(equirect_row_solid_angles(*pooled.shape)[:, None], pooled.shape)
         return cls(np.ascontiguousarray(_mixed_probabilities(pooled * omega, omega, uniform_fraction)))
 
     def pdf(self, dirs: np.ndarray) -> np.ndarray:
-        from .envmap import direction_to_equirect
-
         height, width = self.probabilities.shape
-        u, v = direction_to_equirect(dirs)
-        col = np.clip((u * width).astype(np.int64), 0, width - 1)
-        row = np.clip((v * height).astype(np.int64), 0, height - 1)
+        row, col, v = equirect_texel(dirs, height, width)
         sin_theta = np.sin(np.pi * v)
         return self.probabilities[row, col] * height * width / (2.0 * np.pi**2 * np.maximum(sin_theta, 1e-12))
 
     def sample(self, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
         """Directions for uniform numbers in [0, 1): u1 picks the texel (and, rescaled, the
         position along u), u2 the position along v."""
-        from .envmap import equirect_direction
-
         height, width = self.probabilities.shape
-        u1 = np.asarray(u1, dtype=np.float64)
+        index, along = _pick_texel(self.probabilities.ravel(), self.cdf, np.asarray(u1, dtype=np.float64))
         u2 = np.asarray(u2, dtype=np.float64)
-        cdf = np.cumsum(self.probabilities.ravel())
-        cdf[-1] = 1.0
-        index = np.minimum(np.searchsorted(cdf, u1, side="right"), len(cdf) - 1)
-        lower = np.where(index > 0, cdf[np.maximum(index - 1, 0)], 0.0)
-        p = self.probabilities.ravel()[index]
-        along = np.clip((u1 - lower) / np.maximum(p, 1e-300), 0.0, 1.0 - 1e-12)
         row, col = index // width, index % width
         return equirect_direction((col + along) / width, (row + u2) / height)

@@ -37,6 +37,22 @@ def direction_to_equirect(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u % 1.0, v
 
 
+def equirect_row_solid_angles(height: int, width: int) -> np.ndarray:
+    """Solid angle of one texel in each row of a height x width equirectangular grid:
+    (2 pi / W) (cos(theta0) - cos(theta1)); shape (H,)."""
+    edges = np.linspace(0.0, np.pi, height + 1)
+    return (2.0 * np.pi / width) * (np.cos(edges[:-1]) - np.cos(edges[1:]))
+
+
+def equirect_texel(d: np.ndarray, height: int, width: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(row, column, v) of the texel of a height x width equirectangular grid containing
+    direction(s) ``d`` (nearest lookups and the texel densities of importance sampling)."""
+    u, v = direction_to_equirect(d)
+    col = np.clip((u * width).astype(np.int64), 0, width - 1)
+    row = np.clip((v * height).astype(np.int64), 0, height - 1)
+    return row, col, v
+
+
 @dataclass
 class EnvironmentMap:
     """Linear radiance on the sphere, stored equirectangularly (float32, H x W x 3)."""
@@ -82,8 +98,7 @@ class EnvironmentMap:
 
     def texel_solid_angles(self) -> np.ndarray:
         """Solid angle of each texel row: (2 pi / W) (cos(theta0) - cos(theta1)); shape (H,)."""
-        edges = np.linspace(0.0, np.pi, self.height + 1)
-        return (2.0 * np.pi / self.width) * (np.cos(edges[:-1]) - np.cos(edges[1:]))
+        return equirect_row_solid_angles(self.height, self.width)
 
     def lookup(self, d: np.ndarray) -> np.ndarray:
         """Bilinear lookup (wrapping in u, clamped in v) in direction(s) ``d``."""
@@ -106,9 +121,7 @@ class EnvironmentMap:
         """The texel containing direction(s) ``d``: the map as piecewise-constant radiance, the
         function the texel quadrature integrates exactly and importance sampling by texel
         (env_sampling.EquirectImportance) matches texel by texel (the baker's lookups)."""
-        u, v = direction_to_equirect(d)
-        col = np.clip((u * self.width).astype(np.int64), 0, self.width - 1)
-        row = np.clip((v * self.height).astype(np.int64), 0, self.height - 1)
+        row, col, _ = equirect_texel(d, self.height, self.width)
         return self.image[row, col]
 
     def downsampled(self, height: int) -> EnvironmentMap:

@@ -598,11 +598,12 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
             scene_warnings,
             f"{path}: material {name!r}: metallicRoughnessTexture ignored (extras.lobeview replaces the glTF BRDF)",
         )
-    for extension in sorted(set(mat.extensions or {}) & set(GLTF_MODEL_EXTENSIONS) if not gltf_model else ()):
-        _warn(
-            scene_warnings,
-            f"{path}: material {name!r}: {extension} ignored (extras.lobeview replaces the glTF BRDF)",
-        )
+    if not gltf_model:  # the glTF model's extensions have nothing to act on
+        for extension in sorted(set(mat.extensions or {}) & set(GLTF_MODEL_EXTENSIONS)):
+            _warn(
+                scene_warnings,
+                f"{path}: material {name!r}: {extension} ignored (extras.lobeview replaces the glTF BRDF)",
+            )
     for slot, (info, fallback) in slots.items():
         texture = _texture_slot(reader, info, slot, name, scene_warnings, fallback)
         if texture is not None:

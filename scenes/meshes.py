@@ -218,12 +218,4 @@ def _gltf_mesh(path: Path) -> Mesh:
         scene = load_gltf(path)
     except GltfError as exc:
         raise MeshError(str(exc)) from None
-    offsets = np.cumsum([0] + [len(o.mesh.positions) for o in scene.objects])
-    return Mesh(
-        np.concatenate([o.mesh.positions for o in scene.objects]),
-        np.concatenate([o.mesh.normals for o in scene.objects]),
-        np.concatenate([o.mesh.tangents for o in scene.objects]),
-        np.concatenate([o.mesh.uvs for o in scene.objects]),
-        np.concatenate([o.mesh.indices + np.uint32(off) for o, off in zip(scene.objects, offsets[:-1], strict=True)]),
-        path.stem,
-    )
+    return merge_meshes([o.mesh for o in scene.objects], path.stem)

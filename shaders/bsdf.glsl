@@ -168,6 +168,13 @@ vec3 fresnel_conductor(float cos_theta, vec3 eta, vec3 k) {
     return clamp(0.5 * (rp + rs), 0.0, 1.0);
 }
 
+// What a glTF dielectric's reflection leaves for the diffuse or the transmission below it:
+// 1 - specular max(F_d(V.H)) (fresnel_mix; materials/gltf.py _GltfDielectric.kept).
+float dielectric_kept(vec3 f0, float specular, float v_dot_h) {
+    vec3 f = schlick(v_dot_h, f0);
+    return 1.0 - specular * max(f.r, max(f.g, f.b));
+}
+
 vec3 lobe_fresnel(Lobe l, float wo_h) {
     if (l.type == LOBE_GLTF_SPECULAR) {
         return (1.0 - l.metallic) * l.specular_weight * schlick(abs(wo_h), l.dielectric_f0) +
@@ -175,8 +182,7 @@ vec3 lobe_fresnel(Lobe l, float wo_h) {
     }
     if (l.type == LOBE_GLTF_TRANSMISSION) {
         // What the dielectric's reflection leaves, tinted (l.k holds the transmission factor).
-        vec3 f = schlick(abs(wo_h), l.dielectric_f0);
-        return (1.0 - l.metallic) * l.r0 * (1.0 - l.specular_weight * max(f.r, max(f.g, f.b)));
+        return (1.0 - l.metallic) * l.r0 * dielectric_kept(l.dielectric_f0, l.specular_weight, abs(wo_h));
     }
     if (l.fresnel == FRESNEL_SCHLICK) return schlick(wo_h, l.r0);
     if (l.fresnel == FRESNEL_CONDUCTOR) return fresnel_conductor(wo_h, l.eta, l.kappa);
@@ -209,10 +215,15 @@ float sheen_attenuation(float cos_o) {
 }
 
 // What the layers leave of the glTF base: 1 - clearcoat F_c(N.V) (KHR_materials_clearcoat)
-// times the sheen's attenuation.
+// times the sheen's attenuation (materials/gltf.py BaseLayers.attenuation).
+float base_attenuation(float coat, float cos_o) {
+    return (1.0 - coat * schlick(cos_o, vec3(0.04)).x) * sheen_attenuation(cos_o);
+}
+
+// base_attenuation for the lobes under the layers (glTF specular and transmission), 1 otherwise.
 float gltf_coat_attenuation(Lobe l, float cos_o) {
     bool base = l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION;
-    return base ? (1.0 - l.coat * schlick(cos_o, vec3(0.04)).x) * sheen_attenuation(cos_o) : 1.0;
+    return base ? base_attenuation(l.coat, cos_o) : 1.0;
 }
 
 // A lobe's directional albedo from the DFG table's (A, B) at its roughness (split-sum and the
@@ -300,7 +311,5 @@ uniform float u_transmission;  // KHR_materials_transmission: the diffuse keeps 
 // view-direction approximation).
 vec3 diffuse_weight(float v_dot_h, float n_dot_v) {
     if (u_gltf_diffuse <= 0.5) return vec3(1.0);
-    vec3 f = schlick(v_dot_h, u_dielectric_f0);
-    float coat = (1.0 - u_clearcoat * schlick(n_dot_v, vec3(0.04)).x) * sheen_attenuation(n_dot_v);
-    return vec3((1.0 - u_specular_weight * max(f.r, max(f.g, f.b))) * coat);
+    return vec3(dielectric_kept(u_dielectric_f0, u_specular_weight, v_dot_h) * base_attenuation(u_clearcoat, n_dot_v));
 }

@@ -86,7 +86,7 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                 [1, 1, 1, comp.specular],
                 [*comp.base_color, 0],
                 [*comp.f0, comp.metallic],
-                [0, 0, 0, comp.coat.coat],
+                [0, 0, 0, comp.layers.coat],
             ]
         elif isinstance(comp, GltfTransmission):
             row = [
@@ -94,7 +94,7 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                 [comp.amount, comp.amount, comp.amount, comp.specular],
                 [*comp.base_color, 0],
                 [*comp.f0, comp.metallic],
-                [0, 0, 0, comp.coat.coat],
+                [0, 0, 0, comp.layers.coat],
             ]
         elif isinstance(comp, GltfClearcoat):
             row = [
@@ -126,7 +126,7 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
     diffuse = next((comp for comp in bsdf.components if isinstance(comp, GltfDiffuse)), None)
     extra = {}
     if diffuse is not None:
-        layers = diffuse.coat
+        layers = diffuse.layers
         extra = dict(dielectric_f0=tuple(map(float, diffuse.f0)), specular_weight=diffuse.specular,
                      clearcoat=layers.coat, transmission=diffuse.transmission,
                      sheen_color=tuple(map(float, layers.sheen_color)),
@@ -146,7 +146,7 @@ def _lobe_key(comp) -> tuple:
 
 def pack_material_row_key(comp) -> tuple:
     values = []
-    for name in ("k", "r0", "alpha", "transmission", "scale", "base_color", "metallic", "f0", "specular", "coat",
+    for name in ("k", "r0", "alpha", "transmission", "scale", "base_color", "metallic", "f0", "specular", "layers",
                  "amount"):  # fmt: skip
         v = getattr(comp, name, None)
         if isinstance(v, BaseLayers):
