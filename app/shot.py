@@ -171,9 +171,13 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
     env = load_environment(args.env or PREVIEW_ENV)
     mesh = uv_sphere() if args.object == "sphere" else load_mesh_file(args.object)
     if str(args.object).lower().endswith((".gltf", ".glb")):
+        import shlex
+
+        own = Path(out).with_name(Path(out).stem + "_own_materials.png")
         print(
             f"--object renders the file's geometry with --material {args.material}; "
-            f"`lobeview shot {args.object} --out FILE.png` renders it with its own materials and textures"
+            f"`lobeview shot {shlex.quote(str(args.object))} --out {shlex.quote(str(own))}` renders it with its "
+            "own materials and textures"
         )
     if args.object != "sphere":
         lo, hi = mesh.bounds

@@ -171,4 +171,11 @@ def test_object_mesh_files_keep_their_surface(tmp_path, capsys):
         np.testing.assert_array_equal(mesh.uvs, reference.uvs)
         args = ["shot", "--object", str(suzanne), "--size", "32x32", "--face-size", "16", "--method", "lobe-5"]
         assert main(args + ["--out", str(tmp_path / "s.png")]) == 0
-        assert "renders it with its own materials" in capsys.readouterr().out
+        printed = capsys.readouterr().out
+        assert "renders it with its own materials" in printed
+        # The printed command runs as pasted.
+        import shlex
+
+        command = shlex.split(printed.split("`")[1])
+        assert command[0] == "lobeview" and main(command[1:]) == 0
+        assert (tmp_path / "s_own_materials.png").is_file()
