@@ -83,11 +83,15 @@ def anisotropy_frame(frame: np.ndarray, rotation: float) -> np.ndarray:
 COAT_F0 = 0.04  # KHR_materials_clearcoat: the coat is a dielectric of ior 1.5
 
 
+def specular_f0_unclamped(ior: float = 1.5, specular_color=(1.0, 1.0, 1.0)) -> np.ndarray:
+    """((ior - 1) / (ior + 1))^2 specularColor: KHR_materials_specular's f0 before the clamp, which
+    comes after the specularColorTexture multiplies it (shaders/scene.frag u_specular_f0_raw)."""
+    return ((float(ior) - 1.0) / (float(ior) + 1.0)) ** 2 * broadcast_rgb(specular_color, "specular_color")
+
+
 def dielectric_f0(ior: float = 1.5, specular_color=(1.0, 1.0, 1.0)) -> np.ndarray:
     """KHR_materials_ior/_specular: min(((ior - 1) / (ior + 1))^2 specularColor, 1) per channel."""
-    return np.minimum(
-        ((float(ior) - 1.0) / (float(ior) + 1.0)) ** 2 * broadcast_rgb(specular_color, "specular_color"), 1.0
-    )
+    return np.minimum(specular_f0_unclamped(ior, specular_color), 1.0)
 
 
 SHEEN_TABLE_SIZE = 16  # E_s(N.V) samples at N.V = (i + 0.5) / 16 (shaders/bsdf.glsl sheen_albedo)
@@ -136,10 +140,19 @@ def sheen_albedo_table(sheen_roughness: float, order: int = 64) -> np.ndarray:
 
 class BaseLayers:
     """What lies over the glTF base (diffuse, specular, transmission): the clearcoat and the
-    sheen; ``attenuation(N.V)`` = (1 - clearcoat F_c(N.V)) (1 - max(sheenColor) E_s(N.V))."""
+    sheen; ``attenuation(N.V)`` = (1 - clearcoat F_c(N_c.V)) (1 - max(sheenColor) E_s(N.V)).
+    N_c.V is ``coat_cos`` when the coat has its own normal (clearcoatNormalTexture: one pixel, one
+    view), else the base's N.V."""
 
-    def __init__(self, coat: float = 0.0, sheen_color=(0.0, 0.0, 0.0), sheen_roughness: float = 0.0):
+    def __init__(
+        self,
+        coat: float = 0.0,
+        sheen_color=(0.0, 0.0, 0.0),
+        sheen_roughness: float = 0.0,
+        coat_cos: float | None = None,
+    ):
         self.coat = float(coat)
+        self.coat_cos = None if coat_cos is None else float(coat_cos)
         self.sheen_color = broadcast_rgb(sheen_color, "sheen_color")
         self.sheen_roughness = float(sheen_roughness)
         self.sheen_table = (
@@ -155,7 +168,8 @@ class BaseLayers:
 
     def attenuation(self, cos_o) -> np.ndarray:
         """What the layers leave of the base (scalar per direction; bsdf.glsl base_attenuation)."""
-        coat = 1.0 - self.coat * schlick(cos_o, np.full(3, COAT_F0))[..., 0]
+        coat_view = cos_o if self.coat_cos is None else np.full(np.shape(cos_o), self.coat_cos)
+        coat = 1.0 - self.coat * schlick(coat_view, np.full(3, COAT_F0))[..., 0]
         return coat * (1.0 - float(np.max(self.sheen_color)) * self.sheen_albedo(cos_o))
 
 
@@ -356,14 +370,17 @@ def gltf_bsdf(
     transmission: float = 0.0,
     sheen_color=(0.0, 0.0, 0.0),
     sheen_roughness: float = 0.0,
+    coat_cos: float | None = None,
 ) -> BSDF:
     """The glTF BSDF with the KHR_materials_anisotropy (strength, rotation: the BSDF's local x
     is the direction, see :func:`anisotropy_frame`), _ior, _specular, _clearcoat,
-    _transmission (thin-walled) and _sheen (approximated) factors."""
+    _transmission (thin-walled) and _sheen (approximated) factors. ``coat_cos``: N_c.V of a
+    clearcoat with its own normal (its lobe is then evaluated in that normal's frame by the
+    caller; :class:`BaseLayers`)."""
     base = broadcast_rgb(base_color, "base_color")
     alpha_t, alpha_b = anisotropic_alphas(roughness, anisotropy)
     f0 = dielectric_f0(ior, specular_color)
-    layers = BaseLayers(clearcoat, sheen_color, sheen_roughness)
+    layers = BaseLayers(clearcoat, sheen_color, sheen_roughness, coat_cos)
     components = [
         GltfDiffuse(base, float(metallic), f0, specular, layers, transmission),
         GltfSpecular(base, float(metallic), alpha_t, alpha_b, f0, specular, layers),

@@ -340,12 +340,12 @@ _FACE_BARY = np.stack(
 
 def _face_albedo_and_emission(obj, material, kd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(F, 3) diffuse albedo and emitted radiance per face of ``obj``: the material's kd and
-    emission, with its textures (base colour, metallic, emissive) averaged over each face at 16
+    emission, with its textures (base colour, metallic, transmission, emissive) averaged over each face at 16
     stratified points (shaders/scene.frag's per-pixel inputs, scenes/texturing.py), so a bounce
     off a textured floor carries the colour of the part it hit, not the texture's mean."""
     faces = obj.mesh.indices.reshape(-1, 3)
     count = len(faces)
-    if not any(material.texture(slot) is not None for slot in ("base_color", "metallic_roughness", "emissive")):
+    if not any(material.texture(slot) for slot in ("base_color", "metallic_roughness", "emissive", "transmission")):
         return np.broadcast_to(kd, (count, 3)), np.broadcast_to(material.emission, (count, 3))
     from .texturing import texel_material
 
@@ -358,7 +358,7 @@ def _face_albedo_and_emission(obj, material, kd: np.ndarray) -> tuple[np.ndarray
     points = len(_FACE_BARY)
     if inputs["gltf_model"]:
         # kd = (1 - metallic)(1 - transmission) baseColor (materials/gltf.py GltfDiffuse), per point.
-        transmission = float(material.desc.get("transmission", 0.0))
+        transmission = inputs["extensions"].get("transmission", 0.0)
         point_kd = ((1.0 - inputs["metallic"]) * (1.0 - transmission))[:, None] * inputs["base_color"]
     else:
         point_kd = np.asarray(kd) * inputs["base_texel"]

@@ -25,6 +25,7 @@ import base64
 import io
 import json
 import struct
+import types
 import warnings
 from pathlib import Path
 
@@ -61,7 +62,7 @@ from .scene import (
 )
 
 # glTF material extensions lobeview maps onto the gltf model: extension -> {glTF field: (desc
-# key, default, (low, high))}; their textures are named in EXTENSION_TEXTURES (warned, unused).
+# key, default, (low, high))}; their textures are read per pixel (EXTENSION_SLOTS).
 GLTF_MODEL_EXTENSIONS = {
     "KHR_materials_anisotropy": {
         "anisotropyStrength": ("anisotropy", 0.0, (0.0, 1.0)),
@@ -85,13 +86,28 @@ GLTF_MODEL_EXTENSIONS = {
     # (thickness > 0, attenuation) is said to be ignored, not silently dropped.
     "KHR_materials_volume": {},
 }
-EXTENSION_TEXTURES = {
-    "KHR_materials_anisotropy": ("anisotropyTexture",),
-    "KHR_materials_specular": ("specularTexture", "specularColorTexture"),
-    "KHR_materials_clearcoat": ("clearcoatTexture", "clearcoatRoughnessTexture", "clearcoatNormalTexture"),
-    "KHR_materials_transmission": ("transmissionTexture",),
-    "KHR_materials_sheen": ("sheenColorTexture", "sheenRoughnessTexture"),
-    "KHR_materials_volume": ("thicknessTexture",),
+# The extensions' textures lobeview reads per pixel: extension -> {glTF field: (slot of
+# scene.TEXTURE_SLOTS, the channels the extension reads from it)}. Two textures that share a slot
+# (clearcoat factor R + roughness G; specular colour RGB + factor A) are combined channel-wise
+# (_extension_slot); the factors multiply the texels as each extension specifies.
+EXTENSION_SLOTS = {
+    "KHR_materials_anisotropy": {"anisotropyTexture": ("anisotropy", (0, 1, 2))},
+    "KHR_materials_clearcoat": {
+        "clearcoatTexture": ("clearcoat", (0,)),
+        "clearcoatRoughnessTexture": ("clearcoat", (1,)),
+        "clearcoatNormalTexture": ("clearcoat_normal", (0, 1, 2)),
+    },
+    "KHR_materials_specular": {
+        "specularColorTexture": ("specular", (0, 1, 2)),
+        "specularTexture": ("specular", (3,)),
+    },
+    "KHR_materials_transmission": {"transmissionTexture": ("transmission", (0,))},
+    "KHR_materials_sheen": {"sheenColorTexture": ("sheen_color", (0, 1, 2))},
+}
+# Extension textures that are read but not honoured (warned: the factor applies uniformly).
+EXTENSION_TEXTURES_UNUSED = {
+    "KHR_materials_sheen": ("sheenRoughnessTexture",),  # the E_s table is per material roughness
+    "KHR_materials_volume": ("thicknessTexture",),  # transmission is thin-walled
 }
 SUPPORTED_EXTENSIONS = {
     "MOZ_lightmap",
@@ -456,9 +472,9 @@ def _node_matrix(node) -> np.ndarray:
 
 
 def _model_extensions(mat, where: str, scene_warnings: list) -> dict:
-    """KHR_materials_anisotropy/_ior/_specular/_clearcoat as the gltf model's optional keys
-    (materials/spec.py GLTF_EXTENSION_KEYS). Out-of-range factors are clamped with a warning;
-    the extensions' textures are not used (warned: the factors apply uniformly)."""
+    """KHR_materials_anisotropy/_ior/_specular/_clearcoat/_transmission/_sheen as the gltf
+    model's optional keys (materials/spec.py GLTF_EXTENSION_KEYS). Out-of-range factors are
+    clamped with a warning; the textures are read by _extension_textures."""
     out: dict = {}
     for extension, fields in GLTF_MODEL_EXTENSIONS.items():
         data = (mat.extensions or {}).get(extension)
@@ -480,11 +496,11 @@ def _model_extensions(mat, where: str, scene_warnings: list) -> dict:
                 _warn(scene_warnings, f"{where}: {extension}.{field} {array.tolist()} clamped to {list(limits)}")
                 array = np.clip(array, *limits)
             out[key] = array.tolist() if array.ndim else float(array)
-        unused = [name for name in EXTENSION_TEXTURES.get(extension, ()) if data.get(name) is not None]
+        unused = [name for name in EXTENSION_TEXTURES_UNUSED.get(extension, ()) if data.get(name) is not None]
         if unused:
             _warn(
                 scene_warnings,
-                f"{where}: {extension} {', '.join(unused)} not used yet; its factors apply uniformly",
+                f"{where}: {extension} {', '.join(unused)} not used yet; its factor applies uniformly",
             )
     volume = (mat.extensions or {}).get("KHR_materials_volume")
     if isinstance(volume, dict):
@@ -502,6 +518,98 @@ def _model_extensions(mat, where: str, scene_warnings: list) -> dict:
         _warn(scene_warnings, f"{where}: KHR_materials_ior ior {ior} is neither 0 nor in [1, 10]; 1.5 used")
         out["ior"] = 1.5
     return out
+
+
+def _texture_info(value, where: str, scene_warnings: list):
+    """An extension's textureInfo (a JSON object) as the attributes _texture_slot reads."""
+    if value is None:
+        return None
+    index = value.get("index") if isinstance(value, dict) else None
+    if not isinstance(index, int) or isinstance(index, bool):
+        _warn(scene_warnings, f"{where} is not a textureInfo with an integer index; its factor applies uniformly")
+        return None
+    return types.SimpleNamespace(
+        index=index,
+        texCoord=value.get("texCoord", 0),
+        extensions=value.get("extensions") if isinstance(value.get("extensions"), dict) else None,
+        scale=value.get("scale", 1.0),
+    )
+
+
+def _same_sampling(a: TextureSlot, b: TextureSlot) -> bool:
+    return (a.tex_coord, a.wrap_s, a.wrap_t, a.mag_filter, a.min_filter) == (
+        b.tex_coord, b.wrap_s, b.wrap_t, b.mag_filter, b.min_filter
+    ) and np.array_equal(a.transform, b.transform)  # fmt: skip
+
+
+def _channel_values(slot: TextureSlot, as_uint8: bool) -> np.ndarray:
+    """(H, W, 4) channels of a slot's image: uint8 as stored, or float32 linear."""
+    if as_uint8:
+        image = slot.image
+        if image.shape[-1] == 3:
+            image = np.concatenate([image, np.full(image.shape[:-1] + (1,), 255, np.uint8)], axis=-1)
+        return image
+    return slot.linear()
+
+
+def _extension_slot(slot: str, parts: list, where: str, scene_warnings: list) -> TextureSlot:
+    """One slot from the extension textures that fill it: ``parts`` = [(TextureSlot, channels,
+    glTF field)]. A texture that is the slot's only source and the same image for every channel
+    is used as it is; otherwise the channels are copied into one image whose other channels
+    are 1 (the texel that leaves the factor unchanged). A texture of another size, UV set,
+    transform or sampler than the first cannot share its slot: warned, its factor applies."""
+    first = parts[0][0]
+    shared = all(
+        _same_sampling(part[0], first) and (part[0].image is first.image or np.array_equal(part[0].image, first.image))
+        for part in parts
+    )
+    if shared and (len(parts) > 1 or slot not in ("clearcoat", "specular")):
+        return first
+    as_uint8 = all(part[0].image.dtype == np.uint8 for part in parts)
+    height, width = first.image.shape[:2]
+    combined = np.full((height, width, 4), 255 if as_uint8 else 1.0, np.uint8 if as_uint8 else np.float32)
+    for texture, channels, field_name in parts:
+        if texture.image.shape[:2] != (height, width) or not _same_sampling(texture, first):
+            _warn(
+                scene_warnings,
+                f"{where}: {field_name} differs from {parts[0][2]} in size, UV set, transform or sampler and "
+                "cannot share its slot; its factor applies uniformly",
+            )
+            continue
+        combined[..., list(channels)] = _channel_values(texture, as_uint8)[..., list(channels)]
+    return TextureSlot(
+        combined,
+        srgb=as_uint8 and slot in COLOUR_SLOTS,
+        tex_coord=first.tex_coord,
+        wrap_s=first.wrap_s,
+        wrap_t=first.wrap_t,
+        mag_filter=first.mag_filter,
+        min_filter=first.min_filter,
+        transform=first.transform,
+        source=first.source,
+    )
+
+
+def _extension_textures(reader: _Reader, mat, name: str, out: SceneMaterial, scene_warnings: list) -> None:
+    """The KHR material extensions' textures (EXTENSION_SLOTS) as per-pixel slots of ``out``."""
+    gathered: dict[str, list] = {}
+    for extension, fields in EXTENSION_SLOTS.items():
+        data = (mat.extensions or {}).get(extension)
+        if not isinstance(data, dict):
+            continue
+        for field_name, (slot, channels) in fields.items():
+            where = f"{reader.path}: material {name!r}: {extension}.{field_name}"
+            info = _texture_info(data.get(field_name), where, scene_warnings)
+            texture = _texture_slot(reader, info, slot, name, scene_warnings, "its factor applies uniformly")
+            if texture is None:
+                continue
+            texture.srgb = slot in COLOUR_SLOTS and channels != (3,) and texture.image.dtype == np.uint8
+            gathered.setdefault(slot, []).append((texture, channels, field_name))
+            if field_name == "clearcoatNormalTexture":
+                out.clearcoat_normal_scale = _finite(info.scale, 1.0)
+    for slot, parts in gathered.items():
+        where = f"{reader.path}: material {name!r}: {slot.replace('_', ' ')} texture"
+        out.textures[slot] = _extension_slot(slot, parts, where, scene_warnings)
 
 
 def _custom_material(reader: _Reader, custom) -> dict:
@@ -608,6 +716,8 @@ def _material(reader: _Reader, index: int | None, scene_warnings: list) -> Scene
         texture = _texture_slot(reader, info, slot, name, scene_warnings, fallback)
         if texture is not None:
             out.textures[slot] = texture
+    if gltf_model:
+        _extension_textures(reader, mat, name, out, scene_warnings)
     if mat.normalTexture is not None and "normal" in out.textures:
         out.normal_scale = _finite(getattr(mat.normalTexture, "scale", 1.0), 1.0)
     if mat.occlusionTexture is not None and "occlusion" in out.textures:

@@ -39,8 +39,24 @@ MIN_FILTERS = (
 )
 
 # The texture slots of a glTF material (core specification 3.9) in the order shaders bind them.
-TEXTURE_SLOTS = ("base_color", "metallic_roughness", "normal", "occlusion", "emissive")
-COLOUR_SLOTS = ("base_color", "emissive")  # sRGB-encoded; the others hold linear data
+TEXTURE_SLOTS = (
+    "base_color",
+    "metallic_roughness",
+    "normal",
+    "occlusion",
+    "emissive",
+    # KHR material extensions' textures (gltf_loader.EXTENSION_SLOTS says which texture fills
+    # which channel): anisotropy (RG direction, B strength), clearcoat (R factor, G roughness),
+    # the clearcoat's normal map, specular (RGB colour, A factor), transmission (R), sheen colour.
+    "anisotropy",
+    "clearcoat",
+    "clearcoat_normal",
+    "specular",
+    "transmission",
+    "sheen_color",
+)
+# sRGB-encoded colour (alpha linear); the others hold linear data
+COLOUR_SLOTS = ("base_color", "emissive", "specular", "sheen_color")
 ALPHA_MODES = ("OPAQUE", "MASK", "BLEND")  # glTF alphaMode, in the order of the shaders' codes
 
 
@@ -111,7 +127,10 @@ class SceneMaterial:
     For the ``gltf`` model the textures act as the specification says (Appendix B): base colour
     (RGBA) x factor, metallic (B) and roughness (G) x factors, a tangent-space normal map scaled
     by ``normal_scale``, occlusion on the indirect diffuse by ``occlusion_strength``, emission x
-    the emissive texture. For the other models the base-colour texture multiplies kd."""
+    the emissive texture; the KHR extensions' textures multiply their factors (anisotropy
+    direction and strength, clearcoat factor and roughness, the clearcoat's own normal map,
+    specular colour and factor, transmission, sheen colour). For the other models the base-colour
+    texture multiplies kd."""
 
     name: str
     desc: dict  # validated material description (lobeview.materials.spec)
@@ -125,6 +144,7 @@ class SceneMaterial:
     alpha_cutoff: float = 0.5
     normal_scale: float = 1.0
     occlusion_strength: float = 1.0
+    clearcoat_normal_scale: float = 1.0  # KHR_materials_clearcoat's clearcoatNormalTexture.scale
 
     def __post_init__(self):
         if self.base_color_texture is not None and "base_color" not in self.textures:

@@ -6,7 +6,8 @@ and of the per-pixel material in shaders/scene.frag (core specification 3.9 and 
   repeat folded into [0, 1] and then repeated, as the shader does), nearest or bilinear filter
   between texel centres, sRGB decoded per texel before filtering (an SRGB8_ALPHA8 texture).
 - :func:`texel_material`: base colour (RGBA x factor), metallic (B) and roughness (G) x factors,
-  the tangent-space normal, occlusion and emission of a material at UV coordinates.
+  the tangent-space normal, occlusion and emission of a material at UV coordinates, and the KHR
+  extensions' factors times their textures (:func:`extension_texels`).
 - :func:`mapped_normal`: the normal map in the interpolated tangent frame.
 - :func:`pixel_bsdf`: the glTF BSDF of one pixel's parameters (materials/gltf.py).
 """
@@ -94,9 +95,44 @@ def texel_material(material: SceneMaterial, uv0: np.ndarray, uv1: np.ndarray | N
         "normal_texel": texel("normal")[:, :3] if material.texture("normal") is not None else None,
         "occlusion": 1.0 + material.occlusion_strength * (occlusion - 1.0),
         "emission": np.asarray(material.emission, dtype=np.float64) * texel("emissive")[:, :3],
-        # KHR_materials_* factors (per material, no textures): passed to gltf_bsdf as they are.
-        "extensions": {k: desc[k] for k in GLTF_EXTENSION_KEYS if k in desc} if gltf_model else {},
+        # KHR_materials_* factors times their textures, per pixel: gltf_bsdf's keyword arguments.
+        "extensions": extension_texels(material, texel, count) if gltf_model else {},
+        "coat_normal_texel": (
+            texel("clearcoat_normal")[:, :3] if gltf_model and material.texture("clearcoat_normal") else None
+        ),
     }
+
+
+def extension_texels(material: SceneMaterial, texel, count: int) -> dict:
+    """The KHR extensions' factors at ``count`` pixels (arrays with a leading pixel axis), each
+    times its texture as the extension specifies (shaders/scene.frag): anisotropy strength x B and
+    rotation + the direction atan2(G, R) of the RG texel in [-1, 1]; clearcoat x R, clearcoat
+    roughness x G; specular colour x RGB (sRGB) and specular x A; transmission x R; sheen colour x
+    RGB (sRGB). ``texel(slot, absent)`` samples a slot."""
+    desc = material.desc
+    out = {k: np.repeat(np.asarray(desc[k], np.float64)[None], count, axis=0) for k in GLTF_EXTENSION_KEYS if k in desc}
+    white = np.ones((count, 4))
+    if material.texture("anisotropy") is not None:
+        values = texel("anisotropy")
+        direction = 2.0 * values[:, :2] - 1.0
+        turned = np.sum(direction**2, axis=1) > 1e-12
+        angle = np.where(turned, np.arctan2(direction[:, 1], direction[:, 0]), 0.0)
+        out["anisotropy"] = float(desc.get("anisotropy", 0.0)) * values[:, 2]
+        out["anisotropy_rotation"] = float(desc.get("anisotropy_rotation", 0.0)) + angle
+    coat = texel("clearcoat", white)
+    if material.texture("clearcoat") is not None:
+        out["clearcoat"] = float(desc.get("clearcoat", 0.0)) * coat[:, 0]
+        out["clearcoat_roughness"] = float(desc.get("clearcoat_roughness", 0.0)) * coat[:, 1]
+    if material.texture("specular") is not None:
+        values = texel("specular")
+        out["specular"] = float(desc.get("specular", 1.0)) * values[:, 3]
+        out["specular_color"] = np.asarray(desc.get("specular_color", [1.0, 1.0, 1.0]), np.float64) * values[:, :3]
+    if material.texture("transmission") is not None:
+        out["transmission"] = float(desc.get("transmission", 0.0)) * texel("transmission")[:, 0]
+    if material.texture("sheen_color") is not None:
+        sheen = np.asarray(desc.get("sheen_color", [0.0, 0.0, 0.0]), np.float64)
+        out["sheen_color"] = sheen * texel("sheen_color")[:, :3]
+    return out
 
 
 def mapped_normal(frame: np.ndarray, normal_texel: np.ndarray, scale: float) -> np.ndarray:
@@ -110,13 +146,17 @@ def mapped_normal(frame: np.ndarray, normal_texel: np.ndarray, scale: float) -> 
     return world / np.linalg.norm(world)
 
 
-def pixel_bsdf(parameters: dict, k: int):
-    """The glTF BSDF of pixel ``k`` of :func:`texel_material`'s output (gltf model only)."""
+def pixel_bsdf(parameters: dict, k: int, coat_cos: float | None = None):
+    """The glTF BSDF of pixel ``k`` of :func:`texel_material`'s output (gltf model only);
+    ``coat_cos``: N_c.V of the clearcoat's own normal at that pixel (gltf_bsdf)."""
     from lobeview.materials.gltf import gltf_bsdf
 
+    extensions = {key: value[k] for key, value in parameters.get("extensions", {}).items()}
+    extensions = {key: value.tolist() if np.ndim(value) else float(value) for key, value in extensions.items()}
     return gltf_bsdf(
         parameters["base_color"][k],
         float(parameters["metallic"][k]),
         float(parameters["roughness"][k]),
-        **parameters.get("extensions", {}),
+        coat_cos=coat_cos,
+        **extensions,
     )

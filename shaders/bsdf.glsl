@@ -27,6 +27,7 @@ struct Lobe {
     vec3 dielectric_f0;
     float specular_weight;
     float coat;
+    float coat_cos;  // N_c.V of the clearcoat's own normal (scene.frag); < 0: the lobe frame's N.V
 };
 
 uniform int u_lobe_count;
@@ -53,6 +54,7 @@ Lobe get_lobe(int i) {
     l.dielectric_f0 = d.rgb;
     l.specular_weight = b.w;
     l.coat = e.w;
+    l.coat_cos = -1.0;
     return l;
 }
 
@@ -199,6 +201,8 @@ float lobe_f90(Lobe l) {
 // like the diffuse, E_s the white sheen lobe's albedo at N.V = (i + 0.5) / SHEEN_TABLE_SIZE.
 uniform vec3 u_sheen_color;
 uniform float u_sheen_albedo[SHEEN_TABLE_SIZE];
+// The pixel's sheenColorTexture texel (scene.frag sets it; white everywhere else).
+vec3 g_sheen_texel = vec3(1.0);
 
 float sheen_albedo(float cos_o) {
     float x = clamp(cos_o * float(SHEEN_TABLE_SIZE) - 0.5, 0.0, float(SHEEN_TABLE_SIZE - 1));
@@ -207,23 +211,26 @@ float sheen_albedo(float cos_o) {
 }
 
 // sheenColor E_s(N.V): the sheen's radiance under irradiance pi.
-vec3 sheen_term(float cos_o) { return u_sheen_color * sheen_albedo(cos_o); }
+vec3 sheen_term(float cos_o) { return u_sheen_color * g_sheen_texel * sheen_albedo(cos_o); }
 
 // What the sheen leaves of the base: 1 - max(sheenColor) E_s(N.V) (the extension's scaling).
 float sheen_attenuation(float cos_o) {
-    return 1.0 - max(u_sheen_color.r, max(u_sheen_color.g, u_sheen_color.b)) * sheen_albedo(cos_o);
+    vec3 sheen = u_sheen_color * g_sheen_texel;
+    return 1.0 - max(sheen.r, max(sheen.g, sheen.b)) * sheen_albedo(cos_o);
 }
 
-// What the layers leave of the glTF base: 1 - clearcoat F_c(N.V) (KHR_materials_clearcoat)
-// times the sheen's attenuation (materials/gltf.py BaseLayers.attenuation).
-float base_attenuation(float coat, float cos_o) {
-    return (1.0 - coat * schlick(cos_o, vec3(0.04)).x) * sheen_attenuation(cos_o);
+// What the layers leave of the glTF base: 1 - clearcoat F_c(N_c.V) (KHR_materials_clearcoat,
+// N_c the coat's normal: coat_cos < 0 takes the base's N.V) times the sheen's attenuation
+// (materials/gltf.py BaseLayers.attenuation).
+float base_attenuation(float coat, float coat_cos, float cos_o) {
+    float coat_view = coat_cos < 0.0 ? cos_o : coat_cos;
+    return (1.0 - coat * schlick(coat_view, vec3(0.04)).x) * sheen_attenuation(cos_o);
 }
 
 // base_attenuation for the lobes under the layers (glTF specular and transmission), 1 otherwise.
 float gltf_coat_attenuation(Lobe l, float cos_o) {
     bool base = l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION;
-    return base ? base_attenuation(l.coat, cos_o) : 1.0;
+    return base ? base_attenuation(l.coat, l.coat_cos, cos_o) : 1.0;
 }
 
 // A lobe's directional albedo from the DFG table's (A, B) at its roughness (split-sum and the
@@ -311,5 +318,6 @@ uniform float u_transmission;  // KHR_materials_transmission: the diffuse keeps 
 // view-direction approximation).
 vec3 diffuse_weight(float v_dot_h, float n_dot_v) {
     if (u_gltf_diffuse <= 0.5) return vec3(1.0);
-    return vec3(dielectric_kept(u_dielectric_f0, u_specular_weight, v_dot_h) * base_attenuation(u_clearcoat, n_dot_v));
+    return vec3(dielectric_kept(u_dielectric_f0, u_specular_weight, v_dot_h) *
+                base_attenuation(u_clearcoat, -1.0, n_dot_v));
 }

@@ -19,7 +19,7 @@ uniform int u_sobol_count;
 uniform int u_sample_offset;        // first Sobol index of this pass (progressive refinement)
 uniform int u_samples;              // N
 uniform float u_lod_bias;
-uniform vec2 u_pattern[MAX_LOBES * MAX_PATTERN];  // per-lobe pattern coordinates (xi1, xi2)
+uniform vec2 u_pattern[MAX_LOBES * MAX_PATTERN];  // per-lobe ring pattern (xi1, xi2): lobe_pattern_xi
 uniform vec3 u_kd;                  // Lambert kd, or (1 - metallic) baseColor for glTF
 uniform uint u_seed;
 
@@ -74,6 +74,20 @@ vec3 cosine_hemisphere(vec2 u) {
 
 #if defined(METHOD_LOBE)
 
+// Pattern coordinates (xi1, xi2) of sample i of n (materials/patterns.py choose_pattern and
+// pattern_xi), chosen per pixel: a line along the longer axis when this pixel's lobe is
+// anisotropic by ANISOTROPY_LINE_RATIO or more (roughness and anisotropy textures change the
+// ratio from pixel to pixel), else the ring or multi-ring of u_pattern (material_gpu.py).
+vec2 lobe_pattern_xi(Lobe l, int lobe_index, int i, int n) {
+    if (max(l.ax, l.ay) >= ANISOTROPY_LINE_RATIO * min(l.ax, l.ay)) {
+        float s = (2.0 * float(i) + 1.0) / float(n) - 1.0;
+        bool along_y = l.ay > l.ax;
+        float xi2 = s < 0.0 ? (along_y ? 0.25 : 0.0) : (along_y ? 0.75 : 0.5);
+        return vec2(1.0 - abs(s), xi2);
+    }
+    return u_pattern[lobe_index * MAX_PATTERN + i];
+}
+
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     int n = u_samples;
     float area = lobe_sample_area(l, wo, n);
@@ -81,7 +95,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     vec3 den = vec3(0.0);
     vec3 num_unit = vec3(0.0);  // Eq. 4.25's numerator for L = 1 (normalisation)
     for (int i = 0; i < n; ++i) {
-        vec3 h = pattern_half_vector(l, u_pattern[lobe_index * MAX_PATTERN + i]);
+        vec3 h = pattern_half_vector(l, lobe_pattern_xi(l, lobe_index, i, n));
         vec3 wr = 2.0 * dot(wo, h) * h - wo;   // Eq. 4.8
         if (wr.z <= 0.0) continue;              // below the horizon: discarded
         vec3 wi = reflected_wi(l, wr);

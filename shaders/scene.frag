@@ -27,6 +27,11 @@ uniform float u_anisotropy;           // KHR_materials_anisotropy strength (0: i
 uniform float u_roughness_factor;
 uniform float u_normal_scale;
 uniform float u_occlusion_strength;
+// KHR material extensions per pixel (their textures x these factors; u_clearcoat, u_specular_weight,
+// u_transmission and u_sheen_color are bsdf.glsl's): materials/gltf.py and scenes/texturing.py.
+uniform float u_clearcoat_roughness;
+uniform float u_clearcoat_normal_scale;
+uniform vec3 u_specular_f0_raw;       // ((ior - 1) / (ior + 1))^2 specularColorFactor, before min(., 1)
 uniform int u_alpha_mode;             // ALPHA_OPAQUE, ALPHA_MASK (u_alpha_cutoff), ALPHA_BLEND
 uniform float u_alpha_cutoff;
 uniform float u_object_id;            // for picking: written + 1 into the normal buffer's w
@@ -64,16 +69,40 @@ void main() {
     vec4 normal_texel = sample_map(MAP_NORMAL, v_uv0, v_uv1, vec4(0.5, 0.5, 1.0, 1.0));
     vec4 occlusion_texel = sample_map(MAP_OCCLUSION, v_uv0, v_uv1, vec4(1.0));
     vec4 emissive_texel = sample_map(MAP_EMISSIVE, v_uv0, v_uv1, vec4(1.0));
+    // Absent textures read as the texel that leaves the factor as it is (direction +x, strength 1).
+    vec4 anisotropy_texel = sample_map(MAP_ANISOTROPY, v_uv0, v_uv1, vec4(1.0, 0.5, 1.0, 1.0));
+    vec4 clearcoat_texel = sample_map(MAP_CLEARCOAT, v_uv0, v_uv1, vec4(1.0));
+    vec4 coat_normal_texel = sample_map(MAP_CLEARCOAT_NORMAL, v_uv0, v_uv1, vec4(0.5, 0.5, 1.0, 1.0));
+    vec4 specular_texel = sample_map(MAP_SPECULAR, v_uv0, v_uv1, vec4(1.0));
+    vec4 transmission_texel = sample_map(MAP_TRANSMISSION, v_uv0, v_uv1, vec4(1.0));
+    vec4 sheen_texel = sample_map(MAP_SHEEN_COLOR, v_uv0, v_uv1, vec4(1.0));
     float coverage = u_alpha_mode == ALPHA_OPAQUE ? 1.0 : clamp(u_base_color_factor.a * base_texel.a, 0.0, 1.0);
     if (u_alpha_mode == ALPHA_MASK && coverage < u_alpha_cutoff) discard;
 
-    mat3 tbn = shading_frame(v_normal, v_tangent, geometric_normal);
+    mat3 vertex_tbn = shading_frame(v_normal, v_tangent, geometric_normal);
+    float handedness = v_tangent.w < 0.0 ? -1.0 : 1.0;
+    mat3 tbn = vertex_tbn;
     if (u_map_texcoord[MAP_NORMAL] >= 0) {
-        vec3 n = mapped_normal(tbn, normal_texel.rgb, u_normal_scale);
-        tbn = shading_frame(n, vec4(tbn[0], v_tangent.w < 0.0 ? -1.0 : 1.0), geometric_normal);
+        vec3 n = mapped_normal(vertex_tbn, normal_texel.rgb, u_normal_scale);
+        tbn = shading_frame(n, vec4(vertex_tbn[0], handedness), geometric_normal);
     }
-    tbn = rotate_tangent(tbn, u_tangent_rotation);
-    vec3 wo = view_in_frame(tbn, normalize(u_camera_position - v_position));
+    // KHR_materials_anisotropy: the texture's direction (RG in [-1, 1] of the tangent frame)
+    // turned by the material's rotation; its strength (B) scales anisotropyStrength.
+    float tangent_angle = u_tangent_rotation;
+    vec2 anisotropy_direction = anisotropy_texel.rg * 2.0 - 1.0;
+    if (u_map_texcoord[MAP_ANISOTROPY] >= 0 && dot(anisotropy_direction, anisotropy_direction) > 1e-12)
+        tangent_angle += atan(anisotropy_direction.y, anisotropy_direction.x);
+    tbn = rotate_tangent(tbn, tangent_angle);
+    vec3 view = normalize(u_camera_position - v_position);
+    vec3 wo = view_in_frame(tbn, view);
+    // KHR_materials_clearcoat: the coat has its own normal map, or the vertex normal (the base's
+    // normal map does not reach it); its Fresnel over the base is at N_c.V.
+    mat3 coat_tbn = vertex_tbn;
+    if (u_map_texcoord[MAP_CLEARCOAT_NORMAL] >= 0) {
+        vec3 n = mapped_normal(vertex_tbn, coat_normal_texel.rgb, u_clearcoat_normal_scale);
+        coat_tbn = shading_frame(n, vec4(vertex_tbn[0], handedness), geometric_normal);
+    }
+    vec3 coat_wo = view_in_frame(coat_tbn, view);
 
     // Without a lightmap: the environment's irradiance at the shading normal (no occlusion).
     vec3 irradiance = sh9_irradiance(tbn[2]);
@@ -86,9 +115,22 @@ void main() {
     vec3 base_color = u_base_color_factor.rgb * base_texel.rgb;
     float metallic = clamp(u_metallic_factor * mr_texel.b, 0.0, 1.0);
     float roughness = clamp(u_roughness_factor * mr_texel.g, 0.0, 1.0);
-    vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * (1.0 - u_transmission) * base_color : u_kd * base_texel.rgb;
+    // The extensions' factors at this pixel (each texture multiplies its factor).
+    float anisotropy = u_anisotropy * anisotropy_texel.b;
+    float clearcoat = u_clearcoat * clearcoat_texel.r;
+    float coat_roughness = u_clearcoat_roughness * clearcoat_texel.g;
+    float coat_alpha = max(coat_roughness * coat_roughness, ALPHA_MIN);
+    vec3 dielectric_f0 = min(u_specular_f0_raw * specular_texel.rgb, vec3(1.0));
+    float specular_weight = u_specular_weight * specular_texel.a;
+    float transmission = u_transmission * transmission_texel.r;
+    g_sheen_texel = sheen_texel.rgb;
+    vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * (1.0 - transmission) * base_color : u_kd * base_texel.rgb;
     vec3 diffuse = albedo / PI * irradiance;
-    diffuse *= diffuse_weight(wo.z, wo.z);
+    if (u_gltf_model == 1) {
+        diffuse *= dielectric_kept(dielectric_f0, specular_weight, wo.z) * base_attenuation(clearcoat, coat_wo.z, wo.z);
+    } else {
+        diffuse *= diffuse_weight(wo.z, wo.z);
+    }
     diffuse += sheen_term(wo.z) / PI * irradiance;  // KHR_materials_sheen, lit like the diffuse
     vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)
@@ -100,8 +142,20 @@ void main() {
             l.r0 = base_color;
             l.metallic = metallic;
             float alpha = max(roughness * roughness, ALPHA_MIN);
-            l.ax = mix(alpha, 1.0, u_anisotropy * u_anisotropy);
+            l.ax = mix(alpha, 1.0, anisotropy * anisotropy);
             l.ay = alpha;
+            l.dielectric_f0 = dielectric_f0;
+            l.specular_weight = specular_weight;
+            l.coat = clearcoat;
+            l.coat_cos = coat_wo.z;
+            if (l.type == LOBE_GLTF_TRANSMISSION) l.k = vec3(transmission);
+        }
+        if (u_gltf_model == 1 && l.type == LOBE_GLTF_CLEARCOAT) {
+            l.k = vec3(clearcoat);
+            l.ax = coat_alpha;
+            l.ay = coat_alpha;
+            radiance += integrate_lobe(l, i, coat_wo, coat_tbn);
+            continue;
         }
         radiance += integrate_lobe(l, i, wo, tbn);
     }

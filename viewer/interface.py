@@ -27,7 +27,7 @@ from lobeview.materials.banks import BANKS_AZIMUTHS
 from lobeview.materials.gltf import SHEEN_TABLE_SIZE
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
 from lobeview.materials.microfacet import ALPHA_MIN
-from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, MAX_ELLIPSE_ANGLE, XI_BORDER
+from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, ANISOTROPY_LINE_RATIO, MAX_ELLIPSE_ANGLE, XI_BORDER
 from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
 from lobeview.scenes.scene import ALPHA_MODES as GLTF_ALPHA_MODES
 from lobeview.scenes.scene import TEXTURE_SLOTS
@@ -101,6 +101,7 @@ SHADER_CONSTANTS: dict = {
     "ALBEDO_MU": ALBEDO_MU,
     "XI_BORDER": float(XI_BORDER),  # Eq. 4.10
     "MAX_ELLIPSE_ANGLE": float(MAX_ELLIPSE_ANGLE),  # Eq. 4.15 clamp
+    "ANISOTROPY_LINE_RATIO": float(ANISOTROPY_LINE_RATIO),  # materials/patterns.py choose_pattern
     "CDF_ROW": CDF_ROW,
     "MAX_PROXY_PLANES": MAX_PROXY_PLANES,
 }
@@ -113,7 +114,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     "u_env_cdf": 3,  # reference: environment importance tables
     "u_env_pdf": 4,
     "u_lightmap": 5,
-    "u_material_maps": (6, 20, 21, 22, 23),  # glTF textures by MAP_SLOTS
+    "u_material_maps": (6, 20, 21, 22, 23, 34, 35, 36, 37, 38, 39),  # glTF textures by MAP_SLOTS
     "u_albedo": 7,  # normalised lobe-N: the lobes' albedo tables
     "u_split_sum": (8, 9),  # by distribution (DIST_BECKMANN, DIST_GGX)
     "u_dfg": 10,

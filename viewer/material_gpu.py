@@ -174,13 +174,15 @@ def albedo_table_for(comp) -> AlbedoTable:
 
 
 def pack_patterns(material: PackedMaterial, n: int, planar: bool = False) -> np.ndarray:
-    """(MAX_LOBES * MAX_PATTERN, 2) pattern coordinates, each lobe's pattern chosen by
-    :func:`lobeview.materials.patterns.choose_pattern` (``planar``: the multi-ring pattern of
-    thesis 4.5.3 for objects shaded from a mirror buffer)."""
+    """(MAX_LOBES * MAX_PATTERN, 2) pattern coordinates of each lobe's ring, or with ``planar``
+    the multi-ring pattern of thesis 4.5.3 for objects shaded from a mirror buffer. The line
+    patterns of strongly anisotropic lobes (:func:`lobeview.materials.patterns.choose_pattern`)
+    are chosen and placed per pixel by shaders/integrate.glsl lobe_pattern_xi, since a roughness
+    or anisotropy texture changes a lobe's anisotropy from pixel to pixel."""
     if not 1 <= n <= MAX_PATTERN:
         raise ValueError(f"lobe-N supports 1 <= N <= {MAX_PATTERN}, got {n}")
     out = np.zeros((MAX_LOBES * MAX_PATTERN, 2), dtype=np.float32)
-    for i, d in enumerate(material.lobe_distributions):
-        xi1, xi2 = pattern_xi(n, choose_pattern(d.alpha_x, d.alpha_y, planar))
+    xi1, xi2 = pattern_xi(n, choose_pattern(1.0, 1.0, planar))  # ring or multi-ring
+    for i in range(len(material.lobe_distributions)):
         out[i * MAX_PATTERN : i * MAX_PATTERN + n] = np.stack([xi1, xi2], -1)
     return out

@@ -25,6 +25,7 @@ import numpy as np
 
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import Method
+from lobeview.materials.gltf import specular_f0_unclamped
 from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
@@ -263,6 +264,14 @@ class SceneRenderer(RendererBase):
         set_uniform(program, "u_metallic_factor", float(desc.get("metallic", 0.0)))
         set_uniform(program, "u_roughness_factor", float(desc.get("roughness", 1.0)))
         set_uniform(program, "u_anisotropy", float(desc.get("anisotropy", 0.0)) if gltf_model else 0.0)
+        set_uniform(program, "u_clearcoat_roughness", float(desc.get("clearcoat_roughness", 0.0)))
+        set_uniform(program, "u_clearcoat_normal_scale", float(mat.clearcoat_normal_scale))
+        raw_f0 = (
+            specular_f0_unclamped(desc.get("ior", 1.5), desc.get("specular_color", (1.0, 1.0, 1.0)))
+            if gltf_model
+            else (0.04, 0.04, 0.04)
+        )
+        set_uniform(program, "u_specular_f0_raw", tuple(float(x) for x in raw_f0))
         set_uniform(program, "u_normal_scale", float(mat.normal_scale))
         set_uniform(program, "u_occlusion_strength", float(mat.occlusion_strength))
         set_uniform(program, "u_alpha_mode", ALPHA_MODES[mat.alpha_mode.lower()])
@@ -284,7 +293,8 @@ class SceneRenderer(RendererBase):
         write_uniform(program, "u_map_transform", np.asarray(transforms, dtype=np.float32))
         write_uniform(program, "u_map_mirrored", np.asarray(mirrored, dtype=np.int32))
         if "u_albedo_per_pixel" in program:  # normalised lobe-N (shaders/patterns.glsl lobe_albedo)
-            per_pixel = gltf_model and bool({"base_color", "metallic_roughness"} & set(mat.textures))
+            # Every texture but the normal maps, occlusion and emission changes the lobes' albedo.
+            per_pixel = gltf_model and bool(set(mat.textures) - {"normal", "occlusion", "emissive", "clearcoat_normal"})
             set_uniform(program, "u_albedo_per_pixel", int(per_pixel))
             # Bound even when unused: a sampler left on unit 0 would meet the radiance cube there
             # (two sampler types on one unit fail the draw with GL_INVALID_OPERATION).
