@@ -9,6 +9,7 @@ import re
 import warnings
 from importlib import resources
 
+import moderngl
 import numpy as np
 import pytest
 
@@ -48,6 +49,11 @@ def _variants():
     yield "scene.vert", "scene.frag", {**method_defines(Method.parse("lobe-3")), "SPECULAR": True, "MIRROR": True}
     yield "scene.vert", "scene.frag", {**method_defines(Method.parse("mc-4")), "SPECULAR": True, "MIRROR": True,
                                        "PLANE_AVERAGE": True}  # fmt: skip
+    yield (
+        "scene.vert",
+        "scene.frag",
+        {**method_defines(Method("prefiltered", 1, mode=PREFILTER_MODES[1])), "SPECULAR": True, "MIRROR": True},
+    )  # fmt: skip  (the most samplers)
     yield "scene.vert", "scene.frag", {**method_defines(Method.parse("lobe-3")), "SPECULAR": True, "PARALLAX": True}
     yield "scene.vert", "scene.frag", {"METHOD_LOBE": True}
 
@@ -73,18 +79,33 @@ def test_a_caller_cannot_override_a_shared_constant_or_use_an_unknown_define():
         assemble("scene.frag", {"METHOD_LOBES": True})
 
 
+COMMON_SAMPLER_LIMIT = 32
+# GL_SAMPLER_2D, _3D, _CUBE, _2D_ARRAY, _CUBE_MAP_ARRAY, _2D_ARRAY_SHADOW (moderngl Uniform.gl_type)
+SAMPLER_TYPES = {0x8B5E, 0x8B5F, 0x8B60, 0x8DC1, 0x900C, 0x8DC4}
+
+
 def test_declared_uniform_parser_sees_what_the_compiler_sees(programs):
     """Every active uniform of every shading variant is among the names the parser found in its
     sources (the check of set_uniform relies on that), and sampler uniforms have a unit."""
     samplers = set()
+    most_samplers = 0
     for vertex, fragment, defines in _variants():
         program = programs.program(vertex, fragment, defines)
         declared = program.extra["declared_uniforms"]
         active = {name for name in program if hasattr(program[name], "value") and hasattr(program[name], "location")}
         assert active and active <= declared, (fragment, defines, active - declared)
+        # Active samplers of the fragment stage, array elements counted: a GPU refuses to link
+        # past GL_MAX_TEXTURE_IMAGE_UNITS (32 on current NVIDIA, AMD and Intel drivers and llvmpipe).
+        in_use = sum(
+            program[name].array_length
+            for name in active
+            if isinstance(program[name], moderngl.Uniform) and program[name].gl_type in SAMPLER_TYPES
+        )
+        most_samplers = max(most_samplers, in_use)
         source = assemble(fragment, defines)
         samplers |= set(re.findall(r"uniform\s+sampler\w+\s+(\w+)", source))
     assert samplers and samplers <= set(TEXTURE_UNITS), samplers - set(TEXTURE_UNITS)
+    assert most_samplers <= COMMON_SAMPLER_LIMIT, most_samplers
     units = [u for v in TEXTURE_UNITS.values() for u in (v if isinstance(v, tuple) else (v,))]
     assert len(units) == len(set(units)), "two samplers share a texture unit"
     assert declared_uniforms("uniform vec4 u_a[3]; // uniform float u_comment;\nlayout(binding = 0) uniform "
