@@ -52,7 +52,7 @@ def _variants():
     yield (
         "scene.vert",
         "scene.frag",
-        {**method_defines(Method("prefiltered", 1, mode=PREFILTER_MODES[1])), "SPECULAR": True, "MIRROR": True},
+        {**method_defines(Method.parse("prefiltered")), "SPECULAR": True, "MIRROR": True},
     )  # fmt: skip  (the most samplers)
     yield "scene.vert", "scene.frag", {**method_defines(Method.parse("lobe-3")), "SPECULAR": True, "PARALLAX": True}
     yield "scene.vert", "scene.frag", {"METHOD_LOBE": True}
