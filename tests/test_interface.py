@@ -53,7 +53,7 @@ def _variants():
         "scene.vert",
         "scene.frag",
         {**method_defines(Method.parse("prefiltered")), "SPECULAR": True, "MIRROR": True},
-    )  # fmt: skip  (the most samplers)
+    )  # fmt: skip  (prefiltered maps and the mirror buffers: many samplers)
     yield "scene.vert", "scene.frag", {**method_defines(Method.parse("lobe-3")), "SPECULAR": True, "PARALLAX": True}
     yield "scene.vert", "scene.frag", {"METHOD_LOBE": True}
 
