@@ -5,6 +5,7 @@ pixel through the real pipeline: a normal-mapped, metallic-roughness-textured qu
 from __future__ import annotations
 
 import base64
+import contextlib
 import io
 import json
 import types
@@ -429,6 +430,31 @@ def test_loader_maps_khr_materials_anisotropy(tmp_path):
     assert bsdf.components[1].distribution.alpha_x == pytest.approx(0.16 + 0.84 * 0.49)
 
 
+@contextlib.contextmanager
+def _rendered_quad(scene):
+    """``scene`` (the textured quad) rendered with lobe-7 through the cube-map path (a glossy
+    quad would otherwise get a mirror pass), unbaked under the smooth environment: yields the
+    renderer, a cube-map lookup for the numpy twin and the result."""
+    from lobeview.bench.testing import CubeLookup
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    scene.objects[0].planar_reflector = False
+    ctx = create_headless_context()
+    env = EnvironmentMap.from_function(_smooth_env, height=64, name="smooth")
+    with pytest.warns(UserWarning, match="no usable lightmap"):
+        renderer = SceneRenderer(ctx, scene, env, size=SIZE, cube_face_size=32, progress=False)
+    try:
+        lookup = CubeLookup(ctx, renderer.programs)
+        result = renderer.render(CAMERA, "lobe-7")
+        assert not result.invalid.any()
+        yield renderer, lookup, result
+    finally:
+        renderer.release()
+        ctx.release()
+
+
 @pytest.mark.parametrize(
     "extensions",
     [
@@ -445,25 +471,14 @@ def test_khr_material_extensions_match_numpy_per_pixel(extensions):
     """KHR_materials_ior/_specular/_clearcoat through the real pipeline (lobe-7, per-pixel glTF
     path with a base-colour texture) against the numpy twin: every lobe by the same pattern
     quadrature, the diffuse by SH9 irradiance times GltfDiffuse.view_weight."""
-    from lobeview.bench.testing import CubeLookup
     from lobeview.materials.gltf import GltfDiffuse, GltfSheen
-    from lobeview.scenes.envmap import EnvironmentMap, eval_sh9
-    from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.scenes.envmap import eval_sh9
 
     scene = _textured_quad_scene()
     material = scene.materials[0]
     material.textures = {"base_color": material.textures["base_color"]}
     material.desc = validate({"model": "gltf", "base_color": [0.9, 0.8, 1.0], **extensions})
-    scene.objects[0].planar_reflector = False  # the cube-map path (a glossy quad would get a mirror pass)
-    ctx = create_headless_context()
-    env = EnvironmentMap.from_function(_smooth_env, height=64, name="smooth")
-    with pytest.warns(UserWarning, match="no usable lightmap"):
-        renderer = SceneRenderer(ctx, scene, env, size=SIZE, cube_face_size=32, progress=False)
-    try:
-        lookup = CubeLookup(ctx, renderer.programs)
-        result = renderer.render(CAMERA, "lobe-7")
-        assert not result.invalid.any()
+    with _rendered_quad(scene) as (renderer, lookup, result):
         cube = renderer.objects[0].cube
         frame = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
         lobes_seen = set()
@@ -488,9 +503,6 @@ def test_khr_material_extensions_match_numpy_per_pixel(extensions):
         assert ("GltfClearcoat" in lobes_seen) == ("clearcoat" in extensions)
         assert ("GltfTransmission" in lobes_seen) == ("transmission" in extensions)
         assert ("GltfSheen" in lobes_seen) == ("sheen_color" in extensions)
-    finally:
-        renderer.release()
-        ctx.release()
 
 
 def test_loader_maps_ior_specular_and_clearcoat(tmp_path):
@@ -629,11 +641,8 @@ def test_khr_extension_textures_match_numpy_per_pixel(case):
     against scenes/texturing.py: every texel scales its factor, the anisotropy texture turns the
     tangent per pixel, the clearcoat lobe is integrated in its own normal's frame and its Fresnel
     over the base taken at N_c.V."""
-    from lobeview.bench.testing import CubeLookup
     from lobeview.materials.gltf import GltfClearcoat, GltfDiffuse, GltfSheen, anisotropy_frame
-    from lobeview.scenes.envmap import EnvironmentMap, eval_sh9
-    from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.scenes.envmap import eval_sh9
 
     factors, maps = EXTENSION_TEXTURE_CASES[case]
     rng = np.random.default_rng(11)
@@ -647,15 +656,7 @@ def test_khr_extension_textures_match_numpy_per_pixel(case):
     material.textures = textures
     material.clearcoat_normal_scale = 0.9
     material.desc = validate({"model": "gltf", "base_color": [0.9, 0.8, 1.0], **factors})
-    scene.objects[0].planar_reflector = False  # the cube-map path (a glossy quad would get a mirror pass)
-    ctx = create_headless_context()
-    env = EnvironmentMap.from_function(_smooth_env, height=64, name="smooth")
-    with pytest.warns(UserWarning, match="no usable lightmap"):
-        renderer = SceneRenderer(ctx, scene, env, size=SIZE, cube_face_size=32, progress=False)
-    try:
-        lookup = CubeLookup(ctx, renderer.programs)
-        result = renderer.render(CAMERA, "lobe-7")
-        assert not result.invalid.any()
+    with _rendered_quad(scene) as (renderer, lookup, result):
         cube = renderer.objects[0].cube
         vertex_frame = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
         pixels = _pixels(result, 12, seed=5)
@@ -704,9 +705,6 @@ def test_khr_extension_textures_match_numpy_per_pixel(case):
         untextured = renderer.render(CAMERA, "lobe-7")
         difference = np.abs(untextured.radiance - result.radiance)[result.mask].mean()
         assert difference > 0.02 * result.radiance[result.mask].mean(), difference
-    finally:
-        renderer.release()
-        ctx.release()
 
 
 def test_loader_combines_the_textures_that_share_a_slot(tmp_path):
