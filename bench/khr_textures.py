@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import base64
-import copy
 import io
 import json
 import tempfile
@@ -25,6 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.scenes.scene import TEXTURE_SLOTS
+
+from .textures import untextured
 
 SIZE = 256  # texels per side of every generated texture
 EXTENSION_SLOTS = set(TEXTURE_SLOTS[5:])  # the KHR extensions' slots (scenes/scene.py)
@@ -165,16 +166,6 @@ def write_gltf(folder: Path) -> Path:
     return path
 
 
-def _factors_only(scene):
-    plain = copy.copy(scene)
-    plain.materials = []
-    for material in scene.materials:
-        stripped = copy.copy(material)
-        stripped.textures = {k: v for k, v in material.textures.items() if k not in EXTENSION_SLOTS}
-        plain.materials.append(stripped)
-    return plain
-
-
 def render_figure(gltf: Path, env_spec: str, size: tuple[int, int], method: str, out: Path) -> dict:
     import warnings
 
@@ -194,7 +185,8 @@ def render_figure(gltf: Path, env_spec: str, size: tuple[int, int], method: str,
     camera = Camera(position=(0.0, 0.6, 7.2), target=(0.0, 0.0, 0.0), fov_y=26.0)
     ctx = create_headless_context()
     rows, stats = [], {}
-    for label, variant in (("factors only", _factors_only(scene)), ("with the extension textures", scene)):
+    factors_only = untextured(scene, EXTENSION_SLOTS)
+    for label, variant in (("factors only", factors_only), ("with the extension textures", scene)):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "no usable lightmap": lit by the environment, as intended
             renderer = SceneRenderer(ctx, variant, env, size=size, cube_face_size=128, progress=False)

@@ -20,12 +20,13 @@ import numpy as np
 METHODS = ("lobe-7", "fis-8", "prefiltered")
 
 
-def _untextured(scene):
+def untextured(scene, slots=None):
+    """A shallow copy of ``scene`` whose materials lack the textures of ``slots`` (all: None)."""
     plain = copy.copy(scene)
     plain.materials = []
     for material in scene.materials:
         stripped = copy.copy(material)
-        stripped.textures = {}
+        stripped.textures = {k: v for k, v in material.textures.items() if slots is not None and k not in slots}
         plain.materials.append(stripped)
     return plain
 
@@ -46,7 +47,7 @@ def run(scene_path: Path, size: tuple[int, int], frames: int) -> str:
     camera = Camera(position, target, up, fov)
     renderers = {
         "textured": SceneRenderer(ctx, scene, env, size=size, cube_face_size=128, progress=False),
-        "factors only": SceneRenderer(ctx, _untextured(scene), env, size=size, cube_face_size=128, progress=False),
+        "factors only": SceneRenderer(ctx, untextured(scene), env, size=size, cube_face_size=128, progress=False),
     }
     rows = []
     for method in METHODS:

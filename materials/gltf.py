@@ -23,8 +23,9 @@ colour 1 give the core model exactly; ior 0 is the extensions' infinite index (f
 KHR_materials_clearcoat layers a dielectric GGX coat over everything else (the extension's
 fresnel_coat): coat = clearcoat F_c(N.V) V D with alpha_c = clearcoatRoughness^2 and
 F_c = 0.04 + 0.96 (1 - N.V)^5 (ior 1.5; the extension evaluates the coat's Fresnel at N.V), and
-the base (diffuse and specular) scaled by 1 - clearcoat F_c(N.V). The coat uses the shading
-normal (the extension's clearcoatNormalTexture is not used).
+the base (diffuse and specular) scaled by 1 - clearcoat F_c(N_c.V). The coat has its own normal
+N_c: its clearcoatNormalTexture, or the vertex normal (the base's normal map does not reach it);
+one pixel's N_c.V is :class:`BaseLayers` ``coat_cos`` (shaders/scene.frag coat_tbn).
 
 KHR_materials_transmission (thin-walled: KHR_materials_volume's thickness 0) moves the fraction
 ``transmission`` of the dielectric's diffuse into a GGX transmission lobe with the same alpha,

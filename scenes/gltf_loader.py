@@ -22,6 +22,7 @@ warned and use the documented fallbacks listed in :data:`FALLBACKS`.
 from __future__ import annotations
 
 import base64
+import dataclasses
 import io
 import json
 import struct
@@ -542,16 +543,6 @@ def _same_sampling(a: TextureSlot, b: TextureSlot) -> bool:
     ) and np.array_equal(a.transform, b.transform)  # fmt: skip
 
 
-def _channel_values(slot: TextureSlot, as_uint8: bool) -> np.ndarray:
-    """(H, W, 4) channels of a slot's image: uint8 as stored, or float32 linear."""
-    if as_uint8:
-        image = slot.image
-        if image.shape[-1] == 3:
-            image = np.concatenate([image, np.full(image.shape[:-1] + (1,), 255, np.uint8)], axis=-1)
-        return image
-    return slot.linear()
-
-
 def _extension_slot(slot: str, parts: list, where: str, scene_warnings: list) -> TextureSlot:
     """One slot from the extension textures that fill it: ``parts`` = [(TextureSlot, channels,
     glTF field)]. A texture that is the slot's only source and the same image for every channel
@@ -576,18 +567,10 @@ def _extension_slot(slot: str, parts: list, where: str, scene_warnings: list) ->
                 "cannot share its slot; its factor applies uniformly",
             )
             continue
-        combined[..., list(channels)] = _channel_values(texture, as_uint8)[..., list(channels)]
-    return TextureSlot(
-        combined,
-        srgb=as_uint8 and slot in COLOUR_SLOTS,
-        tex_coord=first.tex_coord,
-        wrap_s=first.wrap_s,
-        wrap_t=first.wrap_t,
-        mag_filter=first.mag_filter,
-        min_filter=first.min_filter,
-        transform=first.transform,
-        source=first.source,
-    )
+        # uint8 images are RGBA as stored (Reader.image(stored=True)); others decode to linear RGBA.
+        values = texture.image if as_uint8 else texture.linear()
+        combined[..., list(channels)] = values[..., list(channels)]
+    return dataclasses.replace(first, image=combined, srgb=as_uint8 and slot in COLOUR_SLOTS)
 
 
 def _extension_textures(reader: _Reader, mat, name: str, out: SceneMaterial, scene_warnings: list) -> None:
@@ -603,7 +586,6 @@ def _extension_textures(reader: _Reader, mat, name: str, out: SceneMaterial, sce
             texture = _texture_slot(reader, info, slot, name, scene_warnings, "its factor applies uniformly")
             if texture is None:
                 continue
-            texture.srgb = slot in COLOUR_SLOTS and channels != (3,) and texture.image.dtype == np.uint8
             gathered.setdefault(slot, []).append((texture, channels, field_name))
             if field_name == "clearcoatNormalTexture":
                 out.clearcoat_normal_scale = _finite(info.scale, 1.0)

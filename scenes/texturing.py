@@ -111,7 +111,6 @@ def extension_texels(material: SceneMaterial, texel, count: int) -> dict:
     RGB (sRGB). ``texel(slot, absent)`` samples a slot."""
     desc = material.desc
     out = {k: np.repeat(np.asarray(desc[k], np.float64)[None], count, axis=0) for k in GLTF_EXTENSION_KEYS if k in desc}
-    white = np.ones((count, 4))
     if material.texture("anisotropy") is not None:
         values = texel("anisotropy")
         direction = 2.0 * values[:, :2] - 1.0
@@ -119,8 +118,8 @@ def extension_texels(material: SceneMaterial, texel, count: int) -> dict:
         angle = np.where(turned, np.arctan2(direction[:, 1], direction[:, 0]), 0.0)
         out["anisotropy"] = float(desc.get("anisotropy", 0.0)) * values[:, 2]
         out["anisotropy_rotation"] = float(desc.get("anisotropy_rotation", 0.0)) + angle
-    coat = texel("clearcoat", white)
     if material.texture("clearcoat") is not None:
+        coat = texel("clearcoat")
         out["clearcoat"] = float(desc.get("clearcoat", 0.0)) * coat[:, 0]
         out["clearcoat_roughness"] = float(desc.get("clearcoat_roughness", 0.0)) * coat[:, 1]
     if material.texture("specular") is not None:

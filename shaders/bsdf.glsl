@@ -315,9 +315,13 @@ uniform float u_transmission;  // KHR_materials_transmission: the diffuse keeps 
 // The weight of the diffuse term: glTF's 1 - specular max(F_d(V.H)) (Appendix B fresnel_mix, with
 // the KHR_materials_ior/_specular f0 and weight) times the clearcoat's 1 - clearcoat F_c(N.V);
 // 1 for every other model. The estimators that do not sample wi pass V.N as V.H (the
-// view-direction approximation).
+// view-direction approximation). gltf_diffuse_weight takes the layers explicitly (scene.frag's
+// per-pixel values, coat_cos < 0: the coat shares the normal).
+float gltf_diffuse_weight(vec3 f0, float specular, float clearcoat, float coat_cos, float v_dot_h, float n_dot_v) {
+    return dielectric_kept(f0, specular, v_dot_h) * base_attenuation(clearcoat, coat_cos, n_dot_v);
+}
+
 vec3 diffuse_weight(float v_dot_h, float n_dot_v) {
     if (u_gltf_diffuse <= 0.5) return vec3(1.0);
-    return vec3(dielectric_kept(u_dielectric_f0, u_specular_weight, v_dot_h) *
-                base_attenuation(u_clearcoat, -1.0, n_dot_v));
+    return vec3(gltf_diffuse_weight(u_dielectric_f0, u_specular_weight, u_clearcoat, -1.0, v_dot_h, n_dot_v));
 }

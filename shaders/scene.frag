@@ -126,11 +126,9 @@ void main() {
     g_sheen_texel = sheen_texel.rgb;
     vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * (1.0 - transmission) * base_color : u_kd * base_texel.rgb;
     vec3 diffuse = albedo / PI * irradiance;
-    if (u_gltf_model == 1) {
-        diffuse *= dielectric_kept(dielectric_f0, specular_weight, wo.z) * base_attenuation(clearcoat, coat_wo.z, wo.z);
-    } else {
-        diffuse *= diffuse_weight(wo.z, wo.z);
-    }
+    diffuse *= u_gltf_model == 1
+                   ? vec3(gltf_diffuse_weight(dielectric_f0, specular_weight, clearcoat, coat_wo.z, wo.z, wo.z))
+                   : diffuse_weight(wo.z, wo.z);
     diffuse += sheen_term(wo.z) / PI * irradiance;  // KHR_materials_sheen, lit like the diffuse
     vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)

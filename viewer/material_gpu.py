@@ -80,22 +80,19 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                 [0, 0, 0, 0],
                 [0, 0, 0, 0],
             ]
-        elif isinstance(comp, GltfSpecular):
+        elif isinstance(comp, (GltfSpecular, GltfTransmission)):
+            # The glTF base lobes: scale 1 (specular) or the transmission factor, the specular
+            # weight, base colour, dielectric f0, metallic and the clearcoat over them.
+            transmission = isinstance(comp, GltfTransmission)
+            scale = comp.amount if transmission else 1.0
             row = [
-                [LOBE_TYPES["gltf specular"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
-                [1, 1, 1, comp.specular],
+                [LOBE_TYPES["gltf transmission" if transmission else "gltf specular"], DISTRIBUTIONS[d.kind],
+                 d.alpha_x, d.alpha_y],
+                [scale, scale, scale, comp.specular],
                 [*comp.base_color, 0],
                 [*comp.f0, comp.metallic],
                 [0, 0, 0, comp.layers.coat],
-            ]
-        elif isinstance(comp, GltfTransmission):
-            row = [
-                [LOBE_TYPES["gltf transmission"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
-                [comp.amount, comp.amount, comp.amount, comp.specular],
-                [*comp.base_color, 0],
-                [*comp.f0, comp.metallic],
-                [0, 0, 0, comp.layers.coat],
-            ]
+            ]  # fmt: skip
         elif isinstance(comp, GltfClearcoat):
             row = [
                 [LOBE_TYPES["gltf clearcoat"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
