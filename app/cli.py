@@ -1,7 +1,8 @@
 """The ``lobeview`` command line.
 
 ``lobeview material list|show|plot``, ``lobeview shot`` (scenes, the demo, object preview),
-``lobeview view`` (the window), ``lobeview bench`` and ``lobeview bake``.
+``lobeview view`` (the window), ``lobeview bench``, ``lobeview bake``, ``lobeview fit`` and
+``lobeview measure`` (measured materials).
 """
 
 from __future__ import annotations
@@ -111,7 +112,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("material", help="preset name, JSON file or inline JSON object")
     p.add_argument("-o", "--output", default="lobe.png", help="output PNG (default: lobe.png)")
     p.set_defaults(func=cmd_material_plot)
-    from lobeview.app import bake, bench, shot, view
+    from lobeview.app import bake, bench, fit, shot, view
+
+    p = sub.add_parser("fit", help="fit the thesis material model to a measurement (CSV, MERL, virtual)")
+    fit.add_fit_arguments(p)
+    p.set_defaults(func=fit.cmd_fit)
+    p = sub.add_parser("measure", help="write a virtual goniophotometer measurement (CSV) or MERL table of a material")
+    fit.add_measure_arguments(p)
+    p.set_defaults(func=fit.cmd_measure)
 
     p = sub.add_parser("shot", help="render a headless screenshot of a scene or an object preview")
     shot.add_arguments(p)

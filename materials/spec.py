@@ -134,13 +134,18 @@ def validate(desc: Any) -> dict:
     model = desc.get("model")
     if model not in MODELS:
         raise MaterialError(f"model: expected one of {list(MODELS)}, got {model!r}")
-    common = {"model", "name", "description"}
+    common = {"model", "name", "description", "fit"}
     out: dict[str, Any] = {"model": model}
     for key in ("name", "description"):
         if key in desc:
             if not isinstance(desc[key], str):
                 raise MaterialError(f"{key}: expected a string, got {desc[key]!r}")
             out[key] = desc[key]
+    if "fit" in desc:
+        # Provenance written by `lobeview fit` (data, metric, error...): kept, never rendered.
+        if not isinstance(desc["fit"], dict):
+            raise MaterialError(f"fit: expected an object (the fit's provenance), got {desc['fit']!r}")
+        out["fit"] = desc["fit"]
 
     if model == "thesis":
         _check_keys(desc, common | {"kd", "lobes", "transmission_lobes"}, set(), "thesis material")

@@ -1,0 +1,280 @@
+"""``lobeview fit`` and ``lobeview measure``: measured materials (thesis 3.4).
+
+``lobeview measure MATERIAL -o data.csv`` writes a virtual goniophotometer measurement of any
+lobeview material (the thesis' incidence angles, optional noise and outliers) in the CSV format
+``lobeview fit`` reads; ``--merl FILE.binary`` writes the material's MERL table instead.
+
+``lobeview fit DATA -o material.json`` fits the thesis model (kd + K reflection lobes + T
+transmission lobes) by the hierarchical brute-force L1 search of thesis 3.4.1 and writes a
+material JSON that ``lobeview shot --material`` and the viewer load; ``--plot PNG`` draws
+measured against fitted slices (thesis Fig. 3.12 layout).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+
+from lobeview.materials import measurement as meas
+from lobeview.materials.fit import FitError, FitOptions, fit_thesis, measured_albedo
+from lobeview.materials.lobe_fit import is_isotropic
+from lobeview.materials.spec import build_bsdf, load_material
+
+
+def _float_list(text: str) -> list[float]:
+    try:
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got {text!r}") from None
+
+
+def _assignment(text: str) -> tuple[str, float]:
+    name, sep, value = text.partition("=")
+    try:
+        if not sep:
+            raise ValueError
+        return name.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected PARAM=VALUE (for example mx=0.1), got {text!r}") from None
+
+
+def _interval(text: str) -> tuple[str, tuple[float, float]]:
+    name, sep, value = text.partition("=")
+    lo, colon, hi = value.partition(":")
+    try:
+        if not sep or not colon:
+            raise ValueError
+        return name.strip(), (float(lo), float(hi))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected PARAM=LO:HI (for example mx=0.01:0.3), got {text!r}") from None
+
+
+def _stride(text: str) -> tuple[int, int, int]:
+    parts = text.split(",")
+    try:
+        values = tuple(int(v) for v in parts)
+        if len(values) != 3 or min(values) < 1:
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected three positive integers H,D,P, got {text!r}") from None
+    return values  # type: ignore[return-value]
+
+
+def _add_goniometer_arguments(p) -> None:
+    g = p.add_argument_group("virtual goniophotometer")
+    g.add_argument(
+        "--theta-i",
+        type=_float_list,
+        default=list(meas.THESIS_THETA_I_DEG),
+        help="incidence polar angles in degrees (default: the thesis' 0,5,20,35,50,65)",
+    )
+    g.add_argument(
+        "--phi-i",
+        type=_float_list,
+        default=list(meas.THESIS_PHI_I_DEG),
+        help="incidence azimuths in degrees from the tangent (default 0,15,...,90)",
+    )
+    g.add_argument("--theta-step", type=float, default=5.0, help="detector grid step in theta_o (deg, default 5)")
+    g.add_argument("--phi-step", type=float, default=15.0, help="detector grid step in phi_o (deg, default 15)")
+    g.add_argument("--noise", type=float, default=0.0, help="relative Gaussian noise (default 0)")
+    g.add_argument("--outliers", type=float, default=0.0, help="fraction of tuples replaced by spikes (default 0)")
+    g.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+
+
+def _virtual(material: str, args) -> meas.Measurement:
+    desc = load_material(material)
+    if args.theta_step <= 0 or args.phi_step <= 0 or not (0 <= args.noise <= 10) or not (0 <= args.outliers < 1):
+        raise FitError("--theta-step/--phi-step must be > 0, --noise in [0, 10], --outliers in [0, 1)")
+    if not args.theta_i or not args.phi_i or not all(0 <= t < 90 for t in args.theta_i):
+        raise FitError("--theta-i needs angles in [0, 90) and --phi-i at least one azimuth")
+    return meas.virtual_measurement(
+        desc,
+        args.theta_i,
+        args.phi_i,
+        args.theta_step,
+        args.phi_step,
+        args.noise,
+        args.outliers,
+        args.seed,
+        name=material if len(material) < 60 else None,
+    )
+
+
+def load_data(data: str, args) -> tuple[meas.Measurement, meas.Measurement | None]:
+    """The measurement to fit, and the one to plot (a MERL table is plotted at goniophotometer
+    directions, as its cells have no common incidences)."""
+    if data.startswith("virtual:"):
+        m = _virtual(data[len("virtual:") :], args)
+        return m, m
+    path = Path(data)
+    if path.suffix.lower() == ".binary":
+        table = meas.read_merl(path)
+        m = meas.merl_measurement(table, args.merl_stride, name=path.stem)
+        return m, meas.merl_goniometer_measurement(table, name=path.stem)
+    if path.suffix.lower() in (".csv", ".txt"):
+        m = meas.read_csv(path, negative=args.negative)
+        return m, m
+    raise FitError(f"{data}: expected a .csv goniophotometer file, a MERL .binary file or virtual:MATERIAL")
+
+
+def cmd_fit(args) -> int:
+    if args.model != "thesis":
+        raise FitError(f"--model {args.model}: only the thesis model is fitted so far")
+    measurement, plotted = load_data(args.data, args)
+    is_merl = measurement.source == "MERL table"
+    options = FitOptions(
+        lobes=args.lobes,
+        transmission_lobes=args.transmission_lobes,
+        grid=args.grid,
+        iterations=args.iterations,
+        alternations=args.alternations,
+        metric=args.metric,
+        fixed=dict(args.fix),
+        ranges=dict(args.range),
+        isotropic=args.isotropic or is_merl,
+        polish=not args.no_polish,
+        progress=None if args.quiet else print,
+    )
+    print(
+        f"{measurement.name}: {len(measurement)} tuples ({int(measurement.transmission.sum())} transmission), "
+        f"{measurement.channels} channel(s), {len(measurement.incidences())} incidences; {measurement.source}"
+    )
+    for note in measurement.notes:
+        print(f"  {note}")
+    result = fit_thesis(measurement, options)
+    name = args.name or Path(args.output).stem
+    desc = result.material(name=name, data=args.data)
+    build_bsdf(desc)  # validates: the fitted values lie in the model's ranges
+    Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
+    print(f"\nkd = {desc['kd']}")
+    for key in ("lobes", "transmission_lobes"):
+        for i, lobe in enumerate(desc[key]):
+            print(f"{key}[{i}]: " + "  ".join(f"{k}={v}" for k, v in lobe.items()))
+    print(
+        f"Eq. 3.7 {args.metric.upper()} error: {result.error:.6g} (reflection {result.error_reflection:.6g}, "
+        f"transmission {result.error_transmission:.6g})"
+    )
+    _print_albedo(measurement, desc)
+    print(f"wrote {args.output}")
+    if args.plot:
+        from lobeview.materials.fit_plot import plot_fit
+
+        out = plot_fit(
+            plotted,
+            {"fit": desc},
+            args.plot,
+            title=f"{measurement.name}: {len(desc['lobes'])} lobe(s), {args.metric.upper()} {result.error:.4g}",
+        )
+        print(f"wrote {out}")
+    return 0
+
+
+def _print_albedo(m: meas.Measurement, desc: dict) -> None:
+    """Measured (Eq. 2.6 by the data's own quadrature) against the model's directional albedo."""
+    rows = measured_albedo(m)
+    if len(rows) > 400:  # scattered incidences (a MERL table): no per-incidence table
+        return
+    azimuths = sorted({row["phi_i"] for row in rows})
+    shown = {azimuths[0], azimuths[-1]}  # the planes along the tangent and the bitangent
+    rows = [row for row in rows if row["phi_i"] in shown or row["theta_i"] < 0.01]
+    bsdf = build_bsdf(desc)
+    print("directional albedo, measured (sum of p x solid angle) vs fitted model (quadrature):")
+    print(f"  {'theta_i':>7} {'phi_i':>6}  {'R meas':>7} {'R model':>7}  {'T meas':>7} {'T model':>7}")
+    for row in rows:
+        wi = meas.spherical_direction(math.radians(row["theta_i"]), math.radians(row["phi_i"]))
+        r, t = bsdf.albedo(wi, order=96)
+        lum = meas.LUMINANCE
+        print(
+            f"  {row['theta_i']:>7.1f} {row['phi_i']:>6.1f}  {row['reflectance']:>7.4f} {float(r @ lum):>7.4f}  "
+            f"{row['transmittance']:>7.4f} {float(t @ lum):>7.4f}"
+        )
+
+
+def cmd_measure(args) -> int:
+    desc = load_material(args.material)
+    if args.merl:
+        bsdf = build_bsdf(desc)
+        if not all(is_isotropic(c) for c in bsdf.components) or bsdf.tangent_rotation:
+            raise FitError(f"{args.material}: anisotropic; the MERL layout holds isotropic BRDFs only")
+        if any(c.hemisphere == "transmission" for c in bsdf.components):
+            print("note: MERL tables hold reflection only; the transmission lobes are not written")
+        table = meas.merl_table_from_bsdf(bsdf)
+        meas.write_merl(table, args.merl)
+        print(f"wrote {args.merl} (MERL layout, {meas.MERL_FILE_BYTES} bytes)")
+    if args.output:
+        m = _virtual(args.material, args)
+        meas.write_csv(m, args.output, comment=f"material: {args.material}\n" + "\n".join(m.notes))
+        print(f"wrote {args.output}: {len(m)} tuples ({int(m.transmission.sum())} transmission)")
+    if not args.merl and not args.output:
+        raise FitError("give -o FILE.csv and/or --merl FILE.binary")
+    return 0
+
+
+def add_fit_arguments(p) -> None:
+    p.add_argument("data", help="goniophotometer .csv, MERL .binary, or virtual:MATERIAL (preset, JSON file)")
+    p.add_argument("-o", "--output", default="fitted.json", help="material JSON to write (default fitted.json)")
+    p.add_argument("--name", default=None, help="material name (default: the output's file name)")
+    p.add_argument(
+        "--model",
+        default="thesis",
+        choices=["thesis", "rational", "microfacet"],
+        help="model to fit (only 'thesis' is built so far)",
+    )
+    p.add_argument("--lobes", type=int, default=1, help="reflection lobes K (default 1)")
+    p.add_argument(
+        "--transmission-lobes",
+        type=int,
+        default=None,
+        help="transmission lobes (default: 1 if the data has transmission tuples, else 0)",
+    )
+    p.add_argument(
+        "--fix",
+        type=_assignment,
+        action="append",
+        default=[],
+        metavar="PARAM=VALUE",
+        help="fix a parameter: kd, ks|kt|k, mx, my, r0, alpha (every lobe) or lobeN.PARAM / tlobeN.PARAM",
+    )
+    p.add_argument(
+        "--range",
+        type=_interval,
+        action="append",
+        default=[],
+        metavar="PARAM=LO:HI",
+        help="search interval of a parameter (defaults: k, r0, alpha 0:1; mx, my 0.001:1, log-spaced)",
+    )
+    p.add_argument("--grid", type=int, default=8, help="values per parameter and iteration, n (default 8)")
+    p.add_argument("--iterations", type=int, default=6, help="refinement iterations (default 6)")
+    p.add_argument("--alternations", type=int, default=3, help="rounds of refitting each lobe (default 3)")
+    p.add_argument("--metric", default="l1", choices=["l1", "l2"], help="Eq. 3.7 (l1, default) or squared (l2)")
+    p.add_argument(
+        "--no-polish",
+        action="store_true",
+        help="skip the Nelder-Mead step after each brute-force search (the thesis' method exactly)",
+    )
+    p.add_argument("--isotropic", action="store_true", help="tie my = mx (always on for MERL tables)")
+    p.add_argument(
+        "--negative",
+        default="error",
+        choices=["error", "clamp", "mask"],
+        help="negative p in a CSV: refuse (default), clamp to 0 or drop the tuple",
+    )
+    p.add_argument(
+        "--merl-stride",
+        type=_stride,
+        default=(2, 3, 6),
+        metavar="H,D,P",
+        help="fit every H-th theta_h, D-th theta_d, P-th phi_d MERL cell (default 2,3,6: ~40k tuples)",
+    )
+    p.add_argument("--plot", default=None, metavar="PNG", help="draw measured vs fitted slices to PNG")
+    p.add_argument("--quiet", action="store_true", help="no per-iteration progress")
+    _add_goniometer_arguments(p)
+
+
+def add_measure_arguments(p) -> None:
+    p.add_argument("material", help="preset name, JSON file or inline JSON object")
+    p.add_argument("-o", "--output", default=None, help="goniophotometer CSV to write")
+    p.add_argument("--merl", default=None, metavar="FILE.binary", help="also write the MERL table (isotropic only)")
+    _add_goniometer_arguments(p)

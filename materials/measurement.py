@@ -1,0 +1,516 @@
+"""Scattering measurements: the thesis' goniophotometer tuples, MERL tables, virtual measurements.
+
+A :class:`Measurement` is a list of tuples (wi, wo, p) with p = f_s(wi, wo) |cos theta_o| the
+*transfer probability* density of thesis Eq. 2.4 (per steradian of wo), plus the solid angle
+``weight`` each tuple represents (the w of thesis Eq. 3.7). Directions live in the sample's
+frame: z = surface normal, x = the tangent (the brushing direction of an anisotropic sample).
+``wi`` points to the light, ``wo`` to the detector; a detector below the surface (wo.z < 0) is a
+transmission measurement.
+
+Three sources:
+
+- :func:`read_csv` / :func:`write_csv`: lobeview's plain goniophotometer format (README
+  "Measured materials"): a header line ``theta_i,phi_i,theta_o,phi_o,p`` (or ``p_r,p_g,p_b``,
+  optionally ``weight``), angles in degrees, theta_o > 90 for the transmission hemisphere,
+  ``#`` comment lines anywhere.
+- :func:`read_merl` / :func:`write_merl`: the MERL isotropic BRDF database's binary layout
+  (Matusik et al. 2003): three int32 dimensions (90, 90, 180) = (theta_h, theta_d, phi_d), then
+  3 x 1 458 000 float64 values, channel-major (all red, all green, all blue), each scaled by
+  1/1500, 1.15/1500, 1.66/1500 for R, G, B. theta_h is stored non-linearly
+  (index = sqrt(theta_h / 90 deg) x 90), phi_d over [0, 180) deg by reciprocity. Negative
+  entries mean "not measured" and are masked. :func:`merl_measurement` turns a table into
+  tuples (a subsampled set of its cells).
+- :func:`virtual_measurement`: any lobeview material evaluated at a goniophotometer's
+  directions (the thesis' incidence angles by default), with optional noise and outliers.
+
+Every reader validates before it allocates (file size against the declared layout, row count)
+and refuses NaN/Inf with the line or cell that holds it.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lobeview.core.trust import MIB, Limits, check_regular_file
+
+from .vec import mirror_z, spherical_direction
+
+#: The thesis' goniophotometer incidence angles (Fig. 3.11/3.17: anisotropic samples).
+THESIS_THETA_I_DEG = (0.0, 5.0, 20.0, 35.0, 50.0, 65.0)
+THESIS_PHI_I_DEG = (0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0)
+#: Incidence angles of the thesis' isotropic white-foil set (Fig. 3.14).
+THESIS_ISOTROPIC_THETA_I_DEG = (0.0, 5.0, 19.0, 33.0, 47.0, 61.0, 75.0)
+
+MAX_CSV_BYTES = 512 * MIB
+MAX_TUPLES = 20_000_000
+
+MERL_DIMS = (90, 90, 180)  # theta_h, theta_d, phi_d
+MERL_SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
+MERL_CELLS = MERL_DIMS[0] * MERL_DIMS[1] * MERL_DIMS[2]
+MERL_FILE_BYTES = 3 * 4 + 3 * MERL_CELLS * 8
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+class MeasurementError(ValueError):
+    """A measurement file or array that cannot be used, with the reason and where."""
+
+
+@dataclass
+class Measurement:
+    """Tuples (wi, wo, p) in the sample frame; see the module docstring for conventions."""
+
+    wi: np.ndarray  # (N, 3) unit, towards the light, wi.z > 0
+    wo: np.ndarray  # (N, 3) unit, towards the detector; wo.z < 0: transmission
+    p: np.ndarray  # (N, C) transfer probability f |cos theta_o|, C = 1 or 3 (linear RGB)
+    weight: np.ndarray  # (N,) solid angle each tuple represents (Eq. 3.7's w)
+    name: str = "measurement"
+    source: str = ""
+    notes: list[str] = field(default_factory=list)
+
+    def __post_init__(self):
+        n = len(self.wi)
+        self.wi = np.asarray(self.wi, dtype=np.float64).reshape(n, 3)
+        self.wo = np.asarray(self.wo, dtype=np.float64).reshape(n, 3)
+        self.p = np.asarray(self.p, dtype=np.float64).reshape(n, -1)
+        self.weight = np.asarray(self.weight, dtype=np.float64).reshape(n)
+        if self.p.shape[1] not in (1, 3):
+            raise MeasurementError(f"{self.name}: p must have 1 or 3 channels, got {self.p.shape[1]}")
+        for label, arr in (("wi", self.wi), ("wo", self.wo), ("p", self.p), ("weight", self.weight)):
+            bad = ~np.isfinite(arr).reshape(n, -1).all(axis=1)
+            if bad.any():
+                raise MeasurementError(f"{self.name}: {label} is NaN or infinite in tuple {int(np.argmax(bad))}")
+        if (self.p < 0).any():
+            raise MeasurementError(
+                f"{self.name}: negative transfer probability in tuple {int(np.argmax((self.p < 0).any(1)))}"
+            )
+        if (self.weight < 0).any():
+            raise MeasurementError(f"{self.name}: negative weight in tuple {int(np.argmax(self.weight < 0))}")
+        if (self.wi[:, 2] <= 0).any():
+            raise MeasurementError(
+                f"{self.name}: incident direction at or below the surface in tuple "
+                f"{int(np.argmax(self.wi[:, 2] <= 0))} (theta_i must be < 90 deg)"
+            )
+        if n == 0:
+            raise MeasurementError(f"{self.name}: no tuples")
+
+    def __len__(self) -> int:
+        return len(self.wi)
+
+    @property
+    def channels(self) -> int:
+        return self.p.shape[1]
+
+    @property
+    def transmission(self) -> np.ndarray:
+        """Mask of tuples whose detector lies below the surface."""
+        return self.wo[:, 2] < 0.0
+
+    @property
+    def luminance(self) -> np.ndarray:
+        """The scalar the shape fit works on: p itself, or Rec. 709 luminance of RGB p, (N,)."""
+        return self.p[:, 0] if self.channels == 1 else self.p @ LUMINANCE
+
+    def subset(self, mask: np.ndarray) -> Measurement:
+        return Measurement(
+            self.wi[mask], self.wo[mask], self.p[mask], self.weight[mask], self.name, self.source, list(self.notes)
+        )
+
+    def incidences(self) -> np.ndarray:
+        """Distinct incident directions as (theta_i, phi_i) in degrees, rounded to 0.01."""
+        theta, phi = angles_deg(self.wi)
+        return np.unique(np.round(np.stack([theta, phi], axis=1), 2), axis=0)
+
+
+def angles_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Polar angle from +z and azimuth from +x (in [0, 360)) of unit vectors, in degrees."""
+    theta = np.degrees(np.arccos(np.clip(w[..., 2], -1.0, 1.0)))
+    phi = np.degrees(np.arctan2(w[..., 1], w[..., 0])) % 360.0
+    return theta, phi
+
+
+def renderer_pair(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(wi, wo) in the renderer's convention (viewer above the surface): a transmission tuple,
+    light above and detector below, is mirrored through the surface plane. The thin-surface
+    models (thesis Eq. 3.5, glTF thin transmission) are symmetric under that mirror, so the BSDF
+    value is unchanged."""
+    below = wo[:, 2] < 0.0
+    wi = np.where(below[:, None], mirror_z(wi), wi)
+    wo = np.where(below[:, None], mirror_z(wo), wo)
+    return wi, wo
+
+
+# -- lobeview's goniophotometer CSV ----------------------------------------------------------------
+
+_REQUIRED = ("theta_i", "phi_i", "theta_o", "phi_o")
+
+
+def read_csv(path, negative: str = "error", limits: Limits | None = None) -> Measurement:
+    """Read a goniophotometer CSV (see the module docstring and README "Measured materials").
+
+    ``negative``: what to do with negative p (background-subtracted noise): ``"error"``
+    (default), ``"clamp"`` to 0 or ``"mask"`` (drop the tuple), both with a warning that counts
+    them. Missing cells, NaN and Inf are always errors naming the line.
+    """
+    path = Path(path)
+    size = check_regular_file(path, "measurement", limits or Limits(max_file_bytes=MAX_CSV_BYTES))
+    if size == 0:
+        raise MeasurementError(f"{path}: empty file")
+    if negative not in ("error", "clamp", "mask"):
+        raise ValueError(f"negative must be 'error', 'clamp' or 'mask', got {negative!r}")
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise MeasurementError(f"{path}: not UTF-8 text ({exc})") from None
+    lines = [
+        (i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")
+    ]
+    if not lines:
+        raise MeasurementError(f"{path}: no header line (expected {','.join(_REQUIRED)},p)")
+    header_line, header = lines[0]
+    columns = [c.strip().lower() for c in next(csv.reader([header]))]
+    missing = [c for c in _REQUIRED if c not in columns]
+    if missing:
+        raise MeasurementError(
+            f"{path}:{header_line}: header lacks {missing}; expected "
+            "theta_i,phi_i,theta_o,phi_o and p or p_r,p_g,p_b (optional weight)"
+        )
+    if "p" in columns:
+        p_columns = ["p"]
+    elif all(c in columns for c in ("p_r", "p_g", "p_b")):
+        p_columns = ["p_r", "p_g", "p_b"]
+    else:
+        raise MeasurementError(f"{path}:{header_line}: header needs a column p (or p_r, p_g, p_b)")
+    unknown = set(columns) - set(_REQUIRED) - set(p_columns) - {"weight"}
+    if unknown:
+        raise MeasurementError(f"{path}:{header_line}: unknown columns {sorted(unknown)}")
+    rows = lines[1:]
+    if len(rows) > MAX_TUPLES:
+        raise MeasurementError(f"{path}: {len(rows)} rows exceed the limit of {MAX_TUPLES}")
+    if not rows:
+        raise MeasurementError(f"{path}: header but no data rows")
+    values = np.empty((len(rows), len(columns)))
+    for r, (line_no, line) in enumerate(rows):
+        cells = line.split(",")
+        if len(cells) != len(columns):
+            raise MeasurementError(f"{path}:{line_no}: {len(cells)} cells, the header has {len(columns)}")
+        try:
+            values[r] = [float(c) for c in cells]
+        except ValueError:
+            raise MeasurementError(f"{path}:{line_no}: not a number in {line.strip()!r}") from None
+        if not np.isfinite(values[r]).all():
+            raise MeasurementError(f"{path}:{line_no}: NaN or infinite value in {line.strip()!r}")
+    col = {name: values[:, i] for i, name in enumerate(columns)}
+    theta_i, theta_o = col["theta_i"], col["theta_o"]
+    bad = (theta_i < 0) | (theta_i >= 90) | (theta_o < 0) | (theta_o > 180) | (np.abs(theta_o - 90) < 1e-9)
+    if bad.any():
+        line_no = rows[int(np.argmax(bad))][0]
+        raise MeasurementError(
+            f"{path}:{line_no}: theta_i must lie in [0, 90) and theta_o in [0, 180] without 90 (above 90: transmission)"
+        )
+    p = np.stack([col[c] for c in p_columns], axis=1)
+    keep = np.ones(len(rows), dtype=bool)
+    neg = (p < 0).any(axis=1)
+    if neg.any():
+        if negative == "error":
+            line_no = rows[int(np.argmax(neg))][0]
+            raise MeasurementError(
+                f"{path}:{line_no}: negative transfer probability (pass negative='clamp' "
+                "or 'mask', CLI --negative, for background-subtracted data)"
+            )
+        warnings.warn(
+            f"{path}: {int(neg.sum())} tuples with negative p {'clamped to 0' if negative == 'clamp' else 'dropped'}",
+            stacklevel=2,
+        )
+        if negative == "clamp":
+            p = np.maximum(p, 0.0)
+        else:
+            keep = ~neg
+    wi = spherical_direction(np.radians(theta_i), np.radians(col["phi_i"]))
+    wo = spherical_direction(np.radians(theta_o), np.radians(col["phi_o"]))
+    weight = col["weight"] if "weight" in col else np.abs(np.sin(np.radians(theta_o)))
+    m = Measurement(wi[keep], wo[keep], p[keep], weight[keep], name=path.stem, source=str(path))
+    return m
+
+
+def write_csv(measurement: Measurement, path, comment: str = "") -> None:
+    """Write ``measurement`` in the format :func:`read_csv` reads (weights included)."""
+    theta_i, phi_i = angles_deg(measurement.wi)
+    theta_o, phi_o = angles_deg(measurement.wo)
+    p_names = ["p"] if measurement.channels == 1 else ["p_r", "p_g", "p_b"]
+    buf = io.StringIO()
+    buf.write("# lobeview goniophotometer measurement: angles in degrees in the sample frame (z = normal,\n")
+    buf.write("# x = tangent/brushing direction); theta_o > 90 = transmission; p = f_s |cos theta_o| [1/sr];\n")
+    buf.write("# weight = solid angle the tuple represents (Eq. 3.7's w)\n")
+    for line in comment.splitlines():
+        buf.write(f"# {line}\n")
+    buf.write(",".join(["theta_i", "phi_i", "theta_o", "phi_o", *p_names, "weight"]) + "\n")
+    table = np.column_stack([theta_i, phi_i, theta_o, phi_o, measurement.p, measurement.weight])
+    np.savetxt(buf, table, delimiter=",", fmt="%.9g")
+    Path(path).write_text(buf.getvalue(), encoding="utf-8")
+
+
+# -- MERL ------------------------------------------------------------------------------------------
+
+
+def read_merl(path, limits: Limits | None = None) -> np.ndarray:
+    """A MERL ``.binary`` file -> table of shape (90, 90, 180, 3) (theta_h, theta_d, phi_d, RGB)
+    of BRDF values with the colour scale factors applied; unmeasured cells (negative in the
+    file) are NaN. The file size must equal the layout's exactly."""
+    path = Path(path)
+    size = check_regular_file(path, "MERL BRDF", limits or Limits(max_file_bytes=MERL_FILE_BYTES))
+    if size != MERL_FILE_BYTES:
+        raise MeasurementError(f"{path}: {size} bytes; a MERL table of {MERL_DIMS} is exactly {MERL_FILE_BYTES} bytes")
+    raw = path.read_bytes()
+    dims = tuple(int(d) for d in np.frombuffer(raw, dtype="<i4", count=3))
+    if dims != MERL_DIMS:
+        raise MeasurementError(f"{path}: declared dimensions {dims}, expected {MERL_DIMS} (theta_h, theta_d, phi_d)")
+    values = np.frombuffer(raw, dtype="<f8", offset=12).reshape(3, *MERL_DIMS)
+    if not np.isfinite(values).all():
+        index = np.unravel_index(int(np.argmax(~np.isfinite(values))), values.shape)
+        raise MeasurementError(f"{path}: NaN or infinite value at (channel, theta_h, theta_d, phi_d) = {index}")
+    table = np.moveaxis(values, 0, -1) * MERL_SCALE
+    return np.where(values.transpose(1, 2, 3, 0) < 0, np.nan, table)
+
+
+def write_merl(table: np.ndarray, path) -> None:
+    """Write a (90, 90, 180, 3) BRDF table in MERL's layout (NaN cells written as -1)."""
+    table = np.asarray(table, dtype=np.float64)
+    if table.shape != (*MERL_DIMS, 3):
+        raise MeasurementError(f"a MERL table has shape {(*MERL_DIMS, 3)}, got {table.shape}")
+    raw = np.where(np.isnan(table), -1.0, table / MERL_SCALE)
+    with open(path, "wb") as fh:
+        fh.write(np.asarray(MERL_DIMS, dtype="<i4").tobytes())
+        fh.write(np.ascontiguousarray(np.moveaxis(raw, -1, 0), dtype="<f8").tobytes())
+
+
+def merl_cell_angles() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (theta_h, theta_d, phi_d) in radians at the centre of each MERL cell in index space
+    (the index functions floor, so a cell's value stands for [i, i + 1)): theta_h =
+    ((i + 1/2) / 90)^2 x 90 deg, theta_d = (i + 1/2) deg, phi_d = (i + 1/2) deg."""
+    theta_h = ((np.arange(MERL_DIMS[0]) + 0.5) / MERL_DIMS[0]) ** 2 * (math.pi / 2)
+    theta_d = (np.arange(MERL_DIMS[1]) + 0.5) / MERL_DIMS[1] * (math.pi / 2)
+    phi_d = (np.arange(MERL_DIMS[2]) + 0.5) / MERL_DIMS[2] * math.pi
+    return theta_h, theta_d, phi_d
+
+
+def _rotate(v: np.ndarray, axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Rodrigues' rotation of vectors ``v`` about a unit ``axis`` by ``angle`` (radians)."""
+    c, s = np.cos(angle)[..., None], np.sin(angle)[..., None]
+    return v * c + axis * (v @ axis)[..., None] * (1.0 - c) + np.cross(axis, v) * s
+
+
+def half_diff_to_directions(theta_h, theta_d, phi_d, phi_h=0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Rusinkiewicz's half/difference angles -> (wi, wo); the inverse of
+    :func:`directions_to_half_diff`."""
+    theta_h, theta_d, phi_d, phi_h = np.broadcast_arrays(
+        *(np.asarray(a, dtype=np.float64) for a in (theta_h, theta_d, phi_d, phi_h))
+    )
+    diff = spherical_direction(theta_d, phi_d)
+    h = spherical_direction(theta_h, phi_h)
+    wi = _rotate(_rotate(diff, np.array([0.0, 1.0, 0.0]), theta_h), np.array([0.0, 0.0, 1.0]), phi_h)
+    wo = 2.0 * np.sum(wi * h, axis=-1, keepdims=True) * h - wi
+    return wi, wo
+
+
+def directions_to_half_diff(wi: np.ndarray, wo: np.ndarray):
+    """(wi, wo) -> (theta_h, phi_h, theta_d, phi_d) in radians, as MERL's
+    std_coords_to_half_diff_coords: rotate wi by -phi_h about n, then by -theta_h about y."""
+    h = wi + wo
+    h = h / np.linalg.norm(h, axis=-1, keepdims=True)
+    theta_h = np.arccos(np.clip(h[..., 2], -1.0, 1.0))
+    phi_h = np.arctan2(h[..., 1], h[..., 0])
+    d = _rotate(wi, np.array([0.0, 0.0, 1.0]), -phi_h)
+    d = _rotate(d, np.array([0.0, 1.0, 0.0]), -theta_h)
+    theta_d = np.arccos(np.clip(d[..., 2], -1.0, 1.0))
+    phi_d = np.arctan2(d[..., 1], d[..., 0])
+    return theta_h, phi_h, theta_d, phi_d
+
+
+def merl_indices(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """MERL's lookup index functions (theta_half_index, theta_diff_index, phi_diff_index)."""
+    theta_h, _, theta_d, phi_d = directions_to_half_diff(wi, wo)
+    n_h, n_d, n_p = MERL_DIMS
+    ih = np.sqrt(np.maximum(theta_h, 0.0) / (math.pi / 2) * n_h * n_h).astype(int)
+    idd = (theta_d / (math.pi / 2) * n_d).astype(int)
+    phi_d = np.where(phi_d < 0.0, phi_d + math.pi, phi_d)  # reciprocity: phi_d ~ phi_d + pi
+    ip = (phi_d / math.pi * n_p).astype(int)
+    return np.clip(ih, 0, n_h - 1), np.clip(idd, 0, n_d - 1), np.clip(ip, 0, n_p - 1)
+
+
+def merl_lookup(table: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """BRDF values (N, 3) of a MERL table at direction pairs (nearest cell, as MERL's code)."""
+    return table[merl_indices(wi, wo)]
+
+
+def merl_table_from_bsdf(bsdf) -> np.ndarray:
+    """Evaluate an isotropic lobeview BSDF at every MERL cell (cells whose directions fall below
+    the horizon are NaN, as unmeasured)."""
+    theta_h, theta_d, phi_d = merl_cell_angles()
+    th, td, pd = np.meshgrid(theta_h, theta_d, phi_d, indexing="ij")
+    wi, wo = half_diff_to_directions(th, td, pd)
+    value = bsdf.eval(wi, wo)
+    below = (wi[..., 2] <= 0.0) | (wo[..., 2] <= 0.0)
+    return np.where(below[..., None], np.nan, value)
+
+
+def merl_measurement(table: np.ndarray, stride: tuple[int, int, int] = (2, 3, 6), name: str = "merl") -> Measurement:
+    """Tuples from every ``stride``-th MERL cell (theta_h, theta_d, phi_d) with both directions
+    above the horizon and a measured value. Each tuple's weight is the 4D measure its cells
+    represent, 4 cos(theta_d) sin(theta_h) sin(theta_d) dtheta_h dtheta_d dphi_d (the Jacobian
+    of the half/difference parameterisation, dwi dwo = 4 cos theta_d dw_h dw_d), divided by the
+    |cos theta_i| Eq. 3.7 multiplies by, so the metric weights every pair by its solid angles."""
+    theta_h, theta_d, phi_d = merl_cell_angles()
+    edges_h = (np.arange(MERL_DIMS[0] + 1) / MERL_DIMS[0]) ** 2 * (math.pi / 2)
+    ih = np.arange(0, MERL_DIMS[0], stride[0])
+    idd = np.arange(0, MERL_DIMS[1], stride[1])
+    ip = np.arange(0, MERL_DIMS[2], stride[2])
+    gh, gd, gp = np.meshgrid(ih, idd, ip, indexing="ij")
+    th, td, pd = theta_h[gh], theta_d[gd], phi_d[gp]
+    wi, wo = half_diff_to_directions(th, td, pd)
+    f = table[gh, gd, gp]
+    ok = (wi[..., 2] > 1e-6) & (wo[..., 2] > 1e-6) & np.isfinite(f).all(axis=-1)
+    d_th = (edges_h[gh + 1] - edges_h[gh]) * stride[0]
+    measure = 4.0 * np.cos(td) * np.sin(th) * np.sin(td) * d_th * (math.pi / 2 / MERL_DIMS[1] * stride[1])
+    measure = measure * (math.pi / MERL_DIMS[2] * stride[2]) * 2.0  # phi_d over [0, pi) stands for [0, 2 pi)
+    wi, wo, f = wi[ok], wo[ok], f[ok]
+    p = f * wo[:, 2:3]
+    if not len(wi):
+        raise MeasurementError(f"{name}: no measured cell above the horizon at stride {stride}")
+    return Measurement(
+        wi,
+        wo,
+        p,
+        measure[ok] / wi[:, 2],
+        name=name,
+        source="MERL table",
+        notes=[f"MERL cells at stride {stride}: {len(wi)} tuples"],
+    )
+
+
+def merl_goniometer_measurement(
+    table: np.ndarray,
+    theta_i_deg=THESIS_ISOTROPIC_THETA_I_DEG,
+    phi_i_deg=(0.0,),
+    theta_step_deg: float = 2.5,
+    phi_step_deg: float = 10.0,
+    name: str = "merl",
+) -> Measurement:
+    """A MERL table read at a goniophotometer's directions (nearest cell, as MERL's lookup):
+    tuples with incidences the slice plots can show. Unmeasured cells are dropped."""
+    wi, wo, weight = goniometer_directions(theta_i_deg, phi_i_deg, theta_step_deg, phi_step_deg)
+    f = merl_lookup(table, wi, wo)
+    ok = np.isfinite(f).all(axis=1)
+    return Measurement(wi[ok], wo[ok], f[ok] * wo[ok, 2:3], weight[ok], name=name, source="MERL table (goniometer)")
+
+
+# -- virtual measurements --------------------------------------------------------------------------
+
+
+def goniometer_directions(
+    theta_i_deg,
+    phi_i_deg,
+    theta_step_deg: float = 5.0,
+    phi_step_deg: float = 15.0,
+    transmission: bool = False,
+    peak_radius_deg: float = 12.0,
+    peak_rings: int = 14,
+    peak_azimuths: int = 24,
+):
+    """Direction pairs of a virtual goniophotometer, with each detector direction's solid angle.
+
+    For every incidence (theta_i, phi_i): a uniform (theta_o, phi_o) grid over the reflection
+    hemisphere (and the transmission hemisphere if ``transmission``), theta_o at cell centres and
+    phi_o from 0 (so the plane of incidence is scanned), solid angle sin(theta_o) dtheta dphi;
+    within ``peak_radius_deg`` of the mirror direction (and of the straight-through direction)
+    the grid is replaced by a polar grid about it with rings spaced
+    geometrically from 0.02 deg, so lobes far narrower than the grid (the thesis' Miro 5 has
+    m = 0.007, a lobe of ~0.4 deg) are resolved, as a goniophotometer scanning the peak does. The
+    union of both grids partitions the sphere, so the weights stay solid angles.
+    """
+    th_o = np.radians(np.arange(theta_step_deg / 2, 90.0, theta_step_deg))
+    ph_o = np.radians(np.arange(0.0, 360.0, phi_step_deg))  # from 0: the plane of incidence is scanned
+    grid_t, grid_p = np.meshgrid(th_o, ph_o, indexing="ij")
+    grid = spherical_direction(grid_t, grid_p).reshape(-1, 3)
+    grid_w = (np.sin(grid_t) * math.radians(theta_step_deg) * math.radians(phi_step_deg)).reshape(-1)
+    radius = math.radians(peak_radius_deg)
+    edges = np.concatenate([[0.0], np.geomspace(math.radians(0.02), radius, peak_rings)])
+    ring_r = 0.5 * (edges[:-1] + edges[1:])
+    ring_w = (np.cos(edges[:-1]) - np.cos(edges[1:])) * (2 * math.pi / peak_azimuths)
+    az = np.arange(peak_azimuths) * 2 * math.pi / peak_azimuths
+    rr, aa = np.meshgrid(ring_r, az, indexing="ij")
+    local = spherical_direction(rr, aa).reshape(-1, 3)
+    local_w = np.repeat(ring_w, peak_azimuths)
+    wis, wos, ws = [], [], []
+    for t in theta_i_deg:
+        for ph in phi_i_deg:
+            wi = spherical_direction(np.radians(t), np.radians(ph))
+            mirror = np.array([-wi[0], -wi[1], wi[2]])
+            for sign in (1.0, -1.0) if transmission else (1.0,):
+                axis = mirror if sign > 0 else -wi
+                hemi = grid * np.array([1.0, 1.0, sign])
+                outside = np.arccos(np.clip(hemi @ axis, -1, 1)) > radius
+                peak = _to_frame(local, axis)
+                inside = peak[:, 2] * sign > 1e-4  # drop peak directions past the horizon
+                wo = np.concatenate([hemi[outside], peak[inside]])
+                wis.append(np.broadcast_to(wi, wo.shape))
+                wos.append(wo)
+                ws.append(np.concatenate([grid_w[outside], local_w[inside]]))
+    return np.concatenate(wis), np.concatenate(wos), np.concatenate(ws)
+
+
+def _to_frame(local: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """Rotate directions given about +z so that +z maps to ``axis``."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[2]) > 0.9 else np.array([0.0, 0.0, 1.0])
+    t = np.cross(helper, axis)
+    t /= np.linalg.norm(t)
+    b = np.cross(axis, t)
+    return local[:, :1] * t + local[:, 1:2] * b + local[:, 2:3] * axis
+
+
+def virtual_measurement(
+    desc: dict,
+    theta_i_deg=THESIS_THETA_I_DEG,
+    phi_i_deg=THESIS_PHI_I_DEG,
+    theta_step_deg: float = 5.0,
+    phi_step_deg: float = 15.0,
+    noise: float = 0.0,
+    outliers: float = 0.0,
+    seed: int = 0,
+    name: str | None = None,
+) -> Measurement:
+    """Measure a lobeview material (a validated description) like a goniophotometer.
+
+    ``noise``: relative Gaussian noise (sigma = noise x value, plus noise x 1e-3 / pi absolute, a
+    sensor floor), clamped at 0. ``outliers``: fraction of tuples replaced by spikes (10-100 x the
+    median non-zero value), the failure mode the thesis' L1 metric is chosen against.
+    """
+    from .spec import build_bsdf  # local import: spec imports the models this module does not need
+
+    bsdf = build_bsdf(desc)
+    transmission = any(c.hemisphere == "transmission" for c in bsdf.components)
+    wi, wo, weight = goniometer_directions(theta_i_deg, phi_i_deg, theta_step_deg, phi_step_deg, transmission)
+    ri, ro = renderer_pair(wi, wo)
+    f = bsdf.eval(ri, ro)
+    p = f * np.abs(wo[:, 2:3])
+    rng = np.random.default_rng(seed)
+    if noise > 0:
+        p = np.maximum(p + rng.normal(size=p.shape) * noise * (p + 1e-3 / math.pi), 0.0)
+    if outliers > 0:
+        count = int(round(outliers * len(p)))
+        rows = rng.choice(len(p), size=count, replace=False)
+        scale = float(np.median(p[p > 0])) if (p > 0).any() else 1.0
+        p[rows] = scale * rng.uniform(10.0, 100.0, size=(count, 1))
+    label = name or desc.get("name") or desc.get("description") or desc["model"]
+    notes = [
+        f"virtual measurement: theta_i {list(theta_i_deg)} deg, phi_i {list(phi_i_deg)} deg, "
+        f"grid {theta_step_deg} x {phi_step_deg} deg + peak scan, noise {noise}, outliers {outliers}, seed {seed}"
+    ]
+    return Measurement(wi, wo, p, weight, name=str(label), source="virtual", notes=notes)
