@@ -266,7 +266,7 @@ def add_fit_arguments(p) -> None:
         type=_stride,
         default=(2, 3, 6),
         metavar="H,D,P",
-        help="fit every H-th theta_h, D-th theta_d, P-th phi_d MERL cell (default 2,3,6: ~40k tuples)",
+        help="fit every H-th theta_h, D-th theta_d, P-th phi_d MERL cell (default 2,3,6: ~31k tuples)",
     )
     p.add_argument("--plot", default=None, metavar="PNG", help="draw measured vs fitted slices to PNG")
     p.add_argument("--quiet", action="store_true", help="no per-iteration progress")
