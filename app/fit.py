@@ -19,7 +19,7 @@ from pathlib import Path
 
 from lobeview.materials import measurement as meas
 from lobeview.materials.fit import FitError, FitOptions, fit_thesis, measured_albedo
-from lobeview.materials.lobe_fit import is_isotropic
+from lobeview.materials.lobe_fit import LUMINANCE, is_isotropic
 from lobeview.materials.spec import build_bsdf, load_material
 
 
@@ -185,10 +185,9 @@ def _print_albedo(m: meas.Measurement, desc: dict) -> None:
     for row in rows:
         wi = meas.spherical_direction(math.radians(row["theta_i"]), math.radians(row["phi_i"]))
         r, t = bsdf.albedo(wi, order=96)
-        lum = meas.LUMINANCE
         print(
-            f"  {row['theta_i']:>7.1f} {row['phi_i']:>6.1f}  {row['reflectance']:>7.4f} {float(r @ lum):>7.4f}  "
-            f"{row['transmittance']:>7.4f} {float(t @ lum):>7.4f}"
+            f"  {row['theta_i']:>7.1f} {row['phi_i']:>6.1f}  {row['reflectance']:>7.4f} {float(r @ LUMINANCE):>7.4f}  "
+            f"{row['transmittance']:>7.4f} {float(t @ LUMINANCE):>7.4f}"
         )
 
 

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .lobe_fit import LUMINANCE
 from .measurement import Measurement, angles_deg, renderer_pair
 from .microfacet import ALPHA_MAX, ALPHA_MIN
 from .vec import mirror_z
@@ -200,10 +201,15 @@ def metric_weights(m: Measurement) -> np.ndarray:
     return m.weight * np.abs(m.wi[:, 2]) / total
 
 
+def _penalty(diff: np.ndarray, metric: str) -> np.ndarray:
+    """|d| for Eq. 3.7's L1 metric, d^2 for the squared variant."""
+    return np.abs(diff) if metric == "l1" else diff * diff
+
+
 def eq37_error(measured: np.ndarray, model: np.ndarray, weights: np.ndarray, metric: str = "l1") -> float:
     """Thesis Eq. 3.7 (or its squared variant) for one channel."""
     diff = np.asarray(measured, dtype=np.float64) - np.asarray(model, dtype=np.float64)
-    return float(np.sum(weights * (np.abs(diff) if metric == "l1" else diff * diff)))
+    return float(np.sum(weights * _penalty(diff, metric)))
 
 
 def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q) -> np.ndarray:
@@ -242,12 +248,9 @@ def estimate_kd(f_values: np.ndarray, weights: np.ndarray | None = None) -> floa
 # -- hierarchical brute force ----------------------------------------------------------------------
 
 
-def _grid(lo: float, hi: float, n: int, log: bool) -> np.ndarray:
-    if hi <= lo:
-        return np.array([lo])
-    if log:
-        return np.exp(np.linspace(math.log(lo), math.log(hi), n))
-    return np.linspace(lo, hi, n)
+def _grid(lo: float, hi: float, n: int) -> np.ndarray:
+    """n equidistant values over [lo, hi] (in the search's coordinates: log m for mx, my)."""
+    return np.array([lo]) if hi <= lo else np.linspace(lo, hi, n)
 
 
 def search_lobe(
@@ -287,8 +290,7 @@ def search_lobe(
             elif isotropic and name == "my":
                 continue
             else:
-                lo, hi = current[name]
-                values[name] = _grid(lo, hi, grid, False)
+                values[name] = _grid(*current[name], grid)
                 if name in LOG_PARAMS:
                     values[name] = np.exp(values[name])
         shapes = np.array(list(itertools.product(*(values[p] for p in SHAPE_PARAMS if p in values))))
@@ -303,7 +305,7 @@ def search_lobe(
             unit = geometry.unit_lobe(cols["mx"][sl], cols["my"][sl], cols["r0"][sl], cols["alpha"][sl])
             for k in ks:
                 diff = target32 - k * unit
-                err = np.sum(w32 * (np.abs(diff) if metric == "l1" else diff * diff), axis=1)
+                err = np.sum(w32 * _penalty(diff, metric), axis=1)
                 i = int(np.argmin(err))
                 evaluations += len(err)
                 if err[i] < best_error:
@@ -363,14 +365,19 @@ def _polish(
     return start, start_error, int(res.nfev)
 
 
+def _param_name(name: str) -> tuple[str, str]:
+    """("lobe2", "k") for "lobe2.ks", ("", "mx") for "mx": ks and kt are aliases of k."""
+    lobe, _, param = name.rpartition(".")
+    return lobe, {"ks": "k", "kt": "k"}.get(param, param)
+
+
 def _lobe_options(options: FitOptions, key: str) -> tuple[dict, dict]:
     """Ranges and fixed values of one lobe ("lobe2", "tlobe1") from the options' keys: "mx"
     applies to every lobe of both kinds, "lobe2.mx" to that lobe; "ks"/"kt" are aliases of k."""
     ranges, fixed = {}, {}
     for source, out in ((options.ranges, ranges), (options.fixed, fixed)):
         for name, value in source.items():
-            lobe, _, param = name.rpartition(".")
-            param = {"ks": "k", "kt": "k"}.get(param, param)
+            lobe, param = _param_name(name)
             if lobe in ("", key) and param in LOBE_PARAMS:
                 out[param] = value
     return ranges, fixed
@@ -379,7 +386,7 @@ def _lobe_options(options: FitOptions, key: str) -> tuple[dict, dict]:
 def check_options(options: FitOptions, reflection_lobes: int, transmission_lobes: int) -> None:
     """Refuse unknown parameter names, empty or inverted intervals and values outside the model's
     ranges, before any work."""
-    keys = {"kd"} | {f"{p}" for p in LOBE_PARAMS} | {"ks", "kt"}
+    keys = {"kd", "ks", "kt", *LOBE_PARAMS}
     keys |= {f"lobe{i + 1}.{p}" for i in range(reflection_lobes) for p in (*LOBE_PARAMS, "ks")}
     keys |= {f"tlobe{i + 1}.{p}" for i in range(transmission_lobes) for p in (*LOBE_PARAMS, "kt")}
     limits = dict(DEFAULT_RANGES, kd=(0.0, 1.0), mx=(ALPHA_MIN, ALPHA_MAX), my=(ALPHA_MIN, ALPHA_MAX))
@@ -390,8 +397,7 @@ def check_options(options: FitOptions, reflection_lobes: int, transmission_lobes
                     f"{kind} parameter {name!r} is unknown; use kd, k (ks/kt), mx, my, r0, alpha, "
                     f"or lobeN./tlobeN. with N up to the number of lobes"
                 )
-            param = {"ks": "k", "kt": "k"}.get(name.rpartition(".")[2], name.rpartition(".")[2])
-            lo, hi = limits[param]
+            lo, hi = limits[_param_name(name)[1]]
             vals = [value] if kind == "fixed" else list(value)
             if kind == "range" and (name == "kd" or not vals[0] < vals[1]):
                 raise FitError(
@@ -456,7 +462,7 @@ def _scale_search(target, unit, weights, metric, hi: float, grid: int = 16, iter
     for _ in range(iterations):
         s = np.linspace(lo, top, grid)
         diff = target[None, :] - s[:, None] * unit[None, :]
-        err = np.sum(weights * (np.abs(diff) if metric == "l1" else diff * diff), axis=1)
+        err = np.sum(weights * _penalty(diff, metric), axis=1)
         best = float(s[int(np.argmin(err))])
         step = (top - lo) / (grid - 1)
         lo, top = max(lo_b, best - step), min(hi_b, best + step)
@@ -499,7 +505,7 @@ def fit_thesis(m: Measurement, options: FitOptions | None = None) -> FitResult:
         kd = np.clip(kd, 0.0, 1.0)
     else:
         kd = np.zeros(channels)
-    kd_lum = float(kd[0]) if channels == 1 else float(kd @ np.array([0.2126, 0.7152, 0.0722]))
+    kd_lum = float(kd[0]) if channels == 1 else float(kd @ LUMINANCE)
     say(
         f"kd = {np.array2string(kd, precision=4)} (histogram mode of the BRDF values)"
         if "kd" not in options.fixed
@@ -508,7 +514,6 @@ def fit_thesis(m: Measurement, options: FitOptions | None = None) -> FitResult:
     diffuse = kd_lum / math.pi * cos_o
 
     evaluations = 0
-    model_lum = np.zeros(len(m))
     lobes, t_fits = [], []
     refl_values = trans_values = None
     if options.lobes:
@@ -516,16 +521,12 @@ def fit_thesis(m: Measurement, options: FitOptions | None = None) -> FitResult:
         target = lum[refl_mask] - diffuse[refl_mask]
         lobes, refl_values, n = _fit_lobe_set(geo, target, weights[refl_mask], options.lobes, options, "lobe", say)
         evaluations += n
-        model_lum[refl_mask] = diffuse[refl_mask] + refl_values.sum(axis=0)
-    else:
-        model_lum[refl_mask] = diffuse[refl_mask]
     if t_lobes:
         geo_t = LobeGeometry(m.wi[trans_mask], m.wo[trans_mask], transmission=True)
         t_fits, trans_values, n = _fit_lobe_set(
             geo_t, lum[trans_mask], weights[trans_mask], t_lobes, options, "tlobe", say
         )
         evaluations += n
-        model_lum[trans_mask] = trans_values.sum(axis=0)
 
     # Colour: each channel's lobes scaled by a 1-D search (ks, kt <= 1 stays within the model).
     lobe_colour = np.ones(channels)
@@ -555,7 +556,7 @@ def fit_thesis(m: Measurement, options: FitOptions | None = None) -> FitResult:
         if trans_values is not None:
             model_rgb[trans_mask, c] = trans_colour[c] * trans_values.sum(axis=0)
         channel_errors.append(eq37_error(m.p[:, c], model_rgb[:, c], weights, options.metric))
-    model_final_lum = model_rgb[:, 0] if channels == 1 else model_rgb @ np.array([0.2126, 0.7152, 0.0722])
+    model_final_lum = model_rgb[:, 0] if channels == 1 else model_rgb @ LUMINANCE
     error = eq37_error(lum, model_final_lum, weights, options.metric)
     err_r = eq37_error(lum[refl_mask], model_final_lum[refl_mask], weights[refl_mask], options.metric)
     err_t = eq37_error(lum[trans_mask], model_final_lum[trans_mask], weights[trans_mask], options.metric)
@@ -592,7 +593,7 @@ def model_transfer(desc: dict, m: Measurement) -> np.ndarray:
 def material_error(desc: dict, m: Measurement, metric: str = "l1") -> float:
     """Eq. 3.7 of a material description against a measurement (luminance for RGB data)."""
     model = model_transfer(desc, m)
-    model_scalar = model @ np.array([0.2126, 0.7152, 0.0722]) if m.channels == 3 else model.mean(axis=1)
+    model_scalar = model @ LUMINANCE if m.channels == 3 else model.mean(axis=1)
     return eq37_error(m.luminance, model_scalar, metric_weights(m), metric)
 
 

@@ -10,7 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from .fit import model_transfer
-from .measurement import LUMINANCE, Measurement, angles_deg
+from .lobe_fit import LUMINANCE
+from .measurement import Measurement, angles_deg
 from .vec import spherical_direction
 
 PLOT_THETA_I_DEG = (0.0, 20.0, 65.0)
@@ -100,8 +101,3 @@ def plot_fit(m: Measurement, models: dict[str, dict], out_path, title: str = "")
     fig.savefig(out, dpi=110)
     plt.close(fig)
     return out
-
-
-def plot_in_plane_available(m: Measurement) -> bool:
-    """Whether the tuples cluster into goniophotometer incidences a slice plot can show."""
-    return len(m.incidences()) <= 400

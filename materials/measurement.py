@@ -40,6 +40,7 @@ import numpy as np
 
 from lobeview.core.trust import MIB, Limits, check_regular_file
 
+from .lobe_fit import LUMINANCE
 from .vec import mirror_z, spherical_direction
 
 #: The thesis' goniophotometer incidence angles (Fig. 3.11/3.17: anisotropic samples).
@@ -55,8 +56,6 @@ MERL_DIMS = (90, 90, 180)  # theta_h, theta_d, phi_d
 MERL_SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
 MERL_CELLS = MERL_DIMS[0] * MERL_DIMS[1] * MERL_DIMS[2]
 MERL_FILE_BYTES = 3 * 4 + 3 * MERL_CELLS * 8
-
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 
 class MeasurementError(ValueError):
@@ -117,11 +116,6 @@ class Measurement:
     def luminance(self) -> np.ndarray:
         """The scalar the shape fit works on: p itself, or Rec. 709 luminance of RGB p, (N,)."""
         return self.p[:, 0] if self.channels == 1 else self.p @ LUMINANCE
-
-    def subset(self, mask: np.ndarray) -> Measurement:
-        return Measurement(
-            self.wi[mask], self.wo[mask], self.p[mask], self.weight[mask], self.name, self.source, list(self.notes)
-        )
 
     def incidences(self) -> np.ndarray:
         """Distinct incident directions as (theta_i, phi_i) in degrees, rounded to 0.01."""
