@@ -214,6 +214,15 @@ class BSDF:
         wo_b = np.broadcast_to(wo, u1.shape + (3,))
         totals = {"reflection": np.zeros(3), "transmission": np.zeros(3)}
         for comp in self.components:
+            if hasattr(comp, "primary_integrand"):
+                # A sampler whose map is only roughly proportional to f cos (the Rational BRDF's
+                # inverse CDFs) needs a finer rule: its own minimum order, integrand given.
+                comp_order = max(order, comp.min_quadrature_order)
+                c_nodes, c_weights = np.polynomial.legendre.leggauss(comp_order)
+                cu1, cu2 = np.meshgrid(0.5 * (c_nodes + 1.0), 0.5 * (c_nodes + 1.0), indexing="ij")
+                integrand = comp.primary_integrand(cu1, cu2, np.broadcast_to(wo, cu1.shape + (3,)))
+                totals[comp.hemisphere] += np.einsum("ij,ijc->c", 0.25 * np.outer(c_weights, c_weights), integrand)
+                continue
             wi = comp.sample_wi(u1, u2, wo_b)
             pdf = comp.pdf(wi, wo_b)
             ok = pdf > 0.0

@@ -15,6 +15,11 @@ gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness
              "ior": 1.5, "specular": 1, "specular_color": [r, g, b],  anisotropy, ior, specular,
              "clearcoat": c, "clearcoat_roughness": r,               clearcoat, transmission)
              "transmission": t, "sheen_color": [r, g, b], "sheen_roughness": r}
+rational    {"model": "rational", "theta_max": 80,               (Rational BRDF, seed 002;
+             "brdf": [fn_r, fn_g, fn_b] | [fn],                    materials/rational_brdf.py,
+             "sampling": {"theta": fn, "phi": fn},                 written by lobeview fit
+             "proxy_alpha": a}  (optional)                         --model rational)
+             with each fn {"form", "lower", "upper", "numerator", "denominator"}
 
 Every parameter has a documented range (:data:`RANGES`). Out-of-range or non-finite values are
 rejected with a :class:`MaterialError` that names the parameter, the value and the range; no
@@ -37,7 +42,7 @@ from .gltf import gltf_bsdf
 from .microfacet import ALPHA_MAX, ALPHA_MIN
 from .thesis import thesis_bsdf
 
-MODELS = ("thesis", "microfacet", "gltf")
+MODELS = ("thesis", "microfacet", "gltf", "rational")
 
 #: (low, high) inclusive range of every parameter, by name.
 RANGES: dict[str, tuple[float, float]] = {
@@ -66,6 +71,8 @@ RANGES: dict[str, tuple[float, float]] = {
     "transmission": (0.0, 1.0),
     "sheen_color": (0.0, 1.0),
     "sheen_roughness": (0.0, 1.0),
+    "theta_max": (10.0, 90.0),  # rational: the fitted (theta_h, theta_d) domain, degrees
+    "proxy_alpha": (ALPHA_MIN, ALPHA_MAX),
 }
 #: Optional glTF-model parameters (KHR_materials_* factors), kept in a description only when given.
 GLTF_EXTENSION_KEYS = ("anisotropy", "anisotropy_rotation", "ior", "specular", "specular_color", "clearcoat",
@@ -170,6 +177,8 @@ def validate(desc: Any) -> dict:
             raise MaterialError("microfacet material: missing alpha (or both alpha_u and alpha_v)")
         out["fresnel"] = _validate_fresnel(desc.get("fresnel", "none"))
         out["scale"] = _scalar_or_rgb(desc.get("scale", 1.0), "scale", "scale")
+    elif model == "rational":
+        out.update(_validate_rational(desc, common))
     else:
         _check_keys(
             desc, common | {"base_color", "metallic", "roughness", *GLTF_EXTENSION_KEYS}, set(), "glTF material"
@@ -186,6 +195,42 @@ def validate(desc: Any) -> dict:
                 out[key] = 0.0
             else:
                 out[key] = _number(desc[key], key, key)
+    return out
+
+
+#: (form, number of variables) of each function of a rational material
+_RATIONAL_SHAPES = {"brdf": ("plain", 2), "theta": ("cdf_theta", 2), "phi": ("cdf_phi", 3)}
+
+
+def _rational_function(value: Any, where: str, kind: str) -> dict:
+    from .rational import RationalFitError, RationalFunction  # local: rational imports scipy
+
+    form, dimension = _RATIONAL_SHAPES[kind]
+    try:
+        fn = RationalFunction.from_dict(value, where)
+    except RationalFitError as exc:
+        raise MaterialError(str(exc)) from None
+    if fn.form != form or fn.dimension != dimension:
+        raise MaterialError(
+            f"{where}: expected form {form!r} of {dimension} variables, got {fn.form!r} of {fn.dimension}"
+        )
+    return fn.to_dict()
+
+
+def _validate_rational(desc: dict, common: set) -> dict:
+    _check_keys(
+        desc, common | {"theta_max", "brdf", "sampling", "proxy_alpha"}, {"brdf", "sampling"}, "rational material"
+    )
+    out: dict[str, Any] = {"theta_max": _number(desc.get("theta_max", 80.0), "theta_max", "theta_max")}
+    brdf = desc["brdf"]
+    if not isinstance(brdf, list) or len(brdf) not in (1, 3):
+        raise MaterialError(f"brdf: expected a list of 1 or 3 rational functions (grey or R, G, B), got {brdf!r:.80}")
+    out["brdf"] = [_rational_function(fn, f"brdf[{i}]", "brdf") for i, fn in enumerate(brdf)]
+    sampling = desc["sampling"]
+    _check_keys(sampling, {"theta", "phi"}, {"theta", "phi"}, "sampling")
+    out["sampling"] = {key: _rational_function(sampling[key], f"sampling.{key}", key) for key in ("theta", "phi")}
+    if "proxy_alpha" in desc:
+        out["proxy_alpha"] = _number(desc["proxy_alpha"], "proxy_alpha", "proxy_alpha")
     return out
 
 
@@ -223,6 +268,10 @@ def build_bsdf(desc: dict) -> BSDF:
             k=fr.get("k", 0.0),
         )
         return microfacet_bsdf(d["distribution"], d["alpha_u"], d["alpha_v"], fresnel, d["scale"])
+    if d["model"] == "rational":
+        from .rational_brdf import rational_bsdf
+
+        return rational_bsdf(d, name=name)
     bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"], **{k: d[k] for k in GLTF_EXTENSION_KEYS if k in d})
     bsdf.name = name
     return bsdf

@@ -132,8 +132,8 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     for (int i = 0; i < u_samples; ++i) {
         vec4 q = sobol_point4(u_sample_offset + i);
         // BSDF sample, MIS-weighted against the environment sampler.
-        vec3 wi = lobe_sample(l, fract(q.xy + rotation), wo);
-        float p_bsdf = lobe_sample_pdf(l, wi, wo);
+        float p_bsdf;
+        vec3 wi = lobe_sample_and_pdf(l, fract(q.xy + rotation), wo, p_bsdf);
         if (p_bsdf > 0.0) {
             vec3 world = tbn * wi;
             float w = power_heuristic(p_bsdf, env_pdf(world));
@@ -164,8 +164,8 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
 #else
         vec2 u = sobol_point(i);
 #endif
-        vec3 wi = lobe_sample(l, u, wo);
-        float p = lobe_sample_pdf(l, wi, wo);
+        float p;
+        vec3 wi = lobe_sample_and_pdf(l, u, wo, p);
         if (p <= 0.0) continue;
         vec3 world = tbn * wi;
 #if defined(METHOD_FIS)

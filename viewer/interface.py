@@ -28,6 +28,8 @@ from lobeview.materials.gltf import SHEEN_TABLE_SIZE
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
 from lobeview.materials.microfacet import ALPHA_MIN
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, ANISOTROPY_LINE_RATIO, MAX_ELLIPSE_ANGLE, XI_BORDER
+from lobeview.materials.rational import MAX_TERMS as RATIONAL_MAX_TERMS
+from lobeview.materials.rational import graded_exponents
 from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
 from lobeview.scenes.scene import ALPHA_MODES as GLTF_ALPHA_MODES
 from lobeview.scenes.scene import TEXTURE_SLOTS
@@ -48,6 +50,7 @@ LOBE_TYPES = {
     "gltf specular": 3,
     "gltf clearcoat": 4,
     "gltf transmission": 5,
+    "rational": 6,  # the Rational BRDF (shaders/rational.glsl); its functions in a storage buffer
 }
 DISTRIBUTIONS = {"beckmann": 0, "ggx": 1}
 FRESNEL_TYPES = {"none": 0, "schlick": 1, "conductor": 2}
@@ -62,6 +65,12 @@ LOBE_LAYOUT = (
     ("kappa.r", "kappa.g", "kappa.b", "coat"),  # glTF specular/transmission: the clearcoat over it
 )
 LOBE_ROWS = len(LOBE_LAYOUT)
+
+# -- the Rational BRDF's storage buffer ----------------------------------------------------------
+RATIONAL_FUNCTIONS = 5  # BRDF R, G, B; inverse CDFs of theta_l (Eq. 8) and dphi (Eq. 9)
+RATIONAL_STRIDE = 3 + 2 * RATIONAL_MAX_TERMS  # vec4s per function: header, lower, upper, terms
+RATIONAL_MAX_DEGREE = int(graded_exponents(2, RATIONAL_MAX_TERMS).max())  # 2D has the highest degrees
+RATIONAL_BINDING = 1  # shader storage binding point (compute shaders use 0)
 
 # -- prefiltered lookups -------------------------------------------------------------------------
 #: u_lobe_map_mode codes: how each lobe is looked up by the prefiltered methods
@@ -104,6 +113,12 @@ SHADER_CONSTANTS: dict = {
     "ANISOTROPY_LINE_RATIO": float(ANISOTROPY_LINE_RATIO),  # materials/patterns.py choose_pattern
     "CDF_ROW": CDF_ROW,
     "MAX_PROXY_PLANES": MAX_PROXY_PLANES,
+    # shaders/rational.glsl: the storage buffer of a Rational BRDF (material_gpu.pack_rational)
+    "RATIONAL_BINDING": RATIONAL_BINDING,
+    "RATIONAL_STRIDE": RATIONAL_STRIDE,
+    "RATIONAL_MAX_DEGREE": RATIONAL_MAX_DEGREE,
+    "RATIONAL_NEWTON_STEPS": 14,  # inverting an inverse CDF (rational_invert): steps in all,
+    "RATIONAL_BISECTION_STEPS": 6,  # the first ones bisection, then safeguarded Newton
 }
 
 # -- texture units of the shading programs ---------------------------------------------------------

@@ -21,9 +21,11 @@ from lobeview.materials.gltf import (
     GltfTransmission,
 )
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, pattern_xi
+from lobeview.materials.rational import graded_exponents
+from lobeview.materials.rational_brdf import RationalLobe
 from lobeview.materials.thesis import KurtLobe
 
-from .interface import DISTRIBUTIONS, FRESNEL_TYPES, LOBE_ROWS, LOBE_TYPES
+from .interface import DISTRIBUTIONS, FRESNEL_TYPES, LOBE_ROWS, LOBE_TYPES, RATIONAL_FUNCTIONS, RATIONAL_STRIDE
 
 ALBEDO_TABLES_KEPT = 256  # albedo tables of distinct lobes kept in memory (slider edits make new ones)
 
@@ -46,6 +48,8 @@ class PackedMaterial:
     # KHR_materials_sheen (approximated, materials/gltf.py GltfSheen): colour and E_s(N.V) table.
     sheen_color: tuple = (0.0, 0.0, 0.0)
     sheen_table: tuple = (0.0,) * SHEEN_TABLE_SIZE
+    # The Rational BRDF's storage buffer (pack_rational), None without a rational lobe.
+    rational: np.ndarray | None = None
 
     @property
     def has_diffuse(self) -> bool:
@@ -101,6 +105,18 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                 [0, 0, 0, 0],
                 [0, 0, 0, 0],
             ]
+        elif isinstance(comp, RationalLobe):
+            # The proxy distribution places lobe-N's pattern; the functions go to a storage
+            # buffer (one rational lobe per material: its data are per material, not per lobe).
+            if any(isinstance(c, RationalLobe) for c in components):
+                raise ValueError("a material has at most one rational lobe")
+            row = [
+                [LOBE_TYPES["rational"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
+                [np.radians(comp.theta_max_deg), 0, 0, 0],
+                [0, 0, 0, 0],
+                [0, 0, 0, 0],
+                [0, 0, 0, 0],
+            ]
         elif isinstance(comp, MicrofacetReflection):
             fr = comp.fresnel
             row = [
@@ -128,9 +144,35 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                      clearcoat=layers.coat, transmission=diffuse.transmission,
                      sheen_color=tuple(map(float, layers.sheen_color)),
                      sheen_table=tuple(map(float, layers.sheen_table)))  # fmt: skip
+    rational = next((pack_rational(c) for c in components if isinstance(c, RationalLobe)), None)
     return PackedMaterial(
-        kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components, float(bsdf.tangent_rotation), **extra
-    )
+        kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components, float(bsdf.tangent_rotation),
+        rational=rational, **extra
+    )  # fmt: skip
+
+
+def pack_rational(lobe: RationalLobe) -> np.ndarray:
+    """(RATIONAL_FUNCTIONS * RATIONAL_STRIDE, 4) float32, shaders/rational.glsl's layout: per
+    function a header (counts), the domain's lower and upper corners, then (coefficient,
+    exponents) per numerator and denominator term. A grey fit's one function fills R, G and B."""
+    functions = list(lobe.functions)
+    if len(functions) == 1:
+        functions = functions * 3
+    functions += [lobe.sampling.theta, lobe.sampling.phi]
+    out = np.zeros((RATIONAL_FUNCTIONS * RATIONAL_STRIDE, 4), dtype=np.float32)
+    for f, fn in enumerate(functions):
+        base = f * RATIONAL_STRIDE
+        n_num, n_den = fn.counts
+        out[base] = (n_num, n_den, 0, 0)
+        out[base + 1, : fn.dimension] = fn.lower
+        out[base + 2, : fn.dimension] = fn.upper
+        row = base + 3
+        for coefficients in (fn.numerator, fn.denominator):
+            exponents = graded_exponents(fn.dimension, len(coefficients))
+            out[row : row + len(coefficients), 0] = coefficients
+            out[row : row + len(coefficients), 1 : 1 + fn.dimension] = exponents
+            row += len(coefficients)
+    return out
 
 
 _ALBEDO_TABLES = BoundedCache(ALBEDO_TABLES_KEPT)
@@ -149,6 +191,8 @@ def pack_material_row_key(comp) -> tuple:
         if isinstance(v, BaseLayers):
             v = (v.coat, *v.sheen_color, v.sheen_roughness)
         values.append(None if v is None else tuple(np.atleast_1d(np.asarray(v, float)).tolist()))
+    if isinstance(comp, RationalLobe):
+        values.append(comp.cache_key)
     fresnel = getattr(comp, "fresnel", None)
     if fresnel is not None:
         values.append((fresnel.kind, *fresnel.r0, *fresnel.eta, *fresnel.k))

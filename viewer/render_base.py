@@ -18,7 +18,16 @@ from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
 
 from .cubemap import RadianceCube
 from .frame import FrameTargets
-from .interface import LOBE_MAP_MODES, LOBE_TABLE_ROWS, bind_sampler, set_uniform, unit, write_uniform
+from .interface import (
+    LOBE_MAP_MODES,
+    LOBE_TABLE_ROWS,
+    RATIONAL_BINDING,
+    RATIONAL_STRIDE,
+    bind_sampler,
+    set_uniform,
+    unit,
+    write_uniform,
+)
 from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
 from .shaders import ProgramCache
 
@@ -115,6 +124,7 @@ class RendererBase:
         # (kind, ..., lobes_key) -> (texture, derived data); live material edits make new ones
         self._material_textures = BoundedCache(MAX_MATERIAL_TEXTURES, on_evict=lambda item: item[0].release())
         self._dummy_textures: dict = {}
+        self._rational_dummy = None
         self._timer = None
         self.frame = FrameTargets(ctx, size, plane_state=self.PLANE_STATE)
 
@@ -173,6 +183,7 @@ class RendererBase:
         )
         set_uniform(program, "u_sobol_count", self.sobol_count)
         set_uniform(program, "u_seed", int(seed))
+        self._bind_rational(material)
         if method.kind == "lobe" and method.normalize and "u_albedo" in program:
 
             def albedo_texture():
@@ -187,6 +198,22 @@ class RendererBase:
             # its table sampler still needs a 2D texture on its own unit, not unit 0's cube.
             set_uniform(program, "u_albedo_per_pixel", 0)
             bind_sampler(program, "u_dfg", self._dummy_texture("2d"))
+
+    def _bind_rational(self, material: PackedMaterial) -> None:
+        """The Rational BRDF's storage buffer (shaders/rational.glsl), or a zero block for every
+        other material: the binding point is read only by a rational lobe, but stays valid."""
+        if material.rational is not None:
+            data = material.rational
+
+            def make():
+                return self.ctx.buffer(data.tobytes()), None
+
+            buffer = self._material_texture(("rational", material.lobes_key), make)[0]
+        else:
+            if self._rational_dummy is None:
+                self._rational_dummy = self.ctx.buffer(reserve=RATIONAL_STRIDE * 16)
+            buffer = self._rational_dummy
+        buffer.bind_to_storage_buffer(RATIONAL_BINDING)
 
     def raise_on_gl_error(self, method) -> None:
         """Raise if GL flagged an error since the flag was last read: a failed draw call leaves
