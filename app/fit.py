@@ -15,10 +15,13 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import time
 from pathlib import Path
 
+import numpy as np
+
 from lobeview.materials import measurement as meas
-from lobeview.materials.fit import FitError, FitOptions, fit_thesis, measured_albedo
+from lobeview.materials.fit import FitError, FitOptions, fit_thesis, material_error, measured_albedo
 from lobeview.materials.lobe_fit import LUMINANCE, is_isotropic
 from lobeview.materials.spec import build_bsdf, load_material
 
@@ -102,17 +105,28 @@ def _virtual(material: str, args) -> meas.Measurement:
     )
 
 
+def merl_source(data: str) -> tuple[np.ndarray | None, str]:
+    """The MERL table of a .binary file or of virtual-merl:MATERIAL (any isotropic lobeview
+    material evaluated at every MERL cell), else (None, "")."""
+    if data.startswith("virtual-merl:"):
+        material = data[len("virtual-merl:") :]
+        return meas.merl_table_from_bsdf(build_bsdf(load_material(material))), Path(material).stem
+    if Path(data).suffix.lower() == ".binary":
+        return meas.read_merl(Path(data)), Path(data).stem
+    return None, ""
+
+
 def load_data(data: str, args) -> tuple[meas.Measurement, meas.Measurement | None]:
     """The measurement to fit, and the one to plot (a MERL table is plotted at goniophotometer
     directions, as its cells have no common incidences)."""
     if data.startswith("virtual:"):
         m = _virtual(data[len("virtual:") :], args)
         return m, m
+    table, name = merl_source(data)
+    if table is not None:
+        m = meas.merl_measurement(table, args.merl_stride, name=name)
+        return m, meas.merl_goniometer_measurement(table, name=name)
     path = Path(data)
-    if path.suffix.lower() == ".binary":
-        table = meas.read_merl(path)
-        m = meas.merl_measurement(table, args.merl_stride, name=path.stem)
-        return m, meas.merl_goniometer_measurement(table, name=path.stem)
     if path.suffix.lower() in (".csv", ".txt"):
         m = meas.read_csv(path, negative=args.negative)
         return m, m
@@ -120,8 +134,10 @@ def load_data(data: str, args) -> tuple[meas.Measurement, meas.Measurement | Non
 
 
 def cmd_fit(args) -> int:
-    if args.model != "thesis":
-        raise FitError(f"--model {args.model}: only the thesis model is fitted so far")
+    if args.model == "microfacet":
+        raise FitError("--model microfacet: not built yet; fit 'thesis' or 'rational'")
+    if args.model == "rational":
+        return _fit_rational(args)
     measurement, plotted = load_data(args.data, args)
     is_merl = measurement.source == "MERL table"
     options = FitOptions(
@@ -168,6 +184,59 @@ def cmd_fit(args) -> int:
             title=f"{measurement.name}: {len(desc['lobes'])} lobe(s), {args.metric.upper()} {result.error:.4g}",
         )
         print(f"wrote {out}")
+    return 0
+
+
+def _fit_rational(args) -> int:
+    """The Rational BRDF (seed 002): one rational function of (theta_h, theta_d) per channel,
+    fitted to the data projected onto that plane, and its rational inverse CDFs."""
+    from lobeview.materials import rational_brdf as rb
+    from lobeview.materials.rational import RationalFitError
+
+    progress = None if args.quiet else print
+    t0 = time.perf_counter()
+    table, name = merl_source(args.data)
+    if table is not None:
+        projected = rb.project_merl(table, args.theta_max)
+        measurement = meas.merl_measurement(table, args.merl_stride, name=name)
+    else:
+        measurement = load_data(args.data, args)[0]
+        projected = rb.project_measurement(measurement, theta_max_deg=args.theta_max)
+    print(f"{args.data}: {len(projected.points)} (theta_h, theta_d) points up to {args.theta_max} deg, "
+          f"{projected.values.shape[1]} channel(s)")  # fmt: skip
+    try:
+        fit = rb.fit_rational_brdf(
+            projected, args.eps, args.max_coefficients, theta_max_deg=args.theta_max, progress=progress
+        )
+        sampling = rb.fit_sampling(fit.functions, fit.theta_max_deg, progress=progress)
+    except RationalFitError as exc:
+        raise FitError(str(exc)) from None
+    desc = rb.rational_description(fit, sampling, name=args.name or Path(args.output).stem)
+    desc["fit"] = {
+        "model": "rational (Pacanowski et al. 2012)",
+        "data": args.data,
+        "eps": args.eps,
+        "theta_max": args.theta_max,
+        "coefficients": [list(fn.counts) for fn in fit.functions],
+        "sampling_coefficients": [list(sampling.theta.counts), list(sampling.phi.counts)],
+        "max_relative_error": fit.max_relative_error,
+        "eq37_l1_error": material_error(desc, measurement, "l1"),
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+    build_bsdf(desc)  # validates
+    Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
+    for c, fn in enumerate(fit.functions):
+        print(f"channel {c}: {fn.counts} (numerator, denominator) coefficients, max relative error "
+              f"{fit.max_relative_error[c]:.3g} on the projected data")  # fmt: skip
+    print(f"inverse CDFs: theta {sampling.theta.counts}, phi {sampling.phi.counts} coefficients")
+    print(f"Eq. 3.7 L1 error on the tuples: {desc['fit']['eq37_l1_error']:.6g}")
+    _print_albedo(measurement, desc)
+    print(f"wrote {args.output} ({time.perf_counter() - t0:.1f} s)")
+    if args.plot:
+        from lobeview.materials.fit_plot import plot_fit
+
+        plotted = meas.merl_goniometer_measurement(table, name=name) if table is not None else measurement
+        print(f"wrote {plot_fit(plotted, {'rational': desc}, args.plot, title=f'{measurement.name}: Rational BRDF')}")
     return 0
 
 
@@ -219,7 +288,15 @@ def add_fit_arguments(p) -> None:
         "--model",
         default="thesis",
         choices=["thesis", "rational", "microfacet"],
-        help="model to fit (only 'thesis' is built so far)",
+        help="thesis (Kurt lobes, thesis 3.4.1) or rational (Rational BRDF, seed 002); microfacet is not built yet",
+    )
+    r = p.add_argument_group("rational model")
+    r.add_argument("--eps", type=float, default=0.05, help="relative interval half-width (default 0.05)")
+    r.add_argument(
+        "--max-coefficients", type=int, default=40, help="most numerator + denominator coefficients (default 40)"
+    )
+    r.add_argument(
+        "--theta-max", type=float, default=80.0, help="fitted theta_h, theta_d domain in degrees (default 80)"
     )
     p.add_argument("--lobes", type=int, default=1, help="reflection lobes K (default 1)")
     p.add_argument(

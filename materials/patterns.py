@@ -285,7 +285,9 @@ class AlbedoTable:
 def specular_lobes(bsdf: BSDF) -> list:
     """The view-dependent lobes of a BSDF (everything but the diffuse term, which the
     lightmap provides)."""
-    return [c for c in bsdf.components if isinstance(c, HalfVectorLobe | MicrofacetReflection)]
+    # Every lobe with a pattern density (lobe_pdf): the half-vector lobes, the microfacet ones and
+    # the Rational BRDF (through its proxy distribution).
+    return [c for c in bsdf.components if callable(getattr(c, "lobe_pdf", None))]
 
 
 def integrate_specular(

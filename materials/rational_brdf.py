@@ -43,7 +43,7 @@ import numpy as np
 from .bsdf import BSDF, Component
 from .lobe_fit import LUMINANCE
 from .measurement import MERL_DIMS, Measurement, merl_cell_angles
-from .microfacet import ALPHA_MAX, ALPHA_MIN, MicrofacetDistribution
+from .microfacet import ALPHA_MAX, ALPHA_MIN, MicrofacetDistribution, reflection_jacobian
 from .rational import IntervalData, RationalFitError, RationalFunction, SolveStats, fit_rational
 from .vec import COS_EPSILON, normalize
 
@@ -398,6 +398,15 @@ class RationalLobe(Component):
         wi, jacobian = self._sample(u1, u2, wo)
         f = self.eval(wi, wo)
         return f * (np.abs(wi[..., 2]) * np.maximum(jacobian, 0.0))[..., None]
+
+    def lobe_pdf(self, wi, wo):
+        """The proxy's half-vector density D(h) cos theta_h / (4 wo.h) (Eq. 4.9): what lobe-N's
+        pattern weights use (shaders/bsdf.glsl lobe_half_pdf), not the sampler's density."""
+        wi, wo = np.broadcast_arrays(wi, wo)
+        valid = (wi[..., 2] > COS_EPSILON) & (wo[..., 2] > COS_EPSILON)
+        h = normalize(wi + wo)
+        p = self.distribution.pdf_half_vector(h) * reflection_jacobian(wo, h)
+        return np.where(valid, p, 0.0)
 
     def eval(self, wi, wo):
         return evaluate_brdf(self.functions, self.theta_max_deg, wi, wo)

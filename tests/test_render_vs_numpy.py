@@ -4,6 +4,8 @@ normal, tangent and view, reading incident radiance through the same cube-map fi
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -29,6 +31,7 @@ def smooth_sky(d):
     return sky + light1 + light2
 
 
+RATIONAL_GOLD = str(Path(__file__).parent / "data" / "gold-ggx-rational.json")
 SIZE = (72, 72)
 CAMERA = Camera(position=(0.4, 0.6, 3.0), target=(0.0, 0.0, 0.0), fov_y=45.0)
 
@@ -110,7 +113,9 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
 @pytest.mark.parametrize(
     "preset,n,normalize",
     [(p, n, False) for p in MATERIALS + ["chrome", "clear-glass", "lacquer", "porcelain"] for n in (5, 11, 19)]
-    + [(p, 7, True) for p in ("alanod-2000gs-2lobe", "frosted-glass", "miro5-2lobe", "gold-ggx", "gltf-red-plastic")],
+    + [(p, 7, True) for p in ("alanod-2000gs-2lobe", "frosted-glass", "miro5-2lobe", "gold-ggx", "gltf-red-plastic")]
+    # The Rational BRDF (seed 002): its pattern placed by the proxy distribution.
+    + [(RATIONAL_GOLD, n, normalize) for n, normalize in ((7, False), (11, True))],
 )
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     from lobeview.core.methods import Method
