@@ -1,6 +1,6 @@
 """The Rational BRDF (seed 002): interval fitting against independent solvers and known
 functions, the BRDF fit on a virtual MERL table, the inverse-CDF sampler against its pdf
-(chi-square) and against an independent quadrature, and the GLSL twin against numpy."""
+(chi-square, in test_sampling.py) and against an independent quadrature, and the GLSL twin against numpy."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from lobeview.bench.chi2 import SphereDomain, chi2_test
 from lobeview.materials import rational as rf
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.measurement import merl_table_from_bsdf
@@ -163,23 +162,7 @@ def test_brdf_fit_keeps_the_albedo_of_the_measured_material(plastic_fit):
         np.testing.assert_allclose(got, want, rtol=0.06)
 
 
-@pytest.mark.parametrize("theta", [35.0, 70.0])
-def test_rational_sampler_matches_its_pdf_chi_square(theta, tmp_path):
-    bsdf = _gold()
-    wo = direction_from_angles_deg(theta, 20.0)
-    rng = np.random.default_rng(int(theta))
-
-    def sample_fn(n):
-        u = rng.random((2, n))
-        s = bsdf.sample(u[0], u[1], wo)
-        return s.wi, s.pdf > 0
-
-    def pdf_fn(dirs):
-        return bsdf.pdf(dirs, np.broadcast_to(wo, dirs.shape))
-
-    result = chi2_test(sample_fn, pdf_fn, 200_000, SphereDomain(), tmp_path, f"rational-{theta}")
-    assert result.passed, result.message
-    assert result.mass_pdf == pytest.approx(result.mass_observed, abs=0.005), result.message
+# The sampler's chi-square test against its pdf is in tests/test_sampling.py (CASES).
 
 
 def test_rational_estimator_is_unbiased_against_a_direct_quadrature():

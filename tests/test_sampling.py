@@ -3,6 +3,8 @@ sample weight against eval * |cos| / pdf."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -12,10 +14,16 @@ from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.fresnel import Fresnel
 from lobeview.materials.gltf import gltf_bsdf
 from lobeview.materials.microfacet import MicrofacetDistribution
+from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.materials.thesis import KurtLobe, thesis_bsdf
 from lobeview.materials.vec import direction_from_angles_deg, mirror_z, reflect
 
 N_SAMPLES = 400_000
+
+
+def _rational_gold() -> BSDF:
+    path = Path(__file__).parent / "data" / "gold-ggx-rational.json"
+    return build_bsdf(load_material(str(path)))
 
 
 def _single(component) -> BSDF:
@@ -116,6 +124,9 @@ CASES = [
         0,
         None,
     ),  # fmt: skip
+    # The Rational BRDF's inverse-CDF sampler (seed 002, Eq. 7-9), fitted to GGX gold.
+    ("rational-gold", lambda: _rational_gold(), 35, 20, None),
+    ("rational-gold-grazing", lambda: _rational_gold(), 70, 20, None),
 ]
 
 
