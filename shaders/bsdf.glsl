@@ -130,7 +130,11 @@ vec3 half_vector_from_xi(Lobe l, float xi1, float xi2) {
     return vec3(sin_t * cos(phi), sin_t * sin(phi), cos_t);
 }
 
+#if defined(HAS_RATIONAL)
+// Only programs drawing a Rational BRDF compile it: llvmpipe runs untaken branches' loops under
+// the execution mask, which made every other material's reference 8x slower.
 #include "rational.glsl"
+#endif
 
 // GGX visible normals (Heitz 2018).
 vec3 sample_visible_normal(Lobe l, vec3 wo, vec2 u) {
@@ -256,8 +260,10 @@ vec3 lobe_dfg_albedo(Lobe l, vec2 ab, float cos_o) {
 vec3 reflected_wi(Lobe l, vec3 wi) { return lobe_is_transmission(l) ? vec3(wi.xy, -wi.z) : wi; }
 
 vec3 lobe_eval(Lobe l, vec3 wi, vec3 wo) {
+#if defined(HAS_RATIONAL)
     // The Rational BRDF (l.k.r: its fitted domain's theta_max, radians).
     if (l.type == LOBE_RATIONAL) return rational_brdf(wi, wo, l.k.r);
+#endif
     vec3 wr = reflected_wi(l, wi);
     if (wo.z <= COS_EPS || wr.z <= COS_EPS) return vec3(0.0);
     vec3 h = normalize(wr + wo);
@@ -292,7 +298,9 @@ bool lobe_uses_vndf(Lobe l) {
 
 // Density of lobe_sample().
 float lobe_sample_pdf(Lobe l, vec3 wi, vec3 wo) {
+#if defined(HAS_RATIONAL)
     if (l.type == LOBE_RATIONAL) return rational_sample_pdf(wi, wo);
+#endif
     if (!lobe_uses_vndf(l)) return lobe_half_pdf(l, wi, wo);
     vec3 wr = reflected_wi(l, wi);  // a transmission lobe's samples are mirrored reflections
     if (wo.z <= COS_EPS || wr.z <= COS_EPS) return 0.0;
@@ -304,8 +312,6 @@ float lobe_sample_pdf(Lobe l, vec3 wi, vec3 wo) {
 
 // Importance sample of the lobe (Eq. 4.5-4.8, or GGX visible normals); check the pdf > 0.
 vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
-    float pdf;
-    if (l.type == LOBE_RATIONAL) return rational_sample(u, wo, pdf);  // inverse CDFs (Eq. 7-9)
     vec3 h = lobe_uses_vndf(l) ? sample_visible_normal(l, wo, u) : half_vector_from_xi(l, 1.0 - u.x, u.y);
     vec3 wr = 2.0 * dot(wo, h) * h - wo;
     return reflected_wi(l, wr);
@@ -314,7 +320,9 @@ vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
 // lobe_sample and lobe_sample_pdf of the sampled direction together: the Rational BRDF reads
 // its density from the sample's own derivatives instead of inverting its CDFs.
 vec3 lobe_sample_and_pdf(Lobe l, vec2 u, vec3 wo, out float pdf) {
-    if (l.type == LOBE_RATIONAL) return rational_sample(u, wo, pdf);
+#if defined(HAS_RATIONAL)
+    if (l.type == LOBE_RATIONAL) return rational_sample(u, wo, pdf);  // inverse CDFs (Eq. 7-9)
+#endif
     vec3 wi = lobe_sample(l, u, wo);
     pdf = lobe_sample_pdf(l, wi, wo);
     return wi;

@@ -4,6 +4,7 @@
 // u and the density of wi. Holds the GLSL twin to materials/rational_brdf.py exactly, not through
 // an image.
 layout(local_size_x = 64) in;
+#define HAS_RATIONAL 1
 #include "bsdf.glsl"
 
 layout(std430, binding = 2) readonly buffer ProbeIn { vec4 probe_in[]; };    // 3 per item: wi, wo, (u, 0, 0)

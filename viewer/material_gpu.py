@@ -57,6 +57,11 @@ class PackedMaterial:
         return bool(np.any(self.kd > 0) or any(c > 0 for c in self.sheen_color))
 
     @property
+    def has_rational(self) -> bool:
+        """Whether the program needs shaders/rational.glsl (the HAS_RATIONAL variant)."""
+        return self.rational is not None
+
+    @property
     def lobes_key(self) -> tuple:
         """Everything that determines what is derived from the specular lobes (albedo tables,
         lobe fits): the one lobe-identity key of the renderers' per-material textures and of the

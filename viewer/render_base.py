@@ -22,7 +22,6 @@ from .interface import (
     LOBE_MAP_MODES,
     LOBE_TABLE_ROWS,
     RATIONAL_BINDING,
-    RATIONAL_STRIDE,
     bind_sampler,
     set_uniform,
     unit,
@@ -124,7 +123,6 @@ class RendererBase:
         # (kind, ..., lobes_key) -> (texture, derived data); live material edits make new ones
         self._material_textures = BoundedCache(MAX_MATERIAL_TEXTURES, on_evict=lambda item: item[0].release())
         self._dummy_textures: dict = {}
-        self._rational_dummy = None
         self._timer = None
         self.frame = FrameTargets(ctx, size, plane_state=self.PLANE_STATE)
 
@@ -200,20 +198,16 @@ class RendererBase:
             bind_sampler(program, "u_dfg", self._dummy_texture("2d"))
 
     def _bind_rational(self, material: PackedMaterial) -> None:
-        """The Rational BRDF's storage buffer (shaders/rational.glsl), or a zero block for every
-        other material: the binding point is read only by a rational lobe, but stays valid."""
-        if material.rational is not None:
-            data = material.rational
+        """The Rational BRDF's storage buffer (shaders/rational.glsl); only HAS_RATIONAL programs
+        (material.has_rational) declare it, so other materials bind nothing."""
+        if material.rational is None:
+            return
+        data = material.rational
 
-            def make():
-                return self.ctx.buffer(data.tobytes()), None
+        def make():
+            return self.ctx.buffer(data.tobytes()), None
 
-            buffer = self._material_texture(("rational", material.lobes_key), make)[0]
-        else:
-            if self._rational_dummy is None:
-                self._rational_dummy = self.ctx.buffer(reserve=RATIONAL_STRIDE * 16)
-            buffer = self._rational_dummy
-        buffer.bind_to_storage_buffer(RATIONAL_BINDING)
+        self._material_texture(("rational", material.lobes_key), make)[0].bind_to_storage_buffer(RATIONAL_BINDING)
 
     def raise_on_gl_error(self, method) -> None:
         """Raise if GL flagged an error since the flag was last read: a failed draw call leaves

@@ -305,8 +305,11 @@ class SceneRenderer(RendererBase):
         return self.cube_bake.render_faces(eye, exclude, specular)
 
     # -- drawing -----------------------------------------------------------------------------
-    def _program(self, method: Method, specular: bool, parallax: bool = False, mirror: bool = False):
+    def _program(
+        self, method: Method, specular: bool, parallax: bool = False, mirror: bool = False, rational: bool = False
+    ):
         defines = {**method_defines(method), "SPECULAR": True} if specular else {"METHOD_LOBE": True}
+        defines["HAS_RATIONAL"] = rational  # a Rational BRDF's functions (shaders/rational.glsl)
         if specular and mirror:
             # Incident light from the mirror buffer; the cube's importance map does not apply, so
             # the reference samples the BSDF only (still unbiased for what the buffer holds).
@@ -418,7 +421,9 @@ class SceneRenderer(RendererBase):
             obj_method = self._object_method(obj.index, method)
             mirror = mirrors.get(obj.index) if use_specular else None
             proxy = self.scene.objects[obj.index].reflection_proxy if use_specular and mirror is None else None
-            program = self._program(obj_method, use_specular, proxy is not None, mirror is not None)
+            program = self._program(
+                obj_method, use_specular, proxy is not None, mirror is not None, obj.material.has_rational
+            )
             mat = self.scene.materials[self.scene.objects[obj.index].material]
             set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
             set_uniform(program, "u_camera_position", tuple(float(x) for x in eye))
