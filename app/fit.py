@@ -7,7 +7,9 @@ lobeview material (the thesis' incidence angles, optional noise and outliers) in
 ``lobeview fit DATA -o material.json`` fits the thesis model (kd + K reflection lobes + T
 transmission lobes) by the hierarchical brute-force L1 search of thesis 3.4.1 and writes a
 material JSON that ``lobeview shot --material`` and the viewer load; ``--plot PNG`` draws
-measured against fitted slices (thesis Fig. 3.12 layout).
+measured against fitted slices (thesis Fig. 3.12 layout). ``--model rational`` fits the Rational
+BRDF (seed 002) instead, ``--model microfacet`` the glTF metallic-roughness model (a ``gltf``
+material a user's scene can take as it is).
 """
 
 from __future__ import annotations
@@ -135,7 +137,7 @@ def load_data(data: str, args) -> tuple[meas.Measurement, meas.Measurement | Non
 
 def cmd_fit(args) -> int:
     if args.model == "microfacet":
-        raise FitError("--model microfacet: not built yet; fit 'thesis' or 'rational'")
+        return _fit_microfacet(args)
     if args.model == "rational":
         return _fit_rational(args)
     measurement, plotted = load_data(args.data, args)
@@ -153,12 +155,7 @@ def cmd_fit(args) -> int:
         polish=not args.no_polish,
         progress=None if args.quiet else print,
     )
-    print(
-        f"{measurement.name}: {len(measurement)} tuples ({int(measurement.transmission.sum())} transmission), "
-        f"{measurement.channels} channel(s), {len(measurement.incidences())} incidences; {measurement.source}"
-    )
-    for note in measurement.notes:
-        print(f"  {note}")
+    _describe(measurement)
     result = fit_thesis(measurement, options)
     name = args.name or Path(args.output).stem
     desc = result.material(name=name, data=args.data)
@@ -185,6 +182,51 @@ def cmd_fit(args) -> int:
         )
         print(f"wrote {out}")
     return 0
+
+
+def _fit_microfacet(args) -> int:
+    """The glTF metallic-roughness BRDF (GGX): roughness, metallic, anisotropy and transmission
+    searched, the base colour solved exactly per candidate (materials/fit_gltf.py)."""
+    from lobeview.materials.fit_gltf import GltfFitOptions, fit_gltf
+
+    if args.lobes != 1 or args.transmission_lobes not in (None, 1):
+        raise FitError("--lobes/--transmission-lobes apply to --model thesis; the glTF model has one specular lobe")
+    measurement, plotted = load_data(args.data, args)
+    _describe(measurement)
+    options = GltfFitOptions(
+        grid=args.grid,
+        iterations=args.iterations,
+        metric=args.metric,
+        fixed=dict(args.fix),
+        ranges=dict(args.range),
+        isotropic=args.isotropic or measurement.source == "MERL table",
+        polish=not args.no_polish,
+        progress=None if args.quiet else print,
+    )
+    result = fit_gltf(measurement, options)
+    desc = result.material(name=args.name or Path(args.output).stem, data=args.data)
+    build_bsdf(desc)  # validates
+    Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
+    shown = {k: v for k, v in desc.items() if k not in ("model", "name", "description", "fit")}
+    print("\n" + "  ".join(f"{k}={v}" for k, v in shown.items()))
+    print(f"Eq. 3.7 {args.metric.upper()} error: {result.error:.6g}")
+    _print_albedo(measurement, desc)
+    print(f"wrote {args.output}")
+    if args.plot:
+        from lobeview.materials.fit_plot import plot_fit
+
+        title = f"{measurement.name}: glTF metallic-roughness, {args.metric.upper()} {result.error:.4g}"
+        print(f"wrote {plot_fit(plotted, {'gltf fit': desc}, args.plot, title=title)}")
+    return 0
+
+
+def _describe(measurement: meas.Measurement) -> None:
+    print(
+        f"{measurement.name}: {len(measurement)} tuples ({int(measurement.transmission.sum())} transmission), "
+        f"{measurement.channels} channel(s), {len(measurement.incidences())} incidences; {measurement.source}"
+    )
+    for note in measurement.notes:
+        print(f"  {note}")
 
 
 def _fit_rational(args) -> int:
@@ -288,7 +330,8 @@ def add_fit_arguments(p) -> None:
         "--model",
         default="thesis",
         choices=["thesis", "rational", "microfacet"],
-        help="thesis (Kurt lobes, thesis 3.4.1) or rational (Rational BRDF, seed 002); microfacet is not built yet",
+        help="thesis (Kurt lobes, thesis 3.4.1), rational (Rational BRDF, seed 002) or microfacet (the glTF "
+        "metallic-roughness GGX model: roughness, metallic, anisotropy, transmission; writes a gltf material)",
     )
     r = p.add_argument_group("rational model")
     r.add_argument("--eps", type=float, default=0.05, help="relative interval half-width (default 0.05)")
@@ -311,7 +354,8 @@ def add_fit_arguments(p) -> None:
         action="append",
         default=[],
         metavar="PARAM=VALUE",
-        help="fix a parameter: kd, ks|kt|k, mx, my, r0, alpha (every lobe) or lobeN.PARAM / tlobeN.PARAM",
+        help="fix a parameter: kd, ks|kt|k, mx, my, r0, alpha (every lobe) or lobeN.PARAM / tlobeN.PARAM; "
+        "microfacet: roughness, metallic, anisotropy (signed: < 0 along the bitangent), transmission",
     )
     p.add_argument(
         "--range",
@@ -319,7 +363,8 @@ def add_fit_arguments(p) -> None:
         action="append",
         default=[],
         metavar="PARAM=LO:HI",
-        help="search interval of a parameter (defaults: k, r0, alpha 0:1; mx, my 0.001:1, log-spaced)",
+        help="search interval of a parameter (defaults: k, r0, alpha 0:1; mx, my 0.001:1, log-spaced; "
+        "microfacet: roughness 0.01:1 log-spaced, metallic, transmission 0:1, anisotropy -1:1)",
     )
     p.add_argument("--grid", type=int, default=8, help="values per parameter and iteration, n (default 8)")
     p.add_argument("--iterations", type=int, default=6, help="refinement iterations (default 6)")
@@ -330,7 +375,11 @@ def add_fit_arguments(p) -> None:
         action="store_true",
         help="skip the Nelder-Mead step after each brute-force search (the thesis' method exactly)",
     )
-    p.add_argument("--isotropic", action="store_true", help="tie my = mx (always on for MERL tables)")
+    p.add_argument(
+        "--isotropic",
+        action="store_true",
+        help="tie my = mx, or anisotropy = 0 for microfacet (always on for MERL tables)",
+    )
     p.add_argument(
         "--negative",
         default="error",

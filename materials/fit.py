@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .lobe_fit import LUMINANCE
-from .measurement import Measurement, angles_deg, renderer_pair
+from .measurement import Measurement, angles_deg, renderer_pair, sample_frame_eval
 from .microfacet import ALPHA_MAX, ALPHA_MIN
 from .vec import mirror_z
 
@@ -587,7 +587,7 @@ def model_transfer(desc: dict, m: Measurement) -> np.ndarray:
     from .spec import build_bsdf
 
     wi, wo = renderer_pair(m.wi, m.wo)
-    return build_bsdf(desc).eval(wi, wo) * np.abs(m.wo[:, 2:3])
+    return sample_frame_eval(build_bsdf(desc), wi, wo) * np.abs(m.wo[:, 2:3])
 
 
 def material_error(desc: dict, m: Measurement, metric: str = "l1") -> float:

@@ -130,6 +130,18 @@ def angles_deg(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return theta, phi
 
 
+def sample_frame_eval(bsdf, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """The BSDF at directions in the sample's frame (x = the tangent, renderer convention): a
+    BSDF's own x axis is its anisotropy direction, the tangent turned by ``tangent_rotation``
+    about the normal (materials/gltf.py anisotropy_frame), so the directions are turned into it."""
+    r = float(getattr(bsdf, "tangent_rotation", 0.0))
+    if r:
+        c, s = math.cos(r), math.sin(r)
+        to_local = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])
+        wi, wo = wi @ to_local.T, wo @ to_local.T
+    return bsdf.eval(wi, wo)
+
+
 def renderer_pair(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(wi, wo) in the renderer's convention (viewer above the surface): a transmission tuple,
     light above and detector below, is mirrored through the surface plane. The thin-surface
@@ -492,7 +504,7 @@ def virtual_measurement(
     transmission = any(c.hemisphere == "transmission" for c in bsdf.components)
     wi, wo, weight = goniometer_directions(theta_i_deg, phi_i_deg, theta_step_deg, phi_step_deg, transmission)
     ri, ro = renderer_pair(wi, wo)
-    f = bsdf.eval(ri, ro)
+    f = sample_frame_eval(bsdf, ri, ro)
     p = f * np.abs(wo[:, 2:3])
     rng = np.random.default_rng(seed)
     if noise > 0:
