@@ -113,8 +113,7 @@ class RationalFunction:
         return len(self.numerator), len(self.denominator)
 
     def unit(self, x: np.ndarray) -> np.ndarray:
-        lo, hi = np.asarray(self.lower), np.asarray(self.upper)
-        return 2.0 * (np.asarray(x, dtype=np.float64) - lo) / (hi - lo) - 1.0
+        return unit_map(x, self.lower, self.upper)
 
     def parts(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """p(x), q(x) at points x (N, D) in domain units."""
@@ -135,8 +134,7 @@ class RationalFunction:
         u = self.unit(x)
         ex_p = graded_exponents(self.dimension, len(self.numerator))
         ex_q = graded_exponents(self.dimension, len(self.denominator))
-        p = monomials(u, ex_p) @ np.asarray(self.numerator)
-        q = monomials(u, ex_q) @ np.asarray(self.denominator)
+        p, q = self.parts(x)
         slope = 2.0 / (self.upper[variable] - self.lower[variable])
         dp = monomial_derivatives(u, ex_p, variable) @ np.asarray(self.numerator) * slope
         dq = monomial_derivatives(u, ex_q, variable) @ np.asarray(self.denominator) * slope
@@ -177,8 +175,15 @@ class RationalFunction:
         return cls(values["numerator"], values["denominator"], values["lower"], values["upper"], d.get("form", "plain"))
 
 
-#: The most coefficients of a numerator or denominator (shaders/rational.glsl's texture width).
+#: The most coefficients of a numerator or denominator (shaders/rational.glsl's storage-buffer
+#: block holds that many per function).
 MAX_TERMS = 128
+
+
+def unit_map(x, lower, upper) -> np.ndarray:
+    """Domain units -> [-1, 1] per variable, where the graded monomials are well conditioned."""
+    lo, hi = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+    return 2.0 * (np.asarray(x, dtype=np.float64) - lo) / (hi - lo) - 1.0
 
 
 def _plain(x, variable=None):
@@ -239,8 +244,8 @@ def least_distance(g: np.ndarray, h: np.ndarray) -> np.ndarray | None:
 @dataclass
 class IntervalData:
     """What one fit must meet: points x (N, D), intervals [lower, upper] of r at them, and
-    optionally monotone_in (a variable index): dr/dx >= 0 at every point and at ``check``
-    points (where only monotonicity and q > 0 are required, for example a denser grid)."""
+    optionally monotone_in (a variable index): dr/dx >= 0 at every point. ``check`` points
+    (a denser grid, poles found between data) require only q > 0."""
 
     x: np.ndarray
     lower: np.ndarray
@@ -279,11 +284,8 @@ def _constraint_rows(data: IntervalData, n_num: int, n_den: int) -> _Rows:
     ex_p, ex_q = graded_exponents(d, n_num), graded_exponents(d, n_den)
     lo, hi = np.asarray(data.domain_lower), np.asarray(data.domain_upper)
 
-    def unit(x):
-        return 2.0 * (x - lo) / (hi - lo) - 1.0
-
     def rows_at(x, s_lo, s_hi):
-        u = unit(x)
+        u = unit_map(x, lo, hi)
         bp, bq = monomials(u, ex_p), monomials(u, ex_q)
         interval = np.zeros((len(x), 2, n_num + n_den))
         # s = p/q in [s_lo, s_hi]: p - s_lo q >= 0 and s_hi q - p >= 0.
@@ -312,7 +314,7 @@ def _constraint_rows(data: IntervalData, n_num: int, n_den: int) -> _Rows:
     interval[b <= 0] = 0.0
     if len(data.check):
         # Check points carry no interval: only q > 0 there (no pole between the data).
-        positive = np.hstack([np.zeros((len(data.check), n_num)), monomials(unit(data.check), ex_q)])
+        positive = np.hstack([np.zeros((len(data.check), n_num)), monomials(unit_map(data.check, lo, hi), ex_q)])
     else:
         positive = np.zeros((0, n_num + n_den))
     return _Rows(interval, mono, positive)
@@ -333,7 +335,7 @@ class SolveStats:
     tried: list = field(default_factory=list)  # (n + 1, m + 1, feasible)
 
 
-def _violations(data: IntervalData, n_num: int, c: np.ndarray, rows: _Rows) -> np.ndarray:
+def _violations(data: IntervalData, c: np.ndarray, rows: _Rows) -> np.ndarray:
     """Per point, the worst constraint violation (> 0: violated) of coefficients c, each row
     normalised, so interval and monotone violations are comparable."""
     per_point = np.zeros(len(data.x))
@@ -352,7 +354,6 @@ def solve_problem(
     n_num: int,
     n_den: int,
     stats: SolveStats | None = None,
-    initial_training: int = 0,
     add_per_round: int = 8,
 ) -> tuple[np.ndarray, float] | None:
     """Solve P(n, m) (``n_num`` = n + 1 numerator and ``n_den`` = m + 1 denominator coefficients)
@@ -370,7 +371,7 @@ def solve_problem(
         return None
     delta = 1.0 / cond
     n = len(data.x)
-    start = initial_training or min(n, max(4 * k, 32))
+    start = min(n, max(4 * k, 32))
     training = np.unique(np.linspace(0, n - 1, start).round().astype(int))
     extra_rows = np.zeros((0, k))
     if len(rows.positive):
@@ -382,7 +383,7 @@ def solve_problem(
         c = least_distance(g, np.full(len(g), delta))
         if c is None:
             return None  # infeasible on a subset: infeasible on all of the data
-        worst = _violations(data, n_num, c, rows)
+        worst = _violations(data, c, rows)
         worst[training] = 0.0
         bad = np.flatnonzero(worst > 1e-9 * delta)
         if len(bad) == 0:
@@ -407,9 +408,8 @@ def fit_rational(
     max_coefficients: int = 40,
     widen: float = 1.5,
     max_widenings: int = 8,
-    max_denominator: int | None = None,
     progress: Callable[[str], None] | None = None,
-    verify: Callable[[RationalFunction], np.ndarray] | None = None,
+    verify: Callable[[RationalFunction], tuple | None] | None = None,
 ) -> tuple[RationalFunction, SolveStats]:
     """Algorithm 1: the rational function with the fewest coefficients (n + m + 2 <=
     ``max_coefficients``) that meets every interval, the best-conditioned one among equal
@@ -429,8 +429,6 @@ def fit_rational(
             for n_num in range(total - 1, 0, -1):
                 n_den = total - n_num
                 if n_num > MAX_TERMS or n_den > MAX_TERMS:
-                    continue
-                if max_denominator is not None and n_den > max_denominator:
                     continue
                 found = solve_problem(data, n_num, n_den, stats)
                 stats.tried.append((n_num, n_den, found is not None))

@@ -44,7 +44,7 @@ from .bsdf import BSDF, Component
 from .lobe_fit import LUMINANCE
 from .measurement import MERL_DIMS, Measurement, merl_cell_angles
 from .microfacet import ALPHA_MAX, ALPHA_MIN, MicrofacetDistribution, reflection_jacobian
-from .rational import IntervalData, RationalFitError, RationalFunction, SolveStats, fit_rational
+from .rational import FORMS, IntervalData, RationalFitError, RationalFunction, SolveStats, fit_rational
 from .vec import COS_EPSILON, normalize
 
 HALF_PI = 0.5 * math.pi
@@ -81,7 +81,9 @@ def project_merl(table: np.ndarray, theta_max_deg: float = DEFAULT_THETA_MAX_DEG
 
 
 def half_diff_angles(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """theta_h (from the normal) and theta_d (between wi and h), radians."""
+    """theta_h (from the normal) and theta_d (between wi and h), radians: the two angles the
+    Rational BRDF depends on, without measurement.directions_to_half_diff's azimuths (that
+    frame construction costs more than the BRDF on the shader-sized batches here)."""
     h = normalize(wi + wo)
     theta_h = np.arccos(np.clip(h[..., 2], -1.0, 1.0))
     theta_d = np.arccos(np.clip(np.sum(wi * h, axis=-1), -1.0, 1.0))
@@ -225,10 +227,6 @@ def _luminance_brdf(functions: list, theta_max_deg: float) -> Callable:
     return rho
 
 
-def _cdf_inverse(cdf: np.ndarray, nodes: np.ndarray, u: np.ndarray) -> np.ndarray:
-    return np.interp(u, cdf, nodes)
-
-
 def inverse_cdf_theta(rho: Callable, theta_v: np.ndarray, mu: np.ndarray) -> np.ndarray:
     """theta_l = CDF_v^-1(mu) of rho cos theta_l (marginal over phi_l), for pairs (theta_v, mu)."""
     theta_l = np.linspace(0.0, HALF_PI, _CDF_THETA_NODES)
@@ -237,7 +235,7 @@ def inverse_cdf_theta(rho: Callable, theta_v: np.ndarray, mu: np.ndarray) -> np.
     for tv in np.unique(theta_v):
         rows = theta_v == tv
         values = rho(tv, theta_l[:, None], dphi[None, :]).mean(axis=1) * np.sin(theta_l) * np.cos(theta_l)
-        out[rows] = _cdf_inverse(_cumulative(values, theta_l), theta_l, mu[rows])
+        out[rows] = np.interp(mu[rows], _cumulative(values, theta_l), theta_l)
     return out
 
 
@@ -248,7 +246,7 @@ def inverse_cdf_phi(rho: Callable, theta_v: np.ndarray, theta_l: np.ndarray, tau
     pairs = np.unique(np.stack([theta_v, theta_l], 1), axis=0)
     for tv, tl in pairs:
         rows = (theta_v == tv) & (theta_l == tl)
-        out[rows] = _cdf_inverse(_cumulative(rho(tv, tl, dphi), dphi), dphi, tau[rows])
+        out[rows] = np.interp(tau[rows], _cumulative(rho(tv, tl, dphi), dphi), dphi)
     return out
 
 
@@ -268,6 +266,45 @@ class SamplingFit:
     stats: tuple
 
 
+def _fit_inverse_cdf(
+    tabulate: Callable[[np.ndarray], np.ndarray],
+    points: np.ndarray,
+    dense: np.ndarray,
+    eps: float,
+    form: str,
+    max_coefficients: int,
+    progress: Callable[[str], None] | None,
+) -> tuple[RationalFunction, SolveStats]:
+    """One inverse CDF of section 4.2 in ``form`` (Eq. 8 or 9: the last variable is the uniform
+    number, every other an angle in [0, pi/2]): intervals value +- eps (1 + value) at ``points``,
+    monotone in the last variable; ``dense`` is checked for monotonicity and poles where the form
+    does not fix the value, and its failing points join the data with their tabulated values."""
+    variable = points.shape[1] - 1
+    values = tabulate(points)
+    data = IntervalData(
+        points,
+        values - eps * (1 + values),
+        values + eps * (1 + values),
+        (0.0,) * points.shape[1],
+        (HALF_PI,) * variable + (1.0,),
+        form=form,
+        monotone_in=variable,
+    )
+    if progress:
+        progress(f"inverse CDF ({form}): {len(values)} points, eps {eps}")
+    interior = FORMS[form](dense)[1] > 0  # the form's own factor: 0 where it fixes the value
+
+    def verify(fn: RationalFunction):
+        _, q = fn.parts(dense)
+        bad = ((fn.derivative(dense, variable) <= 0) | (q <= 0)) & interior
+        if not bad.any():
+            return None
+        v = tabulate(dense[bad])
+        return dense[bad], v - eps * (1 + v), v + eps * (1 + v)
+
+    return fit_rational(data, max_coefficients, widen=2.0, progress=progress, verify=verify)
+
+
 def fit_sampling(
     functions: list,
     theta_max_deg: float,
@@ -281,65 +318,31 @@ def fit_sampling(
     intervals value +- eps (1 + value) as the paper's, monotone in mu / tau; a denser grid is
     verified for monotonicity and its failing points join the data."""
     rho = _luminance_brdf(functions, theta_max_deg)
+
+    def grid_points(*axes):
+        return np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], 1)
+
     theta_v = np.linspace(0.0, HALF_PI * 0.99, grid)
-    mu = (np.arange(2 * grid) + 0.5) / (2 * grid)
-    tv, m = (a.ravel() for a in np.meshgrid(theta_v, mu, indexing="ij"))
-    values = inverse_cdf_theta(rho, tv, m)
-    data = IntervalData(
-        np.stack([tv, m], 1),
-        values - eps_theta * (1 + values),
-        values + eps_theta * (1 + values),
-        (0.0, 0.0),
-        (HALF_PI, 1.0),
-        form="cdf_theta",
-        monotone_in=1,
+    theta_fn, theta_stats = _fit_inverse_cdf(
+        lambda x: inverse_cdf_theta(rho, x[:, 0], x[:, 1]),
+        grid_points(theta_v, (np.arange(2 * grid) + 0.5) / (2 * grid)),
+        grid_points(np.linspace(0.0, HALF_PI, 2 * grid + 1), np.linspace(0.0, 1.0, 8 * grid + 1)),
+        eps_theta,
+        "cdf_theta",
+        max_coefficients,
+        progress,
     )
-    if progress:
-        progress(f"inverse CDF of theta_l: {len(values)} points, eps {eps_theta}")
-
-    def verify_theta(fn: RationalFunction):
-        dv = np.linspace(0.0, HALF_PI, 2 * grid + 1)
-        dm = np.linspace(0.0, 1.0, 8 * grid + 1)
-        pts = np.stack([a.ravel() for a in np.meshgrid(dv, dm, indexing="ij")], 1)
-        _, q = fn.parts(pts)
-        bad = (fn.derivative(pts, 1) <= 0) | (q <= 0)
-        bad &= (pts[:, 1] > 0) & (pts[:, 1] < 1)  # the form fixes the ends
-        if not bad.any():
-            return None
-        v = inverse_cdf_theta(rho, pts[bad, 0], pts[bad, 1])
-        return pts[bad], v - eps_theta * (1 + v), v + eps_theta * (1 + v)
-
-    theta_fn, theta_stats = fit_rational(data, max_coefficients, widen=2.0, progress=progress, verify=verify_theta)
-
     theta_l = np.linspace(0.0, HALF_PI * 0.99, grid)
-    tau = (np.arange(grid) + 0.5) / grid
-    tv, tl, t = (a.ravel() for a in np.meshgrid(theta_v, theta_l, tau, indexing="ij"))
-    values = inverse_cdf_phi(rho, tv, tl, t)
-    data = IntervalData(
-        np.stack([tv, tl, t], 1),
-        values - eps_phi * (1 + values),
-        values + eps_phi * (1 + values),
-        (0.0, 0.0, 0.0),
-        (HALF_PI, HALF_PI, 1.0),
-        form="cdf_phi",
-        monotone_in=2,
+    dense = np.linspace(0.0, HALF_PI, grid + 1)
+    phi_fn, phi_stats = _fit_inverse_cdf(
+        lambda x: inverse_cdf_phi(rho, x[:, 0], x[:, 1], x[:, 2]),
+        grid_points(theta_v, theta_l, (np.arange(grid) + 0.5) / grid),
+        grid_points(dense, dense, np.linspace(0.0, 1.0, 4 * grid + 1)),
+        eps_phi,
+        "cdf_phi",
+        max_coefficients,
+        progress,
     )
-    if progress:
-        progress(f"inverse CDF of phi_l: {len(values)} points, eps {eps_phi}")
-
-    def verify_phi(fn: RationalFunction):
-        d = np.linspace(0.0, HALF_PI, grid + 1)
-        dt = np.linspace(0.0, 1.0, 4 * grid + 1)
-        pts = np.stack([a.ravel() for a in np.meshgrid(d, d, dt, indexing="ij")], 1)
-        _, q = fn.parts(pts)
-        bad = (fn.derivative(pts, 2) <= 0) | (q <= 0)
-        bad &= (pts[:, 2] > 0) & (pts[:, 2] < 1) & (pts[:, 0] > 0) & (pts[:, 1] > 0)
-        if not bad.any():
-            return None
-        v = inverse_cdf_phi(rho, pts[bad, 0], pts[bad, 1], pts[bad, 2])
-        return pts[bad], v - eps_phi * (1 + v), v + eps_phi * (1 + v)
-
-    phi_fn, phi_stats = fit_rational(data, max_coefficients, widen=2.0, progress=progress, verify=verify_phi)
     return SamplingFit(theta_fn, phi_fn, (theta_stats, phi_stats))
 
 
@@ -495,7 +498,6 @@ __all__ = [
     "RationalBRDFFit",
     "RationalLobe",
     "SamplingFit",
-    "SolveStats",
     "fit_rational_brdf",
     "fit_sampling",
     "project_measurement",
