@@ -261,7 +261,8 @@ def fit_gltf(m: Measurement, options: GltfFitOptions | None = None) -> GltfFitRe
             step = (hi - lo) / (options.grid - 1)
             b_lo, b_hi = bounds[name]
             current[name] = (max(b_lo, best[1][name] - step), min(b_hi, best[1][name] + step))
-        say(f"  iteration {it + 1}: {options.metric.upper()} {best[0]:.6g}  {_shown(candidate(best[1]), best[2])}")
+        shown = _shown(candidate(best[1]), best[2])
+        say(f"  iteration {it + 1}: channel {options.metric.upper()} sum {best[0]:.6g}  {shown}")
     if options.polish and free:
         from scipy.optimize import minimize
 
