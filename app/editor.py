@@ -106,7 +106,8 @@ GLTF_EXTENSION_SLIDERS = (
 
 
 def material_widgets(imgui, desc: dict) -> tuple[bool, dict]:
-    """ImGui widgets for every parameter of the three models; returns (changed, new desc)."""
+    """ImGui widgets for every parameter of the models (a Rational BRDF's coefficients are shown,
+    not edited); returns (changed, new desc)."""
     changed_any = False
     d = json.loads(json.dumps(desc))
     if d["model"] == "thesis":
@@ -142,6 +143,10 @@ def material_widgets(imgui, desc: dict) -> tuple[bool, dict]:
             changed_any |= c
             c, fr["k"] = _scalar_or_rgb_slider(imgui, "k", fr["k"], "k")
             changed_any |= c
+    elif d["model"] == "rational":
+        # Fitted coefficients, not parameters to slide: refit (the panel's fit) to change them.
+        counts = [f"{len(fn['numerator'])}/{len(fn['denominator'])}" for fn in d["brdf"]]
+        imgui.text(f"Rational BRDF, theta_max {d['theta_max']:g} deg, coefficients {' '.join(counts)}")
     else:
         c, d["base_color"] = _scalar_or_rgb_slider(imgui, "base colour", d["base_color"], "base_color")
         changed_any |= c

@@ -135,13 +135,31 @@ def load_data(data: str, args) -> tuple[meas.Measurement, meas.Measurement | Non
     raise FitError(f"{data}: expected a .csv goniophotometer file, a MERL .binary file or virtual:MATERIAL")
 
 
-def cmd_fit(args) -> int:
-    if args.model == "microfacet":
-        return _fit_microfacet(args)
+def fit_description(args, progress=print) -> tuple[dict, meas.Measurement, meas.Measurement]:
+    """Fit ``args.model`` to ``args.data`` (the command's options): the material description
+    (validated, with its ``fit`` provenance), the measurement fitted and the one to plot. Shared
+    by ``lobeview fit`` and the viewer's fit panel (app/fit_job.py); ``progress`` gets every line."""
+    say = progress or (lambda _msg: None)
+    name = args.name or Path(args.output).stem
     if args.model == "rational":
-        return _fit_rational(args)
-    measurement, plotted = load_data(args.data, args)
-    is_merl = measurement.source == "MERL table"
+        desc, measurement, plotted = _fit_rational(args, name, say)
+    else:
+        measurement, plotted = load_data(args.data, args)
+        say(
+            f"{measurement.name}: {len(measurement)} tuples ({int(measurement.transmission.sum())} transmission), "
+            f"{measurement.channels} channel(s), {len(measurement.incidences())} incidences; {measurement.source}"
+        )
+        for note in measurement.notes:
+            say(f"  {note}")
+        isotropic = args.isotropic or measurement.source == "MERL table"
+        detail = None if args.quiet else progress
+        fit = _fit_microfacet if args.model == "microfacet" else _fit_thesis
+        desc = fit(args, measurement, isotropic, detail, name)
+    build_bsdf(desc)  # validates: the fitted values lie in the model's ranges
+    return desc, measurement, plotted
+
+
+def _fit_thesis(args, measurement, isotropic, progress, name: str) -> dict:
     options = FitOptions(
         lobes=args.lobes,
         transmission_lobes=args.transmission_lobes,
@@ -151,101 +169,54 @@ def cmd_fit(args) -> int:
         metric=args.metric,
         fixed=dict(args.fix),
         ranges=dict(args.range),
-        isotropic=args.isotropic or is_merl,
+        isotropic=isotropic,
         polish=not args.no_polish,
-        progress=None if args.quiet else print,
+        progress=progress,
     )
-    _describe(measurement)
     result = fit_thesis(measurement, options)
-    name = args.name or Path(args.output).stem
-    desc = result.material(name=name, data=args.data)
-    build_bsdf(desc)  # validates: the fitted values lie in the model's ranges
-    Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
-    print(f"\nkd = {desc['kd']}")
-    for key in ("lobes", "transmission_lobes"):
-        for i, lobe in enumerate(desc[key]):
-            print(f"{key}[{i}]: " + "  ".join(f"{k}={v}" for k, v in lobe.items()))
-    print(
-        f"Eq. 3.7 {args.metric.upper()} error: {result.error:.6g} (reflection {result.error_reflection:.6g}, "
-        f"transmission {result.error_transmission:.6g})"
-    )
-    _print_albedo(measurement, desc)
-    print(f"wrote {args.output}")
-    if args.plot:
-        from lobeview.materials.fit_plot import plot_fit
-
-        out = plot_fit(
-            plotted,
-            {"fit": desc},
-            args.plot,
-            title=f"{measurement.name}: {len(desc['lobes'])} lobe(s), {args.metric.upper()} {result.error:.4g}",
-        )
-        print(f"wrote {out}")
-    return 0
+    return result.material(name=name, data=args.data)
 
 
-def _fit_microfacet(args) -> int:
+def _fit_microfacet(args, measurement, isotropic, progress, name: str) -> dict:
     """The glTF metallic-roughness BRDF (GGX): roughness, metallic, anisotropy and transmission
     searched, the base colour solved exactly per candidate (materials/fit_gltf.py)."""
     from lobeview.materials.fit_gltf import GltfFitOptions, fit_gltf
 
     if args.lobes != 1 or args.transmission_lobes not in (None, 1):
         raise FitError("--lobes/--transmission-lobes apply to --model thesis; the glTF model has one specular lobe")
-    measurement, plotted = load_data(args.data, args)
-    _describe(measurement)
     options = GltfFitOptions(
         grid=args.grid,
         iterations=args.iterations,
         metric=args.metric,
         fixed=dict(args.fix),
         ranges=dict(args.range),
-        isotropic=args.isotropic or measurement.source == "MERL table",
+        isotropic=isotropic,
         polish=not args.no_polish,
-        progress=None if args.quiet else print,
+        progress=progress,
     )
     result = fit_gltf(measurement, options)
-    desc = result.material(name=args.name or Path(args.output).stem, data=args.data)
-    build_bsdf(desc)  # validates
-    Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
-    shown = {k: v for k, v in desc.items() if k not in ("model", "name", "description", "fit")}
-    print("\n" + "  ".join(f"{k}={v}" for k, v in shown.items()))
-    print(f"Eq. 3.7 {args.metric.upper()} error: {result.error:.6g}")
-    _print_albedo(measurement, desc)
-    print(f"wrote {args.output}")
-    if args.plot:
-        from lobeview.materials.fit_plot import plot_fit
-
-        title = f"{measurement.name}: glTF metallic-roughness, {args.metric.upper()} {result.error:.4g}"
-        print(f"wrote {plot_fit(plotted, {'gltf fit': desc}, args.plot, title=title)}")
-    return 0
+    return result.material(name=name, data=args.data)
 
 
-def _describe(measurement: meas.Measurement) -> None:
-    print(
-        f"{measurement.name}: {len(measurement)} tuples ({int(measurement.transmission.sum())} transmission), "
-        f"{measurement.channels} channel(s), {len(measurement.incidences())} incidences; {measurement.source}"
-    )
-    for note in measurement.notes:
-        print(f"  {note}")
-
-
-def _fit_rational(args) -> int:
+def _fit_rational(args, name: str, say) -> tuple[dict, meas.Measurement, meas.Measurement]:
     """The Rational BRDF (seed 002): one rational function of (theta_h, theta_d) per channel,
     fitted to the data projected onto that plane, and its rational inverse CDFs."""
     from lobeview.materials import rational_brdf as rb
     from lobeview.materials.rational import RationalFitError
 
-    progress = None if args.quiet else print
+    progress = None if args.quiet else say
     t0 = time.perf_counter()
-    table, name = merl_source(args.data)
+    table, table_name = merl_source(args.data)
     if table is not None:
         projected = rb.project_merl(table, args.theta_max)
-        measurement = meas.merl_measurement(table, args.merl_stride, name=name)
+        measurement = meas.merl_measurement(table, args.merl_stride, name=table_name)
+        plotted = meas.merl_goniometer_measurement(table, name=table_name)
     else:
         measurement = load_data(args.data, args)[0]
         projected = rb.project_measurement(measurement, theta_max_deg=args.theta_max)
-    print(f"{args.data}: {len(projected.points)} (theta_h, theta_d) points up to {args.theta_max} deg, "
-          f"{projected.values.shape[1]} channel(s)")  # fmt: skip
+        plotted = measurement
+    say(f"{args.data}: {len(projected.points)} (theta_h, theta_d) points up to {args.theta_max} deg, "
+        f"{projected.values.shape[1]} channel(s)")  # fmt: skip
     try:
         fit = rb.fit_rational_brdf(
             projected, args.eps, args.max_coefficients, theta_max_deg=args.theta_max, progress=progress
@@ -253,7 +224,7 @@ def _fit_rational(args) -> int:
         sampling = rb.fit_sampling(fit.functions, fit.theta_max_deg, progress=progress)
     except RationalFitError as exc:
         raise FitError(str(exc)) from None
-    desc = rb.rational_description(fit, sampling, name=args.name or Path(args.output).stem)
+    desc = rb.rational_description(fit, sampling, name=name)
     desc["fit"] = {
         "model": "rational (Pacanowski et al. 2012)",
         "data": args.data,
@@ -262,23 +233,50 @@ def _fit_rational(args) -> int:
         "coefficients": [list(fn.counts) for fn in fit.functions],
         "sampling_coefficients": [list(sampling.theta.counts), list(sampling.phi.counts)],
         "max_relative_error": fit.max_relative_error,
-        "eq37_l1_error": material_error(desc, measurement, "l1"),
+        "error": material_error(desc, measurement, "l1"),
         "seconds": round(time.perf_counter() - t0, 1),
     }
-    build_bsdf(desc)  # validates
-    Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
     for c, fn in enumerate(fit.functions):
-        print(f"channel {c}: {fn.counts} (numerator, denominator) coefficients, max relative error "
-              f"{fit.max_relative_error[c]:.3g} on the projected data")  # fmt: skip
-    print(f"inverse CDFs: theta {sampling.theta.counts}, phi {sampling.phi.counts} coefficients")
-    print(f"Eq. 3.7 L1 error on the tuples: {desc['fit']['eq37_l1_error']:.6g}")
+        say(f"channel {c}: {fn.counts} (numerator, denominator) coefficients, max relative error "
+            f"{fit.max_relative_error[c]:.3g} on the projected data")  # fmt: skip
+    say(f"inverse CDFs: theta {sampling.theta.counts}, phi {sampling.phi.counts} coefficients")
+    return desc, measurement, plotted
+
+
+def parameter_lines(desc: dict) -> list[str]:
+    """The fitted parameters, one line per lobe (thesis) or one line (glTF); the Rational BRDF's
+    coefficients are in the JSON."""
+    if desc["model"] == "thesis":
+        lines = [f"kd = {desc['kd']}"]
+        for key in ("lobes", "transmission_lobes"):
+            for i, lobe in enumerate(desc[key]):
+                lines.append(f"{key}[{i}]: " + "  ".join(f"{k}={v}" for k, v in lobe.items()))
+        return lines
+    if desc["model"] == "gltf":
+        return ["  ".join(f"{k}={v}" for k, v in desc.items() if k not in ("model", "name", "description", "fit"))]
+    return []
+
+
+def cmd_fit(args) -> int:
+    t0 = time.perf_counter()
+    desc, measurement, plotted = fit_description(args)
+    Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
+    print("\n" + "\n".join(parameter_lines(desc)))
+    fit = desc["fit"]
+    metric = "L1" if args.model == "rational" else args.metric.upper()
+    extra = ""
+    if "error_reflection" in fit:
+        extra = f" (reflection {fit['error_reflection']:.6g}, transmission {fit['error_transmission']:.6g})"
+    print(f"Eq. 3.7 {metric} error: {fit['error']:.6g}{extra}")
     _print_albedo(measurement, desc)
     print(f"wrote {args.output} ({time.perf_counter() - t0:.1f} s)")
     if args.plot:
         from lobeview.materials.fit_plot import plot_fit
 
-        plotted = meas.merl_goniometer_measurement(table, name=name) if table is not None else measurement
-        print(f"wrote {plot_fit(plotted, {'rational': desc}, args.plot, title=f'{measurement.name}: Rational BRDF')}")
+        label = {"thesis": "fit", "gltf": "gltf fit", "rational": "rational"}[desc["model"]]
+        what = {"thesis": f"{len(desc.get('lobes', []))} lobe(s)", "gltf": "glTF metallic-roughness"}
+        title = f"{measurement.name}: {what.get(desc['model'], 'Rational BRDF')}, {metric} {fit['error']:.4g}"
+        print(f"wrote {plot_fit(plotted, {label: desc}, args.plot, title=title)}")
     return 0
 
 

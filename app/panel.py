@@ -11,6 +11,7 @@ from pathlib import Path
 from imgui_bundle import imgui, implot
 
 from lobeview.app.editor import lobe_plot_values, material_widgets
+from lobeview.app.fit_job import FIT_MODELS, lockable_parameters
 from lobeview.app.walk import WalkCamera
 from lobeview.core.methods import MAX_PATTERN, method_choice, method_from_choice, realtime_choices
 from lobeview.viewer.camera import Camera
@@ -126,6 +127,7 @@ def _material(window) -> None:
     if implot.begin_plot("lobe, 45 deg view", (-1, 160)):
         implot.plot_line("(f cos)^1/3", x, y)
         implot.end_plot()
+    _fit(window)
     if imgui.button("undo (Ctrl+Z)") and editor.undo_last():
         window.dirty = True
     imgui.same_line()
@@ -149,3 +151,35 @@ def _material(window) -> None:
                 window.message = f"not loaded: {exc}"
         else:
             window.message = f"no {sidecar} to load"
+
+
+def _fit(window) -> None:
+    """Fit a measurement to the selected material in the background (app/fit_job.py): the data
+    as ``lobeview fit`` takes it, the model, and which current values to lock."""
+    if not imgui.tree_node("fit to a measurement"):
+        return
+    _, window.fit_data = imgui.input_text("data", window.fit_data)
+    imgui.text_disabled(".csv, MERL .binary, virtual:MATERIAL, virtual-merl:MATERIAL")
+    _, m = imgui.combo("model", FIT_MODELS.index(window.fit_model), list(FIT_MODELS))
+    window.fit_model = FIT_MODELS[m]
+    lockable = lockable_parameters(window.editor.desc(window.selected), window.fit_model)
+    if lockable:
+        imgui.text("lock at the current value:")
+    for name, value in lockable.items():
+        changed, on = imgui.checkbox(f"{name} = {value:.4g}", name in window.fit_locks)
+        if changed:
+            (window.fit_locks.add if on else window.fit_locks.discard)(name)
+    job = window.fit_job
+    if job is not None and job.running:
+        imgui.text_wrapped(job.status)
+        if imgui.button("cancel fit"):
+            job.cancel()
+    else:
+        if imgui.button("fit"):
+            try:
+                window.start_fit(window.fit_data.strip(), window.fit_model, sorted(window.fit_locks & set(lockable)))
+            except ValueError as exc:
+                window.message = str(exc)
+        if job is not None:
+            imgui.text_wrapped(job.status)
+    imgui.tree_pop()

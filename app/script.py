@@ -14,6 +14,8 @@ frame N (in order; steps of earlier frames first):
     load_materials    path (as the panel's load button)
     undo              the last material edit (as Ctrl+Z)
     click             x, y: window pixels, a left click through the window's mouse handler
+    fit               data, model (thesis|microfacet|rational), lock: [names], extra: [fit options],
+                      wait (default true): the panel's fit for the selected object
     stats             print "stats frame=N gl_objects=K rss_mib=M cached=C" (soak tests)
     quit
 """
@@ -40,6 +42,7 @@ ACTIONS = (
     "load_materials",
     "undo",
     "click",
+    "fit",
     "stats",
     "quit",
 )
@@ -152,6 +155,19 @@ def run_due_steps(window, steps: list[dict]) -> None:
         elif action == "click":
             window.on_mouse_press_event(float(step["x"]), float(step["y"]), 1)
             window.on_mouse_release_event(float(step["x"]), float(step["y"]), 1)
+        elif action == "fit":
+            try:
+                job = window.start_fit(
+                    str(step.get("data", "")),
+                    str(step.get("model", "thesis")),
+                    list(step.get("lock", [])),
+                    [str(a) for a in step.get("extra", [])],
+                )
+            except ValueError as exc:
+                raise ScriptError(f"fit: {exc}") from None
+            if step.get("wait", True):
+                job.wait()
+                window.poll_fit()
         elif action == "stats":
             # GL objects held by the bounded caches on purpose (material tables, scene
             # textures): a leak is growth of the rest.

@@ -21,6 +21,7 @@ from imgui_bundle import imgui, implot
 from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
 
 from lobeview.app.editor import MaterialEditor
+from lobeview.app.fit_job import FitJob, lockable_parameters
 from lobeview.app.options import scene_renderer_from_args, scene_view, shot_command
 from lobeview.app.panel import draw_panel
 from lobeview.app.script import run_due_steps
@@ -123,6 +124,13 @@ class LobeviewWindow(mglw.WindowConfig):
         self.dirty = True
         self.closed = False
         self.quit_requested = False
+        # The panel's fit (app/fit_job.py): the job, the object it will replace the material of
+        # (None once applied), and the panel's inputs.
+        self.fit_job: FitJob | None = None
+        self.fit_target: int | None = None
+        self.fit_data = ""
+        self.fit_model = "thesis"
+        self.fit_locks: set[str] = set()
         if session.loaded_materials is not None:
             self.message = f"loaded {', '.join(session.loaded_materials) or 'no changes'}"
 
@@ -137,6 +145,39 @@ class LobeviewWindow(mglw.WindowConfig):
         if index is not None and not 0 <= index < len(self.scene.objects):
             raise IndexError(f"object {index} does not exist: the scene has {len(self.scene.objects)} objects")
         self.selected = index
+
+    def start_fit(self, data: str, model: str, lock=(), extra=()) -> FitJob:
+        """Fit a measurement to ``model`` for the selected object's material in the background,
+        the parameters named in ``lock`` held at the material's current values (ValueError with
+        the reason when it cannot start)."""
+        if self.selected is None:
+            raise ValueError("select an object first: the fit replaces its material")
+        if self.fit_job is not None and self.fit_job.running:
+            raise ValueError("a fit is running: cancel it first")
+        if not data:
+            raise ValueError("give the measurement: a .csv, a MERL .binary, virtual:MATERIAL or virtual-merl:MATERIAL")
+        lockable = lockable_parameters(self.editor.desc(self.selected), model)
+        unknown = sorted(set(lock) - set(lockable))
+        if unknown:
+            raise ValueError(f"cannot lock {', '.join(unknown)} for a {model} fit of this material")
+        name = self.scene.materials[self.scene.objects[self.selected].material].name
+        job = FitJob(data, model, {k: lockable[k] for k in lock}, ["--name", name, *extra])
+        self.fit_job, self.fit_target = job.start(), self.selected
+        self.message = f"fitting {data} ({model}) for {self.scene.objects[self.selected].name} ..."
+        return job
+
+    def poll_fit(self) -> None:
+        """Apply a finished fit once (an undoable edit), or report why it did not finish."""
+        job = self.fit_job
+        if job is None or job.running or self.fit_target is None:
+            return
+        if job.state == "done":
+            error = self.editor.apply(self.fit_target, job.result)
+            self.message = error or f"{self.scene.objects[self.fit_target].name}: {job.status}"
+            self.dirty = True
+        else:
+            self.message = job.status
+        self.fit_target = None
 
     # -- events ----------------------------------------------------------------------------------
     def on_key_event(self, key, action, modifiers):
@@ -278,6 +319,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self._last_frame_start = t_frame
         run_due_steps(self, self.script)
         self._walk_keys(frame_time)
+        self.poll_fit()
 
         camera = self.walk.camera()
         refinement = self.refinement
@@ -319,6 +361,8 @@ class LobeviewWindow(mglw.WindowConfig):
 
     def on_close(self):
         self.closed = True
+        if self.fit_job is not None:
+            self.fit_job.cancel()
         self.realtime.release()
         self.accumulator.release()
         self.renderer.release()
