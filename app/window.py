@@ -334,6 +334,8 @@ class LobeviewWindow(mglw.WindowConfig):
             self.realtime.add(self.renderer.radiance_target, 1.0)
         else:
             batch = Method("reference", int(refinement.batch))
+            if self.renderer.has_rational:
+                batch = batch.for_rational()
             self.renderer.draw_frame(camera, batch, sample_offset=refinement.samples, seed=0)
             self.accumulator.add(self.renderer.radiance_target, float(batch.samples))
             refinement.samples += batch.samples

@@ -35,6 +35,10 @@ MAX_LOBES = 8  # specular/transmission lobes per material (spec validation, GPU 
 MAX_PATTERN = 32  # lobe-N samples per lobe (the pattern uniform array)
 MAX_SAMPLES = 4096  # fis-N / mc-N samples per lobe and frame
 REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
+# ... and on a Rational BRDF: llvmpipe's loop limiter (65 535 loop iterations per invocation, all
+# loops counted) cuts a 64-sample pass short, as every environment sample inverts both rational
+# CDFs (measured: 2 % black pixels in a grid at 64 samples per pass, none at 4).
+RATIONAL_REFERENCE_BATCH = 4
 NORMALIZE_SUFFIX = "+norm"
 
 # MIP level bias b in lod = 0.5 log2(Omega_s / Omega_p) + b, chosen by `lobeview bench`'s sweep
@@ -125,6 +129,12 @@ class Method:
 
     def default_lod_bias(self) -> float:
         return DEFAULT_FIS_LOD_BIAS if self.kind == "fis" else DEFAULT_LOBE_LOD_BIAS
+
+    def for_rational(self) -> Method:
+        """This method with a reference pass small enough for a Rational BRDF's shader."""
+        if self.kind == "reference" and self.samples > RATIONAL_REFERENCE_BATCH:
+            return Method("reference", RATIONAL_REFERENCE_BATCH)
+        return self
 
     def passes(self, spp: int) -> int:
         """Passes that accumulate ``spp`` samples per lobe (reference); every other method is one pass."""

@@ -69,6 +69,8 @@ class PreviewRenderer(RendererBase):
     ) -> RenderResult:
         method = Method.parse(method) if isinstance(method, str) else method
         material = pack_material(bsdf)
+        if material.has_rational:
+            method = method.for_rational()
         program, vao = self._program(method, material.has_diffuse, material.has_rational)
         width, height = self.size
         model = np.eye(4) if model is None else np.asarray(model, dtype=np.float64)

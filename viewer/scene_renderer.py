@@ -518,6 +518,11 @@ class SceneRenderer(RendererBase):
                     faces = self.render_cube_faces(gpu_obj.centre, exclude=gpu_obj.index, specular=True)
                     gpu_obj.cube = RadianceCube(self.ctx, faces)
 
+    @property
+    def has_rational(self) -> bool:
+        """Whether any object draws a Rational BRDF (reference passes then shrink: Method.for_rational)."""
+        return any(obj.material.has_rational for obj in self.objects)
+
     def refresh_one_stale_cube(self) -> str | None:
         """Re-render one out-of-date cube map (after a material edit changed what it sees);
         the viewer calls this once per frame so edits never freeze the UI. Returns its name."""
@@ -532,6 +537,8 @@ class SceneRenderer(RendererBase):
         seed: int = 0,
     ) -> RenderResult:
         method = Method.parse(method) if isinstance(method, str) else method
+        if self.has_rational:
+            method = method.for_rational()
         width, height = self.size
         passes = method.passes(spp)
         accumulated = np.zeros((height, width, 3))
