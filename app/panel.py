@@ -50,11 +50,10 @@ def _status(window) -> None:
     imgui.text(f"{fps:.1f} fps, frame {window.frame_ms:.1f} ms")
     imgui.text(f"shading + accumulation {window.pass_ms:.1f} ms, last cube map {window.cube_ms:.1f} ms")
     refinement = window.refinement
-    imgui.text(
-        f"refined: {refinement.samples} spp per lobe (batch {refinement.batch})"
-        if refinement.samples
-        else f"moving: {window.method}"
-    )
+    if refinement.samples:
+        imgui.text_wrapped(refinement.status())
+    else:
+        imgui.text(f"moving: {window.method}")
 
 
 def _sample_slider(label: str, kind: str, samples: int) -> tuple[bool, int]:

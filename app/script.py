@@ -17,6 +17,12 @@ frame N (in order; steps of earlier frames first):
     fit               data, model (thesis|microfacet|rational), lock: [names], extra: [fit options],
                       wait (default true): the panel's fit for the selected object
     stats             print "stats frame=N gl_objects=K rss_mib=M cached=C" (soak tests)
+    refine            value: true/false, as the panel's "refine when still" checkbox
+    refinement        print "refinement frame=N scene_passes=P spp=S refined_share=F noise=X
+                      realtime=Y shown=Z finished=..." (F: the refined image's mean weight in
+                      what is shown; X, Y, Z: estimated display RMS errors of the refined mean,
+                      the real-time frame and the shown blend, x 255, -1 before the first
+                      estimate; app/refinement.py)
     quit
 """
 
@@ -44,10 +50,12 @@ ACTIONS = (
     "click",
     "fit",
     "stats",
+    "refine",
+    "refinement",
     "quit",
 )
 # Actions after which the image is unchanged (no reset of the refinement).
-_KEEP_IMAGE = ("screenshot", "save_materials", "stats")
+_KEEP_IMAGE = ("screenshot", "save_materials", "stats", "refine", "refinement")
 
 
 def live_gl_objects() -> int:
@@ -174,6 +182,18 @@ def run_due_steps(window, steps: list[dict]) -> None:
             cached = len(window.renderer._material_textures) + len(window.renderer.textures)
             live, rss = live_gl_objects(), resident_mib()
             print(f"stats frame={window.frame} gl_objects={live} rss_mib={rss:.0f} cached={cached}", flush=True)
+        elif action == "refine":
+            window.progressive = bool(step.get("value", True))
+        elif action == "refinement":
+            refinement, estimate = window.refinement, window.refinement.estimate
+            noise, realtime = (estimate.noise * 255, estimate.realtime * 255) if estimate else (-1.0, -1.0)
+            print(
+                f"refinement frame={window.frame} scene_passes={window.scene_passes} spp={refinement.samples}"
+                f" refined_share={estimate.refined_share if estimate else 0.0:.3f} noise={noise:.3f}"
+                f" realtime={realtime:.3f} shown={estimate.shown * 255 if estimate else -1.0:.3f}"
+                f" finished={refinement.finished or '-'}",
+                flush=True,
+            )
         elif action == "quit":
             window.quit_requested = True
         if action not in _KEEP_IMAGE:

@@ -30,7 +30,7 @@ from lobeview.app.options import (
     scene_renderer_from_args,
     scene_view,
 )
-from lobeview.core.methods import Method, resolve_cli_method
+from lobeview.core.methods import PIXEL_FILTERS, Method, resolve_cli_method
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.builtin_env import load_environment
 from lobeview.scenes.hdrio import write_hdr_image
@@ -78,6 +78,13 @@ def add_arguments(p) -> None:
         type=int,
         default=1024,
         help="samples per pixel per lobe for --method reference (default 1024)",
+    )
+    a(
+        "--pixel-filter",
+        default="box",
+        choices=PIXEL_FILTERS,
+        help="--method reference: 'box' (default) renders each pixel's integral, one sub-pixel position "
+        "per pass (at least min(spp, 64) passes); 'point' shades the pixel centres only",
     )
     a(
         "--lod-bias",
@@ -155,8 +162,9 @@ def _report(
     stages: dict,
     out: Path,
     describe,
+    pixel_filter: str = "box",
 ) -> None:
-    extra = f", {samples} spp per lobe" if method.kind == "reference" else ""
+    extra = f", {samples} spp per lobe, {pixel_filter} pixel filter" if method.kind == "reference" else ""
     print(f"rendered {what}, {size[0]}x{size[1]}, method {method}{extra}")
     print(f"device: {describe(ctx)}")
     print(f"camera: {camera.describe()}")
@@ -196,6 +204,7 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
         spp=args.spp,
         lod_bias=args.lod_bias,
         background=not args.no_background,
+        pixel_filter=args.pixel_filter,
     )
     _finish(result, out, args, stages)
     _report(
@@ -208,6 +217,7 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
         stages,
         out,
         describe,
+        args.pixel_filter,
     )
     renderer.release()
     ctx.release()
@@ -227,12 +237,12 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
     args.gpu_timer = gpu_timer_meaningful(describe(ctx))
     renderer = scene_renderer_from_args(ctx, scene, env, size, cache, args)
     print(renderer.analysis.report())
-    result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias)
+    result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias, pixel_filter=args.pixel_filter)
     for line in renderer.mirror_report:
         print(f"[mirror] {line}")
     _finish(result, out, args, stages)
     what = f"{'the demo scene' if args.scene is None else path.name} under {env.name}"
-    _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe)
+    _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe, args.pixel_filter)
     renderer.release()
     ctx.release()
     return 0

@@ -4,9 +4,10 @@ app/editor.py, the camera app/walk.py, scripted sessions app/script.py.
 
 While the camera moves, every frame is rendered with the chosen real-time method; as soon as
 the camera, the materials and the method stay still, each frame adds a batch of unbiased
-quasi-random MIS samples to a float accumulation buffer and the display shows the running mean
-(thesis 4.4.2) once it holds SHOW_REFINED_AFTER samples per lobe. The batch adapts to keep frames
-near TARGET_FRAME_MS.
+quasi-random MIS samples at another sub-pixel position to a float accumulation buffer, and the
+display shows the running mean (thesis 4.4.2) once its estimated error is below the real-time
+frame's; refinement stops when converged (app/refinement.py). A frame in which nothing changed
+and nothing is refined is not rendered again: the last image is shown.
 """
 
 from __future__ import annotations
@@ -24,17 +25,15 @@ from lobeview.app.editor import MaterialEditor
 from lobeview.app.fit_job import FitJob, lockable_parameters
 from lobeview.app.options import scene_renderer_from_args, scene_view, shot_command
 from lobeview.app.panel import draw_panel
+from lobeview.app.refinement import Refinement, two_half_estimate
 from lobeview.app.script import run_due_steps
 from lobeview.app.walk import WalkCamera, walk_speed_for
 from lobeview.core.methods import Method
 from lobeview.scenes.hdrio import write_hdr_image
-from lobeview.viewer.camera import Camera
-from lobeview.viewer.display import Accumulator
+from lobeview.viewer.camera import Camera, pixel_offset
+from lobeview.viewer.display import Accumulator, RefinementBlend
 from lobeview.viewer.tonemap import to_uint8, tonemap
 
-TARGET_FRAME_MS = 50.0
-MAX_BATCH = 64
-SHOW_REFINED_AFTER = 32  # spp per lobe before the refined image replaces the real-time one
 FRAME_TIME_SMOOTHING = 0.2  # exponential smoothing of the shown frame interval
 
 
@@ -51,24 +50,6 @@ class Session:
     script: list
     original_materials: dict | None = None
     loaded_materials: list | None = None
-
-
-class Refinement:
-    """Progressive refinement while still: samples accumulated, the adaptive batch size."""
-
-    def __init__(self):
-        self.batch = 4
-        self.samples = 0
-        self.still_frames = 0
-
-    def reset(self) -> None:
-        self.samples = 0
-        self.still_frames = 0
-
-    def adapt(self, pass_ms: float) -> None:
-        """Scale the batch by the measured cost of the last pass (at most x2 / x0.5 a frame)."""
-        ratio = TARGET_FRAME_MS / max(pass_ms, 1e-3)
-        self.batch = int(np.clip(self.batch * np.clip(ratio, 0.5, 2.0), 1, MAX_BATCH))
 
 
 class LobeviewWindow(mglw.WindowConfig):
@@ -92,8 +73,7 @@ class LobeviewWindow(mglw.WindowConfig):
         size = self.wnd.buffer_size
         self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
                                                  self.args)  # fmt: skip
-        self.accumulator = Accumulator(self.ctx, self.renderer.programs, size)  # refinement
-        self.realtime = Accumulator(self.ctx, self.renderer.programs, size)  # last moving frame
+        self._make_accumulators(size)
         self.pending_screenshots: list[str] = []
         position, target, up, fov = scene_view(self.scene, self.args.view)
         self.walk = WalkCamera.from_camera(Camera(position, target, up, fov))
@@ -120,6 +100,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.plot_cache = (None, None)
         self.vsync = not self.args.no_vsync
         self.frame = 0
+        self.scene_passes = 0  # frames of the scene drawn (real-time and refinement passes)
         self.script = list(session.script)
         self.dirty = True
         self.closed = False
@@ -242,16 +223,27 @@ class LobeviewWindow(mglw.WindowConfig):
         self.imgui.resize(width, height)
         size = self.wnd.buffer_size
         self.renderer.resize(size)
-        for acc in (self.accumulator, self.realtime):
-            acc.release()
-        self.accumulator = Accumulator(self.ctx, self.renderer.programs, size)
-        self.realtime = Accumulator(self.ctx, self.renderer.programs, size)
+        self._release_accumulators()
+        self._make_accumulators(size)
         self.dirty = True
+
+    def _make_accumulators(self, size) -> None:
+        programs = self.renderer.programs
+        self.accumulator = Accumulator(self.ctx, programs, size)  # the refinement's running mean
+        self.halves = [Accumulator(self.ctx, programs, size) for _ in range(2)]  # its two-half estimate
+        self.realtime = Accumulator(self.ctx, programs, size)  # the last real-time frame
+        self.shown = Accumulator(self.ctx, programs, size)  # their blend (app/refinement.py)
+        self.blend = RefinementBlend(self.ctx, programs, size)
+
+    def _release_accumulators(self) -> None:
+        for acc in (self.accumulator, *self.halves, self.realtime, self.shown, self.blend):
+            acc.release()
 
     # -- screenshots -----------------------------------------------------------------------------
     def displayed(self) -> Accumulator:
-        refined = self.progressive and self.refinement.samples >= SHOW_REFINED_AFTER
-        return self.accumulator if refined else self.realtime
+        """The real-time frame, or once refinement has an estimate, its blend with the mean."""
+        refined = self.progressive and self.refinement.estimate is not None
+        return self.shown if refined else self.realtime
 
     def save_screenshot(self, name: str | None = None) -> None:
         """Queued: written after this frame's panel is drawn, so the window capture is complete."""
@@ -268,7 +260,9 @@ class LobeviewWindow(mglw.WindowConfig):
         width, height = self.wnd.buffer_size
         screen = np.frombuffer(self.ctx.screen.read(components=3), np.uint8).reshape(height, width, 3)[::-1]
         Image.fromarray(screen).save(directory / f"{stem}-window.png")
-        refined = self.displayed() is self.accumulator
+        # A blend has no single command: the one of what it mostly shows, said so below.
+        estimate = self.refinement.estimate if self.displayed() is self.shown else None
+        refined = estimate is not None and estimate.refined_share >= 0.5
         method = Method.parse("reference") if refined else self.method
         materials = None
         if self.editor.edits():  # the edits travel with the screenshot, so the command reproduces it
@@ -287,6 +281,8 @@ class LobeviewWindow(mglw.WindowConfig):
             exposure=self.exposure,
         )
         note = "" if not self.renderer.object_methods else " (per-object methods are not reproduced)"
+        if estimate is not None:
+            note += f" (shown: {100 * estimate.refined_share:.0f} % refined, blended per pixel with {self.method})"
         print(f"screenshot {directory / stem}.exr/.png{note}: {command}", flush=True)
         return directory / f"{stem}.png"
 
@@ -325,29 +321,29 @@ class LobeviewWindow(mglw.WindowConfig):
         refinement = self.refinement
         t0 = time.perf_counter()
         if self.dirty:
-            self.accumulator.reset()
+            for acc in (self.accumulator, *self.halves):
+                acc.reset()
             refinement.reset()
             self.dirty = False
-        if refinement.still_frames == 0 or not self.progressive:
+        refining = refinement.still_frames > 0 and self.progressive and not refinement.finished
+        if refinement.still_frames == 0:
+            self.scene_passes += 1
             self.renderer.draw_frame(camera, self.method)
             self.realtime.reset()
             self.realtime.add(self.renderer.radiance_target, 1.0)
-        else:
-            batch = Method("reference", int(refinement.batch))
-            if self.renderer.has_rational:
-                batch = batch.for_rational()
-            self.renderer.draw_frame(camera, batch, sample_offset=refinement.samples, seed=0)
-            self.accumulator.add(self.renderer.radiance_target, float(batch.samples))
-            refinement.samples += batch.samples
-        self.ctx.finish()
-        self.pass_ms = (time.perf_counter() - t0) * 1000.0
+        elif refining:
+            self._refine(camera)
+        # else: nothing changed and nothing is left to refine; the last image is shown again
+        if refinement.still_frames == 0 or refining:
+            self.ctx.finish()
+            self.pass_ms = (time.perf_counter() - t0) * 1000.0
         t0 = time.perf_counter()
         refreshed = self.renderer.refresh_one_stale_cube()
         if refreshed is not None:
             self.cube_ms = (time.perf_counter() - t0) * 1000.0
             self.message = f"updated the cube map of {refreshed} ({self.renderer.stale_cube_count} to go)"
             self.dirty = True
-        if refinement.still_frames > 0 and self.progressive:
+        if refining:
             refinement.adapt(self.pass_ms)
         refinement.still_frames += 1
 
@@ -361,10 +357,35 @@ class LobeviewWindow(mglw.WindowConfig):
         if self.quit_requested or (self.args.exit_after and self.frame >= self.args.exit_after):
             self.wnd.close()  # releases GPU objects (on_close): the frame is finished
 
+    def _refine(self, camera) -> None:
+        """One refinement pass: a batch of reference samples at the next sub-pixel position into
+        the running mean and one half; the two-half estimate when due (app/refinement.py)."""
+        refinement = self.refinement
+        samples, half = refinement.next_pass()
+        batch = Method("reference", samples)
+        if self.renderer.has_rational:
+            batch = batch.for_rational()
+        jitter = pixel_offset(refinement.half_passes[half], stream=half)
+        self.scene_passes += 1
+        offset = refinement.sample_offset(half)
+        self.renderer.draw_frame(camera, batch, sample_offset=offset, seed=half, jitter=jitter)
+        self.accumulator.add(self.renderer.radiance_target, float(batch.samples))
+        self.halves[half].add(self.renderer.radiance_target, float(batch.samples))
+        refinement.added(batch.samples, half)
+        if refinement.estimate_due:
+            halves = [acc.radiance() for acc in self.halves]
+            estimate = two_half_estimate(
+                halves[0], refinement.weights[0], halves[1], refinement.weights[1],
+                self.realtime.radiance(), self.tonemap, self.exposure,
+            )  # fmt: skip
+            refinement.update(estimate)
+            self.blend.set_weight(estimate.weight)
+        if refinement.estimate is not None:
+            self.blend.blend(self.accumulator, self.realtime, self.shown)
+
     def on_close(self):
         self.closed = True
         if self.fit_job is not None:
             self.fit_job.cancel()
-        self.realtime.release()
-        self.accumulator.release()
+        self._release_accumulators()
         self.renderer.release()

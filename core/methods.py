@@ -40,6 +40,11 @@ REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
 # CDFs (measured: 2 % black pixels in a grid at 64 samples per pass, none at 4).
 RATIONAL_REFERENCE_BATCH = 4
 NORMALIZE_SUFFIX = "+norm"
+# A reference is the pixel's integral under a box filter: each pass shades at another sub-pixel
+# position (viewer/camera.py pixel_offset), so a reference of spp samples takes at least
+# min(spp, MIN_PIXEL_POSITIONS) passes (smaller batches) to resolve what a pixel covers.
+PIXEL_FILTERS = ("box", "point")
+MIN_PIXEL_POSITIONS = 64
 
 # MIP level bias b in lod = 0.5 log2(Omega_s / Omega_p) + b, chosen by `lobeview bench`'s sweep
 # (mean PSNR over 6 material classes x 2 HDR environments at 640x400, b in -1..2; details in
@@ -135,6 +140,16 @@ class Method:
         if self.kind == "reference" and self.samples > RATIONAL_REFERENCE_BATCH:
             return Method("reference", RATIONAL_REFERENCE_BATCH)
         return self
+
+    def for_pixel_filter(self, spp: int, pixel_filter: str) -> Method:
+        """The reference's pass size for ``spp`` samples under ``pixel_filter``: 'box' takes at
+        least min(spp, MIN_PIXEL_POSITIONS) passes (one sub-pixel position each), 'point' keeps
+        the batch (every pass at the pixel centre). Other methods are one pass, unchanged."""
+        if pixel_filter not in PIXEL_FILTERS:
+            raise MethodError(f"unknown pixel filter {pixel_filter!r}; use one of {', '.join(PIXEL_FILTERS)}")
+        if self.kind != "reference" or pixel_filter == "point":
+            return self
+        return Method("reference", max(1, min(self.samples, spp // MIN_PIXEL_POSITIONS)))
 
     def passes(self, spp: int) -> int:
         """Passes that accumulate ``spp`` samples per lobe (reference); every other method is one pass."""

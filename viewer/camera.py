@@ -4,8 +4,10 @@ looking down -Z in view space, as glTF cameras)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
+from scipy.stats import qmc
 
 
 def look_at(eye, target, up) -> np.ndarray:
@@ -34,6 +36,38 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.
     proj[2, 3] = 2.0 * far * near / (near - far)
     proj[3, 2] = -1.0
     return proj
+
+
+PIXEL_OFFSET_TABLE = 4096  # sub-pixel offsets tabulated at once; later passes wrap (pixel_offset)
+# Toroidal shifts of the offset sequence per stream: stream 0 starts at the pixel centre, stream 1
+# (the refinement's second half, app/refinement.py) is the same sequence moved by the R2
+# sequence's generator, so that its positions differ from stream 0's at every index.
+PIXEL_OFFSET_SHIFTS = ((0.5, 0.5), (0.5 + 0.7548776662466927, 0.5 + 0.5698402909980532))
+
+
+@lru_cache(maxsize=1)
+def _halton_points() -> np.ndarray:
+    return qmc.Halton(d=2, scramble=False).random(PIXEL_OFFSET_TABLE)
+
+
+def pixel_offset(pass_index: int, stream: int = 0) -> tuple[float, float]:
+    """The sub-pixel position of pass ``pass_index`` of a box-filtered pixel integral, in pixels
+    from the pixel centre, in [-0.5, 0.5)^2 (x right, y up). The Halton (2, 3) points toroidally
+    shifted (a Cranley-Patterson shift keeps their discrepancy), so any prefix of passes is
+    stratified over the pixel; stream 0's pass 0 is the centre (its G-buffer is the point-sampled
+    one)."""
+    point = _halton_points()[int(pass_index) % PIXEL_OFFSET_TABLE] + PIXEL_OFFSET_SHIFTS[stream]
+    x, y = np.mod(point, 1.0) - 0.5
+    return float(x), float(y)
+
+
+def jittered(view_projection: np.ndarray, offset_px, size) -> np.ndarray:
+    """``view_projection`` moved by ``offset_px`` pixels in the image plane of a ``size`` = (W, H)
+    frame: x_ndc += 2 dx / W, i.e. x_clip += (2 dx / W) w_clip (and y alike)."""
+    shift = np.eye(4)
+    shift[0, 3] = 2.0 * float(offset_px[0]) / float(size[0])
+    shift[1, 3] = 2.0 * float(offset_px[1]) / float(size[1])
+    return shift @ view_projection
 
 
 DEPTH_RANGE_RATIO = 5000.0  # far / near kept by fit_clip_planes: 24-bit depth resolves ~far/1e4 at far

@@ -64,3 +64,40 @@ class Accumulator:
         self._vao_display.release()
         self.fbo.release()
         self.texture.release()
+
+
+class RefinementBlend:
+    """Mixes the refinement's running mean with the real-time frame per pixel, by a weight
+    image (app/refinement.py two_half_estimate), into an Accumulator that the window shows."""
+
+    def __init__(self, ctx: moderngl.Context, programs: ProgramCache, size):
+        self.ctx = ctx
+        self.size = (int(size[0]), int(size[1]))
+        self.weight = ctx.texture(self.size, 1, dtype="f4")
+        self.weight.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.set_weight(None)
+        self.program = programs.program("fullscreen.vert", "refinement_blend.frag", {})
+        self._vao = ctx.vertex_array(self.program, [])
+
+    def set_weight(self, weight: np.ndarray | None) -> None:
+        """The mean's weight per pixel, (H, W), row 0 at the top; None: 0 everywhere."""
+        if weight is None:
+            weight = np.zeros((self.size[1], self.size[0]), np.float32)
+        self.weight.write(np.ascontiguousarray(weight[::-1], dtype=np.float32).tobytes())
+
+    def blend(self, refined: Accumulator, realtime: Accumulator, target: Accumulator) -> None:
+        target.reset()
+        target.fbo.use()
+        self.ctx.viewport = (0, 0, *self.size)
+        self.ctx.disable(moderngl.DEPTH_TEST)
+        self.ctx.disable(moderngl.BLEND)
+        for unit, texture in enumerate((refined.texture, realtime.texture, self.weight)):
+            texture.use(unit)
+        for unit, name in enumerate(("u_refined", "u_realtime", "u_weight")):
+            self.program[name].value = unit
+        self._vao.render(moderngl.TRIANGLES, vertices=3)
+        target.weight = 1.0
+
+    def release(self) -> None:
+        self._vao.release()
+        self.weight.release()

@@ -18,7 +18,7 @@ from lobeview.materials.bsdf import BSDF
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import Mesh
 
-from .camera import Camera
+from .camera import Camera, jittered, pixel_offset
 from .cubemap import EnvironmentCubes
 from .interface import bind_sampler, method_defines, set_uniform
 from .material_gpu import pack_material
@@ -66,8 +66,14 @@ class PreviewRenderer(RendererBase):
         background: bool = True,
         model: np.ndarray | None = None,
         seed: int = 0,
+        pixel_filter: str = "box",
     ) -> RenderResult:
+        """``pixel_filter`` (reference only): 'box', the pixel's integral (each pass at another
+        sub-pixel position), or 'point', the pixel centre (what the G-buffer holds). The
+        G-buffer is always pass 0's, at the pixel centre."""
         method = Method.parse(method) if isinstance(method, str) else method
+        method = method.for_pixel_filter(spp, pixel_filter)
+        jitter = method.kind == "reference" and pixel_filter == "box"
         material = pack_material(bsdf)
         if material.has_rational:
             method = method.for_rational()
@@ -79,7 +85,6 @@ class PreviewRenderer(RendererBase):
 
         set_uniform(program, "u_model", tuple(model.T.astype("f4").ravel()))
         set_uniform(program, "u_normal_matrix", tuple(normal_matrix.T.astype("f4").ravel()))
-        set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
         set_uniform(program, "u_camera_position", tuple(float(x) for x in camera.position))
         self.set_material(program, material, method, lod_bias, seed)
         self.bind_cube(program, self.cubes, method, material)
@@ -91,9 +96,13 @@ class PreviewRenderer(RendererBase):
         timings = {"shade": 0.0}
         g_buffers = None
         for p in range(passes):
+            pass_view_proj = jittered(view_proj, pixel_offset(p), self.size) if jitter else view_proj
+            set_uniform(program, "u_view_projection", tuple(pass_view_proj.T.astype("f4").ravel()))
             set_uniform(program, "u_sample_offset", p * method.samples)
             t0 = time.perf_counter()
             self.frame.begin()
+            if background:  # behind the object in every pass: silhouettes are filtered too
+                self.draw_background(self.cubes, pass_view_proj)
             self.ctx.enable(moderngl.DEPTH_TEST)
             timer = self.gpu_timer()
             _ = self.ctx.error  # only this pass's errors count
@@ -109,17 +118,9 @@ class PreviewRenderer(RendererBase):
             invalid |= radiance[..., 3] < 0.0
             if g_buffers is None:
                 g_buffers = [self.read(i) for i in (1, 2, 3)]
-        radiance = (accumulated / passes).astype(np.float32)
         mask = g_buffers[0][..., 3] > 0.5
-        if background:
-            t0 = time.perf_counter()
-            self.frame.begin()
-            self.draw_background(self.cubes, view_proj)
-            self.ctx.finish()
-            radiance = np.where(mask[..., None], radiance, self.read(0)[..., :3])
-            timings["background"] = time.perf_counter() - t0
         return RenderResult(
-            radiance=radiance,
+            radiance=(accumulated / passes).astype(np.float32),
             position=g_buffers[0][..., :3],
             normal=g_buffers[1][..., :3],
             tangent=g_buffers[2][..., :3],

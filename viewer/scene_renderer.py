@@ -31,7 +31,7 @@ from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
 
-from .camera import Camera
+from .camera import Camera, jittered, pixel_offset
 from .cube_bake import CubeBake, scene_content_key
 from .cubemap import RadianceCube, equirect_to_cube_faces
 from .interface import (
@@ -469,12 +469,16 @@ class SceneRenderer(RendererBase):
         """The scene as the cube-map and mirror passes draw it (no per-frame state)."""
         self._draw_objects(view_proj, eye, method, specular, exclude)
 
-    def draw_frame(self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0) -> None:
+    def draw_frame(
+        self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0, jitter=(0.0, 0.0)
+    ) -> None:
         """One pass into the renderer's own float targets (radiance in ``targets[0]``), no read
-        back: what the interactive viewer calls every frame."""
+        back: what the interactive viewer calls every frame. ``jitter``: this pass's sub-pixel
+        position in pixels (a box-filtered reference, viewer/camera.py pixel_offset); the mirror
+        passes keep the unjittered camera (they are looked up by world position)."""
         camera = camera.fitted_to(self.bounds)  # any scene scale, mm to km (viewer/camera.py)
         width, height = self.size
-        view_proj = camera.view_projection(width / height)
+        view_proj = jittered(camera.view_projection(width / height), jitter, self.size)
         # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
         # lookup per lobe, so there they keep their cube maps and no mirror pass is drawn.
         if method.kind == "prefiltered":
@@ -535,8 +539,13 @@ class SceneRenderer(RendererBase):
         spp: int = 1024,
         lod_bias: float | None = None,
         seed: int = 0,
+        pixel_filter: str = "box",
     ) -> RenderResult:
+        """``pixel_filter`` as in PreviewRenderer.render: 'box' (default) makes a reference the
+        pixel's integral, 'point' shades every pass at the pixel centre."""
         method = Method.parse(method) if isinstance(method, str) else method
+        method = method.for_pixel_filter(spp, pixel_filter)
+        jitter = method.kind == "reference" and pixel_filter == "box"
         if self.has_rational:
             method = method.for_rational()
         width, height = self.size
@@ -551,7 +560,8 @@ class SceneRenderer(RendererBase):
             t0 = time.perf_counter()
             _ = self.ctx.error  # reset the flag: only errors of this frame's passes count below
             with timer or contextlib.nullcontext():
-                self.draw_frame(camera, method, p * method.samples, lod_bias, seed)
+                offset = pixel_offset(p) if jitter else (0.0, 0.0)
+                self.draw_frame(camera, method, p * method.samples, lod_bias, seed, jitter=offset)
             self.ctx.finish()
             self.raise_on_gl_error(method)
             t_shade += time.perf_counter() - t0
