@@ -45,8 +45,8 @@ MAX_BATCH = 64
 # tails make the estimate optimistic (measured on the demo: 6.7 estimated vs 9.2 true at 8 spp)
 FIRST_ESTIMATE_AT = 32
 LOCAL_WINDOW = 9  # pixels: the neighbourhood of the per-pixel noise and bias estimates
-CONVERGED_NOISE = 0.25 / 255.0
-ERROR_FLOOR = 1e-6  # display RMS error below which a pixel's errors count as zero  # display RMS noise at which refinement stops
+CONVERGED_NOISE = 0.25 / 255.0  # display RMS noise at which refinement stops
+ERROR_FLOOR = 1e-6  # display RMS error below which a pixel's errors count as zero
 HALF_SAMPLE_BUDGET = SOBOL_SIDE * SOBOL_SIDE  # the Sobol table: a half never wraps around it
 
 

@@ -30,7 +30,7 @@ from lobeview.app.options import (
     scene_renderer_from_args,
     scene_view,
 )
-from lobeview.core.methods import PIXEL_FILTERS, Method, resolve_cli_method
+from lobeview.core.methods import MAX_REFERENCE_SPP, PIXEL_FILTERS, Method, resolve_cli_method
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.builtin_env import load_environment
 from lobeview.scenes.hdrio import write_hdr_image
@@ -128,8 +128,8 @@ def run(args) -> int:
     if args.object is not None and args.scene is not None:
         raise ShotError("give either a SCENE or --object, not both")
     method = resolve_cli_method(args.method, args.lobe_normalize)
-    if args.spp < 1:
-        raise ShotError("--spp must be at least 1")
+    if not 1 <= args.spp <= MAX_REFERENCE_SPP:
+        raise ShotError(f"--spp must be in [1, {MAX_REFERENCE_SPP}] (the Sobol table: more would repeat its points)")
     check_scene_options(args)
     if args.object is not None and args.materials is not None:
         raise ShotError("--materials edits a scene's materials; with --object use --material")

@@ -1,8 +1,10 @@
 """Convergence of the progressive refinement (thesis 4.4.2) against a converged reference.
 
 The interactive viewer adds, per still frame, a batch of quasi-random MIS samples continuing
-the same Sobol sequence; rendering `reference` with spp = K x batch therefore equals K
-accumulated frames. This script measures the relative RMSE against a reference of
+the same Sobol sequence; rendering `reference` with spp = K x batch at the pixel centres
+(pixel_filter 'point') therefore equals K accumulated frames of one half of the viewer's
+refinement without its sub-pixel positions (app/refinement.py), whose error this
+measures. This script measures the relative RMSE against a reference of
 --reference-spp samples per lobe (a different per-pixel scrambling seed, so it is an
 independent estimate) for K = 1, 2, 4, ..., fits the log-log slope and plots error against K
 beside the 1/sqrt(K) line of plain Monte Carlo.
@@ -50,7 +52,15 @@ def main(argv=None) -> int:
         what = f"preview sphere, {args.preview}, {args.env or 'builtin:studio'}"
 
         def render(spp, seed):
-            return renderer.render(camera, bsdf, Method("reference", args.batch), spp=spp, seed=seed, background=False)
+            return renderer.render(
+                camera,
+                bsdf,
+                Method("reference", args.batch),
+                spp=spp,
+                seed=seed,
+                background=False,
+                pixel_filter="point",
+            )
     else:
         from lobeview.scenes.demo import build_demo_scene
         from lobeview.scenes.gltf_loader import load_gltf
@@ -65,7 +75,7 @@ def main(argv=None) -> int:
         what = "demo scene, camera 'table'"
 
         def render(spp, seed):
-            return renderer.render(camera, Method("reference", args.batch), spp=spp, seed=seed)
+            return renderer.render(camera, Method("reference", args.batch), spp=spp, seed=seed, pixel_filter="point")
 
     print(f"[convergence] reference: {args.reference_spp} spp per lobe", file=sys.stderr, flush=True)
     reference = render(args.reference_spp, seed=99).radiance

@@ -221,7 +221,8 @@ def refinement_against_ray_tracing(ctx, camera, size, spp: int, figure_path: Pat
         images = {}
         for averaged in (False, True):
             renderer.mirror_plane_average = averaged
-            result = renderer.render(camera, "reference", spp=spp)
+            # at the pixel centres: the ray tracer below starts from the G-buffer's points
+            result = renderer.render(camera, "reference", spp=spp, pixel_filter="point")
             images[averaged] = result.radiance
         renderer.release()
         floor = result.object_id == 0

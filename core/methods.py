@@ -45,6 +45,9 @@ NORMALIZE_SUFFIX = "+norm"
 # min(spp, MIN_PIXEL_POSITIONS) passes (smaller batches) to resolve what a pixel covers.
 PIXEL_FILTERS = ("box", "point")
 MIN_PIXEL_POSITIONS = 64
+# A reference reads the renderer's table of 65 536 Sobol points (viewer/render_base.py) once:
+# more samples per lobe would wrap around it and add the same points again.
+MAX_REFERENCE_SPP = 65536
 
 # MIP level bias b in lod = 0.5 log2(Omega_s / Omega_p) + b, chosen by `lobeview bench`'s sweep
 # (mean PSNR over 6 material classes x 2 HDR environments at 640x400, b in -1..2; details in
@@ -147,6 +150,11 @@ class Method:
         the batch (every pass at the pixel centre). Other methods are one pass, unchanged."""
         if pixel_filter not in PIXEL_FILTERS:
             raise MethodError(f"unknown pixel filter {pixel_filter!r}; use one of {', '.join(PIXEL_FILTERS)}")
+        if self.kind == "reference" and not 1 <= spp <= MAX_REFERENCE_SPP:
+            raise MethodError(
+                f"reference: {spp} samples per lobe; use 1 to {MAX_REFERENCE_SPP} (the Sobol table's size: "
+                "more would repeat its points)"
+            )
         if self.kind != "reference" or pixel_filter == "point":
             return self
         return Method("reference", max(1, min(self.samples, spp // MIN_PIXEL_POSITIONS)))

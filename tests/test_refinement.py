@@ -22,7 +22,7 @@ from lobeview.app.refinement import (
     RefinementEstimate,
     two_half_estimate,
 )
-from lobeview.core.methods import MIN_PIXEL_POSITIONS, REFERENCE_BATCH, Method, MethodError
+from lobeview.core.methods import MAX_REFERENCE_SPP, MIN_PIXEL_POSITIONS, REFERENCE_BATCH, Method, MethodError
 from lobeview.viewer.camera import Camera, jittered, pixel_offset
 from lobeview.viewer.tonemap import tonemap
 
@@ -65,6 +65,10 @@ def test_the_box_filter_takes_at_least_64_sub_pixel_positions():
     assert Method.parse("lobe-7").for_pixel_filter(1024, "box") == Method.parse("lobe-7")
     with pytest.raises(MethodError, match="pixel filter"):
         reference.for_pixel_filter(64, "gauss")
+    # the Sobol table is read once: no silent wrap-around
+    assert reference.for_pixel_filter(MAX_REFERENCE_SPP, "point") == reference
+    with pytest.raises(MethodError, match="Sobol table"):
+        reference.for_pixel_filter(MAX_REFERENCE_SPP + 1, "box")
 
 
 def _bands(d):

@@ -10,7 +10,7 @@ import numpy as np
 from scipy.stats import qmc
 
 from lobeview.core.cache import BoundedCache
-from lobeview.core.methods import MAX_LOBES, Method
+from lobeview.core.methods import MAX_LOBES, MAX_REFERENCE_SPP, Method
 from lobeview.materials.banks import BANKS_AZIMUTHS, fit_banks
 from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_maps, is_isotropic
@@ -31,6 +31,7 @@ from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
 from .shaders import ProgramCache
 
 SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
+assert SOBOL_SIDE * SOBOL_SIDE == MAX_REFERENCE_SPP  # a reference never wraps around the table
 SOBOL_SEED = 20100501
 MAX_MATERIAL_TEXTURES = 64  # per-material textures kept (live material edits make new ones)
 
