@@ -134,7 +134,8 @@ def furnace_check(
     object pixels with the numpy directional albedo at the same view. Prefiltered maps of an
     anisotropic lobe store the azimuth-averaged albedo (an isotropic map cannot follow the view
     azimuth), so there the bound holds on the mean only."""
-    result = renderer.render(STRESS_CAMERA, bsdf, Method.parse(method), spp=spp, background=False)
+    # at the pixel centres, where the G-buffer's view and normal are (pixel_filter 'point')
+    result = renderer.render(STRESS_CAMERA, bsdf, Method.parse(method), spp=spp, background=False, pixel_filter="point")
     tolerance, rule = furnace_tolerance(method, anisotropic)
     if method.startswith("prefiltered") and anisotropic:
         rule = "mean"
