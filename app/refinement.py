@@ -32,10 +32,12 @@ the last one (a read back of three frames).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy.ndimage import uniform_filter
 
+from lobeview.viewer.camera import pixel_offset
 from lobeview.viewer.render_base import SOBOL_SIDE
 from lobeview.viewer.tonemap import tonemap
 
@@ -102,6 +104,17 @@ def two_half_estimate(
     )
 
 
+class RefinementPass(NamedTuple):
+    """One refinement pass: draw ``samples`` reference samples per lobe with the shader's seed =
+    ``half``, from Sobol index ``sample_offset``, at sub-pixel position ``jitter``; then
+    Refinement.added(samples actually drawn, half)."""
+
+    samples: int
+    half: int
+    sample_offset: int
+    jitter: tuple[float, float]
+
+
 class Refinement:
     """The refinement state of one still period: samples, the adaptive batch, the halves'
     weights, the last estimate and whether the refined image is shown or refinement is done."""
@@ -124,20 +137,21 @@ class Refinement:
         ratio = TARGET_FRAME_MS / max(pass_ms, 1e-3)
         self.batch = int(np.clip(self.batch * np.clip(ratio, 0.5, 2.0), 1, MAX_BATCH))
 
-    def next_pass(self) -> tuple[int, int]:
-        """(samples, half) of the next pass: the half holding fewer samples (that is not done),
-        the batch cut to that half's budget."""
+    def next_pass(self) -> RefinementPass:
+        """The next pass: into the half holding fewer samples (that is not done), the batch cut
+        to that half's budget, at that half's next sub-pixel position. Half B's Sobol indices
+        start one table further: the shader reads index i at i mod table size, so both halves
+        read the same points, and only a first pass of all (offset 0) starts the reflectors'
+        plane averages afresh (shaders/incident.glsl)."""
         half = int(self.weights[1] < self.weights[0])
         if self.weights[half] >= HALF_SAMPLE_BUDGET:
             half = 1 - half
-        return min(int(self.batch), HALF_SAMPLE_BUDGET - int(self.weights[half])), half
-
-    def sample_offset(self, half: int) -> int:
-        """The first Sobol index of ``half``'s next pass. Half B's indices start one table
-        further: the shader reads index i at i mod table size, so both halves read the same
-        points, and only a first pass of all (offset 0) starts the reflectors' plane averages
-        afresh (shaders/incident.glsl)."""
-        return int(self.weights[half]) + half * HALF_SAMPLE_BUDGET
+        return RefinementPass(
+            samples=min(int(self.batch), HALF_SAMPLE_BUDGET - int(self.weights[half])),
+            half=half,
+            sample_offset=int(self.weights[half]) + half * HALF_SAMPLE_BUDGET,
+            jitter=pixel_offset(self.half_passes[half], stream=half),
+        )
 
     def added(self, samples: int, half: int) -> None:
         self.samples += samples

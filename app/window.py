@@ -30,7 +30,7 @@ from lobeview.app.script import run_due_steps
 from lobeview.app.walk import WalkCamera, walk_speed_for
 from lobeview.core.methods import Method
 from lobeview.scenes.hdrio import write_hdr_image
-from lobeview.viewer.camera import Camera, pixel_offset
+from lobeview.viewer.camera import Camera
 from lobeview.viewer.display import Accumulator, RefinementBlend
 from lobeview.viewer.tonemap import to_uint8, tonemap
 
@@ -361,17 +361,15 @@ class LobeviewWindow(mglw.WindowConfig):
         """One refinement pass: a batch of reference samples at the next sub-pixel position into
         the running mean and one half; the two-half estimate when due (app/refinement.py)."""
         refinement = self.refinement
-        samples, half = refinement.next_pass()
-        batch = Method("reference", samples)
+        plan = refinement.next_pass()
+        batch = Method("reference", plan.samples)
         if self.renderer.has_rational:
             batch = batch.for_rational()
-        jitter = pixel_offset(refinement.half_passes[half], stream=half)
         self.scene_passes += 1
-        offset = refinement.sample_offset(half)
-        self.renderer.draw_frame(camera, batch, sample_offset=offset, seed=half, jitter=jitter)
+        self.renderer.draw_frame(camera, batch, sample_offset=plan.sample_offset, seed=plan.half, jitter=plan.jitter)
         self.accumulator.add(self.renderer.radiance_target, float(batch.samples))
-        self.halves[half].add(self.renderer.radiance_target, float(batch.samples))
-        refinement.added(batch.samples, half)
+        self.halves[plan.half].add(self.renderer.radiance_target, float(batch.samples))
+        refinement.added(batch.samples, plan.half)
         if refinement.estimate_due:
             halves = [acc.radiance() for acc in self.halves]
             estimate = two_half_estimate(

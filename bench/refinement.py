@@ -26,27 +26,25 @@ CHECKPOINTS = (8, 16, 32, 64, 128, 256, 512)
 
 def replay(renderer, camera, realtime: np.ndarray, batch: int, checkpoints, say):
     """Yield (spp, mean, estimate) at each checkpoint of a refinement replayed as the window
-    runs it (app/window.py _refine), against the real-time frame ``realtime``."""
-    from lobeview.app.refinement import HALF_SAMPLE_BUDGET, two_half_estimate
+    runs it (app/window.py _refine, with a fixed batch), against the real-time frame ``realtime``."""
+    from lobeview.app.refinement import Refinement, two_half_estimate
     from lobeview.core.methods import Method
-    from lobeview.viewer.camera import pixel_offset
 
+    refinement = Refinement()
+    refinement.batch = batch
     sums = [np.zeros_like(realtime), np.zeros_like(realtime)]
-    weights, passes, total = [0, 0], [0, 0], 0
-    while total < max(checkpoints):
-        half = int(weights[1] < weights[0])
-        offset = weights[half] + half * HALF_SAMPLE_BUDGET
-        jitter = pixel_offset(passes[half], stream=half)
-        renderer.draw_frame(camera, Method("reference", batch), sample_offset=offset, seed=half, jitter=jitter)
-        sums[half] += renderer.read(0)[..., :3] * batch
-        weights[half] += batch
-        passes[half] += 1
-        total += batch
-        if total in checkpoints:
-            halves = [s / w for s, w in zip(sums, weights, strict=True)]
-            estimate = two_half_estimate(halves[0], weights[0], halves[1], weights[1], realtime)
-            say(f"[refinement] {total} spp: estimated noise {estimate.noise * 255:.2f}")
-            yield total, (sums[0] + sums[1]) / total, estimate
+    while refinement.samples < max(checkpoints):
+        plan = refinement.next_pass()
+        renderer.draw_frame(
+            camera, Method("reference", plan.samples), plan.sample_offset, seed=plan.half, jitter=plan.jitter
+        )
+        sums[plan.half] += renderer.read(0)[..., :3] * plan.samples
+        refinement.added(plan.samples, plan.half)
+        if refinement.samples in checkpoints:
+            weights = refinement.weights
+            estimate = two_half_estimate(sums[0] / weights[0], weights[0], sums[1] / weights[1], weights[1], realtime)
+            say(f"[refinement] {refinement.samples} spp: estimated noise {estimate.noise * 255:.2f}")
+            yield refinement.samples, (sums[0] + sums[1]) / refinement.samples, estimate
 
 
 def main(argv=None) -> int:

@@ -205,9 +205,10 @@ def test_refinement_alternates_independent_halves_and_estimates_at_doublings():
     refinement.batch = 4
     seen = []
     while refinement.samples < 4 * FIRST_ESTIMATE_AT:
-        samples, half = refinement.next_pass()
-        seen.append((half, refinement.sample_offset(half), refinement.half_passes[half]))
-        refinement.added(samples, half)
+        plan = refinement.next_pass()
+        assert plan.jitter == pixel_offset(refinement.half_passes[plan.half], stream=plan.half)
+        seen.append((plan.half, plan.sample_offset, refinement.half_passes[plan.half]))
+        refinement.added(plan.samples, plan.half)
         if refinement.estimate_due:
             assert refinement.samples in (FIRST_ESTIMATE_AT, 2 * FIRST_ESTIMATE_AT, 4 * FIRST_ESTIMATE_AT)
             refinement.update(_estimate(refinement.samples, 0.1))
@@ -229,11 +230,12 @@ def test_refinement_stops_when_converged_or_at_the_sobol_table():
     refinement = Refinement()
     refinement.batch = 48  # not a divisor of the table: the last pass of each half is cut
     while not refinement.finished:
-        samples, half = refinement.next_pass()
-        assert samples > 0
-        refinement.added(samples, half)
+        plan = refinement.next_pass()
+        assert plan.samples > 0
+        refinement.added(plan.samples, plan.half)
         assert max(refinement.weights) <= HALF_SAMPLE_BUDGET
-        assert refinement.sample_offset(half) - half * HALF_SAMPLE_BUDGET <= HALF_SAMPLE_BUDGET
+        # the pass just drawn ends within its half's table
+        assert plan.sample_offset + plan.samples - plan.half * HALF_SAMPLE_BUDGET <= HALF_SAMPLE_BUDGET
     assert refinement.weights == [HALF_SAMPLE_BUDGET, HALF_SAMPLE_BUDGET]
     assert "sample budget" in refinement.finished
     assert refinement.estimate_due  # one last estimate of the final image

@@ -18,7 +18,7 @@ from lobeview.materials.bsdf import BSDF
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import Mesh
 
-from .camera import Camera, jittered, pixel_offset
+from .camera import Camera, jittered
 from .cubemap import EnvironmentCubes
 from .interface import bind_sampler, method_defines, set_uniform
 from .material_gpu import pack_material
@@ -72,11 +72,8 @@ class PreviewRenderer(RendererBase):
         sub-pixel position), or 'point', the pixel centre (what the G-buffer holds). The
         G-buffer is always pass 0's, at the pixel centre."""
         method = Method.parse(method) if isinstance(method, str) else method
-        method = method.for_pixel_filter(spp, pixel_filter)
-        jitter = method.kind == "reference" and pixel_filter == "box"
         material = pack_material(bsdf)
-        if material.has_rational:
-            method = method.for_rational()
+        method, offsets = self.pass_plan(method, spp, pixel_filter, material.has_rational)
         program, vao = self._program(method, material.has_diffuse, material.has_rational)
         width, height = self.size
         model = np.eye(4) if model is None else np.asarray(model, dtype=np.float64)
@@ -90,13 +87,13 @@ class PreviewRenderer(RendererBase):
         self.bind_cube(program, self.cubes, method, material)
         bind_sampler(program, "u_irradiance", self.cubes.irradiance)
 
-        passes = method.passes(spp)
+        passes = len(offsets)
         accumulated = np.zeros((height, width, 3), dtype=np.float64)
         invalid = np.zeros((height, width), dtype=bool)
         timings = {"shade": 0.0}
         g_buffers = None
-        for p in range(passes):
-            pass_view_proj = jittered(view_proj, pixel_offset(p), self.size) if jitter else view_proj
+        for p, offset in enumerate(offsets):
+            pass_view_proj = jittered(view_proj, offset, self.size)
             set_uniform(program, "u_view_projection", tuple(pass_view_proj.T.astype("f4").ravel()))
             set_uniform(program, "u_sample_offset", p * method.samples)
             t0 = time.perf_counter()

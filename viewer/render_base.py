@@ -16,6 +16,7 @@ from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_maps, is_isotropic
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
 
+from .camera import pixel_offset
 from .cubemap import RadianceCube
 from .frame import FrameTargets
 from .interface import (
@@ -152,6 +153,20 @@ class RendererBase:
             except moderngl.Error:
                 self._timer = False
         return self._timer or None
+
+    @staticmethod
+    def pass_plan(method: Method, spp: int, pixel_filter: str, has_rational: bool) -> tuple[Method, list]:
+        """The method of each pass and the passes' sub-pixel positions (pixels from the centre)
+        for ``spp`` samples per lobe: a box-filtered reference moves each pass (pixel_offset,
+        pass 0 at the centre), everything else shades the pixel centres; a Rational BRDF's
+        reference passes shrink (Method.for_rational)."""
+        method = method.for_pixel_filter(spp, pixel_filter)
+        if has_rational:
+            method = method.for_rational()
+        passes = method.passes(spp)
+        if method.kind == "reference" and pixel_filter == "box":
+            return method, [pixel_offset(p) for p in range(passes)]
+        return method, [(0.0, 0.0)] * passes
 
     def read(self, attachment: int) -> np.ndarray:
         """(H, W, 4) of G-buffer target ``attachment``, row 0 at the top."""

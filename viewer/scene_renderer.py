@@ -31,7 +31,7 @@ from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
 
-from .camera import Camera, jittered, pixel_offset
+from .camera import Camera, jittered
 from .cube_bake import CubeBake, scene_content_key
 from .cubemap import RadianceCube, equirect_to_cube_faces
 from .interface import (
@@ -544,23 +544,19 @@ class SceneRenderer(RendererBase):
         """``pixel_filter`` as in PreviewRenderer.render: 'box' (default) makes a reference the
         pixel's integral, 'point' shades every pass at the pixel centre."""
         method = Method.parse(method) if isinstance(method, str) else method
-        method = method.for_pixel_filter(spp, pixel_filter)
-        jitter = method.kind == "reference" and pixel_filter == "box"
-        if self.has_rational:
-            method = method.for_rational()
+        method, offsets = self.pass_plan(method, spp, pixel_filter, self.has_rational)
         width, height = self.size
-        passes = method.passes(spp)
+        passes = len(offsets)
         accumulated = np.zeros((height, width, 3))
         invalid = np.zeros((height, width), dtype=bool)
         t_shade = 0.0
         t_gpu = 0.0
         timer = self.gpu_timer()
         g_buffers = None
-        for p in range(passes):
+        for p, offset in enumerate(offsets):
             t0 = time.perf_counter()
             _ = self.ctx.error  # reset the flag: only errors of this frame's passes count below
             with timer or contextlib.nullcontext():
-                offset = pixel_offset(p) if jitter else (0.0, 0.0)
                 self.draw_frame(camera, method, p * method.samples, lod_bias, seed, jitter=offset)
             self.ctx.finish()
             self.raise_on_gl_error(method)
