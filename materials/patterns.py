@@ -25,6 +25,14 @@ Steps, with the thesis equations:
   5. Quadrature (Eq. 4.25):  L = sum L_i cos_i^2 f_i^2 / p_i  /  sum f_i cos_i , with f the lobe
      BSDF, p its importance pdf (Eq. 4.9), samples below the horizon discarded. Eq. 4.24
      (sum L_i cos_i^2 f_i / sum p_i cos_i) is available for comparison.
+  6. Lobes with their own inverse-CDF sampler and no half-vector distribution of their shape (the
+     Rational BRDF, seed 002: ``sampled_pattern = True``): the pattern is the golden-ratio lattice
+     of :func:`lattice_xi` mapped through the lobe's sampler, so the samples are distributed by
+     its density p; each sample covers the solid angle 1 / (N p) (its MIP level) and the
+     quadrature is the importance-sampling one, (1/N) sum L f cos / p, or with the energy
+     normalisation the self-normalised sum L f cos / p / sum f cos / p times the albedo. Eq.
+     4.25 assumes samples spread evenly over the lobe's core, weighted by f cos / p towards the
+     lobe's shape; with p-distributed samples it would weight by the squared lobe.
 """
 
 from __future__ import annotations
@@ -50,6 +58,11 @@ ANISOTROPY_LINE_RATIO = 3.0  # max/min roughness at which the line pattern repla
 MULTI_RING_SAMPLES_PER_RING = 3  # thesis 4.5.3 / Fig. 4.34: rings of three samples
 MAX_ELLIPSE_ANGLE = np.radians(80.0)  # Eq. 4.15 blows up at 90 deg; wider lobes are clamped
 PATTERN_KINDS = ("ring", "multi_ring", "line_x", "line_y")
+# 1 / golden ratio: the rank-1 lattice of lattice_xi (a Fibonacci lattice for any n)
+GOLDEN_LATTICE_STEP = (np.sqrt(5.0) - 1.0) / 2.0
+# Second coordinate of the lattice's first point: 0.25 is the middle of the first half of [0, 1),
+# for the Rational sampler the median azimuth on one side (u2 < 1/2 picks one side, Eq. 9).
+LATTICE_U2_START = 0.25
 
 
 def choose_pattern(alpha_x: float, alpha_y: float, planar: bool = False) -> str:
@@ -98,6 +111,16 @@ def pattern_xi(n: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
         xi1 += [1.0 - radius] * count
         xi2 += list((np.arange(count) + 0.5 * (j % 2)) / count)
     return np.array(xi1), np.array(xi2)
+
+
+def lattice_xi(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """n points of the golden-ratio rank-1 lattice in [0, 1)^2, u1 = (i + 1/2) / n stratified and
+    u2 = frac(1/4 + i / golden ratio): the deterministic pattern of lobes sampled through their
+    own inverse CDFs (step 6 above). Any n; at Fibonacci numbers it is the Fibonacci lattice."""
+    if n < 1:
+        raise ValueError(f"a lobe pattern needs at least one sample, got n = {n}")
+    i = np.arange(n, dtype=np.float64)
+    return (i + 0.5) / n, (LATTICE_U2_START + i * GOLDEN_LATTICE_STEP) % 1.0
 
 
 def theta_thresh(distribution: MicrofacetDistribution, phi: np.ndarray, xi_border: float = XI_BORDER):
@@ -204,7 +227,12 @@ def integrate_lobe(
     With ``albedo_table`` (lobeview's energy normalisation, not in the thesis) the Eq. 4.25
     result is rescaled by albedo(wo) / Eq. 4.25(L = 1): exact under a uniform environment, so
     lobes wider than their pattern or cut by the horizon keep their true energy.
+
+    A lobe with ``sampled_pattern`` (the Rational BRDF) uses step 6 of the module docstring:
+    ``kind`` and ``weighting`` do not apply to it.
     """
+    if getattr(lobe, "sampled_pattern", False):
+        return integrate_sampled_lobe(lobe, wo, radiance, n, face_size, frame, albedo_table)
     samples = lobe_samples(lobe, wo, n, face_size, frame, kind)
     valid = samples.valid
     if not np.any(valid):
@@ -236,6 +264,37 @@ def integrate_lobe(
     else:
         raise ValueError(f"unknown weighting {weighting!r}; use 'eq4.25' or 'eq4.24'")
     return np.where(den > 0.0, num / np.where(den > 0.0, den, 1.0), 0.0)
+
+
+def integrate_sampled_lobe(
+    lobe,
+    wo: np.ndarray,
+    radiance: RadianceFn,
+    n: int,
+    face_size: int = 256,
+    frame: np.ndarray | None = None,
+    albedo_table: AlbedoTable | None = None,
+    lod_bias: float = LOBE_LOD_BIAS,
+) -> np.ndarray:
+    """lobe-N of a lobe with its own sampler (step 6 of the module docstring): the lattice of
+    :func:`lattice_xi` through ``lobe._sample(u1, u2, wo) -> (wi, 1 / p)``, one MIP level per
+    sample from its solid angle 1 / (N p) (Eq. 4.16-4.17 with that area)."""
+    u1, u2 = lattice_xi(n)
+    wo = np.asarray(wo, dtype=np.float64).reshape(3)
+    wi, inverse_pdf = lobe._sample(u1, u2, wo)
+    ok = (inverse_pdf > 0.0) & (wi[:, 2] > 0.0)
+    if not np.any(ok):
+        return np.zeros(3)
+    wi, inverse_pdf = wi[ok], inverse_pdf[ok]
+    world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
+    lod = cube_map_lod(world, inverse_pdf / n, face_size) + lod_bias
+    li = np.asarray(radiance(world, lod), dtype=np.float64)
+    weight = lobe.eval(wi, np.broadcast_to(wo, wi.shape)) * (wi[:, 2] * inverse_pdf)[:, None]  # f cos / p
+    if albedo_table is None:
+        return np.sum(li * weight, axis=0) / n
+    total = np.sum(weight, axis=0)
+    target = albedo_table.lookup(wo)
+    return np.where(total > 0.0, np.sum(li * weight, axis=0) * target / np.where(total > 0.0, total, 1.0), 0.0)
 
 
 ALBEDO_MU = 32  # cos(theta_o) samples of the normalisation table

@@ -27,9 +27,12 @@ sign), so the weight f cos / pdf is Eq. 7's estimator. The density of an arbitra
 multiple importance sampling and the chi-square test) inverts both functions by bisection.
 
 The whole BRDF is one lobe (the paper's point: no diffuse/specular split), lit from the
-object's incident light like every lobe; lobe-N places its pattern with a Beckmann *proxy*
-distribution fitted to the function's theta_d = 0 slice (:func:`proxy_alpha`), which only moves
-where samples go, not what they weigh.
+object's incident light like every lobe. lobe-N maps its deterministic lattice through these
+inverse CDFs (materials/patterns.py step 6: samples distributed by the sampler's density, each
+filtered over 1 / (N p)). A Beckmann *proxy* distribution fitted to the function's theta_d = 0
+slice (:func:`proxy_alpha`) remains for what reads a microfacet width (the lobe's GPU row, the
+split-sum prefiltered mode); an earlier lobe-N placed its ring with it and missed the broad part of p / q (plastic
+fit: 8 dB, bench/results/rational-20261124-223505-quick.md).
 """
 
 from __future__ import annotations
@@ -374,6 +377,9 @@ class RationalLobe(Component):
 
     name = "rational"
     transmission = False
+    #: lobe-N places its pattern through this lobe's inverse CDFs (materials/patterns.py step 6):
+    #: no microfacet distribution has the shape of a fitted p / q (a proxy missed its broad part)
+    sampled_pattern = True
 
     def __init__(self, functions: list, theta_max_deg: float, sampling: SamplingFit, alpha: float | None = None):
         self.functions = list(functions)

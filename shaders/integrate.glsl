@@ -88,7 +88,39 @@ vec2 lobe_pattern_xi(Lobe l, int lobe_index, int i, int n) {
     return u_pattern[lobe_index * MAX_PATTERN + i];
 }
 
+#if defined(HAS_RATIONAL)
+// lobe-N of a lobe sampled through its own inverse CDFs (materials/patterns.py step 6,
+// integrate_sampled_lobe): u_pattern holds the golden-ratio lattice (lattice_xi), mapped by the
+// Rational sampler so that samples are distributed by its density p; each is filtered over its
+// solid angle 1 / (N p) and weighted by f cos / p (importance quadrature; self-normalised and
+// scaled to the albedo with LOBE_NORMALIZE).
+vec3 integrate_sampled_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
+    int n = u_samples;
+    vec3 sum = vec3(0.0);
+    vec3 weight_sum = vec3(0.0);
+    for (int i = 0; i < n; ++i) {
+        float p;
+        vec3 wi = rational_sample(u_pattern[lobe_index * MAX_PATTERN + i], wo, p);
+        if (p <= 0.0 || wi.z <= 0.0) continue;
+        vec3 weight = lobe_eval(l, wi, wo) * (wi.z / p);
+        sum += incident(tbn * wi, 1.0 / (float(n) * p)) * weight;
+        weight_sum += weight;
+    }
+#if defined(LOBE_NORMALIZE)
+    vec3 target = lobe_albedo(l, lobe_index, wo);
+    return vec3(weight_sum.r > 0.0 ? sum.r * target.r / weight_sum.r : 0.0,
+                weight_sum.g > 0.0 ? sum.g * target.g / weight_sum.g : 0.0,
+                weight_sum.b > 0.0 ? sum.b * target.b / weight_sum.b : 0.0);
+#else
+    return sum / float(n);
+#endif
+}
+#endif
+
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
+#if defined(HAS_RATIONAL)
+    if (l.type == LOBE_RATIONAL) return integrate_sampled_lobe(l, lobe_index, wo, tbn);
+#endif
     int n = u_samples;
     float area = lobe_sample_area(l, wo, n);
     vec3 num = vec3(0.0);

@@ -190,6 +190,49 @@ def test_rational_estimator_is_unbiased_against_a_direct_quadrature():
     np.testing.assert_allclose(lobe.pdf(wi[ok], np.broadcast_to(wo, wi[ok].shape)), 1 / inverse_pdf[ok], rtol=1e-6)
 
 
+def _smooth_environment(dirs: np.ndarray, lod=None) -> np.ndarray:
+    """A smooth coloured environment (three broad exponential lights over a constant)."""
+    centres = np.array([[0.6, 0.0, 0.8], [-0.5, 0.7, 0.5], [0.0, -0.8, 0.6]])
+    colours = np.array([[3.0, 1.0, 0.5], [0.4, 2.0, 0.6], [0.5, 0.6, 2.5]])
+    return 0.5 + np.exp(4.0 * (dirs @ centres.T - 1.0)) @ colours
+
+
+def test_lobe_pattern_through_the_rational_sampler_converges_to_the_integral():
+    """lobe-N on a Rational BRDF maps its lattice through the lobe's inverse CDFs (patterns.py
+    step 6). Against a dense midpoint grid of L f cos under a smooth environment: the normalised
+    estimate at N = 19 is within 4 % at every view angle up to 50 deg (measured 0.7-3.1 %), and much better on
+    average than the Beckmann-proxy ring it replaced (2.1-12 % here, up to 35 % at grazing)."""
+    from lobeview.materials.patterns import AlbedoTable, integrate_lobe, lattice_xi
+
+    lobe = _gold().components[0]
+    assert lobe.sampled_pattern
+    u1, u2 = lattice_xi(8)
+    assert np.all(np.diff(u1) > 0) and np.all((u2 >= 0) & (u2 < 1)) and len(set(np.round(u2, 9))) == 8
+    table = AlbedoTable.build(lobe)
+    n_t, n_p = 400, 800
+    t = (np.arange(n_t) + 0.5) * (np.pi / 2) / n_t
+    p = (np.arange(n_p) + 0.5) * 2 * np.pi / n_p
+    tt, pp = np.meshgrid(t, p, indexing="ij")
+    dirs = np.stack([np.sin(tt) * np.cos(pp), np.sin(tt) * np.sin(pp), np.cos(tt)], -1).reshape(-1, 3)
+    measure = (np.cos(tt) * np.sin(tt)).reshape(-1) * (np.pi / 2 / n_t) * (2 * np.pi / n_p)
+    light = _smooth_environment(dirs)
+    errors, proxy_errors = [], []
+    for theta_o in (5.0, 20.0, 35.0, 50.0):
+        wo = direction_from_angles_deg(theta_o, 30.0)
+        f = lobe.eval(dirs, np.broadcast_to(wo, dirs.shape))
+        truth = (light * f * measure[:, None]).sum(0)
+        got = integrate_lobe(lobe, wo, _smooth_environment, 19, albedo_table=table)
+        errors.append(np.abs(got - truth).max() / truth.max())
+        type(lobe).sampled_pattern = False  # the old placement: the Beckmann proxy's ring
+        try:
+            old = integrate_lobe(lobe, wo, _smooth_environment, 19, albedo_table=table)
+        finally:
+            type(lobe).sampled_pattern = True
+        proxy_errors.append(np.abs(old - truth).max() / truth.max())
+    assert max(errors) < 0.04, (errors, proxy_errors)
+    assert np.mean(errors) < 0.5 * np.mean(proxy_errors), (errors, proxy_errors)
+
+
 def test_glsl_twin_matches_numpy_eval_sample_and_pdf():
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.interface import RATIONAL_BINDING

@@ -114,7 +114,7 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     "preset,n,normalize",
     [(p, n, False) for p in MATERIALS + ["chrome", "clear-glass", "lacquer", "porcelain"] for n in (5, 11, 19)]
     + [(p, 7, True) for p in ("alanod-2000gs-2lobe", "frosted-glass", "miro5-2lobe", "gold-ggx", "gltf-red-plastic")]
-    # The Rational BRDF (seed 002): its pattern placed by the proxy distribution.
+    # The Rational BRDF (seed 002): its lattice mapped through the rational inverse CDFs.
     + [(RATIONAL_GOLD, n, normalize) for n, normalize in ((7, False), (11, True))],
 )
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):

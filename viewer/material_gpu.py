@@ -20,7 +20,7 @@ from lobeview.materials.gltf import (
     GltfSpecular,
     GltfTransmission,
 )
-from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, pattern_xi
+from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, lattice_xi, pattern_xi
 from lobeview.materials.rational import graded_exponents
 from lobeview.materials.rational_brdf import RationalLobe
 from lobeview.materials.thesis import KurtLobe
@@ -224,11 +224,14 @@ def pack_patterns(material: PackedMaterial, n: int, planar: bool = False) -> np.
     the multi-ring pattern of thesis 4.5.3 for objects shaded from a mirror buffer. The line
     patterns of strongly anisotropic lobes (:func:`lobeview.materials.patterns.choose_pattern`)
     are chosen and placed per pixel by shaders/integrate.glsl lobe_pattern_xi, since a roughness
-    or anisotropy texture changes a lobe's anisotropy from pixel to pixel."""
+    or anisotropy texture changes a lobe's anisotropy from pixel to pixel. A lobe sampled through
+    its own inverse CDFs (``sampled_pattern``: the Rational BRDF) gets the lattice of
+    :func:`lobeview.materials.patterns.lattice_xi` instead (integrate.glsl integrate_sampled_lobe)."""
     if not 1 <= n <= MAX_PATTERN:
         raise ValueError(f"lobe-N supports 1 <= N <= {MAX_PATTERN}, got {n}")
     out = np.zeros((MAX_LOBES * MAX_PATTERN, 2), dtype=np.float32)
-    xi1, xi2 = pattern_xi(n, choose_pattern(1.0, 1.0, planar))  # ring or multi-ring
-    for i in range(len(material.lobe_distributions)):
-        out[i * MAX_PATTERN : i * MAX_PATTERN + n] = np.stack([xi1, xi2], -1)
+    ring = np.stack(pattern_xi(n, choose_pattern(1.0, 1.0, planar)), -1)  # ring or multi-ring
+    lattice = np.stack(lattice_xi(n), -1)
+    for i, comp in enumerate(material.lobe_components):
+        out[i * MAX_PATTERN : i * MAX_PATTERN + n] = lattice if getattr(comp, "sampled_pattern", False) else ring
     return out
