@@ -32,7 +32,7 @@ def add_method_arguments(p, default: str = "lobe-11", what: str = "") -> None:
         action=argparse.BooleanOptionalAction,
         default=True,
         help="lobe-N: rescale Eq. 4.25 by each lobe's directional albedo, exact under uniform light"
-        " (default on, lobe-N+norm; --no-lobe-normalize: Eq. 4.25 as printed)",
+        " (default on, lobe-N+norm; --no-lobe-normalize: Eq. 4.25 as printed; lobe-N+eq4.24 is never normalised)",
     )
 
 

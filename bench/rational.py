@@ -90,7 +90,8 @@ def compare(name: str, quick: bool, say) -> list[str]:
     return lines + [""], [(label, desc) for label, desc, _, _ in rows]
 
 
-RENDER_METHODS = ("lobe-7", "lobe-15")
+# lobe-N with the energy normalisation: what `shot` and the viewer use by default (--lobe-normalize)
+RENDER_METHODS = ("lobe-7+norm", "lobe-15+norm")
 
 
 def rendered_section(fits: dict, quick: bool, env_path: str, say) -> list[str]:

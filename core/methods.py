@@ -3,6 +3,8 @@ tables, the scripts and every printed command.
 
     lobe-N[+norm]   the thesis' deterministic in-lobe pattern, N in [1, MAX_PATTERN]; ``+norm``:
                     lobeview's energy normalisation of Eq. 4.25 by the lobe's albedo table
+    lobe-N+eq4.24   the same pattern with the thesis' derived quadrature Eq. 4.24 instead of
+                    its empirical Eq. 4.25 (for the comparison of Fig. 4.24; not normalised)
     fis-N           filtered importance sampling (Colbert & Krivanek 2007), N in [1, MAX_SAMPLES]
     mc-N            plain importance sampling, no filtering
     reference       converged MIS integration, REFERENCE_BATCH samples per lobe and pass
@@ -40,6 +42,9 @@ REFERENCE_BATCH = 64  # samples per lobe per pass of the reference method
 # CDFs (measured: 2 % black pixels in a grid at 64 samples per pass, none at 4).
 RATIONAL_REFERENCE_BATCH = 4
 NORMALIZE_SUFFIX = "+norm"
+#: lobe-N quadratures (thesis 4.4.3): Eq. 4.25 (lobeview's and the thesis' choice) and Eq. 4.24
+WEIGHTINGS = ("eq4.25", "eq4.24")
+EQ424_SUFFIX = "+eq4.24"
 # A reference is the pixel's integral under a box filter: each pass shades at another sub-pixel
 # position (viewer/camera.py pixel_offset), so a reference of spp samples takes at least
 # min(spp, MIN_PIXEL_POSITIONS) passes (smaller batches) to resolve what a pixel covers.
@@ -60,11 +65,11 @@ DEFAULT_FIS_LOD_BIAS = -0.5
 DEFAULT_LOBE_LOD_BIAS = -0.5
 
 _GRAMMAR = re.compile(
-    r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?P<norm>\+norm)?"
+    r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?:(?P<norm>\+norm)|(?P<eq424>\+eq4\.24))?"
     r"|(?P<reference>reference)"
     r"|prefiltered(?:-(?P<mode>[a-z0-9]+))?)$"
 )
-GRAMMAR_HELP = "lobe-N[+norm], fis-N, mc-N, reference or prefiltered[-" + "|-".join(PREFILTER_MODES[1:]) + "]"
+GRAMMAR_HELP = "lobe-N[+norm|+eq4.24], fis-N, mc-N, reference or prefiltered[-" + "|-".join(PREFILTER_MODES[1:]) + "]"
 
 
 class MethodError(ValueError):
@@ -77,6 +82,7 @@ class Method:
     samples: int  # N per lobe (reference: per pass; prefiltered: 1)
     normalize: bool = False  # lobe-N: energy normalisation by the lobe's albedo table
     mode: str = ""  # prefiltered: one of PREFILTER_MODES
+    weighting: str = "eq4.25"  # lobe-N: the quadrature, one of WEIGHTINGS
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -87,6 +93,12 @@ class Method:
             raise MethodError(f"reference: samples per pass must be >= 1, got {self.samples}")
         if self.normalize and self.kind != "lobe":
             raise MethodError(f"energy normalisation ({NORMALIZE_SUFFIX}) applies to lobe-N only, not {self.kind}")
+        if self.weighting not in WEIGHTINGS:
+            raise MethodError(f"unknown lobe-N weighting {self.weighting!r}; use one of {', '.join(WEIGHTINGS)}")
+        if self.weighting != "eq4.25" and self.kind != "lobe":
+            raise MethodError(f"{EQ424_SUFFIX} (Eq. 4.24) applies to lobe-N only, not {self.kind}")
+        if self.weighting == "eq4.24" and self.normalize:
+            raise MethodError(f"{NORMALIZE_SUFFIX} normalises Eq. 4.25; {EQ424_SUFFIX} is Eq. 4.24 as printed")
         if self.kind == "prefiltered":
             if self.mode not in PREFILTER_MODES:
                 raise MethodError(f"unknown prefiltered mode {self.mode!r}; use one of {', '.join(PREFILTER_MODES)}")
@@ -107,21 +119,25 @@ class Method:
             if mode not in PREFILTER_MODES:
                 raise MethodError(f"unknown method {text!r}; use {GRAMMAR_HELP}")
             return cls("prefiltered", 1, mode=mode)
-        kind, norm = m.group("kind"), bool(m.group("norm"))
-        if norm and kind != "lobe":
-            raise MethodError(f"{text!r}: {NORMALIZE_SUFFIX} applies to lobe-N only")
-        return cls(kind, int(m.group("n")), normalize=norm)
+        kind, norm, eq424 = m.group("kind"), bool(m.group("norm")), bool(m.group("eq424"))
+        if (norm or eq424) and kind != "lobe":
+            raise MethodError(f"{text!r}: {NORMALIZE_SUFFIX if norm else EQ424_SUFFIX} applies to lobe-N only")
+        return cls(kind, int(m.group("n")), normalize=norm, weighting="eq4.24" if eq424 else "eq4.25")
 
     def __str__(self) -> str:
         if self.kind == "reference":
             return "reference"
         if self.kind == "prefiltered":
             return "prefiltered" if self.mode == "auto" else f"prefiltered-{self.mode}"
-        return f"{self.kind}-{self.samples}" + (NORMALIZE_SUFFIX if self.normalize else "")
+        suffix = NORMALIZE_SUFFIX if self.normalize else EQ424_SUFFIX if self.weighting == "eq4.24" else ""
+        return f"{self.kind}-{self.samples}" + suffix
 
     @property
     def family(self) -> str:
-        """The benchmark's plot family: 'lobe', 'lobe+norm', 'fis', 'mc', 'reference', 'prefiltered'."""
+        """The benchmark's plot family: 'lobe', 'lobe+norm', 'lobe+eq4.24', 'fis', 'mc', 'reference',
+        'prefiltered'."""
+        if self.weighting == "eq4.24":
+            return "lobe" + EQ424_SUFFIX
         return "lobe+norm" if self.normalize else self.kind
 
     def with_samples(self, samples: int) -> Method:
@@ -132,8 +148,11 @@ class Method:
         return dataclasses.replace(self, samples=int(min(max(samples, 1), sample_limit(self.kind))))
 
     def with_normalize(self, normalize: bool) -> Method:
-        """lobe-N with or without energy normalisation; other methods unchanged."""
-        return dataclasses.replace(self, normalize=bool(normalize)) if self.kind == "lobe" else self
+        """lobe-N with or without energy normalisation; other methods, and Eq. 4.24 (which has
+        none), unchanged."""
+        if self.kind != "lobe" or self.weighting == "eq4.24":
+            return self
+        return dataclasses.replace(self, normalize=bool(normalize))
 
     def default_lod_bias(self) -> float:
         return DEFAULT_FIS_LOD_BIAS if self.kind == "fis" else DEFAULT_LOBE_LOD_BIAS
@@ -188,9 +207,10 @@ def method_from_choice(choice: str, samples: int, normalize: bool) -> Method:
 def resolve_cli_method(text: str, lobe_normalize: bool | None) -> Method:
     """``--method`` with ``--lobe-normalize``/``--no-lobe-normalize`` (None: the flag's default,
     on). ``lobe-N+norm`` is normalised whatever the default; with an explicit
-    ``--no-lobe-normalize`` it is a contradiction and refused."""
+    ``--no-lobe-normalize`` it is a contradiction and refused; ``lobe-N+eq4.24`` is Eq. 4.24 as
+    printed whatever the flag (the normalisation is one of Eq. 4.25)."""
     method = Method.parse(text)
-    if method.kind != "lobe":
+    if method.kind != "lobe" or method.weighting == "eq4.24":
         return method
     if method.normalize:
         if lobe_normalize is False:
@@ -202,6 +222,6 @@ def resolve_cli_method(text: str, lobe_normalize: bool | None) -> Method:
 def method_cli_flags(method: Method) -> str:
     """The ``lobeview shot`` flags that select ``method`` (:func:`resolve_cli_method`'s inverse),
     written ``--flag=value`` so that pasting them always works."""
-    if method.kind == "lobe" and not method.normalize:
+    if method.kind == "lobe" and not method.normalize and method.weighting == "eq4.25":
         return f"--method={method} --no-lobe-normalize"
     return f"--method={method}"

@@ -1,6 +1,7 @@
 // Integration of incident light over the lobes of a material (thesis 4.4), for one shading
 // point: the methods of DESIGN.md chosen by #define.
-//   METHOD_LOBE  lobe-N: deterministic pattern, MIP level per sample, Eq. 4.25
+//   METHOD_LOBE  lobe-N: deterministic pattern, MIP level per sample, Eq. 4.25 (Eq. 4.24 with
+//                LOBE_EQ424)
 //   METHOD_FIS   fis-N: the same N quasi-random importance samples at every pixel, each
 //                filtered with Colbert & Krivanek's lod = 0.5 log2(omega_s / omega_p) + bias
 //   METHOD_MC    mc-N / reference: importance samples from a Sobol sequence with a per-pixel
@@ -137,11 +138,17 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         if (p <= 0.0) continue;
         float c = abs(wi.z);
         vec3 li = incident(world, area);
-        // Eq. 4.25: sum L c^2 f^2 / p / sum f c, written as (f c / p) (f c) to stay in range.
         vec3 fc = f * c;
+#if defined(LOBE_EQ424)
+        // Eq. 4.24 (the derived quadrature, thesis Fig. 4.24): sum L c^2 f / sum p c.
+        num += li * fc * c;
+        den += vec3(p * c);
+#else
+        // Eq. 4.25: sum L c^2 f^2 / p / sum f c, written as (f c / p) (f c) to stay in range.
         num += li * (fc / p) * fc;
         num_unit += (fc / p) * fc;
         den += fc;
+#endif
     }
 #if defined(LOBE_NORMALIZE)
     // lobeview's energy normalisation: Eq. 4.25 rescaled to be exact under uniform light.

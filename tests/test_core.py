@@ -34,6 +34,8 @@ def _all_methods():
             yield Method(kind, n)
     for n in (1, 5, 19, MAX_PATTERN):
         yield Method("lobe", n, normalize=True)
+    for n in (1, 15):
+        yield Method("lobe", n, weighting="eq4.24")
     yield Method.parse("reference")
     for mode in PREFILTER_MODES:
         yield Method("prefiltered", 1, mode=mode)
@@ -65,11 +67,14 @@ def test_the_names_the_program_uses_are_canonical():
     for name in names:
         assert str(Method.parse(name)) == name
     assert Method.parse("lobe-7+norm") == Method("lobe", 7, normalize=True)
+    assert Method.parse("lobe-15+eq4.24") == Method("lobe", 15, weighting="eq4.24")
+    assert Method.parse("lobe-15+eq4.24").family == "lobe+eq4.24"
 
 
 @pytest.mark.parametrize(
     "text",
     ["lobe-0", f"lobe-{MAX_PATTERN + 1}", "fis-0", f"mc-{MAX_SAMPLES + 1}", "fis-8+norm", "reference-64",
+     "fis-8+eq4.24", "lobe-7+norm+eq4.24", "lobe-7+eq4.24+norm", "lobe-7+eq424",
      "prefiltered-auto", "prefiltered-nope", "Lobe-3", "lobe-11 (normalised)", "lobe", ""],
 )  # fmt: skip
 def test_names_outside_the_grammar_are_refused(text):
@@ -80,7 +85,9 @@ def test_names_outside_the_grammar_are_refused(text):
 def test_invalid_methods_cannot_be_constructed():
     for bad in (dict(kind="fis", samples=4, normalize=True), dict(kind="lobe", samples=0),
                 dict(kind="prefiltered", samples=1, mode="nope"), dict(kind="mc", samples=4, mode="lobe"),
-                dict(kind="ray", samples=1)):  # fmt: skip
+                dict(kind="ray", samples=1), dict(kind="fis", samples=4, weighting="eq4.24"),
+                dict(kind="lobe", samples=4, normalize=True, weighting="eq4.24"),
+                dict(kind="lobe", samples=4, weighting="eq4.23")):  # fmt: skip
         with pytest.raises(MethodError):
             Method(**bad)
 
@@ -93,6 +100,9 @@ def test_command_line_normalisation_rule_and_its_inverse():
     assert resolve_cli_method("fis-16", False) == Method("fis", 16)
     with pytest.raises(MethodError):
         resolve_cli_method("lobe-11+norm", False)
+    # Eq. 4.24 is never normalised, whatever the flag.
+    for flag in (None, True, False):
+        assert resolve_cli_method("lobe-15+eq4.24", flag) == Method("lobe", 15, weighting="eq4.24")
     from lobeview.app.cli import build_parser
 
     for method in _all_methods():

@@ -115,15 +115,21 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     [(p, n, False) for p in MATERIALS + ["chrome", "clear-glass", "lacquer", "porcelain"] for n in (5, 11, 19)]
     + [(p, 7, True) for p in ("alanod-2000gs-2lobe", "frosted-glass", "miro5-2lobe", "gold-ggx", "gltf-red-plastic")]
     # The Rational BRDF (seed 002): its lattice mapped through the rational inverse CDFs.
-    + [(RATIONAL_GOLD, n, normalize) for n, normalize in ((7, False), (11, True))],
-)
+    + [(RATIONAL_GOLD, n, normalize) for n, normalize in ((7, False), (11, True))]
+    # Eq. 4.24 (lobe-N+eq4.24) on the thesis' Fig. 4.24 materials.
+    + [(p, n, "eq4.24") for p, n in (("gold-ggx", 15), ("alanod-2000gs-2lobe", 15), ("frosted-glass", 5),
+                                     ("lacquer", 7), (RATIONAL_GOLD, 7))],
+)  # fmt: skip
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     from lobeview.core.methods import Method
     from lobeview.viewer.material_gpu import albedo_table_for
 
     renderer, lookup = gl
     bsdf = build_bsdf(load_material(preset))
-    result = renderer.render(CAMERA, bsdf, Method("lobe", n, normalize), background=False)
+    weighting = "eq4.24" if normalize == "eq4.24" else "eq4.25"
+    normalize = normalize is True
+    method = Method("lobe", n, normalize, weighting=weighting)
+    result = renderer.render(CAMERA, bsdf, method, background=False)
     assert not result.invalid.any()
     cube = renderer.cubes.radiance
     for y, x in _pixels(result, count=10, seed=n):
@@ -135,7 +141,9 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
         expected = np.zeros(3)
         for lobe in specular_lobes(bsdf):
             table = albedo_table_for(lobe) if normalize else None
-            expected += integrate_lobe(lobe, wo, radiance, n, renderer.cubes.face_size, frame, albedo_table=table)
+            expected += integrate_lobe(
+                lobe, wo, radiance, n, renderer.cubes.face_size, frame, weighting=weighting, albedo_table=table
+            )
         kd = diffuse_albedo(bsdf)
         if np.any(kd > 0):
             irradiance = lookup(renderer.cubes.irradiance, frame[:, 2][None], 0.0)[0]

@@ -160,6 +160,7 @@ def method_defines(method: Method) -> dict:
         "METHOD_MC": method.kind in ("mc", "reference"),
         "ENV_SAMPLING": method.kind == "reference",
         "LOBE_NORMALIZE": method.kind == "lobe" and method.normalize,
+        "LOBE_EQ424": method.kind == "lobe" and method.weighting == "eq4.24",
         "METHOD_PREFILTERED": method.kind == "prefiltered",
     }
 
