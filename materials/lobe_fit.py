@@ -177,6 +177,7 @@ class LobeMapFit:
     isotropic_approximation: bool  # the component was anisotropic and fitted isotropically
     phong_exponent: float | None = None
     axes: np.ndarray | None = None  # (S, 3) lobe axes when not in the plane of incidence (multi)
+    transmission: bool = False  # the component's lobe lies below the surface
 
     def profile(self, slice_index: int) -> RadialProfile:
         return self.profiles[slice_index if len(self.profiles) > 1 else 0]
@@ -188,8 +189,39 @@ class LobeMapFit:
         return _in_plane(self.peak_theta[slice_index])
 
     def local_axes(self) -> np.ndarray:
-        """(S, 3): :meth:`axis` of every slice (what the renderer's lobe table holds)."""
+        """(S, 3): :meth:`axis` of every slice."""
         return np.stack([self.axis(s) for s in range(len(self.cos_theta_o))])
+
+    def mirror_relative_axes(self) -> np.ndarray:
+        """(S, 3): each slice's axis in the frame of that slice's mirror direction m (straight
+        through for transmission), as (a.e, a.y, a.m) with e = dm/dtheta_o in the plane of
+        incidence: what the renderer's lobe table holds. Interpolating these between slices
+        and rebuilding with the pixel's own mirror frame (:func:`axis_from_mirror_relative`) keeps
+        a mirror-like lobe on its mirror direction; interpolating the axes themselves put it up to
+        7 deg off between the coarse slices near normal incidence (chrome, prefiltered: relRMSE 0.50)."""
+        out = np.empty((len(self.cos_theta_o), 3))
+        for s, c in enumerate(self.cos_theta_o):
+            m, e = _mirror_frame(float(c), self.transmission)
+            a = self.axis(s)
+            out[s] = (a @ e, a[1], a @ m)
+        return out
+
+
+def _mirror_frame(cos_theta_o: float, transmission: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Mirror direction m of wo = (sin, 0, cos) (straight through for transmission) and e = dm/dtheta_o."""
+    sin = np.sqrt(max(1.0 - cos_theta_o * cos_theta_o, 0.0))
+    if transmission:
+        return np.array([-sin, 0.0, -cos_theta_o]), np.array([-cos_theta_o, 0.0, sin])
+    return np.array([-sin, 0.0, cos_theta_o]), np.array([-cos_theta_o, 0.0, -sin])
+
+
+def axis_from_mirror_relative(relative: np.ndarray, cos_theta_o: float, transmission: bool) -> np.ndarray:
+    """The axis (wo at azimuth 0) of mirror-relative coordinates (:meth:`LobeMapFit.mirror_relative_axes`,
+    typically interpolated between slices) at the view elevation ``cos_theta_o``: the numpy twin of
+    shaders/prefiltered.glsl's reconstruction."""
+    m, e = _mirror_frame(cos_theta_o, transmission)
+    a = relative[0] * e + np.array([0.0, relative[1], 0.0]) + relative[2] * m
+    return a / np.linalg.norm(a)
 
 
 def _interp_profiles(profiles: list) -> RadialProfile:
@@ -235,7 +267,10 @@ def _fit(component: Component, mode: str, slices: int) -> LobeMapFit:
         errors.append(
             relative_rms(comp, wo, lambda d, shape=shape, axis=axis, scale=scale: scale * shape.of_cosine(d @ axis))
         )
-    return LobeMapFit(mode, cosines, peaks, shapes, energies, np.array(errors), anisotropic, exponent)
+    return LobeMapFit(
+        mode, cosines, peaks, shapes, energies, np.array(errors), anisotropic, exponent,
+        transmission=bool(comp.transmission),
+    )  # fmt: skip
 
 
 def _fill_empty_slices(shapes: list) -> list:
@@ -384,6 +419,7 @@ def _fit_multi(component: Component, slices: int, lobes: int = MAP_LOBES) -> lis
                 np.zeros(len(cosines)),
                 anisotropic,
                 axes=axes,
+                transmission=bool(comp.transmission),
             )
         )
     errors = []

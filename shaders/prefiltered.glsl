@@ -14,6 +14,9 @@ uniform int u_lobe_map_mode[MAX_LOBES];        // LOBE_MAP_SPLITSUM, LOBE_MAP_LO
 uniform int u_lobe_map_depth[MAX_LOBES];       // slices per fitted lobe (LOBE_SLICES or 1), Banks slices
 uniform int u_lobe_map_count[MAX_LOBES];       // fitted lobes in the lobe map
 uniform int u_banks_fibre[MAX_LOBES];          // Banks fibre axis: 0 tangent, 1 bitangent
+// Median angle below which a fitted lobe is read from the radiance cube's MIP chain instead of its
+// map, which cannot resolve it (viewer/prefiltered.py lobe_direct_angle; 0: never).
+uniform float u_lobe_direct_angle[MAX_LOBES];
 // render_base.lobe_table: row lobe_index * LOBE_TABLE_ROWS + j; texels 0..S-1 the axis of
 // fitted lobe j (local, wo at azimuth 0), S..2S-1 its energy (Banks: albedo at azimuth j).
 uniform sampler2D u_lobe_table;
@@ -65,14 +68,29 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     // Rotation of the local frame that takes azimuth 0 to wo's azimuth.
     float len_xy = length(wo.xy);
     vec2 u = len_xy > 1e-7 ? wo.xy / len_xy : vec2(-1.0, 0.0);
+    bool transmission = lobe_is_transmission(l);
+    vec3 m = vec3(-len_xy, 0.0, transmission ? -wo.z : wo.z);  // mirror direction at azimuth 0
     int count = u_lobe_map_count[lobe_index];
     int depth = u_lobe_map_depth[lobe_index];
     vec3 sum = vec3(0.0);
     for (int j = 0; j < count; ++j) {
         int row = lobe_index * LOBE_TABLE_ROWS + j;
+        // The axis relative to the mirror direction (lobe_fit.mirror_relative_axes), rebuilt in
+        // this pixel's own mirror frame (m, e = dm/dtheta_o) at azimuth 0, then rotated to wo's.
         vec3 a = lobe_table_mix(row, s0, f);
         vec3 energy = lobe_table_mix(row, LOBE_SLICES + s0, f);
-        vec3 axis = tbn * normalize(vec3(a.x * u + a.y * vec2(-u.y, u.x), a.z));
+        vec3 e = transmission ? vec3(-wo.z, 0.0, len_xy) : vec3(-wo.z, 0.0, -len_xy);
+        vec3 local0 = a.x * e + vec3(0.0, a.y, 0.0) + a.z * m;
+        vec3 axis = tbn * normalize(vec3(local0.x * u + local0.y * vec2(-u.y, u.x), local0.z));
+        float median = mix(texelFetch(u_lobe_table, ivec2(s0, row), 0).w,
+                           texelFetch(u_lobe_table, ivec2(s0 + 1, row), 0).w, f);
+        if (median < u_lobe_direct_angle[lobe_index]) {
+            // Narrower than the map resolves: the cube's MIP chain over the lobe's footprint
+            // (lookup() follows the reflection proxy and its footprint change itself).
+            float area = LOBE_DIRECT_AREA_PER_MEDIAN2 * median * median;
+            sum += lookup(axis, cube_lod(axis, area, u_face_size)) * energy;
+            continue;
+        }
 #if defined(PARALLAX)
         float unused_offset;
         axis = proxy_direction(axis, unused_offset);

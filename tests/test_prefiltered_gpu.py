@@ -17,15 +17,18 @@ from lobeview.materials.fresnel import conductor_f0
 from lobeview.materials.lobe_fit import (
     LUMINANCE,
     MAP_LOBES,
+    axis_from_mirror_relative,
     fit_lobe_map,
     fit_lobe_maps,
     slice_coordinate,
     slice_cosines,
 )
+from lobeview.materials.patterns import cube_map_lod, specular_lobes
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.envmap import EnvironmentMap, equirect_direction
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.context import create_headless_context
+from lobeview.viewer.material_gpu import pack_material
 from lobeview.viewer.preview import PreviewRenderer
 
 THESIS_GLOSSY = '{"model": "thesis", "kd": 0, "lobes": [{"ks": 0.9, "mx": 0.12, "my": 0.12, "r0": 0.5, "alpha": 0.3}]}'
@@ -167,12 +170,13 @@ def test_lobe_map_render_matches_brute_force_prefiltering(gl):
     result = renderer.render(CAMERA, bsdf, "prefiltered", background=False)
     (comp,) = [c for c in bsdf.components if not isinstance(c, CosineSampled)]
     fit = fit_lobe_map(comp, "lobe")
+    relative = fit.mirror_relative_axes()
     for y, x in _pixels(result, count=12, seed=3):
         frame, wo = _frame(result, y, x)
         s0, f = _slice_position(wo)
-        t = (1 - f) * fit.peak_theta[s0] + f * fit.peak_theta[s0 + 1]
-        azimuth = -wo[:2] / np.linalg.norm(wo[:2])
-        axis = frame @ np.array([np.sin(t) * azimuth[0], np.sin(t) * azimuth[1], np.cos(t)])
+        a = axis_from_mirror_relative((1 - f) * relative[s0] + f * relative[s0 + 1], wo[2], False)
+        u = wo[:2] / np.linalg.norm(wo[:2])
+        axis = frame @ np.array([a[0] * u[0] - a[1] * u[1], a[0] * u[1] + a[1] * u[0], a[2]])
         conv = [pf.prefilter_brute_force(renderer.cubes.faces, fit.profile(i), axis[None])[0] for i in (s0, s0 + 1)]
         energy = (1 - f) * fit.energy[s0] + f * fit.energy[s0 + 1]
         expected = ((1 - f) * conv[0] + f * conv[1]) * energy
@@ -186,8 +190,8 @@ def _brute(renderer, profile, direction):
 
 def test_multi_lobe_render_matches_brute_force_prefiltering(gl):
     """prefiltered-multi: the sum over the fitted lobes of the brute-force convolution at each
-    lobe's axis (interpolated between slices, rotated to the view azimuth; off-plane axes
-    included) times the lobe's energy share."""
+    lobe's axis (interpolated between slices relative to the mirror direction, rotated to the view
+    azimuth; off-plane axes included) times the lobe's energy share."""
     renderer, _ = gl
     bsdf = build_bsdf(load_material(THESIS_GLOSSY))
     result = renderer.render(CAMERA, bsdf, "prefiltered-multi", background=False)
@@ -201,13 +205,66 @@ def test_multi_lobe_render_matches_brute_force_prefiltering(gl):
         u = wo[:2] / np.linalg.norm(wo[:2])
         expected = np.zeros(3)
         for fit in fits:
-            a = (1 - f) * fit.axes[s0] + f * fit.axes[s0 + 1]
-            local = np.array([a[0] * u[0] - a[1] * u[1], a[0] * u[1] + a[1] * u[0], a[2]])
-            axis = frame @ (local / np.linalg.norm(local))
+            relative = fit.mirror_relative_axes()
+            a = axis_from_mirror_relative((1 - f) * relative[s0] + f * relative[s0 + 1], wo[2], False)
+            axis = frame @ np.array([a[0] * u[0] - a[1] * u[1], a[0] * u[1] + a[1] * u[0], a[2]])
             conv = (1 - f) * _brute(renderer, fit.profile(s0), axis) + f * _brute(renderer, fit.profile(s0 + 1), axis)
             expected += conv * ((1 - f) * fit.energy[s0] + f * fit.energy[s0 + 1])
         got = result.radiance[y, x]
         assert abs(got @ LUMINANCE - expected @ LUMINANCE) < 0.05 * (expected @ LUMINANCE) + 1e-3, (got, expected)
+
+
+def test_mirror_relative_axes_round_trip_and_follow_the_mirror_direction():
+    """The lobe table's axes relative to each slice's mirror frame rebuild every slice's axis, and
+    a mirror-like lobe interpolated between two coarse slices stays on the pixel's own mirror
+    direction (interpolating the axes themselves put it 7 deg off near normal incidence)."""
+    for desc in ("chrome", THESIS_GLOSSY, "frosted-glass"):
+        for comp in specular_lobes(build_bsdf(load_material(desc))):
+            fit = fit_lobe_map(comp, "lobe")
+            relative = fit.mirror_relative_axes()
+            for s, c in enumerate(fit.cos_theta_o):
+                np.testing.assert_allclose(axis_from_mirror_relative(relative[s], c, fit.transmission), fit.axis(s),
+                                           atol=1e-9)  # fmt: skip
+    chrome = fit_lobe_map(specular_lobes(build_bsdf(load_material("chrome")))[0], "lobe")
+    relative = chrome.mirror_relative_axes()
+    mirror = np.array([-np.sin(np.radians(15.0)), 0.0, np.cos(np.radians(15.0))])
+    s0, f = _slice_position(np.array([-mirror[0], 0.0, mirror[2]]))  # between the slices at 29 and 0 deg
+    between = axis_from_mirror_relative((1 - f) * relative[s0] + f * relative[s0 + 1], mirror[2], False)
+    assert np.degrees(np.arccos(min(between @ mirror, 1.0))) < 0.05
+    old = (1 - f) * chrome.axis(s0) + f * chrome.axis(s0 + 1)  # what the old table interpolated
+    assert np.degrees(np.arccos(old @ mirror / np.linalg.norm(old))) > 5.0
+
+
+def test_narrow_fitted_lobes_read_the_cube_and_build_no_map(gl):
+    """A lobe narrower than its map can resolve (chrome: median angle 0.3-0.6 deg, the map's cap
+    is 0.7 deg per texel) is read from the radiance cube at the axis with the footprint
+    LOBE_DIRECT_AREA_PER_MEDIAN2 m^2, and no lobe map is built or counted for it."""
+    from lobeview.viewer.interface import LOBE_DIRECT_AREA_PER_MEDIAN2
+    from lobeview.viewer.prefiltered import lobe_direct_angle, needs_lobe_map
+
+    renderer, lookup = gl
+    bsdf = build_bsdf(load_material("chrome"))
+    (comp,) = specular_lobes(bsdf)
+    fit = fit_lobe_map(comp, "lobe")
+    assert not needs_lobe_map([fit], "lobe")
+    assert max(p.median_angle for p in fit.profiles) < lobe_direct_angle("lobe")
+    memory = renderer.method_memory(renderer.cubes, pack_material(bsdf), Method.parse("prefiltered"))
+    assert not any(key.startswith("lobe map") for key in memory), memory
+    result = renderer.render(CAMERA, bsdf, "prefiltered", background=False)
+    assert not result.invalid.any()
+    relative = fit.mirror_relative_axes()
+    for y, x in _pixels(result, count=12, seed=5):
+        frame, wo = _frame(result, y, x)
+        s0, f = _slice_position(wo)
+        a = axis_from_mirror_relative((1 - f) * relative[s0] + f * relative[s0 + 1], wo[2], False)
+        u = wo[:2] / np.linalg.norm(wo[:2])
+        axis = frame @ np.array([a[0] * u[0] - a[1] * u[1], a[0] * u[1] + a[1] * u[0], a[2]])
+        median = (1 - f) * fit.profile(s0).median_angle + f * fit.profile(s0 + 1).median_angle
+        lod = cube_map_lod(axis[None], LOBE_DIRECT_AREA_PER_MEDIAN2 * median**2, renderer.cubes.face_size)
+        expected = lookup(renderer.cubes.radiance, axis[None], lod)[0] * (
+            (1 - f) * fit.energy[s0] + f * fit.energy[s0 + 1]
+        )
+        np.testing.assert_allclose(result.radiance[y, x], expected, rtol=5e-3, atol=1e-4)
 
 
 def test_banks_render_matches_brute_force_prefiltering(gl):

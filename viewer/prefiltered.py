@@ -108,6 +108,24 @@ def lobe_map_height(fit: LobeMapFit | list) -> int:
     return _rows_for(min(medians, default=np.pi / 8), MULTI_MAP_MAX_HEIGHT)
 
 
+# A fitted lobe narrower than two texels of the largest map its mode may build (median angle below
+# 2 pi / max height: 1.4 deg for the lobe maps, 2.8 deg for multi) is not resolved by that map:
+# the shader reads the radiance cube's MIP chain along the lobe axis instead (shaders/prefiltered.glsl,
+# footprint interface.LOBE_DIRECT_AREA_PER_MEDIAN2).
+
+
+def lobe_direct_angle(mode: str) -> float:
+    """Median angle below which a fitted lobe of ``mode`` is read from the radiance cube."""
+    return 2.0 * np.pi / (MULTI_MAP_MAX_HEIGHT if mode == "multi" else LOBE_MAP_MAX_HEIGHT)
+
+
+def needs_lobe_map(fits: list, mode: str) -> bool:
+    """Whether any slice of any fitted lobe is wide enough for the map (no map is built, and no
+    memory spent, for a component whose lobes are all read directly: chrome, lacquer's coat)."""
+    limit = lobe_direct_angle(mode)
+    return any(f.profile(s).median_angle >= limit for f in fits for s in range(len(f.cos_theta_o)))
+
+
 def banks_map_shape(fit: BanksFit) -> tuple[int, int, int]:
     """(width, height, depth) of a Banks map: two texels across the ring's half width."""
     height = _rows_for(float(np.arccos(fit.s)), BANKS_MAP_MAX_HEIGHT)

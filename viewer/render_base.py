@@ -60,7 +60,8 @@ def lobe_table(plan: list[str], fitted: list) -> tuple[np.ndarray, np.ndarray, n
     (table, counts, fibres). ``fitted``: per lobe, the BanksFit ('banks'), the list of
     LobeMapFit (lobe-map modes) or None ('splitsum'). table: (MAX_LOBES * LOBE_TABLE_ROWS,
     2 LOBE_SLICES, 4); component i owns rows i LOBE_TABLE_ROWS + j: for lobe maps, fitted lobe
-    j's axis (local, for wo at azimuth 0) in texels 0..S-1 and its energy in S..2S-1; for a Banks
+    j's axis relative to the slice's mirror direction (LobeMapFit.mirror_relative_axes) and median
+    angle (w) in texels 0..S-1 and its energy in S..2S-1; for a Banks
     map, the albedo at view azimuth j pi / (2 (BANKS_AZIMUTHS - 1)) from the fibre in texels
     S..2S-1. counts: fitted lobes per component; fibres: the Banks fibre axis (0 = tangent,
     1 = bitangent)."""
@@ -74,7 +75,9 @@ def lobe_table(plan: list[str], fitted: list) -> tuple[np.ndarray, np.ndarray, n
             counts[i], fibres[i] = 1, fit.axis
         elif kind != "splitsum":
             for j, lobe in enumerate(fit):
-                table[base + j, :LOBE_SLICES, :3] = lobe.local_axes()
+                table[base + j, :LOBE_SLICES, :3] = lobe.mirror_relative_axes()
+                # w: the lobe's median angle per slice (the direct read of narrow lobes)
+                table[base + j, :LOBE_SLICES, 3] = [lobe.profile(s).median_angle for s in range(LOBE_SLICES)]
                 table[base + j, LOBE_SLICES:, :3] = lobe.energy
             counts[i] = len(fit)
     return table, counts, fibres
@@ -253,6 +256,8 @@ class RendererBase:
             set_uniform(program, "u_env_size", int(cube.importance.size))
 
     def bind_prefiltered(self, program, cube: RadianceCube, material: PackedMaterial, method: Method) -> None:
+        from .prefiltered import lobe_direct_angle, needs_lobe_map
+
         maps = cube.prefiltered_maps(self.programs)
         plan = prefilter_plan(material, method.mode)
         for index, kind in enumerate(("beckmann", "ggx")):  # DIST_BECKMANN, DIST_GGX
@@ -277,14 +282,17 @@ class RendererBase:
         bind_sampler(program, "u_lobe_table", table)
         modes = np.full(MAX_LOBES, LOBE_MAP_MODES["splitsum"], dtype=np.int32)
         depth = np.ones(MAX_LOBES, dtype=np.int32)
+        direct = np.zeros(MAX_LOBES, dtype=np.float32)  # 0: never read the cube directly
         for i in range(MAX_LOBES):
             texture = self._dummy_texture("3d")
             if i < len(plan) and plan[i] == "banks":
                 texture = maps.banks_map(fitted[i], f"lobe {i}")
                 modes[i], depth[i] = LOBE_MAP_MODES["banks"], len(fitted[i].profiles)
             elif i < len(plan) and plan[i] != "splitsum":
-                texture = maps.lobe_map(fitted[i], f"lobe {i}")
+                if needs_lobe_map(fitted[i], plan[i]):
+                    texture = maps.lobe_map(fitted[i], f"lobe {i}")
                 modes[i], depth[i] = LOBE_MAP_MODES["lobes"], len(fitted[i][0].profiles)
+                direct[i] = lobe_direct_angle(plan[i])
             texture.use(unit("u_lobe_maps", i))
         set_uniform(program, "u_lobe_maps", [unit("u_lobe_maps", i) for i in range(MAX_LOBES)])
         for name, values in (
@@ -292,6 +300,7 @@ class RendererBase:
             ("u_lobe_map_depth", depth),
             ("u_lobe_map_count", counts),
             ("u_banks_fibre", fibres),
+            ("u_lobe_direct_angle", direct),
         ):
             write_uniform(program, name, values)
 
@@ -300,7 +309,7 @@ class RendererBase:
         cube (the bench's memory column): the radiance cube with its MIP chain, plus the
         importance tables (reference), the albedo table (normalised lobe-N) or the prefiltered
         maps (prefiltered)."""
-        from .prefiltered import DFG_SIZE, banks_map_shape, cube_bytes, lobe_map_shape
+        from .prefiltered import DFG_SIZE, banks_map_shape, cube_bytes, lobe_map_shape, needs_lobe_map
 
         face = cube.face_size
         memory = {"radiance cube": cube_bytes(face, int(np.log2(face)) + 1)}
@@ -321,8 +330,10 @@ class RendererBase:
                     width, height, depth = banks_map_shape(fit_banks(material.lobe_components[i]))
                     memory[f"Banks map {i}"] = width * height * depth * 16
                 else:
-                    width, height, depth = lobe_map_shape(fit_lobe_maps(material.lobe_components[i], kind))
-                    memory[f"lobe map {i}"] = width * height * depth * 16
+                    fits = fit_lobe_maps(material.lobe_components[i], kind)
+                    if needs_lobe_map(fits, kind):
+                        width, height, depth = lobe_map_shape(fits)
+                        memory[f"lobe map {i}"] = width * height * depth * 16
         return memory
 
     def _dummy_texture(self, kind: str):
