@@ -76,6 +76,12 @@ def _rendering(window) -> None:
         window.dirty = True
     for line in renderer.mirror_report:
         imgui.text(line)
+    c6, culling = imgui.checkbox("frustum culling", renderer.frustum_culling)
+    if c6:
+        renderer.frustum_culling = culling
+        window.dirty = True  # the image is the same; the counts below are the next frame's
+    for line in renderer.draw_report:
+        imgui.text(line)
     scene = window.scene
     if scene.cameras:
         names = [c.name for c in scene.cameras]

@@ -240,6 +240,8 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
     result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias, pixel_filter=args.pixel_filter)
     for line in renderer.mirror_report:
         print(f"[mirror] {line}")
+    for line in renderer.draw_report:
+        print(f"[draw] {line}")
     _finish(result, out, args, stages)
     what = f"{'the demo scene' if args.scene is None else path.name} under {env.name}"
     _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe, args.pixel_filter)

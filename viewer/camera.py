@@ -70,6 +70,26 @@ def jittered(view_projection: np.ndarray, offset_px, size) -> np.ndarray:
     return shift @ view_projection
 
 
+def box_corners(box_min, box_max) -> np.ndarray:
+    """The 8 corners (8, 3) of an axis-aligned box."""
+    lo, hi = np.asarray(box_min, dtype=np.float64), np.asarray(box_max, dtype=np.float64)
+    return np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+
+
+def outside_frustum(corners: np.ndarray, view_projection: np.ndarray) -> bool:
+    """Whether points (the corners of a convex volume) lie wholly outside one clip plane of
+    ``view_projection``: then nothing of the volume can reach the image. Each plane (x <= w,
+    -w <= x, and y, z alike) is a linear function of the homogeneous point, so the test holds for
+    corners behind the eye (w < 0) and for oblique near planes too. Conservative: a volume that
+    crosses a frustum edge outside every single plane's half-space is kept."""
+    clip = np.c_[np.asarray(corners, dtype=np.float64), np.ones(len(corners))] @ np.asarray(view_projection).T
+    w = clip[:, 3]
+    for axis in range(3):
+        if np.all(clip[:, axis] > w) or np.all(clip[:, axis] < -w):
+            return True
+    return False
+
+
 DEPTH_RANGE_RATIO = 5000.0  # far / near kept by fit_clip_planes: 24-bit depth resolves ~far/1e4 at far
 
 

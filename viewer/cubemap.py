@@ -46,27 +46,61 @@ def upload_cube(ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True) 
 
 class RadianceCube:
     """Incident radiance as a cube map with a full MIP chain, plus its importance map (texel CDF
-    + per-texel density cube) for the reference method's environment sampling."""
+    + per-texel density cube) for the reference method's environment sampling, built on first use
+    (issue 18: a cube that no reference pass reads, e.g. a first-bounce cube of the bake or any
+    cube of a real-time session, never builds it)."""
 
     def __init__(self, ctx: moderngl.Context, faces: np.ndarray, importance_size: int = 64):
         self.faces = np.asarray(faces, dtype=np.float32)
         self.face_size = self.faces.shape[1]
         self.radiance = upload_cube(ctx, self.faces)
-        self.importance = CubeImportance.from_faces(self.faces, size=importance_size)
-        cdf = self.importance.cdf.astype(np.float32)
-        rows = (len(cdf) + CDF_ROW - 1) // CDF_ROW
-        padded = np.ones(rows * CDF_ROW, dtype=np.float32)
-        padded[: len(cdf)] = cdf
-        self.env_cdf = ctx.texture((CDF_ROW, rows), 1, padded.tobytes(), dtype="f4")
-        self.env_cdf.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        size = self.importance.size
-        self.env_pdf = ctx.texture_cube((size, size), 1, dtype="f4")
-        scale = self.importance.pdf_scale().astype(np.float32)
-        for face in range(6):
-            self.env_pdf.write(face, np.ascontiguousarray(scale[face]).tobytes())
-        self.env_pdf.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.importance_size = min(int(importance_size), self.face_size)
+        self._importance: tuple | None = None  # (CubeImportance, env_cdf, env_pdf) once built
         self._prefiltered = None
         self.cache_dir = None  # where prefiltered maps are cached (set by the owner)
+
+    @property
+    def importance_built(self) -> bool:
+        return self._importance is not None
+
+    def _importance_tables(self) -> tuple:
+        if self._importance is None:
+            ctx = self.radiance.ctx
+            importance = CubeImportance.from_faces(self.faces, size=self.importance_size)
+            cdf = importance.cdf.astype(np.float32)
+            rows = (len(cdf) + CDF_ROW - 1) // CDF_ROW
+            padded = np.ones(rows * CDF_ROW, dtype=np.float32)
+            padded[: len(cdf)] = cdf
+            env_cdf = ctx.texture((CDF_ROW, rows), 1, padded.tobytes(), dtype="f4")
+            env_cdf.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            size = importance.size
+            env_pdf = ctx.texture_cube((size, size), 1, dtype="f4")
+            scale = importance.pdf_scale().astype(np.float32)
+            for face in range(6):
+                env_pdf.write(face, np.ascontiguousarray(scale[face]).tobytes())
+            env_pdf.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            self._importance = (importance, env_cdf, env_pdf)
+        return self._importance
+
+    @property
+    def importance(self) -> CubeImportance:
+        """The importance map of the environment sampler (built on first use)."""
+        return self._importance_tables()[0]
+
+    @property
+    def env_cdf(self) -> moderngl.Texture:
+        return self._importance_tables()[1]
+
+    @property
+    def env_pdf(self) -> moderngl.TextureCube:
+        return self._importance_tables()[2]
+
+    def importance_memory(self) -> int:
+        """Bytes of the importance tables (whether built or not): the CDF texture, rows of
+        CDF_ROW floats, and the density cube."""
+        texels = 6 * self.importance_size * self.importance_size
+        rows = (texels + CDF_ROW - 1) // CDF_ROW
+        return rows * CDF_ROW * 4 + 6 * self.importance_size * self.importance_size * 4
 
     def prefiltered_maps(self, programs: ProgramCache | None = None):
         """The prefiltered maps of this radiance (viewer/prefiltered.py), created on first use."""
@@ -84,8 +118,10 @@ class RadianceCube:
     def release(self):
         if self._prefiltered is not None:
             self._prefiltered.release()
-        for texture in (self.radiance, self.env_cdf, self.env_pdf):
-            texture.release()
+        self.radiance.release()
+        if self._importance is not None:
+            self._importance[1].release()
+            self._importance[2].release()
 
 
 class EnvironmentCubes(RadianceCube):

@@ -13,7 +13,7 @@ import numpy as np
 
 from lobeview.core.methods import Method
 
-from .camera import Camera, perspective
+from .camera import Camera, outside_frustum, perspective
 from .frame import begin_pass, new_framebuffer
 from .interface import TEXTURE_UNITS, bind_sampler, set_uniform
 
@@ -50,11 +50,8 @@ def skip_reason(reflector, camera: Camera, view_proj: np.ndarray) -> str | None:
     outside the view frustum."""
     if not reflector.transmission and reflector.side(np.asarray(camera.position, dtype=np.float64)) <= 1e-6:
         return "seen from behind"
-    clip = np.c_[reflector.corners(), np.ones(8)] @ view_proj.T
-    w = clip[:, 3:4]
-    for axis in range(3):
-        if np.all(clip[:, axis : axis + 1] > w) or np.all(clip[:, axis : axis + 1] < -w):
-            return "outside the view"
+    if outside_frustum(reflector.corners(), view_proj):
+        return "outside the view"
     return None
 
 

@@ -314,9 +314,7 @@ class RendererBase:
         face = cube.face_size
         memory = {"radiance cube": cube_bytes(face, int(np.log2(face)) + 1)}
         if method.kind == "reference":
-            memory["importance tables"] = cube.env_cdf.width * cube.env_cdf.height * 4 + cube_bytes(
-                cube.importance.size, 1, 4
-            )
+            memory["importance tables"] = cube.importance_memory()
         if method.kind == "lobe" and method.normalize:
             memory["albedo table"] = int(albedo_texture_data(material).size * 4)
         if method.kind == "prefiltered":

@@ -15,9 +15,11 @@ set_mirrors / set_object_method / update_material, never by writing attributes.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import moderngl
@@ -31,7 +33,7 @@ from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
 
-from .camera import Camera, jittered
+from .camera import Camera, box_corners, jittered, outside_frustum
 from .cube_bake import CubeBake, scene_content_key
 from .cubemap import RadianceCube, equirect_to_cube_faces
 from .interface import (
@@ -52,6 +54,37 @@ MAX_SCENE_TEXTURES = 256  # lightmaps and material textures kept on the GPU
 GL_SRGB8_ALPHA8 = 0x8C43  # colour textures: the GPU decodes sRGB before filtering (glTF 3.9.2)
 
 
+@dataclass
+class PassCounts:
+    drawn: int = 0
+    culled: int = 0
+
+
+class DrawCounts:
+    """Objects drawn and culled (frustum) per kind of pass: 'camera' and 'mirror' for the last
+    frame (new_frame resets them), 'cube map' since start-up (bake and refreshes)."""
+
+    PER_FRAME = ("camera", "mirror")
+
+    def __init__(self):
+        self.passes: dict[str, PassCounts] = {}
+
+    def of(self, pass_kind: str) -> PassCounts:
+        return self.passes.setdefault(pass_kind, PassCounts())
+
+    def new_frame(self) -> None:
+        for kind in self.PER_FRAME:
+            self.passes[kind] = PassCounts()
+
+    def report(self) -> list[str]:
+        labels = {"camera": "camera pass", "mirror": "mirror passes", "cube map": "cube-map faces since start"}
+        return [
+            f"{labels.get(kind, kind)}: {c.drawn} object draws, {c.culled} culled (outside the frustum)"
+            for kind, c in self.passes.items()
+            if c.drawn or c.culled
+        ]
+
+
 class _GpuObject:
     def __init__(self, ctx, obj, material: PackedMaterial, index: int):
         m = obj.mesh
@@ -64,6 +97,7 @@ class _GpuObject:
         self.name = obj.name
         lo, hi = m.positions.min(axis=0), m.positions.max(axis=0)
         self.centre = (lo + hi) / 2.0
+        self.corners = box_corners(lo, hi)  # world space (meshes are stored transformed): frustum culling
         self.cube: RadianceCube | None = None
 
     def release(self):
@@ -88,6 +122,7 @@ class SceneRenderer(RendererBase):
         cube_bounces: int = 2,
         mirror_scale: float = 1.0,
         mirror_specular: bool = True,
+        frustum_culling: bool = True,
     ):
         super().__init__(ctx, size)
         if not 0.05 <= float(mirror_scale) <= 2.0:
@@ -135,11 +170,24 @@ class SceneRenderer(RendererBase):
         t0 = time.perf_counter()
         self.object_methods: dict[int, Method] = {}
         self.cache_dir = Path(cache_dir) if cache_dir else None
-        self.mirror_passes = MirrorPasses(ctx, self.environment, self.draw_background, self._draw_pass)
+        # Frustum culling (issue 18): objects whose bounding box lies outside a pass's frustum are
+        # not drawn; draw_counts says, per kind of pass, how many were drawn and culled.
+        self.frustum_culling = bool(frustum_culling)
+        self.draw_counts = DrawCounts()
+        self.mirror_passes = MirrorPasses(
+            ctx, self.environment, self.draw_background, functools.partial(self._draw_pass, pass_kind="mirror")
+        )
         self.bounds = scene.bounds  # static scene: near/far planes are fitted to it every frame
         extent = float(np.max(self.bounds[1] - self.bounds[0]))
         self.cube_bake = CubeBake(
-            ctx, cube_face_size, cube_bounces, extent, self.environment, self.draw_background, self._draw_pass, progress
+            ctx,
+            cube_face_size,
+            cube_bounces,
+            extent,
+            self.environment,
+            self.draw_background,
+            functools.partial(self._draw_pass, pass_kind="cube map"),
+            progress,
         )
         key = scene_content_key(scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces)
         self.cube_bake.build(self.objects, self.analysis.cube_mapped, key, self.cache_dir)
@@ -155,6 +203,12 @@ class SceneRenderer(RendererBase):
     @property
     def cube_bounces(self) -> int:
         return self.cube_bake.bounces
+
+    @property
+    def draw_report(self) -> list[str]:
+        """Objects drawn and culled: by the last frame's camera and mirror passes, and by every
+        cube-map face rendered since start-up."""
+        return self.draw_counts.report()
 
     @property
     def mirror_report(self) -> list[str]:
@@ -397,12 +451,24 @@ class SceneRenderer(RendererBase):
         seed=0,
         mirrors: dict | None = None,
         cull: bool = False,
+        pass_kind: str = "camera",
     ):
-        """Every object with its material. ``cull``: skip the back faces of single-sided
-        materials (the camera pass only: mirror and cube-map passes flip the winding)."""
+        """Every object with its material whose bounding box reaches the frustum of
+        ``view_proj`` (``frustum_culling``; counted in ``draw_counts[pass_kind]``). ``cull``: skip
+        the back faces of single-sided materials (the camera pass only: mirror and cube-map
+        passes flip the winding)."""
         self.ctx.enable(moderngl.DEPTH_TEST)
         mirrors = mirrors or {}
+        counts = self.draw_counts.of(pass_kind)
         for obj, blended in self._draw_order(eye):
+            if obj.index == exclude or (not specular and self.analysis.objects[obj.index].transmission_lobes):
+                # Thin transmissive panes are see-through in the diffuse pass that fills cube
+                # maps (as in the baker): a black pane would hide what lies behind it.
+                continue
+            if self.frustum_culling and outside_frustum(obj.corners, view_proj):
+                counts.culled += 1
+                continue
+            counts.drawn += 1
             if blended:  # alphaMode BLEND: composited over what is drawn, depth tested, not written
                 self.ctx.enable(moderngl.BLEND)
                 self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
@@ -412,10 +478,6 @@ class SceneRenderer(RendererBase):
                 self.ctx.enable(moderngl.CULL_FACE)  # glTF doubleSided false: back faces are not drawn
             else:
                 self.ctx.disable(moderngl.CULL_FACE)
-            if obj.index == exclude or (not specular and self.analysis.objects[obj.index].transmission_lobes):
-                # Thin transmissive panes are see-through in the diffuse pass that fills cube
-                # maps (as in the baker): a black pane would hide what lies behind it.
-                continue
             use_specular = specular and obj.cube is not None
             # Per-object real-time method (the panel's override); the reference ignores it.
             obj_method = self._object_method(obj.index, method)
@@ -465,9 +527,9 @@ class SceneRenderer(RendererBase):
         blended.sort(key=lambda o: -float(np.linalg.norm(o.centre - eye)))
         return [(o, False) for o in opaque] + [(o, True) for o in blended]
 
-    def _draw_pass(self, view_proj, eye, method: Method, specular: bool, exclude=None) -> None:
+    def _draw_pass(self, view_proj, eye, method: Method, specular: bool, exclude=None, pass_kind="cube map") -> None:
         """The scene as the cube-map and mirror passes draw it (no per-frame state)."""
-        self._draw_objects(view_proj, eye, method, specular, exclude)
+        self._draw_objects(view_proj, eye, method, specular, exclude, pass_kind=pass_kind)
 
     def draw_frame(
         self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0, jitter=(0.0, 0.0)
@@ -479,6 +541,7 @@ class SceneRenderer(RendererBase):
         camera = camera.fitted_to(self.bounds)  # any scene scale, mm to km (viewer/camera.py)
         width, height = self.size
         view_proj = jittered(camera.view_projection(width / height), jitter, self.size)
+        self.draw_counts.new_frame()
         # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
         # lookup per lobe, so there they keep their cube maps and no mirror pass is drawn.
         if method.kind == "prefiltered":

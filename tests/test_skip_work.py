@@ -1,0 +1,101 @@
+"""Work a scene does not need is skipped (issue 18), and skipping changes no pixel: frustum
+culling (the box test is conservative, the renderer counts what it culls, frame and cube maps are
+unchanged) and the reference's importance tables (built only when a reference pass runs)."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from lobeview.viewer.camera import Camera, box_corners, outside_frustum, perspective
+from lobeview.viewer.camera import look_at as camera_look_at
+
+
+def _points_in_frustum(points: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
+    clip = np.c_[points, np.ones(len(points))] @ view_proj.T
+    w = clip[:, 3:4]
+    return np.all((np.abs(clip[:, :3]) <= w) & (w > 0), axis=1)
+
+
+def test_box_test_never_drops_a_box_with_a_point_in_view_and_drops_far_away_boxes():
+    rng = np.random.default_rng(3)
+    view_proj = perspective(60.0, 1.6, 0.1, 50.0) @ camera_look_at((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0, 1, 0))
+    culled = kept_empty = 0
+    for _ in range(3000):
+        centre = rng.uniform(-30.0, 30.0, 3)
+        half = rng.uniform(0.05, 6.0, 3)
+        corners = box_corners(centre - half, centre + half)
+        points = centre + half * rng.uniform(-1.0, 1.0, (400, 3))
+        visible = _points_in_frustum(np.vstack([points, corners]), view_proj).any()
+        if outside_frustum(corners, view_proj):
+            culled += 1
+            assert not visible, (centre, half)  # conservative: a visible box is never culled
+        elif not visible:
+            kept_empty += 1
+    # Most boxes out of view are culled (the rest straddle a frustum edge outside two planes).
+    assert culled > 1500 and kept_empty < 0.2 * culled, (culled, kept_empty)
+    # Behind the eye (w < 0 at every corner) and beyond the far plane.
+    assert outside_frustum(box_corners((-1, -1, 2), (1, 1, 4)), view_proj)
+    assert outside_frustum(box_corners((-1, -1, -80), (1, 1, -60)), view_proj)
+    # A box around the eye is kept.
+    assert not outside_frustum(box_corners((-1, -1, -1), (1, 1, 1)), view_proj)
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    from lobeview.viewer.context import create_headless_context
+
+    context = create_headless_context()
+    yield context
+    context.release()
+
+
+def test_culling_skips_objects_and_changes_no_pixel(ctx):
+    from lobeview.scenes.demo import build_demo_scene
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    scene = load_gltf(build_demo_scene())
+    env = EnvironmentMap.from_function(lambda d: 0.5 + 0.5 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 16)
+    renderers, images = {}, {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for culling in (True, False):
+            renderers[culling] = SceneRenderer(
+                ctx, scene, env, size=(96, 60), cube_face_size=32, progress=False, frustum_culling=culling
+            )
+    # Real-time methods never build the environment importance tables (nor does the bake).
+    assert not any(o.cube.importance_built for r in renderers.values() for o in r.objects if o.cube is not None)
+    cam = next(c for c in scene.cameras if c.name == "table")  # the close-up: part of the room is behind it
+    camera = Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
+    for culling, renderer in renderers.items():
+        images[culling] = renderer.render(camera, "lobe-5", spp=1).radiance
+    on, off = renderers[True], renderers[False]
+    counts_on, counts_off = on.draw_counts.passes, off.draw_counts.passes
+    # The camera sees part of the room: some objects are culled, and everything else is drawn.
+    assert counts_on["camera"].culled > 0
+    assert counts_on["camera"].drawn + counts_on["camera"].culled == counts_off["camera"].drawn
+    assert counts_off["camera"].culled == 0 and counts_off["cube map"].culled == 0
+    # A cube-map face sees a sixth of the room: most draws there are skipped.
+    assert counts_on["cube map"].culled > counts_on["cube map"].drawn
+    assert counts_on["mirror"].drawn + counts_on["mirror"].culled == counts_off["mirror"].drawn
+    assert any("culled" in line for line in on.draw_report)
+    # Nothing that was skipped could have reached a pixel: cube maps and frame are the same.
+    for a, b in zip(on.objects, off.objects, strict=True):
+        if a.cube is not None:
+            np.testing.assert_allclose(a.cube.faces, b.cube.faces, rtol=1e-6, atol=1e-7)
+    np.testing.assert_allclose(images[True], images[False], rtol=1e-6, atol=1e-7)
+    assert not any(o.cube.importance_built for o in on.objects if o.cube is not None)
+    # The reference builds them for the cubes it reads, and the memory report counts what it built.
+    on.render(camera, "reference", spp=4)
+    drawn = [o for o in on.objects if o.cube is not None and o.cube.importance_built]
+    assert drawn
+    for o in drawn:
+        cube = o.cube
+        built = cube.env_cdf.width * cube.env_cdf.height * 4 + 6 * cube.env_pdf.size[0] * cube.env_pdf.size[1] * 4
+        assert cube.importance_memory() == built
+    for renderer in renderers.values():
+        renderer.release()
