@@ -321,11 +321,18 @@ class AlbedoTable:
         mus = ((np.arange(ALBEDO_MU) + 0.5) / ALBEDO_MU) ** 2
         phis = np.arange(ALBEDO_PHI) / ALBEDO_PHI * 2 * np.pi
         values = np.zeros((ALBEDO_PHI + 1, ALBEDO_MU, 3))
-        for j, phi in enumerate(phis[:1] if isotropic else phis):
-            for i, mu in enumerate(mus):
-                s = np.sqrt(max(1 - mu * mu, 0.0))
-                r, t = single.albedo(np.array([s * np.cos(phi), s * np.sin(phi), mu]), order)
-                values[j, i] = r + t
+        rows = phis[:1] if isotropic else phis
+        sin_o = np.sqrt(np.maximum(1.0 - mus * mus, 0.0))
+        wos = np.stack(
+            [
+                np.outer(np.cos(rows), sin_o),
+                np.outer(np.sin(rows), sin_o),
+                np.broadcast_to(mus, (len(rows), ALBEDO_MU)),
+            ],
+            axis=-1,
+        ).reshape(-1, 3)
+        r, t = single.albedo_many(wos, order)  # one vectorised quadrature for the whole table
+        values[: len(rows)] = (r + t).reshape(len(rows), ALBEDO_MU, 3)
         if isotropic:
             values[:] = values[0]
         values[ALBEDO_PHI] = values[0]
