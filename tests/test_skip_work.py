@@ -99,3 +99,36 @@ def test_culling_skips_objects_and_changes_no_pixel(ctx):
         assert cube.importance_memory() == built
     for renderer in renderers.values():
         renderer.release()
+
+
+def test_albedo_tables_are_cached_on_disk_and_damaged_files_rebuilt(tmp_path, monkeypatch):
+    """A second start does not rebuild the normalisation tables (issue 18 item 4); a damaged or
+    foreign cache file is rebuilt with a warning, never used."""
+    from lobeview.materials.patterns import AlbedoTable, specular_lobes
+    from lobeview.materials.spec import build_bsdf, load_material
+    from lobeview.viewer import material_gpu
+
+    lobe = specular_lobes(build_bsdf(load_material("brushed-steel-beckmann")))[0]
+    material_gpu._ALBEDO_TABLES.clear()
+    built = material_gpu.albedo_table_for(lobe, tmp_path).values
+    files = list((tmp_path / "albedo").glob("albedo-v*.npy"))
+    assert len(files) == 1
+    np.testing.assert_array_equal(built, AlbedoTable.build(lobe).values)
+
+    def no_build(*_):
+        raise AssertionError("rebuilt although cached")
+
+    material_gpu._ALBEDO_TABLES.clear()
+    with monkeypatch.context() as patch:
+        patch.setattr(AlbedoTable, "build", classmethod(no_build))
+        np.testing.assert_array_equal(material_gpu.albedo_table_for(lobe, tmp_path).values, built)
+    for damage in (b"not a numpy file", None):
+        if damage is None:
+            np.save(files[0], np.full((3, 3), np.nan))  # a readable array of the wrong shape and values
+        else:
+            files[0].write_bytes(damage)
+        material_gpu._ALBEDO_TABLES.clear()
+        with pytest.warns(UserWarning, match="albedo table"):
+            again = material_gpu.albedo_table_for(lobe, tmp_path).values
+        np.testing.assert_array_equal(again, built)
+    material_gpu._ALBEDO_TABLES.clear()

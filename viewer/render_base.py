@@ -4,6 +4,7 @@ targets with a G-buffer, material/cube uniforms and the environment background."
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import moderngl
 import numpy as np
@@ -129,6 +130,9 @@ class RendererBase:
         self._material_textures = BoundedCache(MAX_MATERIAL_TEXTURES, on_evict=lambda item: item[0].release())
         self._dummy_textures: dict = {}
         self._timer = None
+        # The cache folder of the albedo tables (normalised lobe-N): None is core/paths.py's default;
+        # the scene renderer uses the one its cube maps are cached under (--cache).
+        self.albedo_cache_root: Path | None = None
         self.frame = FrameTargets(ctx, size, plane_state=self.PLANE_STATE)
 
     def resize(self, size):
@@ -204,7 +208,7 @@ class RendererBase:
         if method.kind == "lobe" and method.normalize and "u_albedo" in program:
 
             def albedo_texture():
-                data = albedo_texture_data(material)
+                data = albedo_texture_data(material, self.albedo_cache_root)
                 tex = self.ctx.texture((data.shape[1], data.shape[0]), 3, data.tobytes(), dtype="f4")
                 tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
                 tex.repeat_x = tex.repeat_y = False
