@@ -25,7 +25,11 @@ so brushed metals lose their stretched highlights (use lobe-N for them).
 from __future__ import annotations
 
 import copy
+import hashlib
+import os
+import warnings
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize_scalar
@@ -311,18 +315,96 @@ def fit_lobe_map(component: Component, mode: str = "lobe", slices: int = LOBE_SL
     return fit_lobe_maps(component, mode, slices)[0]
 
 
-def fit_lobe_maps(component: Component, mode: str = "lobe", slices: int = LOBE_SLICES) -> list:
+def fit_lobe_maps(component: Component, mode: str = "lobe", slices: int = LOBE_SLICES, directory=None) -> list:
     """The fitted lobes (LobeMapFit each, one 3D map each) of one specular component: one for
-    'lobe', 'lobe2d' and 'phong', MAP_LOBES for 'multi'. Fits (0.25-1 s) are cached by the
-    component's parameters, not its identity, so a rebuilt material is not fitted again."""
+    'lobe', 'lobe2d' and 'phong', MAP_LOBES for 'multi'. Fits (0.05-1.5 s each) are cached by the
+    component's parameters, not its identity, so a rebuilt material is not fitted again: in
+    memory, and on disk under ``directory``/lobe_fits (default: core/paths.py's cache folder), so
+    that a second start of a scene with `prefiltered` does not fit again."""
     if mode not in FIT_MODES:
         raise ValueError(f"unknown lobe-map mode {mode!r}; use one of {FIT_MODES}")
     key = f"{component_key(component)}|{mode}|{slices}"
     if key not in _FITS:
         if len(_FITS) >= _MAX_CACHED_FITS:
             _FITS.pop(next(iter(_FITS)))  # oldest first
-        _FITS[key] = _fit_multi(component, slices) if mode == "multi" else [_fit(component, mode, slices)]
+        path = _fit_cache_path(key, directory)
+        fits = _load_fits(path, slices)
+        if fits is None:
+            fits = _fit_multi(component, slices) if mode == "multi" else [_fit(component, mode, slices)]
+            _save_fits(path, fits)
+        _FITS[key] = fits
     return _FITS[key]
+
+
+# Lobe-map fits cached on disk: bump when the fit or the LobeMapFit layout changes.
+FIT_CACHE_VERSION = 1
+
+
+def _fit_cache_path(key: str, directory) -> Path:
+    from lobeview.core.paths import cache_dir
+
+    digest = hashlib.sha256(f"{FIT_CACHE_VERSION}|{key}".encode()).hexdigest()[:24]
+    return Path(directory or cache_dir()) / "lobe_fits" / f"fit-v{FIT_CACHE_VERSION}-{digest}.npz"
+
+
+def _save_fits(path: Path, fits: list) -> None:
+    arrays = {"count": np.array(len(fits))}
+    for j, f in enumerate(fits):
+        arrays.update({
+            f"{j}_mode": np.array(f.mode), f"{j}_cos": f.cos_theta_o, f"{j}_peak": f.peak_theta,
+            f"{j}_energy": f.energy, f"{j}_error": f.error,
+            f"{j}_flags": np.array([f.isotropic_approximation, f.transmission]),
+            f"{j}_phong": np.array(np.nan if f.phong_exponent is None else f.phong_exponent),
+            f"{j}_profiles": np.array(len(f.profiles)),
+        })  # fmt: skip
+        if f.axes is not None:
+            arrays[f"{j}_axes"] = f.axes
+        for i, p in enumerate(f.profiles):
+            arrays[f"{j}_p{i}"] = np.stack([p.psi, p.density, p.radial_mass])
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_suffix(f".{os.getpid()}.tmp")
+        with open(partial, "wb") as handle:
+            np.savez(handle, **arrays)
+        os.replace(partial, path)  # atomic: a concurrent reader never sees half a file
+    except OSError:
+        pass  # a read-only cache only costs the refit next time
+
+
+def _load_fits(path: Path, slices: int) -> list | None:
+    """The cached fits, or None (absent; damaged or inconsistent: warned, refitted)."""
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            fits = []
+            for j in range(int(data["count"])):
+                energy, error = data[f"{j}_energy"], data[f"{j}_error"]
+                cosines, peaks = data[f"{j}_cos"], data[f"{j}_peak"]
+                count = int(data[f"{j}_profiles"])
+                profiles = [RadialProfile(*data[f"{j}_p{i}"]) for i in range(count)]
+                axes = data[f"{j}_axes"] if f"{j}_axes" in data.files else None
+                isotropic_approximation, transmission = (bool(x) for x in data[f"{j}_flags"])
+                phong = float(data[f"{j}_phong"])
+                shapes_ok = (
+                    cosines.shape == (slices,) and peaks.shape == (slices,) and energy.shape == (slices, 3)
+                    and error.shape == (slices,) and count in (1, slices)
+                    and (axes is None or axes.shape == (slices, 3))
+                    and all(p.psi.ndim == 1 and p.psi.shape == p.density.shape == p.radial_mass.shape for p in profiles)
+                )  # fmt: skip
+                values = [cosines, peaks, energy, *(p.density for p in profiles)]
+                if not shapes_ok or not all(np.all(np.isfinite(v)) for v in values) or energy.min() < 0.0:
+                    raise ValueError("inconsistent shapes or values")
+                fits.append(
+                    LobeMapFit(
+                        str(data[f"{j}_mode"]), cosines, peaks, profiles, energy, error, isotropic_approximation,
+                        None if np.isnan(phong) else phong, axes, transmission,
+                    )
+                )  # fmt: skip
+            return fits if fits else None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        warnings.warn(f"{path}: unusable cached lobe-map fit ({exc}); fitting again", stacklevel=3)
+        return None
 
 
 # -- greedy multi-lobe fitting (seed 000, 3.3) --------------------------------------------------

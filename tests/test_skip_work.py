@@ -132,3 +132,48 @@ def test_albedo_tables_are_cached_on_disk_and_damaged_files_rebuilt(tmp_path, mo
             again = material_gpu.albedo_table_for(lobe, tmp_path).values
         np.testing.assert_array_equal(again, built)
     material_gpu._ALBEDO_TABLES.clear()
+
+
+@pytest.mark.parametrize(
+    ("preset", "mode"),
+    [("frosted-glass", "lobe"), ("alanod-2000gs-1lobe", "multi"), ("plastic", "phong"), ("plastic", "lobe2d")],
+)
+def test_lobe_map_fits_round_trip_through_the_disk_cache(tmp_path, monkeypatch, preset, mode):
+    """A second start with `prefiltered` loads its lobe-map fits instead of fitting again (5.7 s
+    of the demo's 8 s shade); what comes back is the same fit, and a damaged file is refitted."""
+    from lobeview.materials import lobe_fit
+    from lobeview.materials.patterns import specular_lobes
+    from lobeview.materials.spec import build_bsdf, load_material
+
+    lobe = specular_lobes(build_bsdf(load_material(preset)))[-1]
+    lobe_fit._FITS.clear()
+    fitted = lobe_fit.fit_lobe_maps(lobe, mode, directory=tmp_path)
+    files = list((tmp_path / "lobe_fits").glob("fit-v*.npz"))
+    assert len(files) == 1
+
+    def no_fit(*_args, **_kwargs):
+        raise AssertionError("fitted again although cached")
+
+    lobe_fit._FITS.clear()
+    with monkeypatch.context() as patch:
+        patch.setattr(lobe_fit, "_fit", no_fit)
+        patch.setattr(lobe_fit, "_fit_multi", no_fit)
+        loaded = lobe_fit.fit_lobe_maps(lobe, mode, directory=tmp_path)
+    assert len(loaded) == len(fitted)
+    for a, b in zip(fitted, loaded, strict=True):
+        assert (a.mode, a.isotropic_approximation, a.transmission, a.phong_exponent) == (
+            b.mode, b.isotropic_approximation, b.transmission, b.phong_exponent,
+        )  # fmt: skip
+        for name in ("cos_theta_o", "peak_theta", "energy", "error", "axes"):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+        for pa, pb in zip(a.profiles, b.profiles, strict=True):
+            np.testing.assert_array_equal(
+                np.stack([pa.psi, pa.density, pa.radial_mass]), np.stack([pb.psi, pb.density, pb.radial_mass])
+            )
+        np.testing.assert_array_equal(a.mirror_relative_axes(), b.mirror_relative_axes())
+    files[0].write_bytes(b"PK damaged")
+    lobe_fit._FITS.clear()
+    with pytest.warns(UserWarning, match="unusable cached lobe-map fit"):
+        again = lobe_fit.fit_lobe_maps(lobe, mode, directory=tmp_path)
+    np.testing.assert_array_equal(again[0].energy, fitted[0].energy)
+    lobe_fit._FITS.clear()

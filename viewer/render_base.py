@@ -84,13 +84,16 @@ def lobe_table(plan: list[str], fitted: list) -> tuple[np.ndarray, np.ndarray, n
     return table, counts, fibres
 
 
-def fit_plan(plan: list[str], components: list) -> list:
-    """Per lobe what its prefiltered map is built from: a BanksFit, a list of LobeMapFit, or
-    None for split-sum (lobe_table's ``fitted``)."""
-    return [
-        fit_banks(comp) if kind == "banks" else None if kind == "splitsum" else fit_lobe_maps(comp, kind)
-        for kind, comp in zip(plan, components, strict=True)
-    ]
+def fit_plan(plan: list[str], components: list, directory=None) -> list:
+    """Per lobe what its prefiltered map is built from: a BanksFit, a list of LobeMapFit (cached
+    under ``directory``, fit_lobe_maps), or None for split-sum (lobe_table's ``fitted``)."""
+    fits = []
+    for kind, comp in zip(plan, components, strict=True):
+        if kind == "banks":
+            fits.append(fit_banks(comp))
+        else:
+            fits.append(None if kind == "splitsum" else fit_lobe_maps(comp, kind, directory=directory))
+    return fits
 
 
 def sobol_points(count: int = SOBOL_SIDE * SOBOL_SIDE, seed: int = SOBOL_SEED) -> np.ndarray:
@@ -130,9 +133,9 @@ class RendererBase:
         self._material_textures = BoundedCache(MAX_MATERIAL_TEXTURES, on_evict=lambda item: item[0].release())
         self._dummy_textures: dict = {}
         self._timer = None
-        # The cache folder of the albedo tables (normalised lobe-N): None is core/paths.py's default;
-        # the scene renderer uses the one its cube maps are cached under (--cache).
-        self.albedo_cache_root: Path | None = None
+        # The cache folder of derived tables (albedo tables of normalised lobe-N, lobe-map fits):
+        # None is core/paths.py's default; the scene renderer uses its cube maps' (--cache).
+        self.table_cache_root: Path | None = None
         self.frame = FrameTargets(ctx, size, plane_state=self.PLANE_STATE)
 
     def resize(self, size):
@@ -208,7 +211,7 @@ class RendererBase:
         if method.kind == "lobe" and method.normalize and "u_albedo" in program:
 
             def albedo_texture():
-                data = albedo_texture_data(material, self.albedo_cache_root)
+                data = albedo_texture_data(material, self.table_cache_root)
                 tex = self.ctx.texture((data.shape[1], data.shape[0]), 3, data.tobytes(), dtype="f4")
                 tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
                 tex.repeat_x = tex.repeat_y = False
@@ -274,7 +277,7 @@ class RendererBase:
         bind_sampler(program, "u_dfg", maps.dfg())
 
         def lobe_table_texture():
-            fitted = fit_plan(plan, material.lobe_components)
+            fitted = fit_plan(plan, material.lobe_components, self.table_cache_root)
             table, counts, fibres = lobe_table(plan, fitted)
             tex = self.ctx.texture((table.shape[1], table.shape[0]), 4, table.tobytes(), dtype="f4")
             tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -332,7 +335,7 @@ class RendererBase:
                     width, height, depth = banks_map_shape(fit_banks(material.lobe_components[i]))
                     memory[f"Banks map {i}"] = width * height * depth * 16
                 else:
-                    fits = fit_lobe_maps(material.lobe_components[i], kind)
+                    fits = fit_lobe_maps(material.lobe_components[i], kind, directory=self.table_cache_root)
                     if needs_lobe_map(fits, kind):
                         width, height, depth = lobe_map_shape(fits)
                         memory[f"lobe map {i}"] = width * height * depth * 16

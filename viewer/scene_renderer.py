@@ -171,7 +171,7 @@ class SceneRenderer(RendererBase):
         self.object_methods: dict[int, Method] = {}
         self.cache_dir = Path(cache_dir) if cache_dir else None
         if self.cache_dir is not None:  # cache_dir is the cubes' folder inside the --cache folder
-            self.albedo_cache_root = self.cache_dir.parent
+            self.table_cache_root = self.cache_dir.parent
         # Frustum culling (issue 18): objects whose bounding box lies outside a pass's frustum are
         # not drawn; draw_counts says, per kind of pass, how many were drawn and culled.
         self.frustum_culling = bool(frustum_culling)
