@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from lobeview.core.progress import timed_step
+
 from .bsdf import BSDF, Component
 from .microfacet import MicrofacetDistribution
 from .prefilter import RadialProfile, cumulative_radial_mass, phong_profile
@@ -330,7 +332,8 @@ def fit_lobe_maps(component: Component, mode: str = "lobe", slices: int = LOBE_S
         path = _fit_cache_path(key, directory)
         fits = _load_fits(path, slices)
         if fits is None:
-            fits = _fit_multi(component, slices) if mode == "multi" else [_fit(component, mode, slices)]
+            with timed_step("prefilter", f"{mode} fit of a {type(component).__name__} lobe (cached afterwards)"):
+                fits = _fit_multi(component, slices) if mode == "multi" else [_fit(component, mode, slices)]
             _save_fits(path, fits)
         _FITS[key] = fits
     return _FITS[key]

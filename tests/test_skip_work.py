@@ -177,3 +177,23 @@ def test_lobe_map_fits_round_trip_through_the_disk_cache(tmp_path, monkeypatch, 
         again = lobe_fit.fit_lobe_maps(lobe, mode, directory=tmp_path)
     np.testing.assert_array_equal(again[0].energy, fitted[0].energy)
     lobe_fit._FITS.clear()
+
+
+def test_progress_lines_for_slow_steps_and_quiet_mode(capsys, monkeypatch):
+    from lobeview.core import progress
+
+    with progress.timed_step("prefilter", "a short step"):
+        pass
+    assert capsys.readouterr().err == ""  # fast and not announced: nothing
+    with progress.timed_step("prefilter", "a long step", announce=True):
+        pass
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == "[prefilter] a long step ..." and err[1].startswith("[prefilter] a long step: done in ")
+    monkeypatch.setattr(progress, "SLOW_STEP_SECONDS", -1.0)  # every step counts as slow
+    with progress.timed_step("albedo", "a table"):
+        pass
+    assert capsys.readouterr().err.startswith("[albedo] a table: done in ")
+    monkeypatch.setenv("LOBEVIEW_QUIET", "1")
+    with progress.timed_step("albedo", "a table", announce=True):
+        pass
+    assert capsys.readouterr().err == ""

@@ -14,6 +14,7 @@ import numpy as np
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
 from lobeview.core.paths import cache_dir
+from lobeview.core.progress import timed_step
 from lobeview.materials.bsdf import BSDF, CosineSampled, diffuse_albedo
 from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.gltf import (
@@ -247,7 +248,8 @@ def _load_or_build_albedo_table(comp, key: tuple, directory: Path | None) -> Alb
         pass
     except (OSError, ValueError) as exc:  # a damaged cache file is rebuilt, never trusted
         warnings.warn(f"{path}: unreadable cached albedo table ({exc}); rebuilding it", stacklevel=2)
-    table = AlbedoTable.build(comp)
+    with timed_step("albedo", f"normalisation table of a {type(comp).__name__} lobe (cached afterwards)"):
+        table = AlbedoTable.build(comp)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         partial = path.with_suffix(f".{os.getpid()}.tmp")

@@ -25,6 +25,7 @@ import moderngl
 import numpy as np
 
 from lobeview.core.paths import cache_dir
+from lobeview.core.progress import timed_step
 from lobeview.materials.banks import BanksFit
 from lobeview.materials.lobe_fit import LUMINANCE, LobeMapFit
 from lobeview.materials.prefilter import (
@@ -223,14 +224,16 @@ class PrefilteredMaps:
         else:
             shader = self.programs.compute("prefilter_cube.comp")
             nodes_texture = self._bind_source(shader, nodes)
-            for level in range(SPLIT_SUM_LEVELS):
-                face = max(size >> level, 1)
-                cube.bind_to_image(0, read=False, write=True, level=level, format=GL_RGBA32F)
-                shader["u_size"] = face
-                shader["u_row"] = level
-                shader["u_rings"] = 1 if level == 0 else self.rings
-                shader.run((face + 7) // 8, (face + 7) // 8, 6)
-            self.ctx.finish()
+            what = f"split-sum {kind} cube, {size}^2 x 6, {SPLIT_SUM_LEVELS} levels (GPU, cached afterwards)"
+            with timed_step("prefilter", what, announce=True):
+                for level in range(SPLIT_SUM_LEVELS):
+                    face = max(size >> level, 1)
+                    cube.bind_to_image(0, read=False, write=True, level=level, format=GL_RGBA32F)
+                    shader["u_size"] = face
+                    shader["u_row"] = level
+                    shader["u_rings"] = 1 if level == 0 else self.rings
+                    shader.run((face + 7) // 8, (face + 7) // 8, 6)
+                self.ctx.finish()
             nodes_texture.release()
             if cache is not None:
                 cache.parent.mkdir(parents=True, exist_ok=True)
@@ -329,10 +332,12 @@ class PrefilteredMaps:
             shader["u_rings"] = rings
             shader["u_size"] = (width, height)
             tex.bind_to_image(0, read=False, write=True, level=0, format=GL_RGBA32F)
-            for s in range(depth):
-                shader["u_slice"] = s
-                shader.run((width + 7) // 8, (height + 7) // 8, 1)
-                self.ctx.finish()
+            what = f"{label}) map, {width}x{height}x{depth} (GPU, cached afterwards)"
+            with timed_step("prefilter", what, announce=True):
+                for s in range(depth):
+                    shader["u_slice"] = s
+                    shader.run((width + 7) // 8, (height + 7) // 8, 1)
+                    self.ctx.finish()
             nodes_texture.release()
             if cache is not None:
                 cache.parent.mkdir(parents=True, exist_ok=True)
