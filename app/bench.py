@@ -1,4 +1,4 @@
-"""``lobeview bench [matrix|stress|mirrors|report]``: the command line of the benchmark package
+"""``lobeview bench [matrix|stress|mirrors|walkthrough|report]``: the command line of the benchmark package
 (bench/, ``lobeview.bench``): options, then the chosen mode. The measuring lives there."""
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ from lobeview.bench.matrix_config import FULL_VIEWS, MATERIAL_CLASSES, SWEEP_BIA
 from lobeview.core.paths import bench_results_dir
 
 __all__ = ["BenchError", "add_arguments", "run"]
-MODES = ("matrix", "stress", "mirrors", "report")
+MODES = ("matrix", "stress", "mirrors", "walkthrough", "report")
 
 
 def add_arguments(p) -> None:
-    p.usage = "lobeview bench [matrix|stress|mirrors|report JSON] [options]  (the mode first)"
+    p.usage = "lobeview bench [matrix|stress|mirrors|walkthrough|report JSON] [options]  (the mode first)"
     a = p.add_argument
     a(
         "mode",
@@ -24,7 +24,8 @@ def add_arguments(p) -> None:
         choices=MODES,
         default="matrix",
         help="matrix (default): time against error for every method; stress: the numerical stress grid;"
-        " mirrors: planar mirror passes (0/1/2 reflectors x --resolutions); report JSON: rewrite a run's"
+        " mirrors: planar mirror passes (0/1/2 reflectors x --resolutions); walkthrough: the demo and the"
+        " apartment along their recorded paths, and cost against object count; report JSON: rewrite a run's"
         " Markdown and plots",
     )
     a("source", nargs="?", metavar="JSON", help="report: the run's JSON")
@@ -56,6 +57,14 @@ def add_arguments(p) -> None:
     a("--cache", help="cache folder for the demo scene and cube maps (default ~/.cache/lobeview)")
     a("--report", metavar="JSON", help=argparse.SUPPRESS)  # same as 'report JSON'
 
+    a("--frames", type=int, help="walkthrough: frames along each path (default 24; --quick 8)")
+    a("--rooms", type=int, help="walkthrough: rooms of the apartment walked (default 12; --quick 6)")
+    a(
+        "--count-rooms",
+        nargs="+",
+        type=int,
+        help="walkthrough: apartment sizes of the object-count table (default 1 6 18; --quick 1 4)",
+    )
     a("--out", help="output folder (default bench/results); files are timestamped, never overwritten")
 
 
@@ -85,6 +94,10 @@ def run(args) -> int:
         from lobeview.bench.mirrors import run_mirrors_command
 
         return run_mirrors_command(args, out_dir, stamp)
+    if mode == "walkthrough":
+        from lobeview.bench.walkthrough import run_walkthrough_command
+
+        return run_walkthrough_command(args, out_dir, stamp)
     from lobeview.bench.matrix import run_matrix_command
 
     return run_matrix_command(args)

@@ -136,8 +136,12 @@ def check_scene_options(args) -> None:
         raise OptionError(f"--mirror-scale must be in [0.05, 2], got {args.mirror_scale}")
     if args.materials is not None and not Path(args.materials).is_file():
         raise OptionError(f"--materials: no such file {args.materials!r}")
-    if getattr(args, "scene", None) is not None and not Path(args.scene).is_file():
-        raise OptionError(f"scene: no such file {args.scene!r}")
+    scene = getattr(args, "scene", None)
+    if scene is not None and scene.startswith("builtin:"):
+        if scene != "builtin:demo":
+            builtin_apartment_rooms(scene)
+    elif scene is not None and not Path(scene).is_file():
+        raise OptionError(f"scene: no such file {scene!r} (a .gltf/.glb file, or {BUILTIN_SCENES})")
     check_environment_option(getattr(args, "env", None))
     args.limits = trust_limits(args)
 
@@ -178,6 +182,23 @@ def camera_from_args(args, default) -> Camera:
 
 
 # -- scene set-up ---------------------------------------------------------------------------------
+BUILTIN_SCENES = "builtin:demo, builtin:apartment (12 rooms) or builtin:apartment-N (N = 1..40 rooms)"
+
+
+def builtin_apartment_rooms(scene_arg: str) -> int:
+    """The room count of ``builtin:apartment`` / ``builtin:apartment-N``; anything else after
+    ``builtin:`` is an error naming the built-in scenes."""
+    from lobeview.scenes.apartment import DEFAULT_ROOMS, MAX_ROOMS
+
+    name = scene_arg.removeprefix("builtin:")
+    if name == "apartment":
+        return DEFAULT_ROOMS
+    count = name.removeprefix("apartment-")
+    if name.startswith("apartment-") and count.isdigit() and 1 <= int(count) <= MAX_ROOMS:
+        return int(count)
+    raise OptionError(f"unknown built-in scene {scene_arg!r}: the built-in scenes are {BUILTIN_SCENES}")
+
+
 def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache_arg: str | None, limits=None):
     """(scene path, Scene, EnvironmentMap, cache folder) for ``shot`` and ``view``: the demo
     (built and cached on first use) when no scene is given, with the matching default sky.
@@ -189,9 +210,14 @@ def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache
     from lobeview.scenes.gltf_loader import load_gltf
 
     cache = cache_dir(cache_arg)
-    if scene_arg is None:
+    if scene_arg is None or scene_arg == "builtin:demo":
         path = build_demo_scene(directory=cache / "demo")
         env_name = env_arg or DEMO_ENVIRONMENT
+    elif scene_arg.startswith("builtin:"):
+        from lobeview.scenes.apartment import APARTMENT_ENVIRONMENT, build_apartment_scene
+
+        path = build_apartment_scene(builtin_apartment_rooms(scene_arg), directory=cache / "apartment")
+        env_name = env_arg or APARTMENT_ENVIRONMENT
     else:
         path = Path(scene_arg)
         env_name = env_arg or SCENE_ENV

@@ -82,6 +82,9 @@ def _rendering(window) -> None:
         window.dirty = True  # the image is the same; the counts below are the next frame's
     for line in renderer.draw_report:
         imgui.text(line)
+    if window.camera_path is not None:
+        state = f"t = {window.path_time:.1f}" if window.path_time is not None else "paused"
+        imgui.text(f"camera path: {state} of {window.camera_path.duration:.1f} s (P: pause / resume)")
     scene = window.scene
     if scene.cameras:
         names = [c.name for c in scene.cameras]

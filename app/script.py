@@ -18,6 +18,8 @@ frame N (in order; steps of earlier frames first):
                       wait (default true): the panel's fit for the selected object
     stats             print "stats frame=N gl_objects=K rss_mib=M cached=C" (soak tests)
     refine            value: true/false, as the panel's "refine when still" checkbox
+    path              value: seconds; the recorded camera path (--path) jumps there and plays on;
+                      prints "path frame=N t=T position=x,y,z target=x,y,z"
     refinement        print "refinement frame=N scene_passes=P spp=S refined_share=F noise=X
                       realtime=Y shown=Z finished=..." (F: the refined image's mean weight in
                       what is shown; X, Y, Z: estimated display RMS errors of the refined mean,
@@ -52,6 +54,7 @@ ACTIONS = (
     "stats",
     "refine",
     "refinement",
+    "path",
     "quit",
 )
 # Actions after which the image is unchanged (no reset of the refinement).
@@ -194,6 +197,15 @@ def run_due_steps(window, steps: list[dict]) -> None:
                 f" finished={refinement.finished or '-'}",
                 flush=True,
             )
+        elif action == "path":
+            try:
+                window.set_path_time(float(step.get("value", 0.0)))
+            except ValueError as exc:
+                raise ScriptError(f"path: {exc}") from None
+            camera = window.camera_path.camera_at(window.path_time)
+            where = ",".join(f"{x:.4f}" for x in camera.position)
+            target = ",".join(f"{x:.4f}" for x in camera.target)
+            print(f"path frame={window.frame} t={window.path_time:.4f} position={where} target={target}", flush=True)
         elif action == "quit":
             window.quit_requested = True
         if action not in _KEEP_IMAGE:

@@ -47,7 +47,11 @@ ShotError = OptionError  # the error type the command line reports as "lobeview:
 
 def add_arguments(p) -> None:
     a = p.add_argument
-    a("scene", nargs="?", help="glTF scene (.gltf/.glb) with lightmaps; omitted: the built-in demo")
+    a(
+        "scene",
+        nargs="?",
+        help="glTF scene (.gltf/.glb) with lightmaps, builtin:demo (default) or builtin:apartment[-ROOMS]",
+    )
     a(
         "--env",
         help="equirectangular .exr/.hdr or builtin:studio|sky|overcast "

@@ -38,7 +38,9 @@ from lobeview.core.methods import resolve_cli_method
 
 
 def add_arguments(p) -> None:
-    p.add_argument("scene", nargs="?", help="glTF scene with lightmaps (default: the built-in demo)")
+    p.add_argument(
+        "scene", nargs="?", help="glTF scene with lightmaps, builtin:demo (default) or builtin:apartment[-ROOMS]"
+    )
     p.add_argument("--env", help="environment outside the scene (default builtin:overcast)")
     p.add_argument("--size", default="1280x800", help="window size WxH (default 1280x800)")
     add_method_arguments(p, what="real-time method while moving: ")
@@ -46,8 +48,32 @@ def add_arguments(p) -> None:
     p.add_argument("--no-vsync", action="store_true", help="disable vsync")
     add_scene_arguments(p)
     p.add_argument("--screenshot-dir", default=".", help="where F12 writes screenshots (default .)")
+    p.add_argument(
+        "--path",
+        metavar="FILE|builtin",
+        help="fly a recorded camera path (JSON, viewer/camera_path.py; 'builtin': the built-in scene's own "
+        "path); P pauses and resumes, moving or looking takes over",
+    )
     p.add_argument("--script", help="JSON list of scripted actions (testing/demos): see app/script.py")
     p.add_argument("--exit-after", type=int, default=0, help="quit after this many frames (0: never)")
+
+
+def builtin_camera_path(scene_arg: str | None, scene_path: Path):
+    """``--path builtin``: the recorded path of the demo or the apartment (written beside it)."""
+    from lobeview.viewer.camera_path import CameraPath
+
+    if scene_arg is None or scene_arg == "builtin:demo":
+        from lobeview.scenes.demo import demo_path
+
+        return demo_path()
+    if scene_arg.startswith("builtin:"):
+        from lobeview.scenes.apartment import apartment_path_file
+
+        return CameraPath.load(apartment_path_file(scene_path))
+    raise OptionError(
+        "--path builtin: only the built-in scenes (builtin:demo, builtin:apartment[-ROOMS]) have a recorded "
+        "path; give a path file (JSON) for this scene"
+    )
 
 
 def _no_display_hint() -> str:
@@ -83,6 +109,11 @@ def run(args) -> int:
 
         script = load_script(args.script)
 
+    camera_path = None
+    if args.path is not None and args.path != "builtin":
+        from lobeview.viewer.camera_path import CameraPath
+
+        camera_path = CameraPath.load(args.path)  # a bad file stops here, before the scene loads
     import moderngl_window as mglw
 
     from lobeview.app.window import LobeviewWindow, Session
@@ -93,7 +124,11 @@ def run(args) -> int:
     if edits is not None:
         original = {m.name: m.desc for m in scene.materials}
         loaded = apply_material_edits(scene, edits)
-    LobeviewWindow.session = Session(scene, scene_path, environment, args, method, cache, script, original, loaded)
+    if args.path == "builtin":
+        camera_path = builtin_camera_path(args.scene, scene_path)
+    LobeviewWindow.session = Session(
+        scene, scene_path, environment, args, method, cache, script, original, loaded, camera_path
+    )
     LobeviewWindow.window_size = (width, height)
     LobeviewWindow.vsync = not args.no_vsync
     mglw.run_window_config(LobeviewWindow, args=["--window", "pyglet"])

@@ -50,6 +50,7 @@ class Session:
     script: list
     original_materials: dict | None = None
     loaded_materials: list | None = None
+    camera_path: object | None = None  # viewer/camera_path.CameraPath flown from frame 1 (--path)
 
 
 class LobeviewWindow(mglw.WindowConfig):
@@ -79,6 +80,10 @@ class LobeviewWindow(mglw.WindowConfig):
         self.walk = WalkCamera.from_camera(Camera(position, target, up, fov))
         self.default_walk_speed = walk_speed_for(self.scene.bounds)
         self.walk.speed = self.default_walk_speed
+        # --path: the recorded path plays from t = 0 (looping); P pauses, walking or looking takes over.
+        self.camera_path = session.camera_path
+        self.path_time = 0.0 if self.camera_path is not None else None
+        self.path_paused_at = 0.0
         self.method = session.method
         # kept apart from the method so switching to fis-N and back keeps the choice
         self.lobe_normalize = self.args.lobe_normalize
@@ -173,6 +178,8 @@ class LobeviewWindow(mglw.WindowConfig):
             elif key == keys.O:
                 self.walk.orbit = not self.walk.orbit
                 self.dirty = True
+            elif key == keys.P:
+                self.toggle_path()
             elif key == keys.ESCAPE:
                 self.wnd.close()
             elif key == keys.Z and modifiers.ctrl:
@@ -190,6 +197,7 @@ class LobeviewWindow(mglw.WindowConfig):
             return
         buttons = self.wnd.mouse_states
         if buttons.right or (self.walk.orbit and buttons.left):
+            self.stop_path()
             self.walk.look(dx, dy)
             self.dirty = True
 
@@ -287,6 +295,39 @@ class LobeviewWindow(mglw.WindowConfig):
         return directory / f"{stem}.png"
 
     # -- frame -----------------------------------------------------------------------------------
+    def toggle_path(self) -> None:
+        """P: pause the recorded path, or resume it from where the camera left it."""
+        if self.camera_path is None:
+            self.message = "no camera path (start the viewer with --path FILE or --path builtin)"
+        elif self.path_time is None:
+            self.path_time = self.path_paused_at
+            self.message = f"flying the camera path from t = {self.path_time:.1f} s"
+        else:
+            self.path_paused_at, self.path_time = self.path_time, None
+            self.message = f"camera path paused at t = {self.path_paused_at:.1f} s (P resumes)"
+
+    def set_path_time(self, t: float) -> None:
+        """Jump the recorded path to ``t`` seconds (scripts); the camera follows this frame."""
+        if self.camera_path is None:
+            raise ValueError("no camera path (--path)")
+        self.path_time = float(np.clip(t, 0.0, self.camera_path.duration))
+
+    def _fly_path(self, frame_time: float) -> None:
+        if self.path_time is None:
+            return
+        speed = self.walk.speed
+        self.walk = WalkCamera.from_camera(self.camera_path.camera_at(self.path_time))
+        self.walk.speed = speed
+        self.dirty = True
+        # Real time between frames (capped so a slow frame does not jump), looping at the end.
+        self.path_time = (self.path_time + min(frame_time, 0.1)) % self.camera_path.duration
+
+    def stop_path(self) -> None:
+        """Walking or looking takes the camera over from the path."""
+        if self.path_time is not None:
+            self.path_paused_at, self.path_time = self.path_time, None
+            self.message = f"camera path stopped at t = {self.path_paused_at:.1f} s (P resumes)"
+
     def _walk_keys(self, frame_time: float) -> None:
         keys = self.wnd.keys
         direction = np.zeros(3)
@@ -301,6 +342,7 @@ class LobeviewWindow(mglw.WindowConfig):
             if key in self.keys:
                 direction += vec
         if np.any(direction):
+            self.stop_path()
             fast = 4.0 if self.wnd.modifiers.shift else 1.0
             self.walk.move(direction * fast, min(frame_time, 0.1))
             self.dirty = True
@@ -315,6 +357,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self._last_frame_start = t_frame
         run_due_steps(self, self.script)
         self._walk_keys(frame_time)
+        self._fly_path(frame_time)
         self.poll_fit()
 
         camera = self.walk.camera()

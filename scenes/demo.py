@@ -223,6 +223,16 @@ def demo_geometry() -> Scene:
     return Scene(objects, materials, cameras, "lobeview demo")
 
 
+def demo_path():
+    """The demo's recorded camera path (``--path builtin``, ``lobeview bench walkthrough``): from
+    the overview camera round the left of the room to the table camera and on to the right."""
+    from lobeview.viewer.camera_path import CameraPath
+
+    positions = [[0.3, 1.55, 2.75], [-1.3, 1.5, 1.4], [-0.4, 1.3, 0.7], [0.95, 1.2, 0.55], [2.2, 1.45, 1.9]]
+    targets = [[0.0, 0.85, -0.9], [0.3, 0.8, -1.2], [0.0, 0.86, -0.7], [0.05, 0.86, -0.62], [-0.6, 0.9, -1.8]]
+    return CameraPath(np.array([0.0, 3.0, 5.5, 7.5, 10.5]), np.array(positions), np.array(targets), 55.0)
+
+
 def unwrap_lightmap_uvs(scene: Scene, resolution: int) -> Scene:
     """One xatlas atlas for all objects; splits vertices along chart seams."""
     import xatlas

@@ -1,0 +1,347 @@
+"""``lobeview bench walkthrough``: what a walkthrough costs along a recorded camera path, and how
+that cost grows with the number of objects (issue 18; thesis 4.6.4: an apartment at 30-40 fps
+with ~7 samples per lobe).
+
+Scenes: the demo room (scenes/demo.py, its recorded path) and the apartment
+(scenes/apartment.py, ``--rooms``, its recorded path). For each:
+
+- start-up, cold (an empty cube-map cache: every cube map rendered, 2 bounces) and warm (the
+  same cache folder again: cube maps read from disk), as SceneRenderer's stages;
+- cube maps: how many objects have one and their GPU memory (radiance cube with its MIP chain);
+- per frame of the path (``--frames`` times spread over it): the mirror passes alone (drawn,
+  then glFinish) and the camera pass (draw + glFinish), objects drawn and culled in the camera
+  pass and in the mirror passes, mirror passes drawn and skipped (and why).
+
+Then the cost table against object count: the apartment with ``--count-rooms`` rooms (about 20,
+100 and 290 objects), baked once at a low lightmap quality (timing does not depend on it), the
+same measurements summarised per scene size.
+
+Timings are wall-clock on this machine (llvmpipe on a 2-core CPU is shared and noisy; the ratios
+between rows measured in one run are what counts); the device is named in the output.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_COUNT_ROOMS = (1, 6, 18)
+COUNT_BAKE = {"resolution": 512, "rays": 16, "bounces": 1}  # the object-count sweep's lightmaps
+
+
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def cube_memory(renderer) -> tuple[int, int]:
+    """(cube maps, GPU bytes of their radiance cubes with MIP chains)."""
+    from lobeview.viewer.prefiltered import cube_bytes
+
+    cubes = [obj.cube for obj in renderer.objects if obj.cube is not None]
+    return len(cubes), sum(cube_bytes(c.face_size, int(np.log2(c.face_size)) + 1) for c in cubes)
+
+
+def _mirror_counts(report: list[str]) -> tuple[int, int, dict]:
+    drawn = sum(1 for line in report if " pass " in line and "no mirror pass" not in line)
+    skipped = {}
+    for line in report:
+        if "no mirror pass (" in line:
+            reason = line.split("no mirror pass (", 1)[1].rstrip(")")
+            skipped[reason] = skipped.get(reason, 0) + 1
+    return drawn, sum(skipped.values()), skipped
+
+
+def start_renderer(ctx, scene, env, size, face_size: int, cube_dir: Path):
+    """(renderer, seconds): SceneRenderer construction with its cube maps under ``cube_dir``."""
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    t0 = time.perf_counter()
+    renderer = SceneRenderer(ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cube_dir)
+    ctx.finish()
+    return renderer, time.perf_counter() - t0
+
+
+def walk_path(renderer, path, method, frames: int) -> list[dict]:
+    """Per frame of ``path``: mirror-pass and camera-pass milliseconds and the draw counters.
+    One untimed frame first (shader compilation)."""
+    rows = []
+    times = path.frame_times(frames)
+    renderer.draw_frame(path.camera_at(0.0), method)
+    renderer.ctx.finish()
+    for n, t in enumerate(times):
+        camera = path.camera_at(float(t)).fitted_to(renderer.bounds)
+        renderer.invalidate_mirrors()
+        renderer.draw_counts.new_frame()
+        renderer.ctx.finish()
+        t0 = time.perf_counter()
+        if method.kind != "prefiltered":
+            renderer.render_mirror_passes(camera)
+        renderer.ctx.finish()
+        t1 = time.perf_counter()
+        mirror = renderer.draw_counts.of("mirror")
+        mirror_draws, mirror_culled = mirror.drawn, mirror.culled
+        drawn, skipped, reasons = _mirror_counts(renderer.mirror_passes.report)
+        renderer.draw_frame(camera, method)  # reuses the mirror buffers just drawn (and resets the counters)
+        renderer.ctx.finish()
+        t2 = time.perf_counter()
+        counts = renderer.draw_counts
+        rows.append(
+            {
+                "frame": n,
+                "t": float(t),
+                "mirror_ms": (t1 - t0) * 1e3,
+                "camera_ms": (t2 - t1) * 1e3,
+                "frame_ms": (t2 - t0) * 1e3,
+                "camera_drawn": counts.of("camera").drawn,
+                "camera_culled": counts.of("camera").culled,
+                "mirror_draws": mirror_draws,
+                "mirror_culled": mirror_culled,
+                "mirror_passes": drawn,
+                "mirror_skipped": skipped,
+                "skip_reasons": reasons,
+            }
+        )
+    return rows
+
+
+def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_size: int) -> dict:
+    """Cold and warm start-up, cube maps and the per-frame rows of one scene."""
+    cube_dir = Path(tempfile.mkdtemp(prefix="lobeview-walk-"))
+    try:
+        _say(f"[walkthrough] {label}: {len(scene.objects)} objects, cold start (every cube map rendered)")
+        renderer, cold = start_renderer(ctx, scene, env, size, face_size, cube_dir)
+        cold_stages = dict(renderer.timings)
+        cube_faces = renderer.draw_counts.of("cube map")
+        cube_draws, cube_culled = cube_faces.drawn, cube_faces.culled
+        renderer.release()
+        renderer, warm = start_renderer(ctx, scene, env, size, face_size, cube_dir)
+        warm_stages = dict(renderer.timings)
+        cubes, memory = cube_memory(renderer)
+        _say(
+            f"[walkthrough] {label}: start-up cold {cold:.1f} s, warm {warm:.1f} s; {cubes} cube maps; {frames} frames"
+        )
+        rows = walk_path(renderer, path, method, frames)
+        renderer.release()
+    finally:
+        shutil.rmtree(cube_dir, ignore_errors=True)
+    reflectors = sum(1 for o in analyse_scene(scene).objects if o.reflector is not None)
+    return {
+        "scene": label,
+        "objects": len(scene.objects),
+        "reflectors": reflectors,
+        "cube_maps": cubes,
+        "cube_memory_mb": memory / 2**20,
+        "startup_cold_s": cold,
+        "startup_warm_s": warm,
+        "cold_stages": cold_stages,
+        "warm_stages": warm_stages,
+        "cube_face_draws": cube_draws,
+        "cube_face_culled": cube_culled,
+        "frames": rows,
+    }
+
+
+def analyse_scene(scene):
+    from lobeview.scenes.analysis import analyse
+
+    return analyse(scene)
+
+
+def _summary(result: dict) -> dict:
+    rows = result["frames"]
+
+    def mean(key):
+        return statistics.fmean(r[key] for r in rows)
+
+    return {
+        "frame_ms_median": statistics.median(r["frame_ms"] for r in rows),
+        "frame_ms_max": max(r["frame_ms"] for r in rows),
+        "mirror_ms_mean": mean("mirror_ms"),
+        "camera_ms_mean": mean("camera_ms"),
+        "camera_drawn_mean": mean("camera_drawn"),
+        "camera_culled_mean": mean("camera_culled"),
+        "mirror_passes_mean": mean("mirror_passes"),
+        "mirror_skipped_mean": mean("mirror_skipped"),
+    }
+
+
+def _scene_markdown(result: dict) -> list[str]:
+    s = _summary(result)
+    cold_cubes = result["cold_stages"].get("cube maps", 0.0)
+    warm_cubes = result["warm_stages"].get("cube maps", 0.0)
+    lines = [
+        f"### {result['scene']}",
+        "",
+        f"{result['objects']} objects, {result['reflectors']} planar reflectors, {result['cube_maps']} cube maps "
+        f"({result['cube_memory_mb']:.0f} MB).",
+        f"Start-up: cold {result['startup_cold_s']:.1f} s (cube maps {cold_cubes:.1f} s: "
+        f"{result['cube_face_draws']} object draws into cube faces, {result['cube_face_culled']} culled), "
+        f"warm {result['startup_warm_s']:.1f} s (cube maps {warm_cubes:.1f} s, from the cache).",
+        f"Frames: median {s['frame_ms_median']:.0f} ms, max {s['frame_ms_max']:.0f} ms; mean split: mirror passes "
+        f"{s['mirror_ms_mean']:.0f} ms, camera pass {s['camera_ms_mean']:.0f} ms.",
+        "",
+        "| frame | t (s) | frame ms | mirror passes ms | camera pass ms | camera draws / culled "
+        "| mirror-pass draws / culled | mirror passes drawn / skipped | skipped because |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in result["frames"]:
+        reasons = ", ".join(f"{k}: {v}" for k, v in sorted(r["skip_reasons"].items())) or "-"
+        lines.append(
+            f"| {r['frame']} | {r['t']:.1f} | {r['frame_ms']:.0f} | {r['mirror_ms']:.0f} | {r['camera_ms']:.0f} "
+            f"| {r['camera_drawn']} / {r['camera_culled']} | {r['mirror_draws']} / {r['mirror_culled']} "
+            f"| {r['mirror_passes']} / {r['mirror_skipped']} | {reasons} |"
+        )
+    return lines + [""]
+
+
+def _count_markdown(rows: list[dict]) -> list[str]:
+    lines = [
+        "| rooms | objects | reflectors | cube maps | cube memory MB | start-up cold s | cube-face draws / culled "
+        "| start-up warm s | frame ms (median) | mirror ms (mean) | camera ms (mean) | camera draws / culled (mean) "
+        "| mirror passes drawn / skipped (mean) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        s = _summary(r)
+        lines.append(
+            f"| {r['rooms']} | {r['objects']} | {r['reflectors']} | {r['cube_maps']} "
+            f"| {r['cube_memory_mb']:.0f} | {r['startup_cold_s']:.1f} "
+            f"| {r['cube_face_draws']} / {r['cube_face_culled']} | {r['startup_warm_s']:.1f} "
+            f"| {s['frame_ms_median']:.0f} | {s['mirror_ms_mean']:.0f} | {s['camera_ms_mean']:.0f} "
+            f"| {s['camera_drawn_mean']:.0f} / {s['camera_culled_mean']:.0f} "
+            f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} |"
+        )
+    return lines
+
+
+def run_walkthrough_bench(
+    ctx,
+    device: str,
+    out_dir: Path,
+    stamp: str,
+    *,
+    size: tuple[int, int],
+    frames: int,
+    method: str,
+    face_size: int,
+    rooms: int,
+    count_rooms,
+    count_frames: int,
+    cache: Path,
+    quick: bool,
+) -> Path:
+    from lobeview.app.options import load_scene_and_environment
+    from lobeview.core.methods import Method
+    from lobeview.scenes.apartment import apartment_path, build_apartment_scene
+    from lobeview.scenes.demo import demo_path
+    from lobeview.scenes.gltf_loader import load_gltf
+
+    method_obj = Method.parse(method)
+    t_start = time.perf_counter()
+    results = []
+    _, demo, env, _ = load_scene_and_environment(None, None, str(cache))
+    results.append(measure_scene(ctx, "demo", demo, env, demo_path(), method_obj, size, frames, face_size))
+    scene_arg = f"builtin:apartment-{rooms}"
+    _, apartment, env, _ = load_scene_and_environment(scene_arg, None, str(cache))
+    results.append(
+        measure_scene(ctx, scene_arg, apartment, env, apartment_path(rooms), method_obj, size, frames, face_size)
+    )
+    count_rows = []
+    for count in count_rooms:
+        glb = build_apartment_scene(count, directory=cache / "apartment", **COUNT_BAKE)
+        scene = load_gltf(glb)
+        row = measure_scene(
+            ctx,
+            f"apartment-{count} (sweep)",
+            scene,
+            env,
+            apartment_path(count),
+            method_obj,
+            size,
+            count_frames,
+            face_size,
+        )
+        row["rooms"] = count
+        count_rows.append(row)
+    elapsed = time.perf_counter() - t_start
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    stem = f"walkthrough-{stamp}{'-quick' if quick else ''}"
+    record = {
+        "device": device,
+        "size": list(size),
+        "method": method,
+        "face_size": face_size,
+        "frames": frames,
+        "count_frames": count_frames,
+        "count_bake": COUNT_BAKE,
+        "scenes": results,
+        "object_count": count_rows,
+        "seconds": elapsed,
+    }
+    (out_dir / f"{stem}.json").write_text(json.dumps(record, indent=1) + "\n")
+    lines = [
+        f"# Walkthrough bench {stamp}{' (quick)' if quick else ''}",
+        "",
+        f"Device: {device}. Frame {size[0]}x{size[1]}, method {method}, cube faces {face_size}^2 (2 bounces), "
+        f"{frames} frames spread over each recorded path (`lobeview view SCENE --path builtin` flies it). "
+        "Wall-clock milliseconds with glFinish after the mirror passes and after the camera pass; mirror "
+        "buffers redrawn every frame; one untimed frame first. Cold start: an empty cube-map cache; warm: "
+        f"the same cache again. Whole run {elapsed / 60:.1f} min.",
+        "",
+        "## Cost against object count",
+        "",
+        f"The apartment at {', '.join(str(c) for c in count_rooms)} rooms (lightmaps baked at "
+        f"{COUNT_BAKE['resolution']}^2, {COUNT_BAKE['rays']} rays, {COUNT_BAKE['bounces']} bounce: timing does "
+        f"not depend on them), {count_frames} frames of each one's path.",
+        "",
+        *_count_markdown(count_rows),
+        "",
+        "## Per frame",
+        "",
+    ]
+    for result in results:
+        lines += _scene_markdown(result)
+    md = out_dir / f"{stem}.md"
+    md.write_text("\n".join(lines) + "\n")
+    _say(f"[walkthrough] wrote {md} and {stem}.json ({elapsed / 60:.1f} min)")
+    return md
+
+
+def run_walkthrough_command(args, out_dir: Path, stamp: str) -> int:
+    """``lobeview bench walkthrough`` with the command line's options."""
+    from lobeview.app.options import parse_size
+    from lobeview.core.paths import cache_dir
+    from lobeview.scenes.apartment import DEFAULT_ROOMS
+    from lobeview.viewer.context import create_headless_context, renderer_description
+
+    sizes = args.resolutions or (["320x200"] if args.quick else ["640x400"])
+    if len(sizes) != 1:
+        from lobeview.bench import BenchError
+
+        raise BenchError("walkthrough: one --resolutions size at a time")
+    ctx = create_headless_context()
+    run_walkthrough_bench(
+        ctx,
+        renderer_description(ctx),
+        out_dir,
+        stamp,
+        size=parse_size(sizes[0]),
+        frames=args.frames or (8 if args.quick else 24),
+        method=(args.methods or ["lobe-7"])[0],
+        face_size=args.face_size if args.face_size != 256 or not args.quick else 64,
+        rooms=args.rooms or (6 if args.quick else DEFAULT_ROOMS),
+        count_rooms=args.count_rooms or ((1, 4) if args.quick else DEFAULT_COUNT_ROOMS),
+        count_frames=args.frames or (4 if args.quick else 12),
+        cache=cache_dir(args.cache),
+        quick=args.quick,
+    )
+    ctx.release()
+    return 0
