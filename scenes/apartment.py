@@ -51,6 +51,7 @@ MAX_ROOMS = 40
 DEFAULT_RESOLUTION = 1024
 DEFAULT_RAYS = 64
 DEFAULT_BOUNCES = 2
+LIGHT_SAMPLES = 64  # shadow rays per texel toward the lamps (baker.py picks each texel's own lamp)
 
 CEILING = 2.7  # m
 CORRIDOR_HALF_WIDTH = 1.0
@@ -396,7 +397,7 @@ def apartment_path(rooms: int = DEFAULT_ROOMS) -> CameraPath:
     if 2 * column + 1 < rooms:
         keys.append(([door_x, y, -c - 1.0], [door_x + 1.6, 1.0, -c - 3.2]))
         keys.append(([door_x, y, -0.2], [door_x + 3.0, 1.4, 0.2]))
-    keys.append(([max(length - 1.2, door_x + 0.8), y, 0.0], [length + 3.0, 1.4, 0.0]))
+    keys.append(([max(length - 2.5, door_x + 0.8), y, 0.0], [length + 3.0, 1.4, 0.0]))
     times = [0.0]
     for (p0, q0), (p1, q1) in zip(keys, keys[1:], strict=False):
         walk = float(np.linalg.norm(np.subtract(p1, p0))) / WALK_SPEED
@@ -414,6 +415,7 @@ def apartment_key(rooms: int, resolution: int, rays: int, bounces: int) -> str:
             "r": resolution,
             "rays": rays,
             "b": bounces,
+            "light_samples": LIGHT_SAMPLES,
             "env": APARTMENT_ENVIRONMENT,
             "presets": [PRESETS[k] for k in sorted(PRESETS)],
         },
@@ -448,7 +450,9 @@ def build_apartment_scene(
         flush=True,
     )
     scene = unwrap_lightmap_uvs(scene, resolution)
-    lightmap = bake_lightmap(scene, load_environment(APARTMENT_ENVIRONMENT), resolution, rays, bounces)
+    lightmap = bake_lightmap(
+        scene, load_environment(APARTMENT_ENVIRONMENT), resolution, rays, bounces, light_samples=LIGHT_SAMPLES
+    )
     tmp = path.with_suffix(".tmp.glb")
     write_glb(scene, tmp, lightmap, lightmap_name=path.stem + "_lightmap.exr")
     apartment_path(rooms).save(path_file)

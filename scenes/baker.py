@@ -462,8 +462,35 @@ def _environment_light(environment, importance, intersector, origin, normal, ray
     return out / samples
 
 
+EMITTER_UNIFORM_SHARE = 0.2  # defensive share of area sampling in the emitter choice (see below)
+EMITTER_CHUNK = 32768  # texels per block of the per-texel emitter weights
+
+
+def emitter_choice_weights(origin, normal, tri, tri_normal, area, radiance) -> np.ndarray:
+    """(texels, emitters) probabilities of choosing each emissive triangle for each texel: the
+    triangle's unoccluded irradiance at the texel estimated from its centroid (L area cos_r
+    cos_e / d^2, d^2 kept above the triangle's area so a nearby emitter does not take every
+    sample), mixed with EMITTER_UNIFORM_SHARE of plain area sampling so that every triangle that
+    can contribute keeps a non-zero probability (the estimator stays unbiased where the centroid
+    guess is wrong, e.g. a light whose centre is behind the receiver's horizon but whose edge is
+    not). A texel in one room of a walkthrough then spends its samples on its own lamp instead of
+    the lamps of every other room in proportion to their area."""
+    centroid = tri.mean(axis=1)
+    d = centroid[None, :, :] - origin[:, None, :]
+    dist2 = np.maximum(np.sum(d * d, axis=2), area[None, :])
+    cos_r = np.clip(np.einsum("tk,tek->te", normal, d), 0.0, None) / np.sqrt(dist2)
+    cos_e = np.clip(-np.einsum("ek,tek->te", tri_normal, d), 0.0, None) / np.sqrt(dist2)
+    guess = radiance[None, :] * area[None, :] * cos_r * cos_e / dist2
+    total = guess.sum(axis=1, keepdims=True)
+    uniform = area / area.sum()
+    share = np.where(total > 0, 1.0 - EMITTER_UNIFORM_SHARE, 0.0)
+    return share * guess / np.where(total > 0, total, 1.0) + (1.0 - share) * uniform[None, :]
+
+
 def _direct_emission(mesh, intersector, faces, emission_face, origin, normal, samples, seed):
-    """Irradiance from emissive triangles by area sampling with shadow rays, per texel."""
+    """Irradiance from emissive triangles by area sampling with shadow rays, per texel: each
+    sample picks a triangle with the texel's own probabilities (emitter_choice_weights), then a
+    uniform point on it; E = mean of L_e cos_r cos_e / d^2 / (p_k / A_k)."""
     emitters = np.flatnonzero(np.max(emission_face, axis=1) > 0)
     out = np.zeros((len(origin), 3))
     if len(emitters) == 0 or samples <= 0:
@@ -472,31 +499,37 @@ def _direct_emission(mesh, intersector, faces, emission_face, origin, normal, sa
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     area = 0.5 * np.linalg.norm(cross, axis=1)
     tri_normal = cross / np.maximum(2.0 * area[:, None], 1e-30)
-    total_area = area.sum()
-    cdf = np.cumsum(area) / total_area
+    radiance = emission_face[emitters] @ np.array([0.2126, 0.7152, 0.0722])
     points = qmc.Sobol(d=3, scramble=True, seed=seed + 1).random(samples)
     rotation = np.random.default_rng(seed + 2).random((len(origin), 3))
-    for s in range(samples):
-        u = (points[s][None, :] + rotation) % 1.0
-        k = np.minimum(np.searchsorted(cdf, u[:, 0], side="right"), len(cdf) - 1)
-        su = np.sqrt(u[:, 1])
-        b0, b1 = 1.0 - su, u[:, 2] * su  # uniform point on the triangle
-        p = tri[k, 0] * b0[:, None] + tri[k, 1] * b1[:, None] + tri[k, 2] * (1.0 - b0 - b1)[:, None]
-        d = p - origin
-        dist2 = np.sum(d * d, axis=1)
-        direction = d / np.sqrt(np.maximum(dist2, 1e-30))[:, None]
-        cos_r = np.sum(normal * direction, axis=1)
-        cos_e = -np.sum(tri_normal[k] * direction, axis=1)
-        candidate = (cos_r > 0) & (cos_e > 0)
-        if not np.any(candidate):
-            continue
-        idx = np.flatnonzero(candidate)
-        first = intersector.intersects_first(origin[idx], direction[idx])
-        visible = np.isin(first, emitters)
-        idx = idx[visible]
-        g = cos_r[idx] * cos_e[idx] / np.maximum(dist2[idx], 1e-12)
-        out[idx] += emission_face[emitters[k[idx]]] * g[:, None]
-    return out * total_area / samples
+    for lo in range(0, len(origin), EMITTER_CHUNK):
+        block = slice(lo, min(lo + EMITTER_CHUNK, len(origin)))
+        o, n = origin[block], normal[block]
+        probability = emitter_choice_weights(o, n, tri, tri_normal, area, radiance)
+        cdf = np.cumsum(probability, axis=1)
+        cdf[:, -1] = 1.0
+        rows = np.arange(len(o))
+        for s in range(samples):
+            u = (points[s][None, :] + rotation[block]) % 1.0
+            k = np.minimum((cdf < u[:, :1]).sum(axis=1), len(area) - 1)
+            su = np.sqrt(u[:, 1])
+            b0, b1 = 1.0 - su, u[:, 2] * su  # uniform point on the triangle
+            p = tri[k, 0] * b0[:, None] + tri[k, 1] * b1[:, None] + tri[k, 2] * (1.0 - b0 - b1)[:, None]
+            d = p - o
+            dist2 = np.sum(d * d, axis=1)
+            direction = d / np.sqrt(np.maximum(dist2, 1e-30))[:, None]
+            cos_r = np.sum(n * direction, axis=1)
+            cos_e = -np.sum(tri_normal[k] * direction, axis=1)
+            candidate = (cos_r > 0) & (cos_e > 0)
+            if not np.any(candidate):
+                continue
+            idx = np.flatnonzero(candidate)
+            first = intersector.intersects_first(o[idx], direction[idx])
+            idx = idx[np.isin(first, emitters)]
+            g = cos_r[idx] * cos_e[idx] / np.maximum(dist2[idx], 1e-12)
+            weight = area[k[idx]] / probability[rows[idx], k[idx]]  # 1 / (p_k / A_k)
+            out[lo + idx] += emission_face[emitters[k[idx]]] * (g * weight)[:, None]
+    return out / samples
 
 
 def lamp_irradiance(light, position: np.ndarray, normal: np.ndarray) -> np.ndarray:

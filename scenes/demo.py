@@ -26,7 +26,7 @@ from .builtin_env import load_environment
 from .meshes import Mesh, box_mesh, merge_meshes, quad, uv_sphere, vertex_normals, vertex_tangents
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
-DEMO_VERSION = 4  # bump when the geometry, materials or baker change (invalidates caches)
+DEMO_VERSION = 5  # bump when the geometry, materials or baker change (invalidates caches)
 DEMO_ENVIRONMENT = "builtin:overcast"
 DEFAULT_RESOLUTION = 512
 DEFAULT_RAYS = 128

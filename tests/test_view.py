@@ -212,3 +212,42 @@ def test_the_command_f12_prints_renders_the_screenshot_again(xvfb, tmp_path, cap
         # up to 22 (the camera is printed to 9 digits; the viewer re-renders an edited scene's cube
         # maps from its neighbours' current ones, shot builds them anew).
         assert difference.mean() < 0.3 and np.percentile(difference, 99) <= 2, (stem, difference.mean())
+
+
+def test_view_flies_the_recorded_path_and_walking_takes_over(xvfb, tmp_path):
+    """``view --path builtin``: the demo's recorded path drives the camera (a scripted jump to
+    t = 7.5 s puts it on the path's key there, as the F12 command's camera shows); pressing W
+    stops the path and walks from where it was."""
+    import re
+
+    from lobeview.scenes.demo import demo_path
+
+    script = [
+        {"frame": 2, "action": "path", "value": 7.5},
+        {"frame": 2, "action": "screenshot", "name": "onpath"},
+        {"frame": 4, "action": "press", "key": "W"},
+        {"frame": 8, "action": "release", "key": "W"},
+        {"frame": 9, "action": "screenshot", "name": "walked"},
+        {"frame": 10, "action": "quit"},
+    ]
+    (tmp_path / "script.json").write_text(json.dumps(script))
+    result = subprocess.run(
+        [sys.executable, "-m", "lobeview", "view", "--path=builtin", "--size=240x150", "--face-size=32",
+         f"--script={tmp_path / 'script.json'}", f"--screenshot-dir={tmp_path}", "--exit-after=40"],
+        env={**os.environ, "DISPLAY": xvfb}, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    key = demo_path().camera_at(7.5)
+    expected = ",".join(f"{x:.4f}" for x in key.position)
+    assert f"path frame=2 t=7.5000 position={expected}" in result.stdout, result.stdout
+    cameras = {}
+    for line in result.stdout.splitlines():
+        printed = re.match(r"screenshot .*?(onpath|walked)\.exr/\.png[^:]*: lobeview shot .*--camera=(\S+)", line)
+        if printed:
+            cameras[printed.group(1)] = np.array([float(x) for x in printed.group(2).split(",")])
+    assert set(cameras) == {"onpath", "walked"}, result.stdout
+    assert np.allclose(cameras["onpath"], key.position, atol=1e-3)
+    # W walks forward (toward the table, -Z) from the path's camera: the path no longer drives it.
+    step = cameras["walked"] - cameras["onpath"]
+    forward = np.subtract(key.target, key.position)
+    assert np.linalg.norm(step) > 0.05 and np.dot(step, forward) > 0
