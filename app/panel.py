@@ -92,7 +92,7 @@ def _rendering(window) -> None:
         if c:
             window.camera_index = pick
             cam = scene.cameras[pick]
-            camera = Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
+            camera = Camera.from_scene_camera(cam)
             window.walk = WalkCamera.from_camera(camera)
             window.dirty = True
     c, vsync = imgui.checkbox("vsync", window.vsync)

@@ -51,7 +51,7 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--path",
         metavar="FILE|builtin",
-        help="fly a recorded camera path (JSON, viewer/camera_path.py; 'builtin': the built-in scene's own "
+        help="fly a recorded camera path (JSON, scenes/camera_path.py; 'builtin': the built-in scene's own "
         "path); P pauses and resumes, moving or looking takes over",
     )
     p.add_argument("--script", help="JSON list of scripted actions (testing/demos): see app/script.py")
@@ -60,7 +60,7 @@ def add_arguments(p) -> None:
 
 def builtin_camera_path(scene_arg: str | None, scene_path: Path):
     """``--path builtin``: the recorded path of the demo or the apartment (written beside it)."""
-    from lobeview.viewer.camera_path import CameraPath
+    from lobeview.scenes.camera_path import CameraPath
 
     if scene_arg is None or scene_arg == "builtin:demo":
         from lobeview.scenes.demo import demo_path
@@ -111,7 +111,7 @@ def run(args) -> int:
 
     camera_path = None
     if args.path is not None and args.path != "builtin":
-        from lobeview.viewer.camera_path import CameraPath
+        from lobeview.scenes.camera_path import CameraPath
 
         camera_path = CameraPath.load(args.path)  # a bad file stops here, before the scene loads
     import moderngl_window as mglw

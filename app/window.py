@@ -50,7 +50,7 @@ class Session:
     script: list
     original_materials: dict | None = None
     loaded_materials: list | None = None
-    camera_path: object | None = None  # viewer/camera_path.CameraPath flown from frame 1 (--path)
+    camera_path: object | None = None  # scenes/camera_path.CameraPath flown from frame 1 (--path)
 
 
 class LobeviewWindow(mglw.WindowConfig):
@@ -316,7 +316,7 @@ class LobeviewWindow(mglw.WindowConfig):
         if self.path_time is None:
             return
         speed = self.walk.speed
-        self.walk = WalkCamera.from_camera(self.camera_path.camera_at(self.path_time))
+        self.walk = WalkCamera.from_camera(Camera.from_scene_camera(self.camera_path.camera_at(self.path_time)))
         self.walk.speed = speed
         self.dirty = True
         # Real time between frames (capped so a slow frame does not jump), looping at the end.

@@ -71,7 +71,7 @@ def main(argv=None) -> int:
             ctx, scene, load_environment(args.env or "builtin:overcast"), size=(width, height), progress=False
         )
         cam = next(c for c in scene.cameras if c.name == "table")
-        camera = Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
+        camera = Camera.from_scene_camera(cam)
         what = "demo scene, camera 'table'"
 
         def render(spp, seed):

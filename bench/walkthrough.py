@@ -71,12 +71,14 @@ def start_renderer(ctx, scene, env, size, face_size: int, cube_dir: Path):
 def walk_path(renderer, path, method, frames: int) -> list[dict]:
     """Per frame of ``path``: mirror-pass and camera-pass milliseconds and the draw counters.
     One untimed frame first (shader compilation)."""
+    from lobeview.viewer.camera import Camera
+
     rows = []
     times = path.frame_times(frames)
-    renderer.draw_frame(path.camera_at(0.0), method)
+    renderer.draw_frame(Camera.from_scene_camera(path.camera_at(0.0)), method)
     renderer.ctx.finish()
     for n, t in enumerate(times):
-        camera = path.camera_at(float(t)).fitted_to(renderer.bounds)
+        camera = Camera.from_scene_camera(path.camera_at(float(t))).fitted_to(renderer.bounds)
         renderer.invalidate_mirrors()
         renderer.draw_counts.new_frame()
         renderer.ctx.finish()

@@ -226,7 +226,7 @@ def demo_geometry() -> Scene:
 def demo_path():
     """The demo's recorded camera path (``--path builtin``, ``lobeview bench walkthrough``): from
     the overview camera round the left of the room to the table camera and on to the right."""
-    from lobeview.viewer.camera_path import CameraPath
+    from lobeview.scenes.camera_path import CameraPath
 
     positions = [[0.3, 1.55, 2.75], [-1.3, 1.5, 1.4], [-0.4, 1.3, 0.7], [0.95, 1.2, 0.55], [2.2, 1.45, 1.9]]
     targets = [[0.0, 0.85, -0.9], [0.3, 0.8, -1.2], [0.0, 0.86, -0.7], [0.05, 0.86, -0.62], [-0.6, 0.9, -1.8]]

@@ -1,4 +1,4 @@
-"""The walkthrough scene and its recorded camera paths (scenes/apartment.py, viewer/camera_path.py)
+"""The walkthrough scene and its recorded camera paths (scenes/apartment.py, scenes/camera_path.py)
 and the walkthrough bench's measurements (bench/walkthrough.py): the path interpolates its keys
 smoothly, never walks through a wall, bad path files are refused with a message; the apartment
 has the size, materials and reflectors it promises, survives the .glb round trip with its
@@ -20,8 +20,8 @@ from lobeview.scenes.apartment import (
     apartment_path_file,
     build_apartment_scene,
 )
+from lobeview.scenes.camera_path import MAX_PATH_BYTES, CameraPath, CameraPathError
 from lobeview.scenes.demo import demo_path
-from lobeview.viewer.camera_path import MAX_PATH_BYTES, CameraPath, CameraPathError
 
 # -- camera paths ---------------------------------------------------------------------------------
 
@@ -225,6 +225,7 @@ def test_walk_through_the_apartment_counts_add_up_and_skips_happen(small_apartme
 
 def test_apartment_renders_lit_and_finite(small_apartment, tmp_path):
     from lobeview.scenes.builtin_env import load_environment
+    from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
 
@@ -237,7 +238,7 @@ def test_apartment_renders_lit_and_finite(small_apartment, tmp_path):
                                      cube_face_size=32, progress=False)  # fmt: skip
         path = apartment_path(4)
         for t in (0.0, path.times[3]):
-            result = renderer.render(path.camera_at(t), "lobe-5", spp=1)
+            result = renderer.render(Camera.from_scene_camera(path.camera_at(t)), "lobe-5", spp=1)
             radiance = result.radiance
             assert np.all(np.isfinite(radiance)) and radiance.min() >= 0
             assert result.mask.mean() > 0.9  # indoors: geometry everywhere but the windows

@@ -120,6 +120,11 @@ class Camera:
     near: float = 0.05
     far: float = 200.0
 
+    @classmethod
+    def from_scene_camera(cls, camera) -> Camera:
+        """A render camera from a scene's camera (scenes.scene.SceneCamera, a path's camera_at)."""
+        return cls(tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y)
+
     def fitted_to(self, bounds) -> Camera:
         """This camera with near/far planes fitted to a scene's (min, max) bounds."""
         near, far = fit_clip_planes(self.position, *bounds)

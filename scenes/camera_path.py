@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .camera import Camera
+from .scene import SceneCamera
 
 MAX_KEYS = 10_000
 MAX_PATH_BYTES = 4 << 20
@@ -87,12 +87,14 @@ class CameraPath:
             + h11 * dt * self._velocity(values, i + 1)
         )
 
-    def camera_at(self, t: float) -> Camera:
+    def camera_at(self, t: float) -> SceneCamera:
+        """The camera at ``t`` seconds (clamped to the path); viewer.camera.Camera.from_scene_camera
+        makes it a render camera."""
         position = self._spline(self.positions, t)
         target = self._spline(self.targets, t)
         if np.linalg.norm(target - position) < 1e-6:  # the spline can pass a target through its eye
             target = position + (self.targets[-1] - self.positions[-1])
-        return Camera(position=tuple(position), target=tuple(target), up=(0.0, 1.0, 0.0), fov_y=self.fov_y)
+        return SceneCamera(f"path t={t:.2f}", position, target, np.array([0.0, 1.0, 0.0]), self.fov_y)
 
     def frame_times(self, frames: int) -> np.ndarray:
         """``frames`` times spread evenly over the path, both ends included."""
