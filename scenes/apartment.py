@@ -25,8 +25,6 @@ own glTF mesh because each has its own lightmap coordinates (TEXCOORD_1 is per v
 
 from __future__ import annotations
 
-import hashlib
-import json
 import sys
 from pathlib import Path
 
@@ -36,10 +34,8 @@ from lobeview.core.paths import cache_dir
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import validate
 
-from .baker import bake_lightmap
-from .builtin_env import load_environment
 from .camera_path import CameraPath
-from .demo import unwrap_lightmap_uvs
+from .demo import bake_and_write, generated_scene_key
 from .meshes import Mesh, box_mesh, merge_meshes, quad, uv_sphere
 from .reflection_proxy import ReflectionProxy
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
@@ -408,20 +404,8 @@ def apartment_path(rooms: int = DEFAULT_ROOMS) -> CameraPath:
 
 
 def apartment_key(rooms: int, resolution: int, rays: int, bounces: int) -> str:
-    text = json.dumps(
-        {
-            "v": APARTMENT_VERSION,
-            "rooms": rooms,
-            "r": resolution,
-            "rays": rays,
-            "b": bounces,
-            "light_samples": LIGHT_SAMPLES,
-            "env": APARTMENT_ENVIRONMENT,
-            "presets": [PRESETS[k] for k in sorted(PRESETS)],
-        },
-        sort_keys=True,
-    )
-    return hashlib.sha256(text.encode()).hexdigest()[:16]
+    fields = {"v": APARTMENT_VERSION, "rooms": rooms, "r": resolution, "rays": rays, "b": bounces}
+    return generated_scene_key({**fields, "light_samples": LIGHT_SAMPLES, "env": APARTMENT_ENVIRONMENT})
 
 
 def build_apartment_scene(
@@ -439,9 +423,6 @@ def build_apartment_scene(
     path_file = apartment_path_file(path)
     if path.exists() and path_file.exists() and not force:
         return path
-    from .gltf_writer import write_glb
-
-    directory.mkdir(parents=True, exist_ok=True)
     scene = apartment_geometry(rooms)
     print(
         f"[apartment] building a {rooms}-room apartment ({len(scene.objects)} objects) into {path}: "
@@ -449,14 +430,9 @@ def build_apartment_scene(
         file=sys.stderr,
         flush=True,
     )
-    scene = unwrap_lightmap_uvs(scene, resolution)
-    lightmap = bake_lightmap(
-        scene, load_environment(APARTMENT_ENVIRONMENT), resolution, rays, bounces, light_samples=LIGHT_SAMPLES
-    )
-    tmp = path.with_suffix(".tmp.glb")
-    write_glb(scene, tmp, lightmap, lightmap_name=path.stem + "_lightmap.exr")
-    apartment_path(rooms).save(path_file)
-    tmp.replace(path)
+    directory.mkdir(parents=True, exist_ok=True)
+    apartment_path(rooms).save(path_file)  # before the .glb: a built scene always has its path
+    bake_and_write(scene, path, APARTMENT_ENVIRONMENT, resolution, rays, bounces, light_samples=LIGHT_SAMPLES)
     return path
 
 

@@ -261,19 +261,29 @@ def unwrap_lightmap_uvs(scene: Scene, resolution: int) -> Scene:
     return scene
 
 
-def demo_key(resolution: int, rays: int, bounces: int) -> str:
-    text = json.dumps(
-        {
-            "v": DEMO_VERSION,
-            "r": resolution,
-            "rays": rays,
-            "b": bounces,
-            "env": DEMO_ENVIRONMENT,
-            "presets": [PRESETS[k] for k in sorted(PRESETS)],
-        },
-        sort_keys=True,
-    )
+def generated_scene_key(fields: dict) -> str:
+    """Cache key of a generated scene: its version and bake settings plus every preset's
+    parameters (the scene's materials), so that any change builds it again."""
+    text = json.dumps({**fields, "presets": [PRESETS[k] for k in sorted(PRESETS)]}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def bake_and_write(scene: Scene, path: Path, environment: str, resolution: int, rays: int, bounces: int, **bake):
+    """Unwrap, bake and write a generated scene to ``path`` (.glb + EXR lightmap), atomically."""
+    from .gltf_writer import write_glb
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    scene = unwrap_lightmap_uvs(scene, resolution)
+    lightmap = bake_lightmap(scene, load_environment(environment), resolution, rays, bounces, **bake)
+    tmp = path.with_suffix(".tmp.glb")
+    write_glb(scene, tmp, lightmap, lightmap_name=path.stem + "_lightmap.exr")
+    tmp.replace(path)
+
+
+def demo_key(resolution: int, rays: int, bounces: int) -> str:
+    return generated_scene_key(
+        {"v": DEMO_VERSION, "r": resolution, "rays": rays, "b": bounces, "env": DEMO_ENVIRONMENT}
+    )
 
 
 def build_demo_scene(
@@ -288,12 +298,6 @@ def build_demo_scene(
     path = directory / f"demo-{demo_key(resolution, rays, bounces)}.glb"
     if path.exists() and not force:
         return path
-    from .gltf_writer import write_glb
-
     print(f"[demo] building the demo scene into {path}", file=sys.stderr, flush=True)
-    scene = unwrap_lightmap_uvs(demo_geometry(), resolution)
-    lightmap = bake_lightmap(scene, load_environment(DEMO_ENVIRONMENT), resolution, rays, bounces)
-    tmp = path.with_suffix(".tmp.glb")
-    write_glb(scene, tmp, lightmap, lightmap_name=path.stem + "_lightmap.exr")
-    tmp.replace(path)
+    bake_and_write(demo_geometry(), path, DEMO_ENVIRONMENT, resolution, rays, bounces)
     return path
