@@ -60,14 +60,13 @@ def _sample_slider(label: str, kind: str, samples: int) -> tuple[bool, int]:
     return imgui.slider_int(label, samples, 1, SAMPLE_SLIDER_MAX.get(kind, PANEL_MAX_SAMPLES))
 
 
-def _report_lines(what: str, lines: list[str], fold_above: int = 6) -> None:
+def _report_lines(summary: str, lines: list[str], fold_above: int = 6) -> None:
     """A report, folded under a one-line summary when it is long (the apartment's 19 reflectors)."""
     if len(lines) <= fold_above:
         for line in lines:
             imgui.text(line)
         return
-    skipped = sum(1 for line in lines if "no mirror pass" in line)
-    if imgui.tree_node(f"{what}: {len(lines) - skipped} drawn, {skipped} skipped"):
+    if imgui.tree_node(summary):
         for line in lines:
             imgui.text(line)
         imgui.tree_pop()
@@ -87,7 +86,8 @@ def _rendering(window) -> None:
     if c4 or c5:
         renderer.set_mirrors(mirrors, scale)
         window.dirty = True
-    _report_lines("mirror passes", renderer.mirror_report)
+    passes = renderer.mirror_passes
+    _report_lines(f"mirror passes: {len(passes.drawn)} reflectors drawn, {len(passes.skipped)} skipped", passes.report)
     c6, culling = imgui.checkbox("frustum culling", renderer.frustum_culling)
     if c6:
         renderer.frustum_culling = culling

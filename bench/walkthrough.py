@@ -28,6 +28,7 @@ import statistics
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -46,16 +47,6 @@ def cube_memory(renderer) -> tuple[int, int]:
 
     cubes = [obj.cube for obj in renderer.objects if obj.cube is not None]
     return len(cubes), sum(cube_bytes(c.face_size, int(np.log2(c.face_size)) + 1) for c in cubes)
-
-
-def _mirror_counts(report: list[str]) -> tuple[int, int, dict]:
-    drawn = sum(1 for line in report if " pass " in line and "no mirror pass" not in line)
-    skipped = {}
-    for line in report:
-        if "no mirror pass (" in line:
-            reason = line.split("no mirror pass (", 1)[1].rstrip(")")
-            skipped[reason] = skipped.get(reason, 0) + 1
-    return drawn, sum(skipped.values()), skipped
 
 
 def start_renderer(ctx, scene, env, size, face_size: int, cube_dir: Path):
@@ -89,7 +80,7 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         t1 = time.perf_counter()
         mirror = renderer.draw_counts.of("mirror")
         mirror_draws, mirror_culled = mirror.drawn, mirror.culled
-        drawn, skipped, reasons = _mirror_counts(renderer.mirror_passes.report)
+        reasons = dict(Counter(renderer.mirror_passes.skipped.values()))
         renderer.draw_frame(camera, method)  # reuses the mirror buffers just drawn (and resets the counters)
         renderer.ctx.finish()
         t2 = time.perf_counter()
@@ -105,8 +96,8 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
                 "camera_culled": counts.of("camera").culled,
                 "mirror_draws": mirror_draws,
                 "mirror_culled": mirror_culled,
-                "mirror_passes": drawn,
-                "mirror_skipped": skipped,
+                "mirror_passes": len(renderer.mirror_passes.drawn),
+                "mirror_skipped": len(renderer.mirror_passes.skipped),
                 "skip_reasons": reasons,
             }
         )
@@ -126,6 +117,7 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         renderer, warm = start_renderer(ctx, scene, env, size, face_size, cube_dir)
         warm_stages = dict(renderer.timings)
         cubes, memory = cube_memory(renderer)
+        reflectors = len(renderer.reflectors())
         _say(
             f"[walkthrough] {label}: start-up cold {cold:.1f} s, warm {warm:.1f} s; {cubes} cube maps; {frames} frames"
         )
@@ -133,7 +125,6 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         renderer.release()
     finally:
         shutil.rmtree(cube_dir, ignore_errors=True)
-    reflectors = sum(1 for o in analyse_scene(scene).objects if o.reflector is not None)
     return {
         "scene": label,
         "objects": len(scene.objects),
@@ -148,12 +139,6 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         "cube_face_culled": cube_culled,
         "frames": rows,
     }
-
-
-def analyse_scene(scene):
-    from lobeview.scenes.analysis import analyse
-
-    return analyse(scene)
 
 
 def _summary(result: dict) -> dict:
@@ -338,7 +323,8 @@ def run_walkthrough_command(args, out_dir: Path, stamp: str) -> int:
         size=parse_size(sizes[0]),
         frames=args.frames or (8 if args.quick else 24),
         method=(args.methods or ["lobe-7"])[0],
-        face_size=args.face_size if args.face_size != 256 or not args.quick else 64,
+        # --quick renders 64^2 faces unless --face-size was changed from its default (256).
+        face_size=64 if args.quick and args.face_size == 256 else args.face_size,
         rooms=args.rooms or (6 if args.quick else DEFAULT_ROOMS),
         count_rooms=args.count_rooms or ((1, 4) if args.quick else DEFAULT_COUNT_ROOMS),
         count_frames=args.frames or (4 if args.quick else 12),

@@ -445,9 +445,11 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
     assert sorted(renderer.analysis.reflectors) == [0, 4]
     renderer.render(_camera(), "lobe-3")
     assert renderer.mirror_report == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
+    assert renderer.mirror_passes.drawn == [0, 4] and renderer.mirror_passes.skipped == {}
     below = Camera(position=(0.0, -1.0, 2.0), target=(0.0, -1.0, -1.0))
     renderer.render(below, "lobe-3")
     assert "floor: no mirror pass (seen from behind)" in renderer.mirror_report
+    assert renderer.mirror_passes.skipped[0] == "seen from behind" and 0 not in renderer.mirror_passes.drawn
     away = Camera(position=(0.0, 1.0, 2.0), target=(0.0, 1.0, 5.0))  # looking at nothing of the wall
     renderer.render(away, "lobe-3")
     assert "glossy wall: no mirror pass (outside the view)" in renderer.mirror_report
@@ -456,6 +458,11 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
         "floor: cube map (prefiltered method)",
         "glossy wall: cube map (prefiltered method)",
     ]
+    assert renderer.mirror_passes.drawn == [] and set(renderer.mirror_passes.skipped) == {0, 4}
+    # Back to lobe-N with the same camera: the passes are drawn (and reported) again, not the
+    # prefiltered frame's report kept.
+    renderer.render(_camera(), "lobe-3")
+    assert renderer.mirror_report == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
     renderer.enabled_reflectors = {0}
     renderer.mirror_scale = 0.5
     result = renderer.render(_camera(), "lobe-3")

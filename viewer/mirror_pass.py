@@ -73,7 +73,9 @@ class MirrorPasses:
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
         self.generation = 0  # bumped when what the buffers show changes (material edits)
-        self.report: list[str] = []  # what the last frame's passes did
+        self.report: list[str] = []  # what the last frame's passes did, one line per pass or skip
+        self.drawn: list[int] = []  # reflectors that got their passes in the last frame
+        self.skipped: dict[int, str] = {}  # reflector -> why it got none in the last frame
 
     def invalidate(self) -> None:
         """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
@@ -94,13 +96,14 @@ class MirrorPasses:
         )  # fmt: skip
         if key == self._key:
             return self._active
-        report, active = [], {}
+        report, active, skipped = [], {}, {}
         size = buffer_size(frame_size, scale)
         projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
         for index, reflector in reflectors.items():
             reason = skip_reason(reflector, camera, view_proj)
             if reason is not None:
                 report.append(f"{names[index]}: no mirror pass ({reason})")
+                skipped[index] = reason
                 continue
             active[index] = {}
             for kind in reflector.passes:
@@ -121,7 +124,15 @@ class MirrorPasses:
                 report.append(f"{names[index]}: {kind} pass {size[0]}x{size[1]}")
         self.ctx.viewport = (0, 0, width, height)
         self._key, self._active, self.report = key, active, report
+        self.drawn, self.skipped = list(active), skipped
         return active
+
+    def skip_all(self, reflectors, names: list, reason: str) -> None:
+        """No pass for any reflector this frame (the prefiltered method reads cube maps); the
+        next render draws the buffers again rather than trusting ones kept from before."""
+        self.report = [f"{names[index]}: {reason}" for index in reflectors]
+        self.drawn, self.skipped = [], {index: reason for index in reflectors}
+        self._key = None
 
     def bind(self, program, reflector, buffers: dict, eye, dummy, previous_plane_states: list) -> None:
         """The reflector's buffers (``dummy`` for a kind it does not have, flagged off in

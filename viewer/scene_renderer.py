@@ -548,9 +548,8 @@ class SceneRenderer(RendererBase):
         # lookup per lobe, so there they keep their cube maps and no mirror pass is drawn.
         if method.kind == "prefiltered":
             mirrors = {}
-            self.mirror_passes.report = [
-                f"{self.objects[i].name}: cube map (prefiltered method)" for i in self.reflectors()
-            ]
+            names = [obj.name for obj in self.objects]
+            self.mirror_passes.skip_all(self.reflectors(), names, "cube map (prefiltered method)")
         else:
             mirrors = self.render_mirror_passes(camera)
         self.frame.begin(averages_planes=any(self._averages_planes(self._object_method(i, method)) for i in mirrors))
