@@ -35,8 +35,8 @@ from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import validate
 
 from .camera_path import CameraPath
-from .demo import bake_and_write, generated_scene_key
-from .meshes import Mesh, box_mesh, merge_meshes, quad, uv_sphere
+from .demo import bake_and_write, diffuse_material, generated_scene_key, glossy_material, torus_mesh, vase_mesh
+from .meshes import Mesh, box_mesh, merge_meshes, quad, translated, uv_sphere
 from .reflection_proxy import ReflectionProxy
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
@@ -60,28 +60,20 @@ ROOM_KINDS = ("living", "dining", "bedroom", "study")
 WALK_SPEED = 1.2  # m/s along the recorded path
 
 
-def _diffuse(kd) -> dict:
-    return validate({"model": "thesis", "kd": kd, "lobes": []})
-
-
-def _glossy(kd, ks: float, m: float, r0: float, alpha: float) -> dict:
-    return validate({"model": "thesis", "kd": kd, "lobes": [{"ks": ks, "mx": m, "my": m, "r0": r0, "alpha": alpha}]})
-
-
 def _materials() -> tuple[list[SceneMaterial], dict[str, int]]:
     materials = [
-        SceneMaterial("wall paint", _diffuse([0.78, 0.76, 0.72])),
-        SceneMaterial("ceiling", _diffuse(0.82)),
-        SceneMaterial("ceiling light", _diffuse(0.8), emission=np.array([12.0, 11.4, 10.4])),
-        SceneMaterial("varnished oak", _glossy([0.45, 0.33, 0.21], ks=1.0, m=0.05, r0=0.05, alpha=0.0)),
-        SceneMaterial("polished stone", _glossy([0.55, 0.54, 0.5], ks=1.0, m=0.03, r0=0.04, alpha=0.0)),
-        SceneMaterial("walnut", _glossy([0.28, 0.16, 0.09], ks=0.6, m=0.12, r0=0.04, alpha=0.2)),
-        SceneMaterial("fabric", _diffuse([0.32, 0.36, 0.42])),
-        SceneMaterial("linen", _diffuse([0.8, 0.78, 0.72])),
-        SceneMaterial("pale wood", _diffuse([0.62, 0.5, 0.36])),
-        SceneMaterial("book red", _diffuse([0.5, 0.12, 0.1])),
-        SceneMaterial("book blue", _diffuse([0.12, 0.2, 0.45])),
-        SceneMaterial("book cream", _diffuse([0.75, 0.7, 0.58])),
+        SceneMaterial("wall paint", diffuse_material([0.78, 0.76, 0.72])),
+        SceneMaterial("ceiling", diffuse_material(0.82)),
+        SceneMaterial("ceiling light", diffuse_material(0.8), emission=np.array([12.0, 11.4, 10.4])),
+        SceneMaterial("varnished oak", glossy_material([0.45, 0.33, 0.21], ks=1.0, m=0.05, r0=0.05, alpha=0.0)),
+        SceneMaterial("polished stone", glossy_material([0.55, 0.54, 0.5], ks=1.0, m=0.03, r0=0.04, alpha=0.0)),
+        SceneMaterial("walnut", glossy_material([0.28, 0.16, 0.09], ks=0.6, m=0.12, r0=0.04, alpha=0.2)),
+        SceneMaterial("fabric", diffuse_material([0.32, 0.36, 0.42])),
+        SceneMaterial("linen", diffuse_material([0.8, 0.78, 0.72])),
+        SceneMaterial("pale wood", diffuse_material([0.62, 0.5, 0.36])),
+        SceneMaterial("book red", diffuse_material([0.5, 0.12, 0.1])),
+        SceneMaterial("book blue", diffuse_material([0.12, 0.2, 0.45])),
+        SceneMaterial("book cream", diffuse_material([0.75, 0.7, 0.58])),
     ]
     index = {m.name: i for i, m in enumerate(materials)}
     for name in (
@@ -137,17 +129,6 @@ def _ceiling(x0, x1, z0, z1, y=CEILING) -> Mesh:
     return quad([x0, y, z0], [x1 - x0, 0, 0], [0, 0, z1 - z0])
 
 
-def _moved(mesh: Mesh, offset, name: str) -> Mesh:
-    return Mesh(
-        (mesh.positions + np.asarray(offset, np.float32)).astype(np.float32),
-        mesh.normals.copy(),
-        mesh.tangents.copy(),
-        mesh.uvs.copy(),
-        mesh.indices.copy(),
-        name,
-    )
-
-
 def _rotated_y(mesh: Mesh, degrees: float) -> Mesh:
     c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
     rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], np.float32)
@@ -163,22 +144,6 @@ def _chair() -> Mesh:
     return merge_meshes(parts, "chair")
 
 
-def _torus() -> Mesh:
-    import trimesh
-
-    from .demo import _from_trimesh
-
-    tm = trimesh.creation.torus(major_radius=0.11, minor_radius=0.04, major_sections=48, minor_sections=24)
-    tm.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
-    return _from_trimesh(tm, "torus")
-
-
-def _vase() -> Mesh:
-    from .demo import _vase as demo_vase
-
-    return demo_vase()
-
-
 class _Builder:
     """Collects objects; ``room`` places furniture in a room's local frame (u along +X from the
     room's west wall, w from the corridor wall toward the outer wall)."""
@@ -186,9 +151,8 @@ class _Builder:
     def __init__(self):
         self.materials, self.index = _materials()
         self.objects: list[SceneObject] = []
-        self.sphere = uv_sphere(1.0, 24, 48)
-        self.torus = _torus()
-        self.vase = _vase()
+        self.torus = torus_mesh(0.11, 0.04, (48, 24))
+        self.vase = vase_mesh()
         self.chair = _chair()
 
     def add(self, name, mesh, material, proxy=None, reflector="auto") -> None:
@@ -237,16 +201,7 @@ def _build_room(b: _Builder, room: int) -> None:
     b.add(f"{tag} window", pane, "frosted-glass" if kind == "bedroom" else "clear-glass", reflector=False)
 
     def sphere(name, centre, radius, material):
-        b.add(
-            f"{tag} {name}",
-            _moved(
-                Mesh(b.sphere.positions * radius, b.sphere.normals, b.sphere.tangents, b.sphere.uvs, b.sphere.indices),
-                centre,
-                name,
-            ),
-            material,
-            proxy,
-        )
+        b.add(f"{tag} {name}", translated(uv_sphere(radius, 24, 48), centre, name), material, proxy)
 
     def shelves(name, u, w0, w1):
         """A shelf unit against a side wall (u = its centre) spanning w0..w1, four rows of books."""
@@ -270,7 +225,7 @@ def _build_room(b: _Builder, room: int) -> None:
         b.add(f"{tag} coffee table", box_mesh(at(2.0, 0.2, 2.6), [0.7, 0.4, 1.1]), "lacquer", proxy)
         sphere("scattergloss sphere", at(3.5, 0.3, 1.1), 0.3, "alanod-2000gs-2lobe")
         sphere("plastic sphere", at(2.0, 0.52, 2.95), 0.12, "plastic")
-        b.add(f"{tag} gold torus", _moved(b.torus, at(2.0, 0.445, 2.3), "torus"), "gold-ggx", proxy)
+        b.add(f"{tag} gold torus", translated(b.torus, at(2.0, 0.445, 2.3), "torus"), "gold-ggx", proxy)
         shelves("shelves", 4.3, 1.2, 3.2)
         b.add(f"{tag} cabinet", box_mesh(at(4.2, 0.45, 4.3), [0.5, 0.9, 1.0]), "miro5-2lobe", proxy)
     elif kind == "dining":
@@ -289,12 +244,12 @@ def _build_room(b: _Builder, room: int) -> None:
         ):
             b.add(
                 f"{tag} chair {n + 1}",
-                _moved(_rotated_y(b.chair, turn), at(2.25 + du, 0.0, 2.6 + dw), "chair"),
+                translated(_rotated_y(b.chair, turn), at(2.25 + du, 0.0, 2.6 + dw), "chair"),
                 "pale wood",
             )
         sphere("chrome sphere", at(2.1, 0.9, 2.2), 0.14, "chrome")
-        b.add(f"{tag} vase", _moved(b.vase, at(2.4, 0.76, 3.1), "vase"), "porcelain", proxy)
-        b.add(f"{tag} gold torus", _moved(b.torus, at(2.3, 0.805, 2.6), "torus"), "gold-ggx", proxy)
+        b.add(f"{tag} vase", translated(b.vase, at(2.4, 0.76, 3.1), "vase"), "porcelain", proxy)
+        b.add(f"{tag} gold torus", translated(b.torus, at(2.3, 0.805, 2.6), "torus"), "gold-ggx", proxy)
         b.add(f"{tag} sideboard", box_mesh(at(4.22, 0.4, 2.6), [0.45, 0.8, 1.6]), "lacquer", proxy)
         sphere("plastic sphere", at(4.22, 0.92, 2.2), 0.12, "plastic")
     elif kind == "bedroom":
@@ -303,10 +258,10 @@ def _build_room(b: _Builder, room: int) -> None:
         b.add(f"{tag} bed", merge_meshes(bed, "bed"), "linen")
         for n, du in enumerate((-1.15, 1.15)):
             b.add(f"{tag} night stand {n + 1}", box_mesh(at(2.25 + du, 0.25, 4.45), [0.45, 0.5, 0.4]), "lacquer", proxy)
-        b.add(f"{tag} vase", _moved(b.vase, at(1.1, 0.5, 4.45), "vase"), "porcelain", proxy)
+        b.add(f"{tag} vase", translated(b.vase, at(1.1, 0.5, 4.45), "vase"), "porcelain", proxy)
         mirror_lo, mirror_hi = at(0.01, 0.6, 1.6), at(0.01, 2.1, 2.6)
         mirror = _wall((mirror_lo[0], mirror_lo[2]), (mirror_hi[0], mirror_hi[2]), (1.0, 0.0), height=1.5)
-        mirror = _moved(mirror[0], [0.0, 0.6, 0.0], "mirror")
+        mirror = translated(mirror[0], [0.0, 0.6, 0.0], "mirror")
         b.add(f"{tag} mirror", mirror, "chrome", reflector=True)
         b.add(f"{tag} wardrobe", box_mesh(at(4.2, 1.0, 1.5), [0.55, 2.0, 1.6]), "miro5-2lobe", proxy)
     else:  # study
@@ -317,14 +272,14 @@ def _build_room(b: _Builder, room: int) -> None:
         b.add(f"{tag} desk", merge_meshes(desk, "desk"), "walnut", proxy)
         b.add(
             f"{tag} chair",
-            _moved(_rotated_y(b.chair, 0 if side > 0 else 180), at(2.25, 0.0, 3.65), "chair"),
+            translated(_rotated_y(b.chair, 0 if side > 0 else 180), at(2.25, 0.0, 3.65), "chair"),
             "pale wood",
         )
         shelves("shelves west", 0.2, 0.8, 2.6)
         shelves("shelves east", 4.3, 0.8, 2.6)
         b.add(f"{tag} brushed panel", box_mesh(at(2.25, 1.6, 4.98), [1.4, 0.9, 0.02]), "miro5-2lobe", proxy)
         sphere("plastic sphere", at(1.8, 0.86, 4.3), 0.1, "plastic")
-        b.add(f"{tag} gold torus", _moved(b.torus, at(2.65, 0.805, 4.3), "torus"), "gold-ggx", proxy)
+        b.add(f"{tag} gold torus", translated(b.torus, at(2.65, 0.805, 4.3), "torus"), "gold-ggx", proxy)
 
 
 def _build_corridor(b: _Builder, rooms: int) -> float:

@@ -23,7 +23,7 @@ from lobeview.materials.spec import validate
 
 from .baker import bake_lightmap
 from .builtin_env import load_environment
-from .meshes import Mesh, box_mesh, merge_meshes, quad, uv_sphere, vertex_normals, vertex_tangents
+from .meshes import Mesh, box_mesh, merge_meshes, quad, translated, uv_sphere, vertex_normals, vertex_tangents
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
 DEMO_VERSION = 5  # bump when the geometry, materials or baker change (invalidates caches)
@@ -33,11 +33,12 @@ DEFAULT_RAYS = 128
 DEFAULT_BOUNCES = 3
 
 
-def _diffuse(kd) -> dict:
+def diffuse_material(kd) -> dict:
+    """A Lambertian thesis material."""
     return validate({"model": "thesis", "kd": kd, "lobes": []})
 
 
-def _glossy(kd, ks: float, m: float, r0: float, alpha: float) -> dict:
+def glossy_material(kd, ks: float, m: float, r0: float, alpha: float) -> dict:
     """A diffuse base under one isotropic thesis lobe."""
     lobe = {"ks": ks, "mx": m, "my": m, "r0": r0, "alpha": alpha}
     return validate({"model": "thesis", "kd": kd, "lobes": [lobe]})
@@ -68,7 +69,8 @@ def _from_trimesh(tm, name: str) -> Mesh:
     return Mesh(pos, normals, vertex_tangents(pos, normals, uvs, idx), uvs, idx, name)
 
 
-def _vase() -> Mesh:
+def vase_mesh() -> Mesh:
+    """A porcelain vase profile revolved about +Y (0.36 m tall, base at the origin)."""
     import trimesh
 
     heights = np.linspace(0.0, 0.36, 25)
@@ -80,29 +82,26 @@ def _vase() -> Mesh:
     return _from_trimesh(tm, "vase")
 
 
-def _torus() -> Mesh:
+def torus_mesh(major: float = 0.13, minor: float = 0.045, sections: tuple[int, int] = (64, 32)) -> Mesh:
+    """A torus lying flat (axis +Y) around the origin."""
     import trimesh
 
-    tm = trimesh.creation.torus(major_radius=0.13, minor_radius=0.045, major_sections=64, minor_sections=32)
+    tm = trimesh.creation.torus(
+        major_radius=major, minor_radius=minor, major_sections=sections[0], minor_sections=sections[1]
+    )
     tm.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, [1, 0, 0]))
     return _from_trimesh(tm, "torus")
-
-
-def _translated(mesh: Mesh, offset, name: str) -> Mesh:
-    mesh.positions = (mesh.positions + np.asarray(offset, np.float32)).astype(np.float32)
-    mesh.name = name
-    return mesh
 
 
 def demo_geometry() -> Scene:
     """The demo room with materials, no lightmap UVs yet."""
     materials = [
-        SceneMaterial("walls", _diffuse([0.75, 0.74, 0.72])),
+        SceneMaterial("walls", diffuse_material([0.75, 0.74, 0.72])),
         # Varnished wood: a narrow Fresnel lobe over the diffuse base, shaded by a mirror pass.
-        SceneMaterial("floor", _glossy([0.42, 0.33, 0.24], ks=1.0, m=0.05, r0=0.05, alpha=0.0)),
-        SceneMaterial("ceiling", _diffuse(0.8)),
-        SceneMaterial("light", _diffuse(0.8), emission=np.array([14.0, 13.2, 12.0])),
-        SceneMaterial("table", _glossy([0.3, 0.18, 0.1], ks=0.6, m=0.12, r0=0.04, alpha=0.2)),
+        SceneMaterial("floor", glossy_material([0.42, 0.33, 0.24], ks=1.0, m=0.05, r0=0.05, alpha=0.0)),
+        SceneMaterial("ceiling", diffuse_material(0.8)),
+        SceneMaterial("light", diffuse_material(0.8), emission=np.array([14.0, 13.2, 12.0])),
+        SceneMaterial("table", glossy_material([0.3, 0.18, 0.1], ks=0.6, m=0.12, r0=0.04, alpha=0.2)),
     ]
     preset_materials = [
         "chrome",
@@ -157,27 +156,27 @@ def demo_geometry() -> Scene:
         SceneObject("table top", table_top, 4),
         SceneObject(
             "chrome sphere",
-            _translated(uv_sphere(0.16, 48, 96), [-0.55, 0.92, -0.65], "chrome sphere"),
+            translated(uv_sphere(0.16, 48, 96), [-0.55, 0.92, -0.65], "chrome sphere"),
             index["chrome"],
         ),
         SceneObject(
             "gold torus",
-            _translated(_torus(), [0.02, 0.805, -0.4], "gold torus"),
+            translated(torus_mesh(), [0.02, 0.805, -0.4], "gold torus"),
             index["gold-ggx"],
         ),
         SceneObject(
             "porcelain vase",
-            _translated(_vase(), [0.55, 0.76, -0.8], "porcelain vase"),
+            translated(vase_mesh(), [0.55, 0.76, -0.8], "porcelain vase"),
             index["porcelain"],
         ),
         SceneObject(
             "scattergloss sphere",
-            _translated(uv_sphere(0.32, 48, 96), [1.75, 0.32, 0.2], "scattergloss sphere"),
+            translated(uv_sphere(0.32, 48, 96), [1.75, 0.32, 0.2], "scattergloss sphere"),
             index["alanod-2000gs-2lobe"],
         ),
         SceneObject(
             "plastic sphere",
-            _translated(uv_sphere(0.22, 48, 96), [-1.55, 0.22, 0.55], "plastic sphere"),
+            translated(uv_sphere(0.22, 48, 96), [-1.55, 0.22, 0.55], "plastic sphere"),
             index["plastic"],
         ),
         SceneObject("lacquer box", box_mesh([-1.9, 0.212, -1.7], [0.55, 0.42, 0.55], 25.0), index["lacquer"]),

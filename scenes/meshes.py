@@ -91,6 +91,19 @@ def merge_meshes(meshes: list[Mesh], name: str) -> Mesh:
     )
 
 
+def translated(mesh: Mesh, offset, name: str) -> Mesh:
+    """A copy of ``mesh`` moved by ``offset`` and named ``name`` (the original is untouched, so one
+    mesh can be placed several times)."""
+    return Mesh(
+        (mesh.positions + np.asarray(offset, np.float32)).astype(np.float32),
+        mesh.normals.copy(),
+        mesh.tangents.copy(),
+        mesh.uvs.copy(),
+        mesh.indices.copy(),
+        name,
+    )
+
+
 def box_mesh(center, size, rotation_y_deg: float = 0.0) -> Mesh:
     """Axis-aligned box (optionally rotated about +Y) with flat faces, outward normals and planar
     UVs whose tangent follows the face's first edge."""
