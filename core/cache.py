@@ -1,11 +1,31 @@
 """One eviction policy for every in-memory cache of derived data: least recently used, bounded
 by entry count, keyed by content (never by ``id()``, which Python reuses and which a material
-packed anew each frame never hits). Ground floor: imports nothing of lobeview."""
+packed anew each frame never hits); and one way to write such data to the disk cache
+(write_cache_file). Ground floor: imports nothing of lobeview."""
 
 from __future__ import annotations
 
+import os
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
+from pathlib import Path
+from typing import BinaryIO
+
+
+def write_cache_file(path: Path, write: Callable[[BinaryIO], None]) -> bool:
+    """Write a derived-data file on disk through ``write(handle)`` into a temporary file beside
+    it, then rename it into place: a concurrent reader never sees half a file. A cache folder
+    that cannot be written returns False instead of failing (the data is computed again next
+    time)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        partial = path.with_suffix(f".{os.getpid()}.tmp")
+        with open(partial, "wb") as handle:
+            write(handle)
+        os.replace(partial, path)
+        return True
+    except OSError:
+        return False
 
 
 class BoundedCache:

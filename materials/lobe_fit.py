@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,6 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
+from lobeview.core.cache import write_cache_file
 from lobeview.core.progress import timed_step
 
 from .bsdf import BSDF, Component
@@ -364,14 +364,7 @@ def _save_fits(path: Path, fits: list) -> None:
             arrays[f"{j}_axes"] = f.axes
         for i, p in enumerate(f.profiles):
             arrays[f"{j}_p{i}"] = np.stack([p.psi, p.density, p.radial_mass])
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        partial = path.with_suffix(f".{os.getpid()}.tmp")
-        with open(partial, "wb") as handle:
-            np.savez(handle, **arrays)
-        os.replace(partial, path)  # atomic: a concurrent reader never sees half a file
-    except OSError:
-        pass  # a read-only cache only costs the refit next time
+    write_cache_file(path, lambda handle: np.savez(handle, **arrays))  # read-only cache: refit next time
 
 
 def _load_fits(path: Path, slices: int) -> list | None:

@@ -4,14 +4,13 @@ deterministic patterns for lobe-N."""
 from __future__ import annotations
 
 import hashlib
-import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from lobeview.core.cache import BoundedCache
+from lobeview.core.cache import BoundedCache, write_cache_file
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
 from lobeview.core.paths import cache_dir
 from lobeview.core.progress import timed_step
@@ -250,14 +249,7 @@ def _load_or_build_albedo_table(comp, key: tuple, directory: Path | None) -> Alb
         warnings.warn(f"{path}: unreadable cached albedo table ({exc}); rebuilding it", stacklevel=2)
     with timed_step("albedo", f"normalisation table of a {type(comp).__name__} lobe (cached afterwards)"):
         table = AlbedoTable.build(comp)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        partial = path.with_suffix(f".{os.getpid()}.tmp")
-        with open(partial, "wb") as handle:
-            np.save(handle, table.values)
-        os.replace(partial, path)  # atomic: a concurrent reader never sees half a file
-    except OSError:
-        pass  # a read-only cache only costs the rebuild next time
+    write_cache_file(path, lambda handle: np.save(handle, table.values))  # read-only cache: rebuild next time
     return table
 
 
