@@ -303,8 +303,7 @@ class LobeviewWindow(mglw.WindowConfig):
             self.path_time = self.path_paused_at
             self.message = f"flying the camera path from t = {self.path_time:.1f} s"
         else:
-            self.path_paused_at, self.path_time = self.path_time, None
-            self.message = f"camera path paused at t = {self.path_paused_at:.1f} s (P resumes)"
+            self.stop_path("paused")
 
     def set_path_time(self, t: float) -> None:
         """Jump the recorded path to ``t`` seconds (scripts); the camera follows this frame."""
@@ -322,11 +321,11 @@ class LobeviewWindow(mglw.WindowConfig):
         # Real time between frames (capped so a slow frame does not jump), looping at the end.
         self.path_time = (self.path_time + min(frame_time, 0.1)) % self.camera_path.duration
 
-    def stop_path(self) -> None:
-        """Walking or looking takes the camera over from the path."""
+    def stop_path(self, verb: str = "stopped") -> None:
+        """Walking or looking takes the camera over from the path (P pauses it the same way)."""
         if self.path_time is not None:
             self.path_paused_at, self.path_time = self.path_time, None
-            self.message = f"camera path stopped at t = {self.path_paused_at:.1f} s (P resumes)"
+            self.message = f"camera path {verb} at t = {self.path_paused_at:.1f} s (P resumes)"
 
     def _walk_keys(self, frame_time: float) -> None:
         keys = self.wnd.keys

@@ -508,7 +508,6 @@ def _direct_emission(mesh, intersector, faces, emission_face, origin, normal, sa
         probability = emitter_choice_weights(o, n, tri, tri_normal, area, radiance)
         cdf = np.cumsum(probability, axis=1)
         cdf[:, -1] = 1.0
-        rows = np.arange(len(o))
         for s in range(samples):
             u = (points[s][None, :] + rotation[block]) % 1.0
             k = np.minimum((cdf < u[:, :1]).sum(axis=1), len(area) - 1)
@@ -527,7 +526,7 @@ def _direct_emission(mesh, intersector, faces, emission_face, origin, normal, sa
             first = intersector.intersects_first(o[idx], direction[idx])
             idx = idx[np.isin(first, emitters)]
             g = cos_r[idx] * cos_e[idx] / np.maximum(dist2[idx], 1e-12)
-            weight = area[k[idx]] / probability[rows[idx], k[idx]]  # 1 / (p_k / A_k)
+            weight = area[k[idx]] / probability[idx, k[idx]]  # 1 / (p_k / A_k)
             out[lo + idx] += emission_face[emitters[k[idx]]] * (g * weight)[:, None]
     return out / samples
 
