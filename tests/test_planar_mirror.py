@@ -15,7 +15,7 @@ from lobeview.materials.patterns import AlbedoTable, integrate_lobe, specular_lo
 from lobeview.materials.spec import build_bsdf, validate
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.meshes import box_mesh, quad, uv_sphere
-from lobeview.scenes.mirror_scene import CAMERA, TILE_TEXELS, BoxTracer, mirror_floor_scene
+from lobeview.scenes.mirror_scene import CAMERA, TILE_TEXELS, BoxTracer, mirror_floor_scene, pane_material
 from lobeview.scenes.planar_mirror import (
     MirrorBuffers,
     PlanarReflector,
@@ -468,6 +468,68 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
     result = renderer.render(_camera(), "lobe-3")
     assert renderer.mirror_report == ["floor: mirror pass 120x80"]
     assert np.all(np.isfinite(result.radiance)) and not result.invalid.any()
+    renderer.release()
+
+
+WALL = 4  # the glossy back wall of mirror_floor_scene(extra_reflector=True), a reflector at z = -3
+SCREEN_Z = -2.8  # just in front of it
+
+
+def _screen(x_max=8.0, facing_camera=True):
+    """A quad in front of the glossy wall, from x = -8 to ``x_max``, y = 0..4: from the camera it
+    covers the whole wall unless x_max leaves a gap (or it is single-sided and facing away)."""
+    if facing_camera:
+        return quad([-8.0, 0.0, SCREEN_Z], [x_max + 8.0, 0.0, 0.0], [0.0, 4.0, 0.0])
+    return quad([x_max, 0.0, SCREEN_Z], [-(x_max + 8.0), 0.0, 0.0], [0.0, 4.0, 0.0])
+
+
+@pytest.mark.parametrize(
+    "case, x_max, facing_camera, material, hidden",
+    [
+        ("opaque screen", 8.0, True, {}, True),
+        ("screen with a gap", 1.0, True, {}, False),
+        ("single-sided screen seen from behind", 8.0, False, {"double_sided": False}, False),
+        ("single-sided screen seen from the front", 8.0, True, {"double_sided": False}, True),
+        ("blended screen", 8.0, True, {"alpha_mode": "BLEND", "base_alpha": 0.5}, False),
+        ("masked screen", 8.0, True, {"alpha_mode": "MASK"}, False),
+        ("glass screen", 8.0, True, {"glass": True}, False),
+    ],
+)
+def test_reflector_hidden_behind_opaque_objects_gets_no_mirror_pass(ctx, case, x_max, facing_camera, material, hidden):
+    """The occlusion test (viewer/occlusion.py) skips the wall exactly when no camera pixel shows
+    it, only opaque objects hide it, and skipping changes no pixel."""
+    from lobeview.scenes.scene import SceneMaterial
+
+    scene = mirror_floor_scene(0.05, extra_reflector=True)
+    material = dict(material)
+    see_through = "alpha_mode" in material or "glass" in material
+    desc = (
+        pane_material(0.01) if material.pop("glass", False) else validate({"model": "thesis", "kd": 0.5, "lobes": []})
+    )
+    material.setdefault("double_sided", True)
+    scene.materials.append(SceneMaterial("screen", desc, lightmap=scene.materials[0].lightmap, **material))
+    screen = _screen(x_max, facing_camera)
+    scene.objects.append(SceneObject("screen", screen, len(scene.materials) - 1, screen.uvs.copy()))
+    renderer = _renderer(ctx, scene)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        culled = renderer.render(_camera(), "lobe-3")
+    if not see_through:  # the wall is hidden exactly where no pixel shows it
+        assert (int((culled.object_id == WALL).sum()) == 0) == hidden, case
+    assert (renderer.mirror_passes.skipped.get(WALL) == "hidden behind other objects") == hidden, case
+    assert 0 in renderer.mirror_passes.drawn  # the floor in front of the screen is seen
+    if hidden:
+        assert "glossy wall: no mirror pass (hidden behind other objects)" in renderer.mirror_report
+        renderer.mirror_occlusion = False
+        drawn = renderer.render(_camera(), "lobe-3")
+        assert WALL in renderer.mirror_passes.drawn
+        np.testing.assert_array_equal(drawn.radiance, culled.radiance)
+        # The box-filtered reference shades off the pixel centres: the test does not apply.
+        renderer.mirror_occlusion = True
+        renderer.render(_camera(), "reference", spp=1)
+        assert WALL in renderer.mirror_passes.drawn
+    else:
+        assert WALL in renderer.mirror_passes.drawn, case
     renderer.release()
 
 

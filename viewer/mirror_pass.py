@@ -60,15 +60,28 @@ def buffer_size(frame_size, scale: float) -> tuple[int, int]:
     return max(1, round(width * scale)), max(1, round(height * scale))
 
 
+HIDDEN = "hidden behind other objects"
+
+
 class MirrorPasses:
     """``draw_background(cube, view_projection)`` and ``draw_scene(view_projection, eye, method,
-    specular, exclude)`` are the renderer's."""
+    specular, exclude)`` are the renderer's; ``visible_samples(view_projection, indices)`` (the
+    renderer's occlusion test, viewer/occlusion.py) says how many camera pixels of each
+    reflector no opaque object hides."""
 
-    def __init__(self, ctx: moderngl.Context, environment, draw_background: Callable, draw_scene: Callable):
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        environment,
+        draw_background: Callable,
+        draw_scene: Callable,
+        visible_samples: Callable | None = None,
+    ):
         self.ctx = ctx
         self.environment = environment
         self.draw_background = draw_background
         self.draw_scene = draw_scene
+        self.visible_samples = visible_samples
         self.targets: dict[tuple[int, str], MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
@@ -81,26 +94,41 @@ class MirrorPasses:
         """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
         self._key = None
 
-    def render(self, camera: Camera, frame_size, reflectors: dict, names: list, scale: float, specular: bool) -> dict:
+    def render(
+        self,
+        camera: Camera,
+        frame_size,
+        reflectors: dict,
+        names: list,
+        scale: float,
+        specular: bool,
+        occlusion: bool = True,
+    ) -> dict:
         """The buffers of the reflectors that need them for ``camera`` (index -> {'mirror' and/or
         'see-through': targets}); reused while the camera, the size, the options and the materials
         stay the same (refinement passes). ``specular``: glossy objects seen in a mirror are shaded
-        from their cube maps (lobe-3) instead of the thesis' diffuse-only mirror pass."""
+        from their cube maps (lobe-3) instead of the thesis' diffuse-only mirror pass.
+        ``occlusion``: a reflector that opaque objects hide at every pixel centre gets no pass."""
         from lobeview.scenes.planar_mirror import mirror_camera
 
         width, height = frame_size
         view_proj = camera.view_projection(width / height)
         key = (
             tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y, camera.near, camera.far,
-            tuple(frame_size), scale, specular, tuple(sorted(reflectors)), self.generation,
+            tuple(frame_size), scale, specular, tuple(sorted(reflectors)), self.generation, occlusion,
         )  # fmt: skip
         if key == self._key:
             return self._active
         report, active, skipped = [], {}, {}
         size = buffer_size(frame_size, scale)
         projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
+        reasons = {index: skip_reason(reflector, camera, view_proj) for index, reflector in reflectors.items()}
+        candidates = [index for index, reason in reasons.items() if reason is None]
+        if occlusion and self.visible_samples is not None and candidates:
+            samples = self.visible_samples(view_proj, candidates)
+            reasons.update({index: HIDDEN for index in candidates if samples[index] == 0})
         for index, reflector in reflectors.items():
-            reason = skip_reason(reflector, camera, view_proj)
+            reason = reasons[index]
             if reason is not None:
                 report.append(f"{names[index]}: no mirror pass ({reason})")
                 skipped[index] = reason

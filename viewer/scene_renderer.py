@@ -47,6 +47,7 @@ from .interface import (
 )
 from .material_gpu import PackedMaterial, pack_material
 from .mirror_pass import MirrorPasses
+from .occlusion import OcclusionTest
 from .render_base import RendererBase, RenderResult
 
 __all__ = ["SceneRenderer"]
@@ -176,8 +177,16 @@ class SceneRenderer(RendererBase):
         # not drawn; draw_counts says, per kind of pass, how many were drawn and culled.
         self.frustum_culling = bool(frustum_culling)
         self.draw_counts = DrawCounts()
+        # Occlusion test of the reflectors (viewer/occlusion.py): no mirror pass for a reflector
+        # that opaque objects hide from the camera (a floor behind a wall).
+        self.mirror_occlusion = True
+        self.occlusion = OcclusionTest(ctx, self.programs)
         self.mirror_passes = MirrorPasses(
-            ctx, self.environment, self.draw_background, functools.partial(self._draw_pass, pass_kind="mirror")
+            ctx,
+            self.environment,
+            self.draw_background,
+            functools.partial(self._draw_pass, pass_kind="mirror"),
+            self._visible_samples,
         )
         self.bounds = scene.bounds  # static scene: near/far planes are fitted to it every frame
         extent = float(np.max(self.bounds[1] - self.bounds[0]))
@@ -395,11 +404,29 @@ class SceneRenderer(RendererBase):
             found = {i: r for i, r in found.items() if i in self.enabled_reflectors}
         return found
 
-    def render_mirror_passes(self, camera: Camera) -> dict:
-        """This frame's mirror and see-through buffers (viewer/mirror_pass.py)."""
+    def render_mirror_passes(self, camera: Camera, jitters: bool = False) -> dict:
+        """This frame's mirror and see-through buffers (viewer/mirror_pass.py). ``jitters``: the
+        frame's passes move off the pixel centres (box-filtered reference), where the occlusion
+        test, exact at pixel centres, does not apply."""
         names = [obj.name for obj in self.objects]
+        occlusion = self.mirror_occlusion and not jitters
         return self.mirror_passes.render(
-            camera, self.size, self.reflectors(), names, self.mirror_scale, self.mirror_specular
+            camera, self.size, self.reflectors(), names, self.mirror_scale, self.mirror_specular, occlusion
+        )
+
+    def _visible_samples(self, view_proj, indices: list) -> dict[int, int]:
+        """Camera pixels of each reflector in ``indices`` that no opaque object hides
+        (viewer/occlusion.py says which objects count as occluders and why)."""
+        reflectors = self.analysis.reflectors
+        occluders = []
+        for obj in self.objects:
+            needs = self.analysis.objects[obj.index]
+            mat = self.scene.materials[self.scene.objects[obj.index].material]
+            if obj.index in reflectors or needs.transmission_lobes or mat.alpha_mode.upper() != "OPAQUE":
+                continue
+            occluders.append((obj, not mat.double_sided))
+        return self.occlusion.visible_samples(
+            view_proj, self.size, occluders, {index: self.objects[index] for index in indices}
         )
 
     def invalidate_mirrors(self) -> None:
@@ -551,7 +578,7 @@ class SceneRenderer(RendererBase):
             names = [obj.name for obj in self.objects]
             self.mirror_passes.skip_all(self.reflectors(), names, "cube map (prefiltered method)")
         else:
-            mirrors = self.render_mirror_passes(camera)
+            mirrors = self.render_mirror_passes(camera, jitters=method.kind == "reference")
         self.frame.begin(averages_planes=any(self._averages_planes(self._object_method(i, method)) for i in mirrors))
         self.draw_background(self.environment, view_proj)
         self._draw_objects(
@@ -647,6 +674,7 @@ class SceneRenderer(RendererBase):
     def release(self):
         super().release()
         self.mirror_passes.release()
+        self.occlusion.release()
         for obj in self.objects:
             obj.release()
         self.textures.clear()
