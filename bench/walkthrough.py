@@ -10,7 +10,9 @@ Scenes: the demo room (scenes/demo.py, its recorded path) and the apartment
 - cube maps: how many objects have one and their GPU memory (radiance cube with its MIP chain);
 - per frame of the path (``--frames`` times spread over it): the mirror passes alone (drawn,
   then glFinish) and the camera pass (draw + glFinish), objects drawn and culled in the camera
-  pass and in the mirror passes, mirror passes drawn and skipped (and why).
+  pass and in the mirror passes, mirror passes drawn and skipped (and why); the occlusion test's
+  own time (part of the mirror passes') and, in the same frame, the mirror passes without it
+  (every reflector in view drawn: what the test saves).
 
 Then the cost table against object count: the apartment with ``--count-rooms`` rooms (about 20,
 100 and 290 objects), baked once at a low lightmap quality (timing does not depend on it), the
@@ -70,6 +72,16 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
     renderer.ctx.finish()
     for n, t in enumerate(times):
         camera = Camera.from_scene_camera(path.camera_at(float(t))).fitted_to(renderer.bounds)
+        unculled_ms, unculled_passes = 0.0, 0
+        if method.kind != "prefiltered":  # first without the occlusion test: the frame then keeps its own buffers
+            renderer.mirror_occlusion = False
+            renderer.ctx.finish()
+            t0 = time.perf_counter()
+            renderer.render_mirror_passes(camera)
+            renderer.ctx.finish()
+            unculled_ms = (time.perf_counter() - t0) * 1e3
+            unculled_passes = len(renderer.mirror_passes.drawn)
+            renderer.mirror_occlusion = True
         renderer.invalidate_mirrors()
         renderer.draw_counts.new_frame()
         renderer.ctx.finish()
@@ -90,6 +102,9 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
                 "frame": n,
                 "t": float(t),
                 "mirror_ms": (t1 - t0) * 1e3,
+                "occlusion_test_ms": renderer.mirror_passes.occlusion_seconds * 1e3,
+                "mirror_ms_without_test": unculled_ms,
+                "mirror_passes_without_test": unculled_passes,
                 "camera_ms": (t2 - t1) * 1e3,
                 "frame_ms": (t2 - t0) * 1e3,
                 "camera_drawn": counts.of("camera").drawn,
@@ -151,6 +166,9 @@ def _summary(result: dict) -> dict:
         "frame_ms_median": statistics.median(r["frame_ms"] for r in rows),
         "frame_ms_max": max(r["frame_ms"] for r in rows),
         "mirror_ms_mean": mean("mirror_ms"),
+        "occlusion_test_ms_mean": mean("occlusion_test_ms"),
+        "mirror_ms_without_test_mean": mean("mirror_ms_without_test"),
+        "mirror_passes_without_test_mean": mean("mirror_passes_without_test"),
         "camera_ms_mean": mean("camera_ms"),
         "camera_drawn_mean": mean("camera_drawn"),
         "camera_culled_mean": mean("camera_culled"),
@@ -172,18 +190,23 @@ def _scene_markdown(result: dict) -> list[str]:
         f"{result['cube_face_draws']} object draws into cube faces, {result['cube_face_culled']} culled), "
         f"warm {result['startup_warm_s']:.1f} s (cube maps {warm_cubes:.1f} s, from the cache).",
         f"Frames: median {s['frame_ms_median']:.0f} ms, max {s['frame_ms_max']:.0f} ms; mean split: mirror passes "
-        f"{s['mirror_ms_mean']:.0f} ms, camera pass {s['camera_ms_mean']:.0f} ms.",
+        f"{s['mirror_ms_mean']:.0f} ms (of which the occlusion test {s['occlusion_test_ms_mean']:.0f} ms), camera "
+        f"pass {s['camera_ms_mean']:.0f} ms. Without the occlusion test the mirror passes took "
+        f"{s['mirror_ms_without_test_mean']:.0f} ms ({s['mirror_passes_without_test_mean']:.1f} passes) on average.",
         "",
-        "| frame | t (s) | frame ms | mirror passes ms | camera pass ms | camera draws / culled "
-        "| mirror-pass draws / culled | mirror passes drawn / skipped | skipped because |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| frame | t (s) | frame ms | mirror passes ms | of which occlusion test ms | camera pass ms "
+        "| camera draws / culled | mirror-pass draws / culled | mirror passes drawn / skipped | skipped because "
+        "| without the test: passes, ms |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in result["frames"]:
         reasons = ", ".join(f"{k}: {v}" for k, v in sorted(r["skip_reasons"].items())) or "-"
         lines.append(
-            f"| {r['frame']} | {r['t']:.1f} | {r['frame_ms']:.0f} | {r['mirror_ms']:.0f} | {r['camera_ms']:.0f} "
+            f"| {r['frame']} | {r['t']:.1f} | {r['frame_ms']:.0f} | {r['mirror_ms']:.0f} "
+            f"| {r['occlusion_test_ms']:.0f} | {r['camera_ms']:.0f} "
             f"| {r['camera_drawn']} / {r['camera_culled']} | {r['mirror_draws']} / {r['mirror_culled']} "
-            f"| {r['mirror_passes']} / {r['mirror_skipped']} | {reasons} |"
+            f"| {r['mirror_passes']} / {r['mirror_skipped']} | {reasons} "
+            f"| {r['mirror_passes_without_test']}, {r['mirror_ms_without_test']:.0f} |"
         )
     return lines + [""]
 
@@ -192,8 +215,8 @@ def _count_markdown(rows: list[dict]) -> list[str]:
     lines = [
         "| rooms | objects | reflectors | cube maps | cube memory MB | start-up cold s | cube-face draws / culled "
         "| start-up warm s | frame ms (median) | mirror ms (mean) | camera ms (mean) | camera draws / culled (mean) "
-        "| mirror passes drawn / skipped (mean) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| mirror passes drawn / skipped (mean) | without the occlusion test: mirror passes, ms (mean) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         s = _summary(r)
@@ -203,7 +226,8 @@ def _count_markdown(rows: list[dict]) -> list[str]:
             f"| {r['cube_face_draws']} / {r['cube_face_culled']} | {r['startup_warm_s']:.1f} "
             f"| {s['frame_ms_median']:.0f} | {s['mirror_ms_mean']:.0f} | {s['camera_ms_mean']:.0f} "
             f"| {s['camera_drawn_mean']:.0f} / {s['camera_culled_mean']:.0f} "
-            f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} |"
+            f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} "
+            f"| {s['mirror_passes_without_test_mean']:.1f}, {s['mirror_ms_without_test_mean']:.0f} |"
         )
     return lines
 

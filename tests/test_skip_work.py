@@ -101,6 +101,21 @@ def test_culling_skips_objects_and_changes_no_pixel(ctx):
         renderer.release()
 
 
+def test_radiance_cubes_keep_no_cpu_copy_and_read_back_exactly_what_was_uploaded(ctx):
+    from lobeview.scenes.env_sampling import CubeImportance
+    from lobeview.viewer.cubemap import RadianceCube
+
+    rng = np.random.default_rng(7)
+    faces = (rng.random((6, 32, 32, 3)) * 10.0 ** rng.uniform(-6, 6, (6, 32, 32, 1))).astype(np.float32)
+    faces[2, 5, 7] = 1.0e9  # a sun seen through a window: beyond half precision
+    cube = RadianceCube(ctx, faces)
+    kept = [name for name, value in vars(cube).items() if isinstance(value, np.ndarray) and value.size >= 6 * 32 * 32]
+    assert kept == []  # nothing face-sized stays on the CPU
+    np.testing.assert_array_equal(cube.faces, faces)  # float32 texels: bit-exact
+    np.testing.assert_array_equal(cube.importance.cdf, CubeImportance.from_faces(faces, size=32).cdf)
+    cube.release()
+
+
 def test_albedo_tables_are_cached_on_disk_and_damaged_files_rebuilt(tmp_path, monkeypatch):
     """A second start does not rebuild the normalisation tables (issue 18 item 4); a damaged or
     foreign cache file is rebuilt with a warning, never used."""

@@ -48,16 +48,30 @@ class RadianceCube:
     """Incident radiance as a cube map with a full MIP chain, plus its importance map (texel CDF
     + per-texel density cube) for the reference method's environment sampling, built on first use
     (issue 18: a cube that no reference pass reads, e.g. a first-bounce cube of the bake or any
-    cube of a real-time session, never builds it)."""
+    cube of a real-time session, never builds it). No CPU copy of the faces is kept (4.7 MB per
+    256^2 cube, 0.6 GB for the 18-room apartment): ``faces`` reads them back from the GPU."""
 
     def __init__(self, ctx: moderngl.Context, faces: np.ndarray, importance_size: int = 64):
-        self.faces = np.asarray(faces, dtype=np.float32)
-        self.face_size = self.faces.shape[1]
-        self.radiance = upload_cube(ctx, self.faces)
+        faces = np.asarray(faces, dtype=np.float32)
+        self.face_size = faces.shape[1]
+        self.radiance = upload_cube(ctx, faces)
         self.importance_size = min(int(importance_size), self.face_size)
         self._importance: tuple | None = None  # (CubeImportance, env_cdf, env_pdf) once built
         self._prefiltered = None
         self.cache_dir = None  # where prefiltered maps are cached (set by the owner)
+
+    @property
+    def faces(self) -> np.ndarray:
+        """(6, S, S, 3) float32: level 0 as stored on the GPU (float32 texels, so exactly what
+        was uploaded), read back on each call; the importance tables and the prefiltered maps'
+        cache key are its only users, once per cube."""
+        size = self.face_size
+        return np.stack(
+            [
+                np.frombuffer(self.radiance.read(face, alignment=1), np.float32).reshape(size, size, 4)[..., :3]
+                for face in range(6)
+            ]
+        )
 
     @property
     def importance_built(self) -> bool:

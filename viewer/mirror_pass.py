@@ -6,6 +6,7 @@ The pass draws through the renderer's callables, so it holds no shading code of 
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import moderngl
@@ -89,6 +90,7 @@ class MirrorPasses:
         self.report: list[str] = []  # what the last frame's passes did, one line per pass or skip
         self.drawn: list[int] = []  # reflectors that got their passes in the last frame
         self.skipped: dict[int, str] = {}  # reflector -> why it got none in the last frame
+        self.occlusion_seconds = 0.0  # the last drawn frame's occlusion test (0: not run)
 
     def invalidate(self) -> None:
         """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
@@ -124,8 +126,11 @@ class MirrorPasses:
         projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
         reasons = {index: skip_reason(reflector, camera, view_proj) for index, reflector in reflectors.items()}
         candidates = [index for index, reason in reasons.items() if reason is None]
+        self.occlusion_seconds = 0.0
         if occlusion and self.visible_samples is not None and candidates:
-            samples = self.visible_samples(view_proj, candidates)
+            t0 = time.perf_counter()
+            samples = self.visible_samples(view_proj, candidates)  # reading the queries waits for the GPU
+            self.occlusion_seconds = time.perf_counter() - t0
             reasons.update({index: HIDDEN for index in candidates if samples[index] == 0})
         for index, reflector in reflectors.items():
             reason = reasons[index]
