@@ -13,6 +13,8 @@ out vec3 v_normal;
 out vec4 v_tangent;
 out vec2 v_uv0;
 out vec2 v_uv1;
+// The same expression as depth.vert: the depth pre-pass (viewer/occlusion.py) must match exactly.
+invariant gl_Position;
 
 void main() {
     v_position = in_position;

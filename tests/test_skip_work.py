@@ -101,6 +101,43 @@ def test_culling_skips_objects_and_changes_no_pixel(ctx):
         renderer.release()
 
 
+def test_depth_pre_pass_draws_the_opaque_objects_and_leaves_the_frame_as_it_was(ctx):
+    """The camera pass's depth pre-pass (viewer/occlusion.py) shades each pixel once; the frame
+    is the one drawn without it but at exact depth ties (surfaces meeting at an edge), where the
+    last drawn rather than the first drawn surface wins."""
+    from lobeview.scenes.demo import build_demo_scene
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    scene = load_gltf(build_demo_scene())
+    scene.materials[0].alpha_mode = "BLEND"  # blended and masked surfaces write no pre-pass depth
+    scene.materials[1].alpha_mode = "MASK"
+    env = EnvironmentMap.from_function(lambda d: 0.5 + 0.5 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 16)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        renderer = SceneRenderer(ctx, scene, env, size=(160, 100), cube_face_size=32, progress=False)
+    not_opaque = {i for i, o in enumerate(scene.objects) if o.material in (0, 1)}
+    assert not_opaque
+    assert {obj.index for obj, _ in renderer._opaque_objects(False)} == set(range(len(scene.objects))) - not_opaque
+    cam = next(c for c in scene.cameras if c.name == "table")
+    camera = Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
+    images = {}
+    for prepass in (False, True):
+        renderer.depth_prepass = prepass
+        images[prepass] = renderer.render(camera, "lobe-5", spp=1).radiance
+        counts = renderer.draw_counts.of("depth pre-pass")
+        if prepass:
+            # Every opaque object the camera pass draws had its depth drawn first.
+            assert counts.drawn + counts.culled == len(scene.objects) - len(not_opaque)
+            assert 0 < counts.drawn <= renderer.draw_counts.of("camera").drawn
+        else:
+            assert counts.drawn == counts.culled == 0
+    same = np.all(images[True] == images[False], axis=2)
+    assert same.mean() > 0.999
+    renderer.release()
+
+
 def test_radiance_cubes_keep_no_cpu_copy_and_read_back_exactly_what_was_uploaded(ctx):
     from lobeview.scenes.env_sampling import CubeImportance
     from lobeview.viewer.cubemap import RadianceCube

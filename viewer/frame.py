@@ -53,6 +53,7 @@ class FrameTargets:
         self.targets = [self.ctx.texture(self.size, 4, dtype="f4") for _ in G_BUFFER]
         self.depth = self.ctx.depth_renderbuffer(self.size)
         self.plain_fbo = new_framebuffer(self.ctx, self.targets, self.depth)
+        self.depth_fbo = new_framebuffer(self.ctx, [], self.depth)  # the depth pre-pass (viewer/occlusion.py)
         self.plane_states = [self.ctx.texture(self.size, 4, dtype="f4") for _ in range(8 if self.plane_state else 0)]
         self.state_fbos = [
             new_framebuffer(self.ctx, [*self.targets, *self.plane_states[4 * k : 4 * k + 4]], self.depth)
@@ -101,6 +102,6 @@ class FrameTargets:
     def release(self) -> None:
         if not self.targets:
             return
-        for item in [*self.state_fbos, self.plain_fbo, *self.plane_states, *self.targets, self.depth]:
+        for item in [*self.state_fbos, self.plain_fbo, self.depth_fbo, *self.plane_states, *self.targets, self.depth]:
             item.release()
         self.targets = []

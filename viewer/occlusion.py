@@ -1,4 +1,12 @@
-"""Occlusion test of the planar reflectors (issue 18): a reflector whose mirror buffers no camera
+"""Depth-only drawing (issue 18): the camera pass's depth pre-pass and the occlusion test of the
+planar reflectors.
+
+Depth pre-pass: the opaque objects' depth goes into the frame's depth buffer first, and the
+shading pass then tests less-or-equal against it, so the expensive per-pixel integration runs
+once per pixel instead of once per overlapping surface (depth.vert and scene.vert compute
+gl_Position invariantly, so a surface meets its own depth exactly).
+
+Occlusion test: a reflector whose mirror buffers no camera
 pixel would read needs no mirror pass. The opaque objects' depth is drawn from the camera (a
 depth-only pre-pass at the frame's resolution), then each candidate reflector is drawn against it
 inside a samples-passed query; a reflector none of whose fragments passes is hidden (a floor
@@ -52,29 +60,41 @@ class OcclusionTest:
             )
         return vao
 
-    def visible_samples(self, view_proj: np.ndarray, size, occluders: list, queried: dict) -> dict[int, int]:
-        """Samples of each ``queried`` object (index -> GPU object) that no occluder hides from
-        the camera of ``view_proj``. ``occluders``: (GPU object, single-sided) pairs."""
-        self._targets(size)
+    def draw_depth(self, view_proj: np.ndarray, objects: list) -> tuple[int, int]:
+        """Depth of ``objects`` ((GPU object, single-sided) pairs) into the bound framebuffer's
+        depth buffer (less-than test, colour untouched: the program has no outputs); objects
+        outside the frustum are skipped. Returns (drawn, culled)."""
         program = self.programs.program("depth.vert", "depth.frag", {})
         set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
         ctx = self.ctx
         ctx.disable(moderngl.BLEND)
-        ctx.scissor = None
-        self.fbo.use()
-        ctx.viewport = (0, 0, *self.size)
-        self.fbo.clear(depth=1.0)
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
-        for obj, single_sided in occluders:
+        drawn = culled = 0
+        for obj, single_sided in objects:
             if outside_frustum(obj.corners, view_proj):
+                culled += 1
                 continue
             if single_sided:
                 ctx.enable(moderngl.CULL_FACE)
             else:
                 ctx.disable(moderngl.CULL_FACE)
             self._vao(program, obj).render(moderngl.TRIANGLES)
+            drawn += 1
         ctx.disable(moderngl.CULL_FACE)
+        return drawn, culled
+
+    def visible_samples(self, view_proj: np.ndarray, size, occluders: list, queried: dict) -> dict[int, int]:
+        """Samples of each ``queried`` object (index -> GPU object) that no occluder hides from
+        the camera of ``view_proj``. ``occluders``: (GPU object, single-sided) pairs."""
+        self._targets(size)
+        ctx = self.ctx
+        ctx.scissor = None
+        self.fbo.use()
+        ctx.viewport = (0, 0, *self.size)
+        self.fbo.clear(depth=1.0)
+        self.draw_depth(view_proj, occluders)
+        program = self.programs.program("depth.vert", "depth.frag", {})
         self.fbo.depth_mask = False
         ctx.depth_func = "<="  # a reflector lying on an occluder (a floor under a wall) is not hidden by it
         if self._query is None:

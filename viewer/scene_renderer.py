@@ -65,7 +65,7 @@ class DrawCounts:
     """Objects drawn and culled (frustum) per kind of pass: 'camera' and 'mirror' for the last
     frame (new_frame resets them), 'cube map' since start-up (bake and refreshes)."""
 
-    PER_FRAME = ("camera", "mirror")
+    PER_FRAME = ("camera", "mirror", "depth pre-pass")
 
     def __init__(self):
         self.passes: dict[str, PassCounts] = {}
@@ -180,6 +180,8 @@ class SceneRenderer(RendererBase):
         # Occlusion test of the reflectors (viewer/occlusion.py): no mirror pass for a reflector
         # that opaque objects hide from the camera (a floor behind a wall).
         self.mirror_occlusion = True
+        # Depth pre-pass of the camera pass (viewer/occlusion.py): shading once per pixel.
+        self.depth_prepass = True
         self.occlusion = OcclusionTest(ctx, self.programs)
         self.mirror_passes = MirrorPasses(
             ctx,
@@ -414,19 +416,26 @@ class SceneRenderer(RendererBase):
             camera, self.size, self.reflectors(), names, self.mirror_scale, self.mirror_specular, occlusion
         )
 
-    def _visible_samples(self, view_proj, indices: list) -> dict[int, int]:
-        """Camera pixels of each reflector in ``indices`` that no opaque object hides
-        (viewer/occlusion.py says which objects count as occluders and why)."""
+    def _opaque_objects(self, occluders_only: bool) -> list:
+        """(GPU object, single-sided) for the objects the camera pass draws opaquely (no alphaMode
+        MASK or BLEND: their discarded or blended pixels hide nothing). ``occluders_only``: also
+        without reflectors and transmissive objects (the reflectors' occlusion test:
+        viewer/occlusion.py says why)."""
         reflectors = self.analysis.reflectors
-        occluders = []
+        found = []
         for obj in self.objects:
-            needs = self.analysis.objects[obj.index]
             mat = self.scene.materials[self.scene.objects[obj.index].material]
-            if obj.index in reflectors or needs.transmission_lobes or mat.alpha_mode.upper() != "OPAQUE":
+            if mat.alpha_mode.upper() != "OPAQUE":
                 continue
-            occluders.append((obj, not mat.double_sided))
+            if occluders_only and (obj.index in reflectors or self.analysis.objects[obj.index].transmission_lobes):
+                continue
+            found.append((obj, not mat.double_sided))
+        return found
+
+    def _visible_samples(self, view_proj, indices: list) -> dict[int, int]:
+        """Camera pixels of each reflector in ``indices`` that no opaque object hides."""
         return self.occlusion.visible_samples(
-            view_proj, self.size, occluders, {index: self.objects[index] for index in indices}
+            view_proj, self.size, self._opaque_objects(True), {index: self.objects[index] for index in indices}
         )
 
     def invalidate_mirrors(self) -> None:
@@ -581,9 +590,18 @@ class SceneRenderer(RendererBase):
             mirrors = self.render_mirror_passes(camera, jitters=method.kind == "reference")
         self.frame.begin(averages_planes=any(self._averages_planes(self._object_method(i, method)) for i in mirrors))
         self.draw_background(self.environment, view_proj)
+        if self.depth_prepass:
+            # Opaque depth first (viewer/occlusion.py): the shading pass then integrates the lobes
+            # once per pixel, not once per overlapping surface.
+            self.frame.depth_fbo.use()
+            counts = self.draw_counts.of("depth pre-pass")
+            counts.drawn, counts.culled = self.occlusion.draw_depth(view_proj, self._opaque_objects(False))
+            self.frame.fbo.use()
+            self.ctx.depth_func = "<="
         self._draw_objects(
             view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors, cull=True
         )
+        self.ctx.depth_func = "<"
 
     def pick(self, x: int, y: int) -> int | None:
         """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
