@@ -12,7 +12,8 @@ Scenes: the demo room (scenes/demo.py, its recorded path) and the apartment
   then glFinish) and the camera pass (draw + glFinish), objects drawn and culled in the camera
   pass and in the mirror passes, mirror passes drawn and skipped (and why); the occlusion test's
   own time (part of the mirror passes') and, in the same frame, the mirror passes without it
-  (every reflector in view drawn: what the test saves).
+  (every reflector in view drawn: what the test saves) and the camera pass without its depth
+  pre-pass (what shading once per pixel saves).
 
 Then the cost table against object count: the apartment with ``--count-rooms`` rooms (about 20,
 100 and 290 objects), baked once at a low lightmap quality (timing does not depend on it), the
@@ -97,6 +98,12 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         renderer.ctx.finish()
         t2 = time.perf_counter()
         counts = renderer.draw_counts
+        camera_drawn, camera_culled = counts.of("camera").drawn, counts.of("camera").culled
+        renderer.depth_prepass = False  # the same camera pass without the depth pre-pass
+        renderer.draw_frame(camera, method)
+        renderer.ctx.finish()
+        no_prepass_ms = (time.perf_counter() - t2) * 1e3
+        renderer.depth_prepass = True
         rows.append(
             {
                 "frame": n,
@@ -107,8 +114,9 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
                 "mirror_passes_without_test": unculled_passes,
                 "camera_ms": (t2 - t1) * 1e3,
                 "frame_ms": (t2 - t0) * 1e3,
-                "camera_drawn": counts.of("camera").drawn,
-                "camera_culled": counts.of("camera").culled,
+                "camera_ms_without_prepass": no_prepass_ms,
+                "camera_drawn": camera_drawn,
+                "camera_culled": camera_culled,
                 "mirror_draws": mirror_draws,
                 "mirror_culled": mirror_culled,
                 "mirror_passes": len(renderer.mirror_passes.drawn),
@@ -170,6 +178,7 @@ def _summary(result: dict) -> dict:
         "mirror_ms_without_test_mean": mean("mirror_ms_without_test"),
         "mirror_passes_without_test_mean": mean("mirror_passes_without_test"),
         "camera_ms_mean": mean("camera_ms"),
+        "camera_ms_without_prepass_mean": mean("camera_ms_without_prepass"),
         "camera_drawn_mean": mean("camera_drawn"),
         "camera_culled_mean": mean("camera_culled"),
         "mirror_passes_mean": mean("mirror_passes"),
@@ -191,7 +200,8 @@ def _scene_markdown(result: dict) -> list[str]:
         f"warm {result['startup_warm_s']:.1f} s (cube maps {warm_cubes:.1f} s, from the cache).",
         f"Frames: median {s['frame_ms_median']:.0f} ms, max {s['frame_ms_max']:.0f} ms; mean split: mirror passes "
         f"{s['mirror_ms_mean']:.0f} ms (of which the occlusion test {s['occlusion_test_ms_mean']:.0f} ms), camera "
-        f"pass {s['camera_ms_mean']:.0f} ms. Without the occlusion test the mirror passes took "
+        f"pass {s['camera_ms_mean']:.0f} ms ({s['camera_ms_without_prepass_mean']:.0f} ms without the depth "
+        "pre-pass). Without the occlusion test the mirror passes took "
         f"{s['mirror_ms_without_test_mean']:.0f} ms ({s['mirror_passes_without_test_mean']:.1f} passes) on average.",
         "",
         "| frame | t (s) | frame ms | mirror passes ms | of which occlusion test ms | camera pass ms "
@@ -215,8 +225,9 @@ def _count_markdown(rows: list[dict]) -> list[str]:
     lines = [
         "| rooms | objects | reflectors | cube maps | cube memory MB | start-up cold s | cube-face draws / culled "
         "| start-up warm s | frame ms (median) | mirror ms (mean) | camera ms (mean) | camera draws / culled (mean) "
-        "| mirror passes drawn / skipped (mean) | without the occlusion test: mirror passes, ms (mean) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| mirror passes drawn / skipped (mean) | without the occlusion test: mirror passes, ms (mean) "
+        "| camera ms without the depth pre-pass (mean) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         s = _summary(r)
@@ -227,7 +238,8 @@ def _count_markdown(rows: list[dict]) -> list[str]:
             f"| {s['frame_ms_median']:.0f} | {s['mirror_ms_mean']:.0f} | {s['camera_ms_mean']:.0f} "
             f"| {s['camera_drawn_mean']:.0f} / {s['camera_culled_mean']:.0f} "
             f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} "
-            f"| {s['mirror_passes_without_test_mean']:.1f}, {s['mirror_ms_without_test_mean']:.0f} |"
+            f"| {s['mirror_passes_without_test_mean']:.1f}, {s['mirror_ms_without_test_mean']:.0f} "
+            f"| {s['camera_ms_without_prepass_mean']:.0f} |"
         )
     return lines
 
