@@ -6,10 +6,16 @@ packed anew each frame never hits); and one way to write such data to the disk c
 from __future__ import annotations
 
 import os
+import warnings
+import zipfile
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, TypeVar
+
+T = TypeVar("T")
+#: what reading a damaged or foreign cache file raises (a truncated .npz: BadZipFile or EOFError)
+DAMAGED_CACHE_ERRORS = (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile)
 
 
 def write_cache_file(path: Path, write: Callable[[BinaryIO], None]) -> bool:
@@ -26,6 +32,19 @@ def write_cache_file(path: Path, write: Callable[[BinaryIO], None]) -> bool:
         return True
     except OSError:
         return False
+
+
+def read_cache_file(path: Path | None, read: Callable[[Path], T], what: str) -> T | None:
+    """``read(path)`` of a derived-data file, or None when there is none or it is damaged, which
+    is warned (the caller computes the data again and rewrites the file: a cache file is never
+    trusted to be whole). ``read`` raises ValueError for content of the wrong shape."""
+    if path is None or not path.exists():
+        return None
+    try:
+        return read(path)
+    except DAMAGED_CACHE_ERRORS as exc:
+        warnings.warn(f"{path}: unusable cached {what} ({type(exc).__name__}: {exc}); computing it again", stacklevel=3)
+        return None
 
 
 class BoundedCache:

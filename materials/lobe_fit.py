@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from lobeview.core.cache import write_cache_file
+from lobeview.core.cache import DAMAGED_CACHE_ERRORS, write_cache_file
 from lobeview.core.progress import timed_step
 
 from .bsdf import BSDF, Component
@@ -398,7 +398,7 @@ def _load_fits(path: Path, slices: int) -> list | None:
                     )
                 )  # fmt: skip
             return fits if fits else None
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except DAMAGED_CACHE_ERRORS as exc:
         warnings.warn(f"{path}: unusable cached lobe-map fit ({exc}); fitting again", stacklevel=3)
         return None
 

@@ -329,8 +329,26 @@ def test_disk_cache_round_trips_split_sum_levels_and_lobe_maps(gl, tmp_path):
     for level in range(pf.SPLIT_SUM_LEVELS):
         assert np.array_equal(lookup(cube_a, dirs, float(level)), lookup(cube_b, dirs, float(level)))
     assert map_a.read() == map_b.read()
+    # Damaged files (a crash while writing, a disk error) are warned about and computed again,
+    # and the rewrite leaves no partial file behind.
+    files = sorted(tmp_path.glob("prefiltered-*.npz"))
+    files[0].write_bytes(files[0].read_bytes()[:200])  # truncated zip
+    files[1].write_bytes(b"not a numpy file at all")
+    with pytest.warns(UserWarning, match="unusable cached") as caught:
+        rebuilt = PrefilteredMaps(ctx, renderer.cubes, renderer.programs, tmp_path)
+        cube_c, map_c = rebuilt.split_sum("ggx"), rebuilt.lobe_map(fit)
+    assert sum("unusable cached" in str(w.message) for w in caught) == 2, [str(w.message) for w in caught]
+    for level in range(pf.SPLIT_SUM_LEVELS):
+        assert np.array_equal(lookup(cube_a, dirs, float(level)), lookup(cube_c, dirs, float(level)))
+    assert map_a.read() == map_c.read()
+    assert sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".npz") == sorted(f.name for f in files)
+    assert not list(tmp_path.glob("*.tmp"))
+    for path in files:
+        with np.load(path) as data:  # whole again
+            assert data.files
     built.release()
     loaded.release()
+    rebuilt.release()
 
 
 def test_per_material_textures_are_made_once_across_frames(gl):

@@ -138,6 +138,32 @@ def test_depth_pre_pass_draws_the_opaque_objects_and_leaves_the_frame_as_it_was(
     renderer.release()
 
 
+def test_a_damaged_cube_map_cache_is_warned_about_and_rendered_again(ctx, tmp_path):
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.mirror_scene import mirror_floor_scene
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    scene = mirror_floor_scene(0.05)
+    env = EnvironmentMap.from_function(lambda d: 0.5 + 0.5 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 16)
+
+    def start():
+        return SceneRenderer(ctx, scene, env, size=(32, 20), cube_face_size=16, cache_dir=tmp_path, progress=False)
+
+    first = start()
+    (cache_file,) = tmp_path.glob("cubes-*.npz")
+    expected = first.objects[0].cube.faces
+    first.release()
+    for damage in (cache_file.read_bytes()[:300], b"PK\x03\x04garbage", b""):
+        cache_file.write_bytes(damage)
+        with pytest.warns(UserWarning, match="unusable cached cube maps"):
+            again = start()
+        np.testing.assert_array_equal(again.objects[0].cube.faces, expected)
+        again.release()
+        with np.load(cache_file) as data:  # rewritten whole
+            assert data["cube_0"].shape == (6, 16, 16, 3)
+    assert not list(tmp_path.glob("*.tmp"))
+
+
 def test_radiance_cubes_keep_no_cpu_copy_and_read_back_exactly_what_was_uploaded(ctx):
     from lobeview.scenes.env_sampling import CubeImportance
     from lobeview.viewer.cubemap import RadianceCube

@@ -20,6 +20,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from lobeview.core.cache import read_cache_file, write_cache_file
 from lobeview.core.cube_layout import face_point_directions
 from lobeview.core.methods import Method
 
@@ -126,12 +127,22 @@ class CubeBake:
         if not wanted:
             return
         cache_file = Path(cache_dir) / f"cubes-{key}.npz" if cache_dir else None
-        if cache_file is not None and cache_file.exists():
-            with np.load(cache_file) as data:
-                if {f"cube_{i}" for i in wanted} <= set(data.files):
-                    for i in wanted:
-                        objects[i].cube = RadianceCube(self.ctx, data[f"cube_{i}"].astype(np.float32))
-                    return
+        shape = (6, self.face_size, self.face_size, 3)
+
+        def read(path: Path) -> dict | None:
+            with np.load(path, allow_pickle=False) as data:
+                if not {f"cube_{i}" for i in wanted} <= set(data.files):
+                    return None  # another selection of objects (the scene analysis changed): render
+                cached = {i: data[f"cube_{i}"] for i in wanted}
+            if any(c.shape != shape or not np.all(np.isfinite(c)) for c in cached.values()):
+                raise ValueError(f"cube maps are not finite arrays of shape {shape}")
+            return cached
+
+        cached = read_cache_file(cache_file, read, "cube maps")
+        if cached is not None:
+            for i in wanted:
+                objects[i].cube = RadianceCube(self.ctx, cached[i].astype(np.float32))
+            return
         faces = {}
         for bounce in range(self.bounces):
             t0 = time.perf_counter()
@@ -149,9 +160,9 @@ class CubeBake:
                     flush=True,
                 )
         if cache_file is not None:
-            cache_file.parent.mkdir(parents=True, exist_ok=True)
             # float32, not float16: a sun seen through a window exceeds half precision's 65504.
-            np.savez_compressed(cache_file, **{f"cube_{i}": f.astype(np.float32) for i, f in faces.items()})
+            arrays = {f"cube_{i}": f.astype(np.float32) for i, f in faces.items()}
+            write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, **arrays))  # read-only: re-render
 
     def refresh_one(self, objects: list) -> str | None:
         """Re-render the next stale cube map; returns its object's name (None: none was stale)."""

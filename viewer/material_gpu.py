@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lobeview.core.cache import BoundedCache, write_cache_file
+from lobeview.core.cache import DAMAGED_CACHE_ERRORS, BoundedCache, write_cache_file
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
 from lobeview.core.paths import cache_dir
 from lobeview.core.progress import timed_step
@@ -245,7 +245,7 @@ def _load_or_build_albedo_table(comp, key: tuple, directory: Path | None) -> Alb
         warnings.warn(f"{path}: not an albedo table of shape {shape}; rebuilding it", stacklevel=2)
     except FileNotFoundError:
         pass
-    except (OSError, ValueError) as exc:  # a damaged cache file is rebuilt, never trusted
+    except DAMAGED_CACHE_ERRORS as exc:  # a damaged cache file is rebuilt, never trusted
         warnings.warn(f"{path}: unreadable cached albedo table ({exc}); rebuilding it", stacklevel=2)
     with timed_step("albedo", f"normalisation table of a {type(comp).__name__} lobe (cached afterwards)"):
         table = AlbedoTable.build(comp)

@@ -24,6 +24,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
+from lobeview.core.cache import read_cache_file, write_cache_file
 from lobeview.core.paths import cache_dir
 from lobeview.core.progress import timed_step
 from lobeview.materials.banks import BanksFit
@@ -59,16 +60,20 @@ def dfg_texture_data(size: int = DFG_SIZE, directory: Path | None = None) -> np.
     folder of core/paths.py)."""
     path = Path(directory or cache_dir()) / f"dfg-v1-{size}.npy"
     if size not in _DFG_CACHE:
-        try:
-            _DFG_CACHE[size] = np.load(path)
-        except (OSError, ValueError):
-            _DFG_CACHE[size] = np.concatenate([dfg_table(kind, size) for kind in SPLIT_SUM_KINDS], axis=-1)
-    if not path.exists():  # this cache folder gets its copy even when the table is in memory
-        try:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            np.save(path, _DFG_CACHE[size])
-        except OSError:
-            pass  # a read-only cache only costs the recomputation
+
+        def read(file: Path) -> np.ndarray:
+            table = np.load(file, allow_pickle=False)
+            if table.shape != (size, size, 4) or not np.all(np.isfinite(table)):
+                raise ValueError(f"not a finite table of shape {(size, size, 4)}")
+            return table
+
+        table = read_cache_file(path, read, "DFG table")
+        if table is None:
+            table = np.concatenate([dfg_table(kind, size) for kind in SPLIT_SUM_KINDS], axis=-1)
+            write_cache_file(path, lambda handle: np.save(handle, table))  # read-only cache: recomputed
+        _DFG_CACHE[size] = table
+    elif not path.exists():  # this cache folder gets its copy even when the table is in memory
+        write_cache_file(path, lambda handle: np.save(handle, _DFG_CACHE[size]))
     return _DFG_CACHE[size]
 
 
@@ -217,9 +222,18 @@ class PrefilteredMaps:
         cube.build_mipmaps(0, SPLIT_SUM_LEVELS - 1)
         cube.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         cache = self._cache_file(f"splitsum-{kind}", nodes, f"{size}")
-        if cache is not None and cache.exists():
-            data = np.load(cache)
-            levels = [data[f"level{level}"] for level in range(SPLIT_SUM_LEVELS)]
+
+        def read(path: Path) -> list:
+            with np.load(path, allow_pickle=False) as data:
+                levels = [data[f"level{level}"] for level in range(SPLIT_SUM_LEVELS)]
+            for level, texels in enumerate(levels):
+                face = max(size >> level, 1)
+                if texels.shape != (6, face, face, 4) or not np.all(np.isfinite(texels)):
+                    raise ValueError(f"level {level} is not a finite array of shape {(6, face, face, 4)}")
+            return levels
+
+        levels = read_cache_file(cache, read, f"split-sum {kind} cube")
+        if levels is not None:
             self._write_cube_levels(cube, levels)
         else:
             shader = self.programs.compute("prefilter_cube.comp")
@@ -236,9 +250,9 @@ class PrefilteredMaps:
                 self.ctx.finish()
             nodes_texture.release()
             if cache is not None:
-                cache.parent.mkdir(parents=True, exist_ok=True)
                 levels = self._read_cube_levels(cube, size)
-                np.savez(cache, **{f"level{i}": v for i, v in enumerate(levels)})
+                arrays = {f"level{i}": v for i, v in enumerate(levels)}
+                write_cache_file(cache, lambda handle: np.savez(handle, **arrays))  # read-only: recomputed
         self._split_sum[kind] = cube
         self.memory[f"split-sum {kind}"] = cube_bytes(size, SPLIT_SUM_LEVELS)
         self.seconds[f"split-sum {kind}"] = time.perf_counter() - t0
@@ -322,9 +336,17 @@ class PrefilteredMaps:
             return self._lobe_maps[key]
         t0 = time.perf_counter()
         cache = self._cache_file(kind, nodes, f"{width}x{height}x{azimuths}")
-        if cache is not None and cache.exists():
-            data = np.load(cache)["texels"]
-            tex = self.ctx.texture3d((width, height, depth), 4, data.tobytes(), dtype="f4")
+
+        def read(path: Path) -> np.ndarray:
+            with np.load(path, allow_pickle=False) as data:
+                texels = data["texels"]
+            if texels.shape != (depth, height, width, 4) or not np.all(np.isfinite(texels)):
+                raise ValueError(f"not a finite array of shape {(depth, height, width, 4)}")
+            return np.ascontiguousarray(texels, dtype=np.float32)
+
+        texels = read_cache_file(cache, read, f"{label}) map")
+        if texels is not None:
+            tex = self.ctx.texture3d((width, height, depth), 4, texels.tobytes(), dtype="f4")
         else:
             tex = self.ctx.texture3d((width, height, depth), 4, dtype="f4")
             shader = self.programs.compute("prefilter_latlong.comp")
@@ -340,8 +362,8 @@ class PrefilteredMaps:
                     self.ctx.finish()
             nodes_texture.release()
             if cache is not None:
-                cache.parent.mkdir(parents=True, exist_ok=True)
-                np.savez(cache, texels=np.frombuffer(tex.read(), dtype=np.float32).reshape(depth, height, width, 4))
+                texels = np.frombuffer(tex.read(), dtype=np.float32).reshape(depth, height, width, 4)
+                write_cache_file(cache, lambda handle: np.savez(handle, texels=texels))  # read-only: recomputed
         tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
         tex.repeat_x = True
         tex.repeat_y = False
