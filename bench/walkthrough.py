@@ -62,6 +62,15 @@ def start_renderer(ctx, scene, env, size, face_size: int, cube_dir: Path):
     return renderer, time.perf_counter() - t0
 
 
+def _finished_ms(ctx, draw, *args) -> float:
+    """Milliseconds of ``draw(*args)`` from an idle GPU to glFinish."""
+    ctx.finish()
+    t0 = time.perf_counter()
+    draw(*args)
+    ctx.finish()
+    return (time.perf_counter() - t0) * 1e3
+
+
 def walk_path(renderer, path, method, frames: int) -> list[dict]:
     """Per frame of ``path``: mirror-pass and camera-pass milliseconds and the draw counters.
     One untimed frame first (shader compilation)."""
@@ -73,47 +82,36 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
     renderer.ctx.finish()
     for n, t in enumerate(times):
         camera = Camera.from_scene_camera(path.camera_at(float(t))).fitted_to(renderer.bounds)
+        mirrors_drawn = method.kind != "prefiltered"
         unculled_ms, unculled_passes = 0.0, 0
-        if method.kind != "prefiltered":  # first without the occlusion test: the frame then keeps its own buffers
+        if mirrors_drawn:  # first without the occlusion test: the frame then keeps its own buffers
             renderer.mirror_occlusion = False
-            renderer.ctx.finish()
-            t0 = time.perf_counter()
-            renderer.render_mirror_passes(camera)
-            renderer.ctx.finish()
-            unculled_ms = (time.perf_counter() - t0) * 1e3
+            unculled_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera)
             unculled_passes = len(renderer.mirror_passes.drawn)
             renderer.mirror_occlusion = True
         renderer.invalidate_mirrors()
         renderer.draw_counts.new_frame()
-        renderer.ctx.finish()
-        t0 = time.perf_counter()
-        if method.kind != "prefiltered":
-            renderer.render_mirror_passes(camera)
-        renderer.ctx.finish()
-        t1 = time.perf_counter()
+        mirror_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera) if mirrors_drawn else 0.0
         mirror = renderer.draw_counts.of("mirror")
         mirror_draws, mirror_culled = mirror.drawn, mirror.culled
         reasons = dict(Counter(renderer.mirror_passes.skipped.values()))
-        renderer.draw_frame(camera, method)  # reuses the mirror buffers just drawn (and resets the counters)
-        renderer.ctx.finish()
-        t2 = time.perf_counter()
+        # Reuses the mirror buffers just drawn (and resets the counters).
+        camera_ms = _finished_ms(renderer.ctx, renderer.draw_frame, camera, method)
         counts = renderer.draw_counts
         camera_drawn, camera_culled = counts.of("camera").drawn, counts.of("camera").culled
         renderer.depth_prepass = False  # the same camera pass without the depth pre-pass
-        renderer.draw_frame(camera, method)
-        renderer.ctx.finish()
-        no_prepass_ms = (time.perf_counter() - t2) * 1e3
+        no_prepass_ms = _finished_ms(renderer.ctx, renderer.draw_frame, camera, method)
         renderer.depth_prepass = True
         rows.append(
             {
                 "frame": n,
                 "t": float(t),
-                "mirror_ms": (t1 - t0) * 1e3,
+                "mirror_ms": mirror_ms,
                 "occlusion_test_ms": renderer.mirror_passes.occlusion_seconds * 1e3,
                 "mirror_ms_without_test": unculled_ms,
                 "mirror_passes_without_test": unculled_passes,
-                "camera_ms": (t2 - t1) * 1e3,
-                "frame_ms": (t2 - t0) * 1e3,
+                "camera_ms": camera_ms,
+                "frame_ms": mirror_ms + camera_ms,
                 "camera_ms_without_prepass": no_prepass_ms,
                 "camera_drawn": camera_drawn,
                 "camera_culled": camera_culled,

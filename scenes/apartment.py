@@ -31,11 +31,17 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.core.paths import cache_dir
-from lobeview.materials.presets import PRESETS
-from lobeview.materials.spec import validate
 
 from .camera_path import CameraPath
-from .demo import bake_and_write, diffuse_material, generated_scene_key, glossy_material, torus_mesh, vase_mesh
+from .demo import (
+    add_showcase_presets,
+    bake_and_write,
+    diffuse_material,
+    generated_scene_key,
+    glossy_material,
+    torus_mesh,
+    vase_mesh,
+)
 from .meshes import Mesh, box_mesh, merge_meshes, quad, translated, uv_sphere
 from .reflection_proxy import ReflectionProxy
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
@@ -75,20 +81,7 @@ def _materials() -> tuple[list[SceneMaterial], dict[str, int]]:
         SceneMaterial("book blue", diffuse_material([0.12, 0.2, 0.45])),
         SceneMaterial("book cream", diffuse_material([0.75, 0.7, 0.58])),
     ]
-    index = {m.name: i for i, m in enumerate(materials)}
-    for name in (
-        "chrome",
-        "gold-ggx",
-        "porcelain",
-        "alanod-2000gs-2lobe",
-        "plastic",
-        "lacquer",
-        "miro5-2lobe",
-        "frosted-glass",
-        "clear-glass",
-    ):
-        index[name] = len(materials)
-        materials.append(SceneMaterial(name, validate(PRESETS[name]), double_sided=name.endswith("glass")))
+    index = add_showcase_presets(materials, {m.name: i for i, m in enumerate(materials)})
     return materials, index
 
 

@@ -26,6 +26,29 @@ from .builtin_env import load_environment
 from .meshes import Mesh, box_mesh, merge_meshes, quad, translated, uv_sphere, vertex_normals, vertex_tangents
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
+#: the presets the generated scenes show (demo and apartment), glass double-sided
+SHOWCASE_PRESETS = (
+    "chrome",
+    "gold-ggx",
+    "porcelain",
+    "alanod-2000gs-2lobe",
+    "plastic",
+    "lacquer",
+    "miro5-2lobe",
+    "frosted-glass",
+    "clear-glass",
+)
+
+
+def add_showcase_presets(materials: list, index: dict) -> dict:
+    """Append a SceneMaterial per SHOWCASE_PRESETS entry to ``materials`` and record its
+    position under its name in ``index`` (returned)."""
+    for name in SHOWCASE_PRESETS:
+        index[name] = len(materials)
+        materials.append(SceneMaterial(name, validate(PRESETS[name]), double_sided=name.endswith("glass")))
+    return index
+
+
 DEMO_VERSION = 5  # bump when the geometry, materials or baker change (invalidates caches)
 DEMO_ENVIRONMENT = "builtin:overcast"
 DEFAULT_RESOLUTION = 512
@@ -103,21 +126,7 @@ def demo_geometry() -> Scene:
         SceneMaterial("light", diffuse_material(0.8), emission=np.array([14.0, 13.2, 12.0])),
         SceneMaterial("table", glossy_material([0.3, 0.18, 0.1], ks=0.6, m=0.12, r0=0.04, alpha=0.2)),
     ]
-    preset_materials = [
-        "chrome",
-        "gold-ggx",
-        "porcelain",
-        "alanod-2000gs-2lobe",
-        "plastic",
-        "lacquer",
-        "miro5-2lobe",
-        "frosted-glass",
-        "clear-glass",
-    ]
-    index = {}
-    for name in preset_materials:
-        index[name] = len(materials)
-        materials.append(SceneMaterial(name, validate(PRESETS[name]), double_sided=name.endswith("glass")))
+    index = add_showcase_presets(materials, {})
 
     W, H, D = 3.0, 3.0, 3.0  # half width, height, half depth
     x0, x1, y0, y1, z0 = -1.4, 1.4, 0.9, 2.4, -D  # window opening in the back wall

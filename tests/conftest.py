@@ -3,8 +3,11 @@ user's ~/.cache, and the demo scene is built at draft quality so CI stays fast."
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -34,3 +37,17 @@ def xvfb():
     yield display
     proc.terminate()
     proc.wait(timeout=10)
+
+
+def run_scripted_view(display: str, folder: Path, script: list, args: list, exit_after: int, timeout: int = 600):
+    """``lobeview view ARGS`` on the X display ``display`` driven by ``script`` (written to
+    ``folder``/script.json; screenshots go to ``folder``), stopped after ``exit_after`` frames;
+    asserts it exits cleanly and returns the completed process (stdout and stderr as text)."""
+    (folder / "script.json").write_text(json.dumps(script))
+    result = subprocess.run(
+        [sys.executable, "-m", "lobeview", "view", *args, f"--script={folder / 'script.json'}",
+         f"--screenshot-dir={folder}", f"--exit-after={exit_after}"],
+        env={**os.environ, "DISPLAY": display}, capture_output=True, text=True, timeout=timeout,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    return result

@@ -7,13 +7,12 @@ from __future__ import annotations
 import json
 import math
 import os
-import subprocess
-import sys
 import time
 import types
 
 import numpy as np
 import pytest
+from conftest import run_scripted_view
 
 from lobeview.app.editor import material_widgets
 from lobeview.app.fit_job import FitJob, lockable_parameters
@@ -197,13 +196,7 @@ def test_fit_step_in_the_viewer_replaces_the_material_under_xvfb(xvfb, tmp_path)
         {"frame": 16, "action": "screenshot", "name": "undone"},
         {"frame": 17, "action": "quit"},
     ]
-    (tmp_path / "script.json").write_text(json.dumps(script))
-    result = subprocess.run(
-        [sys.executable, "-m", "lobeview", "view", "--view=table", "--size=320x200", "--face-size=64",
-         f"--script={tmp_path / 'script.json'}", f"--screenshot-dir={tmp_path}", "--exit-after=60"],
-        env={**os.environ, "DISPLAY": xvfb}, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr[-3000:]
+    run_scripted_view(xvfb, tmp_path, script, ["--view=table", "--size=320x200", "--face-size=64"], 60)
     saved = json.loads((tmp_path / "materials.json").read_text())
     assert saved["chrome"]["model"] == "gltf" and saved["chrome"]["roughness"] == pytest.approx(0.4, abs=0.01)
     from lobeview.scenes.hdrio import read_hdr_image

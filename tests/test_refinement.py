@@ -5,14 +5,11 @@ refinement's halves, budget and stopping rule, and the window under Xvfb."""
 
 from __future__ import annotations
 
-import json
-import os
 import re
-import subprocess
-import sys
 
 import numpy as np
 import pytest
+from conftest import run_scripted_view
 
 from lobeview.app.refinement import (
     CONVERGED_NOISE,
@@ -297,14 +294,8 @@ def test_window_refines_blends_and_stops_drawing_an_unchanged_frame(xvfb, tmp_pa
         {"frame": FIRST_ESTIMATE_AT + 16, "action": "refinement"},
         {"frame": FIRST_ESTIMATE_AT + 17, "action": "quit"},
     ]
-    (tmp_path / "script.json").write_text(json.dumps(script))
-    result = subprocess.run(
-        [sys.executable, "-m", "lobeview", "view", "--view=table", "--size=160x100", "--face-size=32",
-         "--method=lobe-3", f"--script={tmp_path / 'script.json'}", f"--screenshot-dir={tmp_path}",
-         "--exit-after=200"],
-        env={**os.environ, "DISPLAY": xvfb}, capture_output=True, text=True, timeout=900,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr[-3000:]
+    args = ["--view=table", "--size=160x100", "--face-size=32", "--method=lobe-3"]
+    result = run_scripted_view(xvfb, tmp_path, script, args, 200, timeout=900)
     lines = [REFINEMENT_LINE.match(line) for line in result.stdout.splitlines() if line.startswith("refinement ")]
     assert len(lines) == 4 and all(lines), result.stdout[-2000:]
     still, off, moved, idle = ([float(x) for x in m.groups()[:7]] for m in lines)

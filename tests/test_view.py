@@ -12,6 +12,7 @@ import sys
 import warnings
 
 import numpy as np
+from conftest import run_scripted_view
 
 from lobeview.app.editor import MaterialEditor
 from lobeview.app.walk import WalkCamera
@@ -182,13 +183,7 @@ def test_the_command_f12_prints_renders_the_screenshot_again(xvfb, tmp_path, cap
         {"frame": 40, "action": "screenshot", "name": "edited"},
         {"frame": 41, "action": "quit"},
     ]
-    (tmp_path / "script.json").write_text(json.dumps(script))
-    result = subprocess.run(
-        [sys.executable, "-m", "lobeview", "view", "--view=table", "--size=320x200", "--face-size=64",
-         f"--script={tmp_path / 'script.json'}", f"--screenshot-dir={tmp_path}", "--exit-after=60"],
-        env={**os.environ, "DISPLAY": xvfb}, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr[-3000:]
+    result = run_scripted_view(xvfb, tmp_path, script, ["--view=table", "--size=320x200", "--face-size=64"], 60)
     import re
     from pathlib import Path
 
@@ -230,13 +225,7 @@ def test_view_flies_the_recorded_path_and_walking_takes_over(xvfb, tmp_path):
         {"frame": 9, "action": "screenshot", "name": "walked"},
         {"frame": 10, "action": "quit"},
     ]
-    (tmp_path / "script.json").write_text(json.dumps(script))
-    result = subprocess.run(
-        [sys.executable, "-m", "lobeview", "view", "--path=builtin", "--size=240x150", "--face-size=32",
-         f"--script={tmp_path / 'script.json'}", f"--screenshot-dir={tmp_path}", "--exit-after=40"],
-        env={**os.environ, "DISPLAY": xvfb}, capture_output=True, text=True, timeout=600,
-    )  # fmt: skip
-    assert result.returncode == 0, result.stderr[-3000:]
+    result = run_scripted_view(xvfb, tmp_path, script, ["--path=builtin", "--size=240x150", "--face-size=32"], 40)
     key = demo_path().camera_at(7.5)
     expected = ",".join(f"{x:.4f}" for x in key.position)
     assert f"path frame=2 t=7.5000 position={expected}" in result.stdout, result.stdout
