@@ -31,8 +31,9 @@ KINDS = ("lobe", "fis", "mc", "reference", "prefiltered")
 #: the kinds the viewer renders while the camera moves (reference is what refinement converges to)
 REALTIME_KINDS = ("lobe", "fis", "mc")
 #: prefiltered sub-modes: auto = split-sum for microfacet/glTF lobes, lobe maps for the rest;
-#: banks = Banks maps for anisotropic lobes, lobe maps for isotropic ones
-PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong", "multi", "banks")
+#: banks = Banks maps for anisotropic lobes, lobe maps for isotropic ones; rsibr = reflection-space
+#: IBR (Cabral et al. 1999) for the microfacet reflection lobes, auto for the rest
+PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong", "multi", "banks", "rsibr")
 MAX_LOBES = 8  # specular/transmission lobes per material (spec validation, GPU layout)
 MAX_PATTERN = 32  # lobe-N samples per lobe (the pattern uniform array)
 MAX_SAMPLES = 4096  # fis-N / mc-N samples per lobe and frame

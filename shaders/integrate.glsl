@@ -264,6 +264,15 @@ vec3 shade(vec3 wo, mat3 tbn) {
 #if defined(HAS_DIFFUSE)
     result += integrate_diffuse(wo, tbn);
 #endif
-    for (int i = 0; i < u_lobe_count; ++i) result += integrate_lobe(get_lobe(i), i, wo, tbn);
+#if defined(METHOD_PREFILTERED)
+    // prefiltered-rsibr: the lobes baked into the reflection-space maps in one blended lookup
+    if (u_rsibr_lobes != 0) result += rsibr_radiance(wo, tbn);
+#endif
+    for (int i = 0; i < u_lobe_count; ++i) {
+#if defined(METHOD_PREFILTERED)
+        if (rsibr_lobe(i)) continue;
+#endif
+        result += integrate_lobe(get_lobe(i), i, wo, tbn);
+    }
     return result;
 }

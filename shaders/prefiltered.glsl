@@ -102,3 +102,5 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     }
     return sum;
 }
+
+#include "rsibr.glsl"

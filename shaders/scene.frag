@@ -132,7 +132,14 @@ void main() {
     diffuse += sheen_term(wo.z) / PI * irradiance;  // KHR_materials_sheen, lit like the diffuse
     vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)
+#if defined(METHOD_PREFILTERED)
+    // prefiltered-rsibr (materials whose lobes no texture changes: viewer/rsibr.py)
+    if (u_rsibr_lobes != 0) radiance += rsibr_radiance(wo, tbn);
+#endif
     for (int i = 0; i < u_lobe_count; ++i) {
+#if defined(METHOD_PREFILTERED)
+        if (rsibr_lobe(i)) continue;
+#endif
         Lobe l = get_lobe(i);
         if (u_gltf_model == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
             // alpha = roughness^2 per pixel, stretched along the anisotropy direction (local x)

@@ -30,6 +30,7 @@ from lobeview.materials.microfacet import ALPHA_MIN
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, ANISOTROPY_LINE_RATIO, MAX_ELLIPSE_ANGLE, XI_BORDER
 from lobeview.materials.rational import MAX_TERMS as RATIONAL_MAX_TERMS
 from lobeview.materials.rational import graded_exponents
+from lobeview.materials.rsibr import RSIBR_FADE, RSIBR_MAX_FACES, RSIBR_MAX_VIEWS
 from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
 from lobeview.scenes.scene import ALPHA_MODES as GLTF_ALPHA_MODES
 from lobeview.scenes.scene import TEXTURE_SLOTS
@@ -115,6 +116,9 @@ SHADER_CONSTANTS: dict = {
     "LOBE_SLICES": LOBE_SLICES,
     "LOBE_TABLE_ROWS": LOBE_TABLE_ROWS,
     "LOBE_DIRECT_AREA_PER_MEDIAN2": LOBE_DIRECT_AREA_PER_MEDIAN2,
+    "RSIBR_MAX_VIEWS": RSIBR_MAX_VIEWS,  # materials/rsibr.py: views of a once-subdivided icosahedron
+    "RSIBR_MAX_FACES": RSIBR_MAX_FACES,
+    "RSIBR_FADE": float(RSIBR_FADE),
     "ALBEDO_PHI": ALBEDO_PHI,
     "ALBEDO_MU": ALBEDO_MU,
     "XI_BORDER": float(XI_BORDER),  # Eq. 4.10
@@ -152,6 +156,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     "u_through_normal": 29,
     "u_plane_point_state": (30, 31),  # previous pass: mirror, see-through
     "u_plane_normal_state": (32, 33),
+    "u_rsibr_maps": 40,  # prefiltered-rsibr: the reflection-space maps (viewer/rsibr.py)
 }
 
 

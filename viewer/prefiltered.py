@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import hashlib
 import time
+import warnings
 from pathlib import Path
 
 import moderngl
@@ -170,6 +171,7 @@ class PrefilteredMaps:
         self._split_sum: dict = {}
         self._lobe_maps: dict = {}
         self._by_fit: dict = {}
+        self._rsibr: dict = {}
         self._dfg = None
         self.memory: dict[str, int] = {}
         self.seconds: dict[str, float] = {}
@@ -374,15 +376,56 @@ class PrefilteredMaps:
         self.seconds[label] = time.perf_counter() - t0
         return tex
 
+    # -- reflection-space IBR (viewer/rsibr.py) ------------------------------------------------
+    def rsibr_map(self, layout, key: str, bake) -> moderngl.Texture:
+        """The RSIBR maps of one material (``key``: viewer/rsibr.rsibr_cache_key), read from the
+        cache or made by ``bake(texture)``."""
+        if key in self._rsibr:
+            return self._rsibr[key]
+        t0 = time.perf_counter()
+        width, height = layout.shape
+        cache = self.cache_dir / f"prefiltered-rsibr-{self._source_key}-{key}.npz" if self.cache_dir else None
+        label = f"RSIBR maps ({layout.views} views x {layout.slices} slices of {width}x{layout.rows}"
+
+        def read(path: Path) -> np.ndarray:
+            with np.load(path, allow_pickle=False) as data:
+                texels = data["texels"]
+            if texels.shape != (height, width, 4) or not np.all(np.isfinite(texels)):
+                raise ValueError(f"not a finite array of shape {(height, width, 4)}")
+            return np.ascontiguousarray(texels, dtype=np.float32)
+
+        texels = read_cache_file(cache, read, f"{label})")
+        if texels is not None:
+            tex = self.ctx.texture((width, height), 4, texels.tobytes(), dtype="f4")
+        else:
+            tex = self.ctx.texture((width, height), 4, dtype="f4")
+            what = f"{label}, {layout.bytes / 2**20:.1f} MB (GPU, cached afterwards)"
+            with timed_step("prefilter", what, announce=True):
+                bake(tex)
+            texels = np.frombuffer(tex.read(), dtype=np.float32).reshape(height, width, 4)
+            bad = int(np.count_nonzero(texels[..., 3] < 0.0))
+            if bad:  # the bake writes 0 there: a material the integrator cannot evaluate
+                warnings.warn(f"{label}): {bad} texels integrated to NaN/Inf were written as 0", stacklevel=2)
+            if cache is not None:
+                write_cache_file(cache, lambda handle: np.savez(handle, texels=texels))  # read-only: recomputed
+        tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        tex.repeat_x = True
+        tex.repeat_y = False
+        self._rsibr[key] = tex
+        self.memory[f"{label}, {key[:6]})"] = layout.bytes
+        self.seconds[f"{label}, {key[:6]})"] = time.perf_counter() - t0
+        return tex
+
     def total_memory(self) -> int:
         return int(sum(self.memory.values()))
 
     def release(self):
-        for tex in list(self._split_sum.values()) + list(self._lobe_maps.values()):
+        for tex in list(self._split_sum.values()) + list(self._lobe_maps.values()) + list(self._rsibr.values()):
             tex.release()
         if self._dfg is not None:
             self._dfg.release()
         self._split_sum.clear()
         self._lobe_maps.clear()
         self._by_fit.clear()
+        self._rsibr.clear()
         self._dfg = None

@@ -30,6 +30,7 @@ from .interface import (
     write_uniform,
 )
 from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
+from .rsibr import bake_rsibr, rsibr_cache_key, rsibr_layout, view_sphere_uniforms
 from .shaders import ProgramCache
 
 SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
@@ -38,11 +39,15 @@ SOBOL_SEED = 20100501
 MAX_MATERIAL_TEXTURES = 64  # per-material textures kept (live material edits make new ones)
 
 
-def prefilter_plan(material: PackedMaterial, mode: str) -> list[str]:
-    """Per lobe: 'splitsum', 'banks' or the lobe-map fit mode ('lobe', 'lobe2d', 'phong',
-    'multi'). Split-sum needs a microfacet BRDF (its DFG table), so the thesis' Kurt lobes use
-    lobe maps; a Banks map needs an anisotropic lobe (a fibre direction), so isotropic lobes
-    use lobe maps under 'banks'."""
+def prefilter_plan(material: PackedMaterial, mode: str, per_pixel_lobes: bool = False) -> list[str]:
+    """Per lobe: 'splitsum', 'banks', 'rsibr' or the lobe-map fit mode ('lobe', 'lobe2d',
+    'phong', 'multi'). Split-sum needs a microfacet BRDF (its DFG table), so the thesis' Kurt
+    lobes use lobe maps; a Banks map needs an anisotropic lobe (a fibre direction), so isotropic
+    lobes use lobe maps under 'banks'; under 'rsibr' the lobes viewer/rsibr.py bakes into its maps
+    (none where ``per_pixel_lobes``: textures change them) and the automatic choice for the rest."""
+    if mode == "rsibr":
+        baked = rsibr_layout(material, per_pixel_lobes).lobes
+        return ["rsibr" if baked >> i & 1 else kind for i, kind in enumerate(prefilter_plan(material, "auto"))]
     plan = []
     for comp in material.lobe_components:
         microfacet = isinstance(comp, MicrofacetReflection)  # includes glTF specular
@@ -74,7 +79,7 @@ def lobe_table(plan: list[str], fitted: list) -> tuple[np.ndarray, np.ndarray, n
         if kind == "banks":
             table[base : base + BANKS_AZIMUTHS, LOBE_SLICES:, :3] = fit.energy.transpose(1, 0, 2)
             counts[i], fibres[i] = 1, fit.axis
-        elif kind != "splitsum":
+        elif kind not in ("splitsum", "rsibr"):
             for j, lobe in enumerate(fit):
                 table[base + j, :LOBE_SLICES, :3] = lobe.mirror_relative_axes()
                 # w: the lobe's median angle per slice (the direct read of narrow lobes)
@@ -92,7 +97,7 @@ def fit_plan(plan: list[str], components: list, directory=None) -> list:
         if kind == "banks":
             fits.append(fit_banks(comp))
         else:
-            fits.append(None if kind == "splitsum" else fit_lobe_maps(comp, kind, directory=directory))
+            fits.append(None if kind in ("splitsum", "rsibr") else fit_lobe_maps(comp, kind, directory=directory))
     return fits
 
 
@@ -247,12 +252,20 @@ class RendererBase:
         content; the least recently used is released beyond MAX_MATERIAL_TEXTURES."""
         return self._material_textures.get(key, make)
 
-    def bind_cube(self, program, cube: RadianceCube, method: Method, material: PackedMaterial | None = None) -> None:
+    def bind_cube(
+        self,
+        program,
+        cube: RadianceCube,
+        method: Method,
+        material: PackedMaterial | None = None,
+        per_pixel_lobes: bool = False,
+    ) -> None:
         """The radiance cube and Sobol table; the importance tables (reference only) and the
         prefiltered maps and lobe table (prefiltered only, built on first use for this cube and
-        material). Units: viewer/interface.py TEXTURE_UNITS."""
+        material; ``per_pixel_lobes``: textures change the lobes, so none is baked into RSIBR
+        maps). Units: viewer/interface.py TEXTURE_UNITS."""
         if method.kind == "prefiltered":
-            self.bind_prefiltered(program, cube, material, method)
+            self.bind_prefiltered(program, cube, material, method, per_pixel_lobes)
         bind_sampler(program, "u_radiance", cube.radiance)
         bind_sampler(program, "u_sobol", self.sobol)
         set_uniform(program, "u_face_size", float(cube.face_size))
@@ -262,11 +275,14 @@ class RendererBase:
             set_uniform(program, "u_env_texels", int(cube.importance.probabilities.size))
             set_uniform(program, "u_env_size", int(cube.importance.size))
 
-    def bind_prefiltered(self, program, cube: RadianceCube, material: PackedMaterial, method: Method) -> None:
+    def bind_prefiltered(
+        self, program, cube: RadianceCube, material: PackedMaterial, method: Method, per_pixel_lobes: bool = False
+    ) -> None:
         from .prefiltered import lobe_direct_angle, needs_lobe_map
 
         maps = cube.prefiltered_maps(self.programs)
-        plan = prefilter_plan(material, method.mode)
+        plan = prefilter_plan(material, method.mode, per_pixel_lobes)
+        self._bind_rsibr(program, maps, cube, material, method, per_pixel_lobes)
         for index, kind in enumerate(("beckmann", "ggx")):  # DIST_BECKMANN, DIST_GGX
             if any(p == "splitsum" and material.lobe_distributions[i].kind == kind for i, p in enumerate(plan)):
                 maps.split_sum(kind).use(unit("u_split_sum", index))
@@ -284,7 +300,7 @@ class RendererBase:
             return tex, (fitted, counts, fibres)
 
         table, (fitted, counts, fibres) = self._material_texture(
-            ("lobe table", method.mode, material.lobes_key), lobe_table_texture
+            ("lobe table", method.mode, per_pixel_lobes, material.lobes_key), lobe_table_texture
         )
         bind_sampler(program, "u_lobe_table", table)
         modes = np.full(MAX_LOBES, LOBE_MAP_MODES["splitsum"], dtype=np.int32)
@@ -295,7 +311,7 @@ class RendererBase:
             if i < len(plan) and plan[i] == "banks":
                 texture = maps.banks_map(fitted[i], f"lobe {i}")
                 modes[i], depth[i] = LOBE_MAP_MODES["banks"], len(fitted[i].profiles)
-            elif i < len(plan) and plan[i] != "splitsum":
+            elif i < len(plan) and plan[i] not in ("splitsum", "rsibr"):
                 if needs_lobe_map(fitted[i], plan[i]):
                     texture = maps.lobe_map(fitted[i], f"lobe {i}")
                 modes[i], depth[i] = LOBE_MAP_MODES["lobes"], len(fitted[i][0].profiles)
@@ -309,6 +325,29 @@ class RendererBase:
             ("u_banks_fibre", fibres),
             ("u_lobe_direct_angle", direct),
         ):
+            write_uniform(program, name, values)
+
+    def _bind_rsibr(self, program, maps, cube, material, method: Method, per_pixel_lobes: bool) -> None:
+        """prefiltered-rsibr's maps and view sphere (shaders/rsibr.glsl); u_rsibr_lobes 0 in
+        every other mode, and for materials with nothing to bake."""
+        layout = rsibr_layout(material, per_pixel_lobes) if method.mode == "rsibr" else None
+        if layout is None or not layout.lobes:
+            set_uniform(program, "u_rsibr_lobes", 0)
+            bind_sampler(program, "u_rsibr_maps", self._dummy_texture("2d"))
+            return
+        texture = maps.rsibr_map(
+            layout, rsibr_cache_key(material, layout), lambda tex: bake_rsibr(self, cube, material, layout, tex)
+        )
+        bind_sampler(program, "u_rsibr_maps", texture)
+        for name, value in (
+            ("u_rsibr_lobes", layout.lobes),
+            ("u_rsibr_rows", layout.rows),
+            ("u_rsibr_slices", layout.slices),
+            ("u_rsibr_tiles", layout.tiles),
+            ("u_rsibr_face_count", 20 * 4**layout.subdivisions),
+        ):
+            set_uniform(program, name, value)
+        for name, values in view_sphere_uniforms(layout.subdivisions).items():
             write_uniform(program, name, values)
 
     def method_memory(self, cube: RadianceCube, material: PackedMaterial, method: Method) -> dict[str, int]:
@@ -331,6 +370,8 @@ class RendererBase:
                     distribution = material.lobe_distributions[i].kind
                     memory[f"split-sum {distribution}"] = cube_bytes(face, SPLIT_SUM_LEVELS)
                     memory["DFG table"] = DFG_SIZE * DFG_SIZE * 16
+                elif kind == "rsibr":
+                    memory["RSIBR maps"] = rsibr_layout(material).bytes
                 elif kind == "banks":
                     width, height, depth = banks_map_shape(fit_banks(material.lobe_components[i]))
                     memory[f"Banks map {i}"] = width * height * depth * 16

@@ -1,0 +1,252 @@
+"""Reflection-space image-based rendering (Cabral, Olano and Nemec 1999; seed 004), numpy reference.
+
+A *radiance environment map* (REM) holds, for one fixed viewing direction v_j, the light a surface
+of the material sends towards v_j, as a function of the surface's orientation, for a distant
+environment (seed section 2). RSIBR precomputes REMs at a set of view directions (the vertices of
+an icosahedron, section 3.1), and reconstructs the map of any other view by warping the three
+maps of the spherical triangle that holds it to that view and blending them with spherical
+barycentric weights (sections 3.2-3.4).
+
+lobeview's form of it (the seed's future work, section 6: the warp per pixel):
+
+* **The mirror warp** (section 3.3) is built into the parameterisation: map j is indexed by the
+  reflection direction r, and its texel r holds the radiance of the normal that reflects v_j into
+  r, n_j = normalize(v_j + r) (:func:`warped_normal`). A pixel seen from v with normal n reflects
+  into r = reflect(-v, n) and reads every map at that same r, so "warping" a map to the pixel's
+  view is a lookup at r; at v = v_j it is exact (n_j = n).
+* **Spherical barycentric weights** (section 3.4): the ratio of the spherical triangle opposite
+  each vertex to the whole triangle, areas from the spherical excess (:func:`triangle_area`, the
+  closed form of Van Oosterom and Strackee 1983; the seed's dihedral-angle form is the test's
+  independent check).
+* **Confidence near the singularity** (section 3.3): texel r = -v_j of map j is the grazing limit
+  (n_j perpendicular to v_j), where the map is pinched; the weight of map j fades with
+  n_j . v_j below RSIBR_FADE and the weights are renormalised (:func:`blend_weights`).
+* **Anisotropic materials** (beyond the seed, which assumes a BRDF fixed relative to n and v): the
+  radiance also depends on the tangent's angle about n. Map j then has RSIBR_SLICES slices: slice
+  k holds the radiance with the tangent at angle k pi / K from a canonical tangent field t0(n)
+  (:func:`canonical_tangent`; pi-periodic because a microfacet lobe is symmetric under t -> -t);
+  a pixel reads the two slices around its own tangent's angle, measured at its own normal.
+* Only the reflection lobes with a microfacet distribution are in the maps: a thin transmission
+  lobe is centred on -v, which the mirror warp cannot follow between views (three views would
+  show three displaced images), so transmission lobes and lobes without a distribution are
+  looked up as in the automatic prefiltered mode.
+
+Maps are equirectangular in r (scenes/envmap.py's convention), tiles stacked in one 2D texture:
+tile (j, k) = j K + k, rows tile H .. tile H + H - 1 (:func:`atlas_lookup`, the GL twin).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lobeview.scenes.envmap import direction_to_equirect
+
+#: fade of a map's weight as n_j . v_j goes to 0 (its singular, grazing texels)
+RSIBR_FADE = 0.25
+#: tangent-angle slices of an anisotropic material's maps over [0, pi)
+RSIBR_SLICES = 8
+RSIBR_MAX_ROWS = 128  # isotropic maps: 256 x 128 x 12 views, 6.3 MB
+RSIBR_MAX_ROWS_ANISOTROPIC = 64  # 128 x 64 x 12 views x 8 slices, 12.6 MB
+RSIBR_MIN_ROWS = 16
+#: geodesic subdivisions of the view sphere: 0 is the seed's icosahedron (12 views, 20 faces),
+#: 1 the once-subdivided one (42 views, 80 faces; the largest the shaders hold)
+RSIBR_SUBDIVISIONS = 0
+RSIBR_MAX_VIEWS = 42
+RSIBR_MAX_FACES = 80
+#: the fallback axis of the canonical tangent field where the normal is (anti)parallel to +Z
+_TANGENT_AXIS = np.array([0.0, 0.0, 1.0])
+_TANGENT_FALLBACK = np.array([1.0, 0.0, 0.0])
+
+
+def _normalize(v: np.ndarray) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def geodesic_sphere(subdivisions: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (V, 3), faces (F, 3)) of an icosahedron (subdivisions 0: 12 views, 20 faces) or
+    its geodesic subdivision (1: 42 views, 80 faces); faces counter-clockwise seen from outside."""
+    phi = (1.0 + np.sqrt(5.0)) / 2.0
+    vertices = [
+        (-1, phi, 0), (1, phi, 0), (-1, -phi, 0), (1, -phi, 0),
+        (0, -1, phi), (0, 1, phi), (0, -1, -phi), (0, 1, -phi),
+        (phi, 0, -1), (phi, 0, 1), (-phi, 0, -1), (-phi, 0, 1),
+    ]  # fmt: skip
+    faces = [
+        (0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11),
+        (1, 5, 9), (5, 11, 4), (11, 10, 2), (10, 7, 6), (7, 1, 8),
+        (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8), (3, 8, 9),
+        (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1),
+    ]  # fmt: skip
+    verts = [tuple(v) for v in _normalize(np.array(vertices, dtype=np.float64))]
+    index = {v: i for i, v in enumerate(verts)}
+
+    def midpoint(a: int, b: int) -> int:  # the new vertex on edge ab, shared by both its faces
+        m = tuple(_normalize(np.add(verts[a], verts[b])))
+        if m not in index:
+            index[m] = len(verts)
+            verts.append(m)
+        return index[m]
+
+    for _ in range(subdivisions):
+        refined = []
+        for a, b, c in faces:
+            ab, bc, ca = midpoint(a, b), midpoint(b, c), midpoint(c, a)
+            refined += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
+        faces = refined
+    return np.array(verts, dtype=np.float64), np.array(faces, dtype=np.int64)
+
+
+def triangle_area(a, b, c) -> np.ndarray:
+    """Area (spherical excess) of the spherical triangle of unit vectors a, b, c:
+    tan(E / 2) = |a . (b x c)| / (1 + a.b + b.c + c.a) (Van Oosterom and Strackee 1983)."""
+    a, b, c = (np.asarray(x, dtype=np.float64) for x in (a, b, c))
+    triple = np.abs(np.sum(a * np.cross(b, c), axis=-1))
+    denominator = 1.0 + np.sum(a * b, axis=-1) + np.sum(b * c, axis=-1) + np.sum(c * a, axis=-1)
+    return 2.0 * np.arctan2(triple, denominator)
+
+
+def containing_face(v, vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Index of the face whose spherical triangle holds each direction v (..., 3): the face that
+    maximises the smallest of v's three signed distances to its edge planes (ties on an edge go
+    to either face; both give the same weights)."""
+    v = _normalize(v)
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    edge_normals = np.stack([np.cross(a, b), np.cross(b, c), np.cross(c, a)], axis=1)  # (F, 3, 3)
+    edge_normals /= np.linalg.norm(edge_normals, axis=-1, keepdims=True)
+    distances = np.einsum("...k,fek->...fe", v, edge_normals)  # (..., F, 3)
+    return np.argmax(distances.min(axis=-1), axis=-1)
+
+
+def view_weights(v, vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(views (..., 3), weights (..., 3)): the vertices of the triangle holding v and their
+    spherical barycentric weights, weight_i = area(v, opposite edge of i) / area of the triangle
+    (seed 3.4), renormalised to sum to 1."""
+    v = _normalize(v)
+    views = faces[containing_face(v, vertices, faces)]
+    a, b, c = (vertices[views[..., i]] for i in range(3))
+    areas = np.stack([triangle_area(v, b, c), triangle_area(a, v, c), triangle_area(a, b, v)], axis=-1)
+    return views, areas / areas.sum(axis=-1, keepdims=True)
+
+
+def reflect(view, normal) -> np.ndarray:
+    """The mirror direction r of the direction towards the viewer ``view`` about ``normal``."""
+    view, normal = np.asarray(view, dtype=np.float64), np.asarray(normal, dtype=np.float64)
+    return 2.0 * np.sum(view * normal, axis=-1, keepdims=True) * normal - view
+
+
+def warped_normal(r, view) -> np.ndarray:
+    """The mirror warp: the normal that reflects ``view`` into r (singular at r = -view)."""
+    h = np.asarray(view, dtype=np.float64) + np.asarray(r, dtype=np.float64)
+    length = np.linalg.norm(h, axis=-1, keepdims=True)
+    return h / np.maximum(length, 1e-12)
+
+
+def confidence(r, view) -> np.ndarray:
+    """Weight of map ``view`` at its texel r: smoothstep(0, RSIBR_FADE, n_j . v_j), where
+    n_j . v_j = |v_j + r| / 2 (no normalisation, so the singular texel r = -v_j gives 0, not NaN)."""
+    x = np.clip(0.5 * np.linalg.norm(np.asarray(view) + np.asarray(r), axis=-1) / RSIBR_FADE, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+def blend_weights(barycentric, confidences) -> np.ndarray:
+    """Barycentric weights times each map's confidence, renormalised; where all three maps are
+    at their singular texels (never, for distinct views) the barycentric weights alone."""
+    product = np.asarray(barycentric) * np.asarray(confidences)
+    total = product.sum(axis=-1, keepdims=True)
+    return np.where(total > 1e-6, product / np.maximum(total, 1e-30), barycentric)
+
+
+def canonical_tangent(normal) -> np.ndarray:
+    """t0(n) = normalize(Z x n), or normalize(X x n) within 1e-3 of the poles n = +-Z: the field
+    the slices' tangent angles are measured from (any continuous field has a singular point)."""
+    n = _normalize(normal)
+    t = np.cross(_TANGENT_AXIS, n)
+    near_pole = np.linalg.norm(t, axis=-1, keepdims=True) < 1e-3
+    t = np.where(near_pole, np.cross(_TANGENT_FALLBACK, n), t)
+    return _normalize(t)
+
+
+def slice_frame(normal, angle) -> np.ndarray:
+    """(..., 3, 3) frame with columns (t, b, n): t = t0(n) turned by ``angle`` about n."""
+    n = _normalize(normal)
+    t0 = canonical_tangent(n)
+    b0 = np.cross(n, t0)
+    angle = np.asarray(angle, dtype=np.float64)[..., None]
+    t = np.cos(angle) * t0 + np.sin(angle) * b0
+    return np.stack([t, np.cross(n, t), n], axis=-1)
+
+
+def tangent_angle(tangent, normal) -> np.ndarray:
+    """Angle in [0, pi) of ``tangent`` about ``normal`` from t0(normal)."""
+    n = _normalize(normal)
+    t0 = canonical_tangent(n)
+    b0 = np.cross(n, t0)
+    return np.mod(np.arctan2(np.sum(tangent * b0, axis=-1), np.sum(tangent * t0, axis=-1)), np.pi)
+
+
+def atlas_lookup(atlas: np.ndarray, rows: int, tile, r) -> np.ndarray:
+    """Twin of the shader's read of one tile (GL_LINEAR, repeat in x, tile rows clamped to their
+    centres): ``atlas`` (tiles H, 2H, C) with tile t in rows t H .. t H + H - 1."""
+    width, total_rows = atlas.shape[1], atlas.shape[0]
+    u, v = direction_to_equirect(r)
+    y = np.asarray(tile) * rows + np.clip(v * rows, 0.5, rows - 0.5)
+    x = u * width - 0.5
+    y = y - 0.5
+    x0, y0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    x0 %= width
+    x1 = (x0 + 1) % width
+    y1 = np.minimum(y0 + 1, total_rows - 1)
+    return (
+        atlas[y0, x0] * (1 - fx) * (1 - fy)
+        + atlas[y0, x1] * fx * (1 - fy)
+        + atlas[y1, x0] * (1 - fx) * fy
+        + atlas[y1, x1] * fx * fy
+    )
+
+
+def rsibr_radiance(
+    atlas: np.ndarray, rows: int, slices: int, vertices: np.ndarray, faces: np.ndarray, view, frame
+) -> np.ndarray:
+    """The shader's RSIBR lookup (shaders/prefiltered.glsl rsibr_radiance), for world directions
+    towards the viewer ``view`` (..., 3) and shading frames ``frame`` (..., 3, 3; columns t, b, n)."""
+    view = _normalize(view)
+    frame = np.asarray(frame, dtype=np.float64)
+    t, n = frame[..., 0], frame[..., 2]
+    r = reflect(view, n)
+    views, barycentric = view_weights(view, vertices, faces)
+    confidences = np.stack([confidence(r, vertices[views[..., i]]) for i in range(3)], axis=-1)
+    weights = blend_weights(barycentric, confidences)
+    if slices > 1:
+        s = tangent_angle(t, n) / np.pi * slices
+        k0 = np.floor(s).astype(np.int64) % slices
+        f = (s - np.floor(s))[..., None]
+        k1 = (k0 + 1) % slices
+    result = np.zeros(view.shape[:-1] + (atlas.shape[-1],))
+    for i in range(3):
+        base = views[..., i] * slices
+        if slices > 1:
+            value = (1 - f) * atlas_lookup(atlas, rows, base + k0, r) + f * atlas_lookup(atlas, rows, base + k1, r)
+        else:
+            value = atlas_lookup(atlas, rows, base, r)
+        result += weights[..., i : i + 1] * value
+    return result
+
+
+def median_reflection_angle(distribution) -> float:
+    """Median angle between the reflected direction and the mirror direction of a microfacet
+    lobe at normal incidence along its narrower axis: twice the half-vector median, tan = alpha
+    (GGX: P(tan^2 < x) = x / (alpha^2 + x)) or alpha sqrt(ln 2) (Beckmann: 1 - exp(-x / alpha^2))."""
+    alpha = min(distribution.alpha_x, distribution.alpha_y)
+    scale = 1.0 if distribution.kind == "ggx" else np.sqrt(np.log(2.0))
+    return float(2.0 * np.arctan(alpha * scale))
+
+
+def map_rows(distributions: list, anisotropic: bool) -> int:
+    """Rows of every tile: two texels across the narrowest lobe's median angle, a multiple of 8
+    between RSIBR_MIN_ROWS and the cap (anisotropic materials have K slices per view)."""
+    most = RSIBR_MAX_ROWS_ANISOTROPIC if anisotropic else RSIBR_MAX_ROWS
+    angle = min((median_reflection_angle(d) for d in distributions), default=np.pi / 8)
+    rows = int(np.ceil(2.0 * np.pi / max(angle, 1e-6)))
+    return int(np.clip(-(-rows // 8) * 8, RSIBR_MIN_ROWS, most))
