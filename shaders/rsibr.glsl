@@ -2,18 +2,18 @@
 // 1999, seed 004; numpy twin materials/rsibr.py rsibr_radiance). The maps of the three views of
 // the icosahedron triangle holding this pixel's view direction are read at its mirror direction r
 // (the mirror warp, section 3.3) and blended with spherical barycentric weights (3.4), each faded
-// near its singular texel r = -v_j; anisotropic materials mix the two tangent-angle slices around
-// the pixel's tangent.
+// near its singular texel r = -v_j and scaled by the albedo ratio of the pixel's and the map's
+// elevation; anisotropic materials mix the two tangent-angle slices around the pixel's tangent.
 #include "rsibr_common.glsl"
 
-uniform sampler2D u_rsibr_maps;    // tile (view j, slice k) = j K + k, rows tile H .. tile H + H - 1
+uniform sampler2DArray u_rsibr_maps;  // layer (view j, slice k) = j K + k: 2H x H, equirectangular in r
 uniform int u_rsibr_lobes;         // bit i: lobe i is in the maps (0: no maps)
-uniform int u_rsibr_rows;          // H
 uniform int u_rsibr_slices;        // K
-uniform int u_rsibr_tiles;
 uniform int u_rsibr_face_count;
 uniform vec3 u_rsibr_views[RSIBR_MAX_VIEWS];
 uniform ivec3 u_rsibr_faces[RSIBR_MAX_FACES];
+// The baked lobes' directional albedo at n.v = (i / (size - 1))^2 (materials/rsibr.py albedo_table).
+uniform vec3 u_rsibr_albedo[RSIBR_ALBEDO_SIZE];
 uniform vec3 u_rsibr_edges[3 * RSIBR_MAX_FACES];  // unit normals of each face's edge planes
 
 bool rsibr_lobe(int i) { return (u_rsibr_lobes & (1 << i)) != 0; }
@@ -24,10 +24,20 @@ float rsibr_area(vec3 a, vec3 b, vec3 c) {
 }
 
 vec3 rsibr_tile(int tile, vec3 r) {
-    vec2 uv = direction_to_latlong(r);
-    float rows = float(u_rsibr_rows);
-    float y = (float(tile) * rows + clamp(uv.y * rows, 0.5, rows - 0.5)) / (rows * float(u_rsibr_tiles));
-    return textureLod(u_rsibr_maps, vec2(uv.x, y), 0.0).rgb;
+    return textureLod(u_rsibr_maps, vec3(direction_to_latlong(r), float(tile)), 0.0).rgb;
+}
+
+vec3 rsibr_albedo(float cos_view) {
+    float x = sqrt(clamp(cos_view, 0.0, 1.0)) * float(RSIBR_ALBEDO_SIZE - 1);
+    int i0 = min(int(floor(x)), RSIBR_ALBEDO_SIZE - 2);
+    return mix(u_rsibr_albedo[i0], u_rsibr_albedo[i0 + 1], x - float(i0));
+}
+
+// Elevation correction E(n.v) / E(n_j.v_j) (materials/rsibr.py albedo_ratio).
+vec3 rsibr_albedo_ratio(vec3 pixel, float cos_map) {
+    vec3 source = rsibr_albedo(cos_map);
+    vec3 ratio = pixel / max(source, vec3(1e-6));
+    return min(mix(vec3(0.0), ratio, greaterThan(source, vec3(1e-6))), vec3(RSIBR_MAX_ALBEDO_RATIO));
 }
 
 float rsibr_confidence(vec3 r, vec3 view) {
@@ -65,18 +75,20 @@ vec3 rsibr_radiance(vec3 wo, mat3 tbn) {
         k1 = (k0 + 1) % slices;
         f = s - floor(s);
     }
+    vec3 r_lookup = r;
 #if defined(PARALLAX)
     // The object's reflection proxy moves the direction the maps are read in, as for the other
     // prefiltered lookups (the maps themselves assume a distant environment).
     float unused_offset;
-    r = proxy_direction(r, unused_offset);
+    r_lookup = proxy_direction(r, unused_offset);
 #endif
+    vec3 pixel_albedo = rsibr_albedo(dot(v, n));
     vec3 sum = vec3(0.0);
     for (int i = 0; i < 3; ++i) {
         int base = views[i] * slices;
-        vec3 value = rsibr_tile(base + k0, r);
-        if (slices > 1) value = mix(value, rsibr_tile(base + k1, r), f);
-        sum += w[i] * value;
+        vec3 value = rsibr_tile(base + k0, r_lookup);
+        if (slices > 1) value = mix(value, rsibr_tile(base + k1, r_lookup), f);
+        sum += w[i] * value * rsibr_albedo_ratio(pixel_albedo, 0.5 * length(u_rsibr_views[views[i]] + r));
     }
     return sum;
 }

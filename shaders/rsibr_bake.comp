@@ -9,8 +9,8 @@ layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 #include "integrate.glsl"
 #include "rsibr_common.glsl"
 
-layout(rgba32f, binding = 0) uniform writeonly image2D u_target;
-uniform int u_rsibr_rows;
+layout(rgba32f, binding = 0) uniform writeonly image2DArray u_target;
+uniform int u_rows;
 uniform int u_rsibr_lobes;
 uniform int u_tile;
 uniform vec3 u_view;
@@ -18,7 +18,7 @@ uniform float u_angle;
 
 void main() {
     ivec2 id = ivec2(gl_GlobalInvocationID.xy);
-    int rows = u_rsibr_rows;
+    int rows = u_rows;
     if (id.x >= 2 * rows || id.y >= rows) return;
     vec3 r = latlong_to_direction((vec2(id) + 0.5) / vec2(2 * rows, rows));
     mat3 tbn = rsibr_slice_frame(rsibr_warped_normal(r, u_view), u_angle);
@@ -30,5 +30,5 @@ void main() {
         if ((u_rsibr_lobes & (1 << i)) != 0) sum += integrate_lobe(get_lobe(i), i, wo, tbn);
     }
     bool bad = any(isnan(sum)) || any(isinf(sum));
-    imageStore(u_target, ivec2(id.x, u_tile * rows + id.y), vec4(bad ? vec3(0.0) : sum, bad ? -1.0 : 1.0));
+    imageStore(u_target, ivec3(id, u_tile), vec4(bad ? vec3(0.0) : sum, bad ? -1.0 : 1.0));
 }

@@ -124,22 +124,22 @@ def test_blend_reproduces_view_independent_maps_and_each_view_at_its_own_directi
     uu, vv = np.meshgrid(u, v)
     dirs = equirect_direction(uu, vv)
     tile = np.concatenate([dirs * 0.5 + 0.5, np.ones(dirs.shape[:2] + (1,))], axis=-1)
-    atlas = np.concatenate([tile] * (len(vertices) * slices), axis=0)
+    atlas = np.stack([tile] * (len(vertices) * slices))
     view = _unit(rng, 300)
     frame = rs.slice_frame(_unit(rng, 300), rng.random(300) * np.pi)
     frame[..., 2] *= np.sign(np.sum(frame[..., 2] * view, axis=1))[:, None]
-    got = rs.rsibr_radiance(atlas, rows, slices, vertices, faces, view, frame)
+    got = rs.rsibr_radiance(atlas, slices, vertices, faces, view, frame)
     r = rs.reflect(view, frame[..., 2])
-    assert np.allclose(got, rs.atlas_lookup(atlas, rows, 0, r))
+    assert np.allclose(got, rs.tile_lookup(atlas, 0, r))
     # Maps holding their own view's index and slice: at a view direction only that map counts,
     # and the slice weights follow the tangent's angle.
     marks = np.zeros_like(atlas)
     for t in range(len(vertices) * slices):
-        marks[t * rows : (t + 1) * rows] = t
+        marks[t] = t
     n = _unit(rng, len(vertices))
     n *= np.sign(np.sum(n * vertices, axis=1))[:, None]
     angle = np.full(len(vertices), np.pi / 4)  # halfway between slices 0 and 1 of K = 2
-    got = rs.rsibr_radiance(marks, rows, slices, vertices, faces, vertices, rs.slice_frame(n, angle))
+    got = rs.rsibr_radiance(marks, slices, vertices, faces, vertices, rs.slice_frame(n, angle))
     assert np.allclose(got[:, 0], np.arange(len(vertices)) * slices + 0.5)
 
 
@@ -177,15 +177,15 @@ def gl():
 
 
 def _maps(renderer, bsdf):
-    """(atlas (rows x tiles, 2 rows, 4), layout) of the maps the last render bound for ``bsdf``."""
+    """(maps (tiles, rows, 2 rows, 4), layout) of the maps the last render bound for ``bsdf``."""
     from lobeview.viewer.material_gpu import pack_material
     from lobeview.viewer.rsibr import rsibr_cache_key, rsibr_layout
 
     material = pack_material(bsdf)
     layout = rsibr_layout(material)
     texture = renderer.cubes.prefiltered_maps()._rsibr[rsibr_cache_key(material, layout)]
-    width, height = layout.shape
-    return np.frombuffer(texture.read(), dtype=np.float32).reshape(height, width, 4).astype(np.float64), layout
+    width, height, layers = layout.shape
+    return np.frombuffer(texture.read(), dtype=np.float32).reshape(layers, height, width, 4).astype(np.float64), layout
 
 
 def _specular_only(bsdf):
@@ -221,7 +221,7 @@ def test_baked_maps_match_numpy_monte_carlo(gl, preset):
         frame = rs.slice_frame(rs.warped_normal(r, vertices[j]), k * np.pi / layout.slices)
         wo = frame.T @ vertices[j]
         expected = _numpy_reference(specular, frame, wo / np.linalg.norm(wo), lookup, renderer.cubes.radiance)
-        got = atlas[(j * layout.slices + k) * layout.rows + y, x, :3]
+        got = atlas[j * layout.slices + k, y, x, :3]
         errors.append(np.abs(got - expected).sum() / max(expected.sum(), 1e-3))
     assert len(errors) >= 6 and np.median(errors) < 0.03 and max(errors) < 0.1, errors
 
@@ -230,7 +230,7 @@ def test_baked_maps_match_numpy_monte_carlo(gl, preset):
 def test_render_matches_the_numpy_warp_and_blend(gl, preset):
     """Rendered pixels (no diffuse term in these presets) against rsibr_radiance on the same maps
     with the pixel's G-buffer frame and view: the face search, spherical barycentric weights,
-    confidence, slice mix and bilinear tile reads of shaders/rsibr.glsl."""
+    confidence, slice mix, elevation correction and bilinear tile reads of shaders/rsibr.glsl."""
     from test_render_vs_numpy import CAMERA, _frame, _pixels
 
     from lobeview.materials.spec import build_bsdf, load_material
@@ -241,9 +241,10 @@ def test_render_matches_the_numpy_warp_and_blend(gl, preset):
     assert not result.invalid.any()
     atlas, layout = _maps(renderer, bsdf)
     vertices, faces = rs.geodesic_sphere(layout.subdivisions)
+    albedo = rs.albedo_table(_specular_only(bsdf).components)
     for y, x in _pixels(result, count=24, seed=7):
         frame, wo = _frame(result, y, x)
-        expected = rs.rsibr_radiance(atlas[..., :3], layout.rows, layout.slices, vertices, faces, frame @ wo, frame)
+        expected = rs.rsibr_radiance(atlas[..., :3], layout.slices, vertices, faces, frame @ wo, frame, albedo)
         got = result.radiance[y, x]
         assert np.allclose(got, expected, rtol=0.02, atol=2e-3), (y, x, got, expected)
 

@@ -30,7 +30,13 @@ from lobeview.materials.microfacet import ALPHA_MIN
 from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, ANISOTROPY_LINE_RATIO, MAX_ELLIPSE_ANGLE, XI_BORDER
 from lobeview.materials.rational import MAX_TERMS as RATIONAL_MAX_TERMS
 from lobeview.materials.rational import graded_exponents
-from lobeview.materials.rsibr import RSIBR_FADE, RSIBR_MAX_FACES, RSIBR_MAX_VIEWS
+from lobeview.materials.rsibr import (
+    RSIBR_ALBEDO_SIZE,
+    RSIBR_FADE,
+    RSIBR_MAX_ALBEDO_RATIO,
+    RSIBR_MAX_FACES,
+    RSIBR_MAX_VIEWS,
+)
 from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
 from lobeview.scenes.scene import ALPHA_MODES as GLTF_ALPHA_MODES
 from lobeview.scenes.scene import TEXTURE_SLOTS
@@ -119,6 +125,8 @@ SHADER_CONSTANTS: dict = {
     "RSIBR_MAX_VIEWS": RSIBR_MAX_VIEWS,  # materials/rsibr.py: views of a once-subdivided icosahedron
     "RSIBR_MAX_FACES": RSIBR_MAX_FACES,
     "RSIBR_FADE": float(RSIBR_FADE),
+    "RSIBR_ALBEDO_SIZE": RSIBR_ALBEDO_SIZE,
+    "RSIBR_MAX_ALBEDO_RATIO": float(RSIBR_MAX_ALBEDO_RATIO),
     "ALBEDO_PHI": ALBEDO_PHI,
     "ALBEDO_MU": ALBEDO_MU,
     "XI_BORDER": float(XI_BORDER),  # Eq. 4.10

@@ -377,32 +377,35 @@ class PrefilteredMaps:
         return tex
 
     # -- reflection-space IBR (viewer/rsibr.py) ------------------------------------------------
-    def rsibr_map(self, layout, key: str, bake) -> moderngl.Texture:
+    def rsibr_map(self, layout, key: str, bake) -> moderngl.TextureArray:
         """The RSIBR maps of one material (``key``: viewer/rsibr.rsibr_cache_key), read from the
         cache or made by ``bake(texture)``."""
         if key in self._rsibr:
             return self._rsibr[key]
         t0 = time.perf_counter()
-        width, height = layout.shape
+        width, height, layers = layout.shape
+        most = self.ctx.info["GL_MAX_ARRAY_TEXTURE_LAYERS"]
+        if layers > most:
+            raise ValueError(f"RSIBR maps need {layers} texture layers; this GPU has {most}")
         cache = self.cache_dir / f"prefiltered-rsibr-{self._source_key}-{key}.npz" if self.cache_dir else None
-        label = f"RSIBR maps ({layout.views} views x {layout.slices} slices of {width}x{layout.rows}"
+        label = f"RSIBR maps ({layout.views} views x {layout.slices} slices of {width}x{height}"
 
         def read(path: Path) -> np.ndarray:
             with np.load(path, allow_pickle=False) as data:
                 texels = data["texels"]
-            if texels.shape != (height, width, 4) or not np.all(np.isfinite(texels)):
-                raise ValueError(f"not a finite array of shape {(height, width, 4)}")
+            if texels.shape != (layers, height, width, 4) or not np.all(np.isfinite(texels)):
+                raise ValueError(f"not a finite array of shape {(layers, height, width, 4)}")
             return np.ascontiguousarray(texels, dtype=np.float32)
 
         texels = read_cache_file(cache, read, f"{label})")
         if texels is not None:
-            tex = self.ctx.texture((width, height), 4, texels.tobytes(), dtype="f4")
+            tex = self.ctx.texture_array((width, height, layers), 4, texels.tobytes(), dtype="f4")
         else:
-            tex = self.ctx.texture((width, height), 4, dtype="f4")
+            tex = self.ctx.texture_array((width, height, layers), 4, dtype="f4")
             what = f"{label}, {layout.bytes / 2**20:.1f} MB (GPU, cached afterwards)"
             with timed_step("prefilter", what, announce=True):
                 bake(tex)
-            texels = np.frombuffer(tex.read(), dtype=np.float32).reshape(height, width, 4)
+            texels = np.frombuffer(tex.read(), dtype=np.float32).reshape(layers, height, width, 4)
             bad = int(np.count_nonzero(texels[..., 3] < 0.0))
             if bad:  # the bake writes 0 there: a material the integrator cannot evaluate
                 warnings.warn(f"{label}): {bad} texels integrated to NaN/Inf were written as 0", stacklevel=2)

@@ -30,7 +30,7 @@ from .interface import (
     write_uniform,
 )
 from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
-from .rsibr import bake_rsibr, rsibr_cache_key, rsibr_layout, view_sphere_uniforms
+from .rsibr import bake_rsibr, rsibr_albedo, rsibr_cache_key, rsibr_layout, view_sphere_uniforms
 from .shaders import ProgramCache
 
 SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
@@ -333,7 +333,7 @@ class RendererBase:
         layout = rsibr_layout(material, per_pixel_lobes) if method.mode == "rsibr" else None
         if layout is None or not layout.lobes:
             set_uniform(program, "u_rsibr_lobes", 0)
-            bind_sampler(program, "u_rsibr_maps", self._dummy_texture("2d"))
+            bind_sampler(program, "u_rsibr_maps", self._dummy_texture("array"))
             return
         texture = maps.rsibr_map(
             layout, rsibr_cache_key(material, layout), lambda tex: bake_rsibr(self, cube, material, layout, tex)
@@ -341,14 +341,13 @@ class RendererBase:
         bind_sampler(program, "u_rsibr_maps", texture)
         for name, value in (
             ("u_rsibr_lobes", layout.lobes),
-            ("u_rsibr_rows", layout.rows),
             ("u_rsibr_slices", layout.slices),
-            ("u_rsibr_tiles", layout.tiles),
             ("u_rsibr_face_count", 20 * 4**layout.subdivisions),
         ):
             set_uniform(program, name, value)
         for name, values in view_sphere_uniforms(layout.subdivisions).items():
             write_uniform(program, name, values)
+        write_uniform(program, "u_rsibr_albedo", rsibr_albedo(material, layout).astype(np.float32))
 
     def method_memory(self, cube: RadianceCube, material: PackedMaterial, method: Method) -> dict[str, int]:
         """Bytes of the GPU resources that shading ``material`` with ``method`` reads from one
@@ -389,6 +388,8 @@ class RendererBase:
                 tex = self.ctx.texture_cube((1, 1), 4, b"\0" * 16 * 6, dtype="f4")
             elif kind == "2d":
                 tex = self.ctx.texture((1, 1), 4, b"\0" * 16, dtype="f4")
+            elif kind == "array":
+                tex = self.ctx.texture_array((1, 1, 1), 4, b"\0" * 16, dtype="f4")
             else:
                 tex = self.ctx.texture3d((1, 1, 1), 4, b"\0" * 16, dtype="f4")
             self._dummy_textures[kind] = tex

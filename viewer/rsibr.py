@@ -1,9 +1,9 @@
 """prefiltered-rsibr: reflection-space image-based rendering on the GPU (Cabral, Olano and Nemec
 1999, seed 004; numpy reference materials/rsibr.py, lookup shaders/rsibr.glsl).
 
-Per object cube and material, one RGBA32F texture holds the radiance environment maps of every
-view of the geodesic view sphere (and, for an anisotropic material, every tangent-angle slice),
-stacked as tiles. Each tile is baked by shaders/rsibr_bake.comp with fis-RSIBR_BAKE_SAMPLES from
+Per object cube and material, one RGBA32F texture array holds the radiance environment maps of
+every view of the geodesic view sphere (and, for an anisotropic material, every tangent-angle
+slice), one layer per map (a "tile"). Each tile is baked by shaders/rsibr_bake.comp with fis-RSIBR_BAKE_SAMPLES from
 the object's radiance cube, which is the part of lobeview that already integrates any material
 (Kurt, microfacet, glTF lobes with their Fresnel terms); the maps are cached beside the other
 prefiltered maps (viewer/prefiltered.py) and their bytes reported with them.
@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import Method
 from lobeview.materials.lobe_fit import is_isotropic
 from lobeview.materials.rsibr import (
@@ -29,6 +30,7 @@ from lobeview.materials.rsibr import (
     RSIBR_MAX_VIEWS,
     RSIBR_SLICES,
     RSIBR_SUBDIVISIONS,
+    albedo_table,
     geodesic_sphere,
     map_rows,
 )
@@ -36,6 +38,7 @@ from lobeview.materials.rsibr import (
 GL_RGBA32F = 0x8814
 RSIBR_BAKE_SAMPLES = 256  # fis-N per texel of a map (filtered lookups, LOD bias 0)
 RSIBR_CACHE_VERSION = 1
+_ALBEDO_TABLES = BoundedCache(64)  # rsibr_cache_key -> albedo_table of the baked lobes (~0.7 s each)
 
 
 def rsibr_eligible(component) -> bool:
@@ -61,14 +64,14 @@ class RsibrLayout:
         return self.views * self.slices
 
     @property
-    def shape(self) -> tuple[int, int]:
-        """(width, height) of the texture."""
-        return 2 * self.rows, self.rows * self.tiles
+    def shape(self) -> tuple[int, int, int]:
+        """(width, height, layers) of the texture array: one layer per tile."""
+        return 2 * self.rows, self.rows, self.tiles
 
     @property
     def bytes(self) -> int:
-        width, height = self.shape
-        return width * height * 16
+        width, height, layers = self.shape
+        return width * height * layers * 16
 
 
 def rsibr_layout(material, per_pixel_lobes: bool = False, subdivisions: int = RSIBR_SUBDIVISIONS) -> RsibrLayout:
@@ -109,14 +112,20 @@ def rsibr_cache_key(material, layout: RsibrLayout) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def rsibr_albedo(material, layout: RsibrLayout) -> np.ndarray:
+    """(RSIBR_ALBEDO_SIZE, 3) directional albedo of the baked lobes (the elevation correction)."""
+    components = [c for i, c in enumerate(material.lobe_components) if layout.lobes >> i & 1]
+    return _ALBEDO_TABLES.get(rsibr_cache_key(material, layout), lambda: albedo_table(components))
+
+
 def bake_rsibr(renderer, cube, material, layout: RsibrLayout, texture) -> None:
-    """Fill ``texture`` (RGBA32F, layout.shape) tile by tile: ``renderer`` (RendererBase) binds
+    """Fill ``texture`` (RGBA32F array, layout.shape) tile by tile: ``renderer`` (RendererBase) binds
     the material and the cube to the bake shader as for a fis-N draw."""
     method = Method("fis", RSIBR_BAKE_SAMPLES)
     shader = renderer.programs.compute("rsibr_bake.comp", {"METHOD_FIS": True})
     renderer.set_material(shader, material, method, lod_bias=0.0, seed=0)
     renderer.bind_cube(shader, cube, method)
-    shader["u_rsibr_rows"] = layout.rows
+    shader["u_rows"] = layout.rows
     shader["u_rsibr_lobes"] = layout.lobes
     vertices, _ = geodesic_sphere(layout.subdivisions)
     texture.bind_to_image(0, read=False, write=True, level=0, format=GL_RGBA32F)

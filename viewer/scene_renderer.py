@@ -108,6 +108,17 @@ class _GpuObject:
             self.cube.release()
 
 
+def per_pixel_lobes(mat: SceneMaterial) -> bool:
+    """Whether textures make a glTF material's lobes differ from pixel to pixel (shaders/scene.frag),
+    so that maps baked for one set of lobe parameters (prefiltered-rsibr) cannot shade it: every
+    texture but occlusion and emission, and the normal map too where a clearcoat keeps the
+    geometric normal for its own lobe."""
+    if mat.desc["model"] != "gltf":
+        return False
+    lobe_neutral = {"occlusion", "emissive"} | ({"normal"} if not mat.desc.get("clearcoat") else set())
+    return bool(set(mat.textures) - lobe_neutral)
+
+
 class SceneRenderer(RendererBase):
     PLANE_STATE = True  # refinement on reflectors averages tangent planes across passes
 
@@ -363,6 +374,7 @@ class SceneRenderer(RendererBase):
             # Every texture but the normal maps, occlusion and emission changes the lobes' albedo.
             per_pixel = gltf_model and bool(set(mat.textures) - {"normal", "occlusion", "emissive", "clearcoat_normal"})
             set_uniform(program, "u_albedo_per_pixel", int(per_pixel))
+
             # Bound even when unused: a sampler left on unit 0 would meet the radiance cube there
             # (two sampler types on one unit fail the draw with GL_INVALID_OPERATION).
             bind_sampler(program, "u_dfg", self._dfg_texture() if per_pixel else self._white)
@@ -542,7 +554,7 @@ class SceneRenderer(RendererBase):
                 write_uniform(program, "u_irradiance_sh9", self.environment_sh9)
             self._bind_material(program, mat)
             if use_specular:
-                self.bind_cube(program, obj.cube, obj_method, obj.material)
+                self.bind_cube(program, obj.cube, obj_method, obj.material, per_pixel_lobes(mat))
                 if proxy is not None:
                     self._bind_proxy(program, obj, proxy)
                 if mirror is not None:
