@@ -11,6 +11,7 @@
    map, the 2D lobe, the multi-lobe map and the reference, with the error per band of view angle.
 
     python bench/prefiltered.py [--env FILE] [--size 200] [--reference-spp 2048] [--out bench/results]
+                                [--presets P ...] [--methods M ...] [--accuracy-only]
 """
 
 from __future__ import annotations
@@ -64,6 +65,7 @@ METHODS = (
     "prefiltered-phong",
     "prefiltered-multi",
     "prefiltered-banks",  # only for materials with an anisotropic lobe (else it is prefiltered-lobe)
+    "prefiltered-rsibr",
     "lobe-7",
     "lobe-15",
     "fis-16",
@@ -115,7 +117,7 @@ def accuracy(args, env, lines, stamp, out_dir):
         exposure = float(np.log2(0.18 / max(np.median(lum), 1e-6)))
         ref_tm = tonemap(ref.radiance, "aces", exposure)[mask]
         anisotropic = any(_anisotropic(c) for c in _specular(preset))
-        for method in METHODS:
+        for method in args.methods:
             if method == "prefiltered-banks" and not anisotropic:
                 continue
             maps = renderer.cubes.prefiltered_maps()
@@ -284,6 +286,10 @@ def main(argv=None) -> int:
     parser.add_argument("--reference-spp", type=int, default=2048)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--presets", nargs="*", default=list(PRESETS))
+    parser.add_argument("--methods", nargs="*", default=list(METHODS), help="section 1's methods")
+    parser.add_argument(
+        "--accuracy-only", action="store_true", help="section 1 alone (skip the hierarchical and fitting sections)"
+    )
     parser.add_argument("--hier-face", type=int, default=64)
     parser.add_argument("--hier-targets", type=int, default=300)
     parser.add_argument("--threshold", type=float, default=1e-3)
@@ -300,8 +306,9 @@ def main(argv=None) -> int:
         f"- command: python bench/prefiltered.py {' '.join(argv or sys.argv[1:])}",
         "",
     ]
-    hierarchical(args, env, lines)
-    fitting(lines, out_dir, stamp)
+    if not args.accuracy_only:
+        hierarchical(args, env, lines)
+        fitting(lines, out_dir, stamp)
     accuracy(args, env, lines, stamp, out_dir)
     path = out_dir / f"prefiltered-{stamp}.md"
     path.write_text("\n".join(lines) + "\n")

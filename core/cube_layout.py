@@ -71,3 +71,20 @@ def texel_solid_angles(size: int) -> np.ndarray:
     x0, y0 = np.meshgrid(edges[:-1], edges[:-1], indexing="ij")
     x1, y1 = np.meshgrid(edges[1:], edges[1:], indexing="ij")
     return area(x1, y1) - area(x0, y1) - area(x1, y0) + area(x0, y0)
+
+
+# -- equirectangular maps (environment maps, lobe maps, RSIBR maps: the convention of shaders/cube.glsl) --
+def equirect_direction(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    phi = 2.0 * np.pi * (np.asarray(u, dtype=np.float64) - 0.5)
+    theta = np.pi * np.asarray(v, dtype=np.float64)
+    s = np.sin(theta)
+    return np.stack([s * np.sin(phi), np.cos(theta), -s * np.cos(phi)], axis=-1)
+
+
+def direction_to_equirect(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    d = np.asarray(d, dtype=np.float64)
+    d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
+    phi = np.arctan2(d[..., 0], -d[..., 2])
+    u = 0.5 + phi / (2.0 * np.pi)
+    v = np.arccos(np.clip(d[..., 1], -1.0, 1.0)) / np.pi
+    return u % 1.0, v

@@ -46,7 +46,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lobeview.scenes.envmap import direction_to_equirect
+from lobeview.core.cube_layout import direction_to_equirect
 
 #: fade of a map's weight as n_j . v_j goes to 0 (its singular, grazing texels)
 RSIBR_FADE = 0.25

@@ -18,23 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.core.cube_layout import direction_to_equirect, equirect_direction
+
 from .hdrio import read_hdr_image, sanitize_radiance
-
-
-def equirect_direction(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    phi = 2.0 * np.pi * (np.asarray(u, dtype=np.float64) - 0.5)
-    theta = np.pi * np.asarray(v, dtype=np.float64)
-    s = np.sin(theta)
-    return np.stack([s * np.sin(phi), np.cos(theta), -s * np.cos(phi)], axis=-1)
-
-
-def direction_to_equirect(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    d = np.asarray(d, dtype=np.float64)
-    d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-300)
-    phi = np.arctan2(d[..., 0], -d[..., 2])
-    u = 0.5 + phi / (2.0 * np.pi)
-    v = np.arccos(np.clip(d[..., 1], -1.0, 1.0)) / np.pi
-    return u % 1.0, v
 
 
 def equirect_row_solid_angles(height: int, width: int) -> np.ndarray:

@@ -259,3 +259,22 @@ def test_plan_bakes_reflection_lobes_and_leaves_the_rest_to_auto():
     gold = pack_material(build_bsdf(load_material("gold-ggx")))
     assert prefilter_plan(gold, "rsibr") == ["rsibr"]
     assert prefilter_plan(gold, "rsibr", per_pixel_lobes=True) == prefilter_plan(gold, "auto") == ["splitsum"]
+
+
+def test_scene_materials_with_lobe_textures_are_not_baked():
+    """shaders/scene.frag changes a glTF material's lobes per pixel from every texture but
+    occlusion, emission and (without a clearcoat) the normal map: such materials keep the
+    automatic lookup under prefiltered-rsibr."""
+    from lobeview.scenes.scene import SceneMaterial
+    from lobeview.viewer.scene_renderer import per_pixel_lobes
+
+    gltf = {"model": "gltf", "base_color": [0.8, 0.8, 0.8], "metallic": 1.0, "roughness": 0.3}
+    slot = object()  # only the slot names matter here
+    assert not per_pixel_lobes(SceneMaterial("plain", gltf))
+    assert not per_pixel_lobes(SceneMaterial("mapped", gltf, textures={"normal": slot, "occlusion": slot}))
+    assert per_pixel_lobes(SceneMaterial("rough", gltf, textures={"metallic_roughness": slot}))
+    assert per_pixel_lobes(SceneMaterial("base", gltf, textures={"base_color": slot}))
+    coated = {**gltf, "clearcoat": 0.5}
+    assert per_pixel_lobes(SceneMaterial("coated", coated, textures={"normal": slot}))
+    thesis = {"model": "thesis", "kd": 0.5, "lobes": [{"ks": 0.5, "mx": 0.1, "my": 0.1, "r0": 0.5, "alpha": 0.3}]}
+    assert not per_pixel_lobes(SceneMaterial("thesis", thesis, textures={"base_color": slot}))
