@@ -278,3 +278,40 @@ def test_scene_materials_with_lobe_textures_are_not_baked():
     assert per_pixel_lobes(SceneMaterial("coated", coated, textures={"normal": slot}))
     thesis = {"model": "thesis", "kd": 0.5, "lobes": [{"ks": 0.5, "mx": 0.1, "my": 0.1, "r0": 0.5, "alpha": 0.3}]}
     assert not per_pixel_lobes(SceneMaterial("thesis", thesis, textures={"base_color": slot}))
+
+
+def test_maps_are_cached_on_disk_and_rebuilt_when_damaged(gl, tmp_path):
+    """Baked maps come back bit-identical from the cache folder; a damaged file is warned about,
+    baked again (to the same texels) and rewritten whole."""
+    from lobeview.materials.spec import build_bsdf, load_material
+    from lobeview.viewer.material_gpu import pack_material
+    from lobeview.viewer.prefiltered import PrefilteredMaps
+    from lobeview.viewer.rsibr import bake_rsibr, rsibr_cache_key, rsibr_layout
+
+    renderer, _ = gl
+    material = pack_material(build_bsdf(load_material("gold-ggx")))
+    layout = rsibr_layout(material)
+    key = rsibr_cache_key(material, layout)
+    bakes = []
+
+    def bake(texture):
+        bakes.append(1)
+        bake_rsibr(renderer, renderer.cubes, material, layout, texture)
+
+    def maps():
+        return PrefilteredMaps(renderer.ctx, renderer.cubes, renderer.programs, tmp_path)
+
+    first = maps()
+    texels = first.rsibr_map(layout, key, bake).read()
+    (path,) = tmp_path.glob("prefiltered-rsibr-*.npz")
+    second = maps()
+    assert second.rsibr_map(layout, key, bake).read() == texels and len(bakes) == 1
+    path.write_bytes(path.read_bytes()[:300])  # truncated
+    third = maps()
+    with pytest.warns(UserWarning, match="unusable cached"):
+        again = third.rsibr_map(layout, key, bake).read()
+    assert len(bakes) == 2 and again == texels
+    with np.load(path) as data:
+        assert data["texels"].shape == (layout.tiles, layout.rows, 2 * layout.rows, 4)
+    for m in (first, second, third):
+        m.release()

@@ -151,6 +151,19 @@ def lobe_map_shape(fit: LobeMapFit | list) -> tuple[int, int, int]:
     return 2 * height, height, sum(len(f.profiles) for f in fits)
 
 
+def _texels_reader(shape: tuple):
+    """Reader of a cached map (read_cache_file): its 'texels' array, finite and of ``shape``."""
+
+    def read(path: Path) -> np.ndarray:
+        with np.load(path, allow_pickle=False) as data:
+            texels = data["texels"]
+        if texels.shape != shape or not np.all(np.isfinite(texels)):
+            raise ValueError(f"not a finite array of shape {shape}")
+        return np.ascontiguousarray(texels, dtype=np.float32)
+
+    return read
+
+
 class PrefilteredMaps:
     def __init__(
         self,
@@ -339,14 +352,7 @@ class PrefilteredMaps:
         t0 = time.perf_counter()
         cache = self._cache_file(kind, nodes, f"{width}x{height}x{azimuths}")
 
-        def read(path: Path) -> np.ndarray:
-            with np.load(path, allow_pickle=False) as data:
-                texels = data["texels"]
-            if texels.shape != (depth, height, width, 4) or not np.all(np.isfinite(texels)):
-                raise ValueError(f"not a finite array of shape {(depth, height, width, 4)}")
-            return np.ascontiguousarray(texels, dtype=np.float32)
-
-        texels = read_cache_file(cache, read, f"{label}) map")
+        texels = read_cache_file(cache, _texels_reader((depth, height, width, 4)), f"{label}) map")
         if texels is not None:
             tex = self.ctx.texture3d((width, height, depth), 4, texels.tobytes(), dtype="f4")
         else:
@@ -390,14 +396,7 @@ class PrefilteredMaps:
         cache = self.cache_dir / f"prefiltered-rsibr-{self._source_key}-{key}.npz" if self.cache_dir else None
         label = f"RSIBR maps ({layout.views} views x {layout.slices} slices of {width}x{height}"
 
-        def read(path: Path) -> np.ndarray:
-            with np.load(path, allow_pickle=False) as data:
-                texels = data["texels"]
-            if texels.shape != (layers, height, width, 4) or not np.all(np.isfinite(texels)):
-                raise ValueError(f"not a finite array of shape {(layers, height, width, 4)}")
-            return np.ascontiguousarray(texels, dtype=np.float32)
-
-        texels = read_cache_file(cache, read, f"{label})")
+        texels = read_cache_file(cache, _texels_reader((layers, height, width, 4)), f"{label})")
         if texels is not None:
             tex = self.ctx.texture_array((width, height, layers), 4, texels.tobytes(), dtype="f4")
         else:
