@@ -390,12 +390,8 @@ class PrefilteredMaps:
             return self._rsibr[key]
         t0 = time.perf_counter()
         width, height, layers = layout.shape
-        most = self.ctx.info["GL_MAX_ARRAY_TEXTURE_LAYERS"]
-        if layers > most:
-            raise ValueError(f"RSIBR maps need {layers} texture layers; this GPU has {most}")
         cache = self.cache_dir / f"prefiltered-rsibr-{self._source_key}-{key}.npz" if self.cache_dir else None
         label = f"RSIBR maps ({layout.views} views x {layout.slices} slices of {width}x{height}"
-
         texels = read_cache_file(cache, _texels_reader((layers, height, width, 4)), f"{label})")
         if texels is not None:
             tex = self.ctx.texture_array((width, height, layers), 4, texels.tobytes(), dtype="f4")

@@ -335,19 +335,18 @@ class RendererBase:
             set_uniform(program, "u_rsibr_lobes", 0)
             bind_sampler(program, "u_rsibr_maps", self._dummy_texture("array"))
             return
-        texture = maps.rsibr_map(
-            layout, rsibr_cache_key(material, layout), lambda tex: bake_rsibr(self, cube, material, layout, tex)
-        )
+        key = rsibr_cache_key(material, layout)
+        texture = maps.rsibr_map(layout, key, lambda tex: bake_rsibr(self, cube, material, layout, tex))
         bind_sampler(program, "u_rsibr_maps", texture)
         for name, value in (
             ("u_rsibr_lobes", layout.lobes),
             ("u_rsibr_slices", layout.slices),
-            ("u_rsibr_face_count", 20 * 4**layout.subdivisions),
+            ("u_rsibr_face_count", layout.faces),
         ):
             set_uniform(program, name, value)
         for name, values in view_sphere_uniforms(layout.subdivisions).items():
             write_uniform(program, name, values)
-        write_uniform(program, "u_rsibr_albedo", rsibr_albedo(material, layout).astype(np.float32))
+        write_uniform(program, "u_rsibr_albedo", rsibr_albedo(material, layout, key).astype(np.float32))
 
     def method_memory(self, cube: RadianceCube, material: PackedMaterial, method: Method) -> dict[str, int]:
         """Bytes of the GPU resources that shading ``material`` with ``method`` reads from one

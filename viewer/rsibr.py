@@ -8,7 +8,7 @@ the object's radiance cube, which is the part of lobeview that already integrate
 (Kurt, microfacet, glTF lobes with their Fresnel terms); the maps are cached beside the other
 prefiltered maps (viewer/prefiltered.py) and their bytes reported with them.
 
-Which lobes go into the maps (:func:`rsibr_plan`): reflection lobes with a microfacet
+Which lobes go into the maps (:func:`rsibr_layout`; render_base.prefilter_plan): reflection lobes with a microfacet
 distribution, when no texture changes the lobes per pixel. The rest keep the automatic
 prefiltered lookup: thin transmission lobes (the mirror warp cannot follow a lobe centred on -v),
 Rational lobes (no distribution to size the maps by), and every lobe of a textured glTF material
@@ -17,6 +17,7 @@ Rational lobes (no distribution to size the maps by), and every lobe of a textur
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from dataclasses import dataclass
 
@@ -35,7 +36,8 @@ from lobeview.materials.rsibr import (
     map_rows,
 )
 
-GL_RGBA32F = 0x8814
+from .prefiltered import GL_RGBA32F
+
 RSIBR_BAKE_SAMPLES = 256  # fis-N per texel of a map (filtered lookups, LOD bias 0)
 RSIBR_CACHE_VERSION = 1
 _ALBEDO_TABLES = BoundedCache(64)  # rsibr_cache_key -> albedo_table of the baked lobes (~0.7 s each)
@@ -48,7 +50,8 @@ def rsibr_eligible(component) -> bool:
 
 @dataclass(frozen=True)
 class RsibrLayout:
-    """What the maps of one material hold and how they are laid out."""
+    """What the maps of one material hold and how they are laid out: at most 42 views x 8 slices
+    = 336 texture-array layers, within the 2048 every OpenGL 4.5 driver supports."""
 
     lobes: int  # bit i: lobe i is in the maps
     rows: int  # H: each tile is 2H x H, equirectangular in the reflection direction
@@ -58,6 +61,10 @@ class RsibrLayout:
     @property
     def views(self) -> int:
         return 10 * 4**self.subdivisions + 2
+
+    @property
+    def faces(self) -> int:
+        return 20 * 4**self.subdivisions
 
     @property
     def tiles(self) -> int:
@@ -85,8 +92,10 @@ def rsibr_layout(material, per_pixel_lobes: bool = False, subdivisions: int = RS
     return RsibrLayout(lobes, rows, RSIBR_SLICES if anisotropic else 1, subdivisions)
 
 
+@functools.lru_cache(maxsize=2)
 def view_sphere_uniforms(subdivisions: int) -> dict[str, np.ndarray]:
-    """The view directions, faces and the faces' edge-plane normals the lookup searches."""
+    """The view directions, faces and the faces' edge-plane normals the lookup searches (made
+    once: every draw of an RSIBR object uploads them)."""
     vertices, faces = geodesic_sphere(subdivisions)
     a, b, c = (vertices[faces[:, i]] for i in range(3))
     edges = np.stack([np.cross(a, b), np.cross(b, c), np.cross(c, a)], axis=1)
@@ -97,11 +106,14 @@ def view_sphere_uniforms(subdivisions: int) -> dict[str, np.ndarray]:
         out[: len(values)] = values
         return out
 
-    return {
+    uniforms = {
         "u_rsibr_views": padded(vertices, RSIBR_MAX_VIEWS, np.float32),
         "u_rsibr_faces": padded(faces, RSIBR_MAX_FACES, np.int32),
         "u_rsibr_edges": padded(edges.reshape(-1, 3), 3 * RSIBR_MAX_FACES, np.float32),
     }
+    for values in uniforms.values():
+        values.flags.writeable = False  # shared by every caller of the cache
+    return uniforms
 
 
 def rsibr_cache_key(material, layout: RsibrLayout) -> str:
@@ -112,10 +124,11 @@ def rsibr_cache_key(material, layout: RsibrLayout) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def rsibr_albedo(material, layout: RsibrLayout) -> np.ndarray:
-    """(RSIBR_ALBEDO_SIZE, 3) directional albedo of the baked lobes (the elevation correction)."""
+def rsibr_albedo(material, layout: RsibrLayout, key: str) -> np.ndarray:
+    """(RSIBR_ALBEDO_SIZE, 3) directional albedo of the baked lobes (the elevation correction);
+    ``key``: the maps' rsibr_cache_key, under which it is kept."""
     components = [c for i, c in enumerate(material.lobe_components) if layout.lobes >> i & 1]
-    return _ALBEDO_TABLES.get(rsibr_cache_key(material, layout), lambda: albedo_table(components))
+    return _ALBEDO_TABLES.get(key, lambda: albedo_table(components))
 
 
 def bake_rsibr(renderer, cube, material, layout: RsibrLayout, texture) -> None:
