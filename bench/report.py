@@ -40,7 +40,7 @@ def write_plots(base: Path, cells, sweep, references) -> list[Path]:
     groups = _groups(cells)
     floors = {(r["view"], r["material"], r["resolution"]): r["psnr_floor"] for r in references}
     colours = {"lobe": "tab:blue", "lobe+norm": "tab:cyan", "fis": "tab:orange", "mc": "tab:grey"}
-    colours["prefiltered"] = "tab:green"
+    colours.update({"lobe+ring": "tab:purple", "lobe+norm+ring": "tab:pink", "prefiltered": "tab:green"})
     for resolution in sorted({k[2] for k in groups}):
         keys = [k for k in groups if k[2] == resolution]
         columns = min(len(keys), 4)
@@ -51,11 +51,11 @@ def write_plots(base: Path, cells, sweep, references) -> list[Path]:
             times = [_time(c) for c in group]
             psnrs = [c["psnr"] for c in group]
             front = pareto_front(times, [-p for p in psnrs])
-            for family in ("lobe", "lobe+norm", "fis", "mc", "prefiltered"):
+            for family in ("lobe", "lobe+norm", "lobe+ring", "lobe+norm+ring", "fis", "mc", "prefiltered"):
                 members = sorted((c for c in group if _family(c["method"]) == family), key=_time)
                 if not members:
                     continue
-                style = "o-" if family in ("lobe", "fis") else "s"
+                style = "o-" if family in ("lobe", "lobe+ring", "fis") else "s"
                 ax.plot(
                     [_time(c) for c in members],
                     [c["psnr"] for c in members],
@@ -65,9 +65,9 @@ def write_plots(base: Path, cells, sweep, references) -> list[Path]:
                     ms=4,
                 )
                 for c in members:
-                    if family in ("lobe", "fis", "mc"):
+                    if family in ("lobe", "lobe+ring", "fis", "mc"):
                         ax.annotate(
-                            c["method"].split("-")[1].replace("+norm", ""),
+                            c["method"].split("-")[1].split("+")[0],
                             (_time(c), c["psnr"]),
                             fontsize=6,
                             xytext=(2, 2),

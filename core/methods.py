@@ -5,6 +5,8 @@ tables, the scripts and every printed command.
                     lobeview's energy normalisation of Eq. 4.25 by the lobe's albedo table
     lobe-N+eq4.24   the same pattern with the thesis' derived quadrature Eq. 4.24 instead of
                     its empirical Eq. 4.25 (for the comparison of Fig. 4.24; not normalised)
+    lobe-N...+ring  the thesis' ring at every N (by default isotropic lobes take a Fibonacci
+                    spiral from N = 11 on, materials/patterns.py step 3); after +norm / +eq4.24
     fis-N           filtered importance sampling (Colbert & Krivanek 2007), N in [1, MAX_SAMPLES]
     mc-N            plain importance sampling, no filtering
     reference       converged MIS integration, REFERENCE_BATCH samples per lobe and pass
@@ -46,6 +48,10 @@ NORMALIZE_SUFFIX = "+norm"
 #: lobe-N quadratures (thesis 4.4.3): Eq. 4.25 (lobeview's and the thesis' choice) and Eq. 4.24
 WEIGHTINGS = ("eq4.25", "eq4.24")
 EQ424_SUFFIX = "+eq4.24"
+#: lobe-N pattern choices: auto = the thesis' ring below N = 11 and a Fibonacci spiral from 11 on
+#: (materials/patterns.py SPIRAL_MIN_SAMPLES), ring = the thesis' ring at every N
+LOBE_PATTERNS = ("auto", "ring")
+RING_SUFFIX = "+ring"
 # A reference is the pixel's integral under a box filter: each pass shades at another sub-pixel
 # position (viewer/camera.py pixel_offset), so a reference of spp samples takes at least
 # min(spp, MIN_PIXEL_POSITIONS) passes (smaller batches) to resolve what a pixel covers.
@@ -66,11 +72,13 @@ DEFAULT_FIS_LOD_BIAS = -0.5
 DEFAULT_LOBE_LOD_BIAS = -0.5
 
 _GRAMMAR = re.compile(
-    r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?:(?P<norm>\+norm)|(?P<eq424>\+eq4\.24))?"
+    r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?:(?P<norm>\+norm)|(?P<eq424>\+eq4\.24))?(?P<ring>\+ring)?"
     r"|(?P<reference>reference)"
     r"|prefiltered(?:-(?P<mode>[a-z0-9]+))?)$"
 )
-GRAMMAR_HELP = "lobe-N[+norm|+eq4.24], fis-N, mc-N, reference or prefiltered[-" + "|-".join(PREFILTER_MODES[1:]) + "]"
+GRAMMAR_HELP = (
+    "lobe-N[+norm|+eq4.24][+ring], fis-N, mc-N, reference or prefiltered[-" + "|-".join(PREFILTER_MODES[1:]) + "]"
+)
 
 
 class MethodError(ValueError):
@@ -84,6 +92,7 @@ class Method:
     normalize: bool = False  # lobe-N: energy normalisation by the lobe's albedo table
     mode: str = ""  # prefiltered: one of PREFILTER_MODES
     weighting: str = "eq4.25"  # lobe-N: the quadrature, one of WEIGHTINGS
+    pattern: str = "auto"  # lobe-N: the isotropic lobes' pattern choice, one of LOBE_PATTERNS
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -98,6 +107,10 @@ class Method:
             raise MethodError(f"unknown lobe-N weighting {self.weighting!r}; use one of {', '.join(WEIGHTINGS)}")
         if self.weighting != "eq4.25" and self.kind != "lobe":
             raise MethodError(f"{EQ424_SUFFIX} (Eq. 4.24) applies to lobe-N only, not {self.kind}")
+        if self.pattern not in LOBE_PATTERNS:
+            raise MethodError(f"unknown lobe-N pattern {self.pattern!r}; use one of {', '.join(LOBE_PATTERNS)}")
+        if self.pattern != "auto" and self.kind != "lobe":
+            raise MethodError(f"{RING_SUFFIX} (the thesis' ring) applies to lobe-N only, not {self.kind}")
         if self.weighting == "eq4.24" and self.normalize:
             raise MethodError(f"{NORMALIZE_SUFFIX} normalises Eq. 4.25; {EQ424_SUFFIX} is Eq. 4.24 as printed")
         if self.kind == "prefiltered":
@@ -120,10 +133,18 @@ class Method:
             if mode not in PREFILTER_MODES:
                 raise MethodError(f"unknown method {text!r}; use {GRAMMAR_HELP}")
             return cls("prefiltered", 1, mode=mode)
-        kind, norm, eq424 = m.group("kind"), bool(m.group("norm")), bool(m.group("eq424"))
-        if (norm or eq424) and kind != "lobe":
-            raise MethodError(f"{text!r}: {NORMALIZE_SUFFIX if norm else EQ424_SUFFIX} applies to lobe-N only")
-        return cls(kind, int(m.group("n")), normalize=norm, weighting="eq4.24" if eq424 else "eq4.25")
+        kind = m.group("kind")
+        norm, eq424, ring = (bool(m.group(name)) for name in ("norm", "eq424", "ring"))
+        if (norm or eq424 or ring) and kind != "lobe":
+            suffix = NORMALIZE_SUFFIX if norm else EQ424_SUFFIX if eq424 else RING_SUFFIX
+            raise MethodError(f"{text!r}: {suffix} applies to lobe-N only")
+        return cls(
+            kind,
+            int(m.group("n")),
+            normalize=norm,
+            weighting="eq4.24" if eq424 else "eq4.25",
+            pattern="ring" if ring else "auto",
+        )
 
     def __str__(self) -> str:
         if self.kind == "reference":
@@ -131,15 +152,18 @@ class Method:
         if self.kind == "prefiltered":
             return "prefiltered" if self.mode == "auto" else f"prefiltered-{self.mode}"
         suffix = NORMALIZE_SUFFIX if self.normalize else EQ424_SUFFIX if self.weighting == "eq4.24" else ""
+        if self.pattern == "ring":
+            suffix += RING_SUFFIX
         return f"{self.kind}-{self.samples}" + suffix
 
     @property
     def family(self) -> str:
-        """The benchmark's plot family: 'lobe', 'lobe+norm', 'lobe+eq4.24', 'fis', 'mc', 'reference',
-        'prefiltered'."""
+        """The benchmark's plot family: 'lobe', 'lobe+norm', 'lobe+eq4.24', each with '+ring' for
+        the thesis' ring at every N, 'fis', 'mc', 'reference', 'prefiltered'."""
+        ring = RING_SUFFIX if self.pattern == "ring" else ""
         if self.weighting == "eq4.24":
-            return "lobe" + EQ424_SUFFIX
-        return "lobe+norm" if self.normalize else self.kind
+            return "lobe" + EQ424_SUFFIX + ring
+        return ("lobe+norm" if self.normalize else self.kind) + ring
 
     def with_samples(self, samples: int) -> Method:
         """The same method with another N (clamped to the kind's limit); prefiltered and

@@ -190,3 +190,30 @@ def test_mirror_bench_times_0_1_2_reflectors_and_writes_the_figure(tmp_path):
     assert figure.size == (3 * 320 + 8, 200)
     pixels = np.asarray(figure, dtype=np.float64)
     assert pixels.std() > 10.0  # an image, not a flat fill
+
+
+def test_pattern_bench_reports_falls_and_writes_the_figure(tmp_path):
+    from PIL import Image
+
+    from lobeview.bench import patterns
+
+    assert patterns.falls([30.0, 31.0, 30.95, 29.0], (3, 7, 11, 15)) == "11->15 -1.95"
+    assert patterns.falls([30.0, 31.0, 30.95], (3, 7, 11)) == "none"  # within the tolerance
+    argv = ["--envs", "builtin:studio", "--presets", "lacquer", "gold-ggx", "--samples", "7", "11",
+            "--size", "24", "--spp", "64", "--out", str(tmp_path)]  # fmt: skip
+    assert patterns.main(argv) == 0
+    (report,) = tmp_path.glob("patterns-*.md")
+    rows = [line for line in report.read_text().splitlines() if line.startswith("| builtin:studio |")]
+    assert [row.split(" | ")[1:3] for row in rows] == [
+        ["lacquer", "auto"],
+        ["lacquer", "ring"],
+        ["gold-ggx", "auto"],
+        ["gold-ggx", "ring"],
+    ]
+    for row in rows:
+        values = [float(v) for v in row.split(" | ")[3:5]]
+        assert all(np.isfinite(values)) and min(values) > 10.0
+    # N = 7 is below SPIRAL_MIN_SAMPLES: both patterns are the ring there, the same image.
+    assert rows[0].split(" | ")[3] == rows[1].split(" | ")[3]
+    (figure,) = tmp_path.glob("patterns-*.png")
+    assert Image.open(figure).size == (5 * 24, 2 * 24)

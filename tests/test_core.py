@@ -36,6 +36,8 @@ def _all_methods():
         yield Method("lobe", n, normalize=True)
     for n in (1, 15):
         yield Method("lobe", n, weighting="eq4.24")
+    for n, normalize, weighting in ((3, False, "eq4.25"), (15, True, "eq4.25"), (19, False, "eq4.24")):
+        yield Method("lobe", n, normalize, weighting=weighting, pattern="ring")
     yield Method.parse("reference")
     for mode in PREFILTER_MODES:
         yield Method("prefiltered", 1, mode=mode)
@@ -69,12 +71,16 @@ def test_the_names_the_program_uses_are_canonical():
     assert Method.parse("lobe-7+norm") == Method("lobe", 7, normalize=True)
     assert Method.parse("lobe-15+eq4.24") == Method("lobe", 15, weighting="eq4.24")
     assert Method.parse("lobe-15+eq4.24").family == "lobe+eq4.24"
+    assert Method.parse("lobe-15+norm+ring") == Method("lobe", 15, normalize=True, pattern="ring")
+    assert Method.parse("lobe-15+norm+ring").family == "lobe+norm+ring"
+    assert Method.parse("lobe-15+norm+ring").with_samples(7).pattern == "ring"
 
 
 @pytest.mark.parametrize(
     "text",
     ["lobe-0", f"lobe-{MAX_PATTERN + 1}", "fis-0", f"mc-{MAX_SAMPLES + 1}", "fis-8+norm", "reference-64",
      "fis-8+eq4.24", "lobe-7+norm+eq4.24", "lobe-7+eq4.24+norm", "lobe-7+eq424",
+     "fis-16+ring", "lobe-7+ring+norm", "lobe-7+ring+ring", "prefiltered+ring",
      "prefiltered-auto", "prefiltered-nope", "Lobe-3", "lobe-11 (normalised)", "lobe", ""],
 )  # fmt: skip
 def test_names_outside_the_grammar_are_refused(text):

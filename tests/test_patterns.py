@@ -9,6 +9,7 @@ from lobeview.materials.bsdf import BSDF
 from lobeview.materials.microfacet import MicrofacetDistribution
 from lobeview.materials.patterns import (
     RING_XI1,
+    SPIRAL_MIN_SAMPLES,
     XI_BORDER,
     choose_pattern,
     cube_map_lod,
@@ -31,8 +32,8 @@ def constant(value=1.0):
     return lambda dirs, lod: np.full((len(dirs), 3), value)
 
 
-@pytest.mark.parametrize("kind", ["ring", "multi_ring", "line_x", "line_y"])
-@pytest.mark.parametrize("n", [1, 2, 3, 5, 7, 10, 11, 15, 19, 20])
+@pytest.mark.parametrize("kind", ["ring", "multi_ring", "line_x", "line_y", "spiral"])
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 7, 10, 11, 15, 19, 20, 32])
 def test_pattern_has_n_samples_inside_the_lobe(kind, n):
     xi1, xi2 = pattern_xi(n, kind)
     assert len(xi1) == len(xi2) == n
@@ -72,6 +73,82 @@ def test_pattern_layouts_follow_the_thesis():
     assert choose_pattern(0.0068, 0.0297) == "line_y"  # Miro 5: elongated along the bitangent
     assert choose_pattern(0.3, 0.05) == "line_x"
     assert choose_pattern(0.2, 0.2, planar=True) == "multi_ring"
+
+
+def test_lobe_n_takes_the_spiral_from_eleven_samples_unless_asked_for_the_ring():
+    assert SPIRAL_MIN_SAMPLES == 11
+    assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES - 1) == "ring"
+    assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES) == "spiral"
+    assert choose_pattern(0.1, 0.1, n=None) == "ring"  # lobe-N+ring
+    assert choose_pattern(0.1, 0.1, planar=True, n=19) == "multi_ring"  # mirror buffers: not measured
+    assert choose_pattern(0.3, 0.05, n=19) == "line_x"  # anisotropic lobes keep the line
+    lobe = KurtLobe(1.0, 0.2, 0.2, 1.0, 0.0)
+    wo = direction_from_angles_deg(30)
+    assert lobe_samples(lobe, wo, 15).kind == "spiral"
+    assert lobe_samples(lobe, wo, 15, pattern="ring").kind == "ring"
+    assert lobe_samples(lobe, wo, 7).kind == "ring"
+    xi1, xi2 = pattern_xi(11, "spiral")
+    assert xi1[0] == 1.0  # the centre first, as in the ring
+    np.testing.assert_allclose(1.0 - xi1[1:], np.sqrt((np.arange(1, 11) + 0.5) / 11))
+    np.testing.assert_allclose(np.diff(xi2) % 1.0, (3.0 - np.sqrt(5.0)) / 2.0)  # golden angle
+    with pytest.raises(ValueError, match="pattern choice"):
+        lobe_samples(lobe, wo, 15, pattern="spiral")
+
+
+def _voronoi_centroid_offset(kind: str, n: int, resolution: int = 400) -> float:
+    """Largest distance between a sample and the centroid of its Voronoi cell in the
+    uniformised lobe disc (radius fraction 1 - xi1, angle 2 pi xi2), in units of the radius
+    sqrt(1 / N) of the disc of area pi / N that step 4 filters each sample over."""
+    xi1, xi2 = pattern_xi(n, kind)
+    points = np.stack([(1 - xi1) * np.cos(2 * np.pi * xi2), (1 - xi1) * np.sin(2 * np.pi * xi2)], -1)
+    grid = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
+    x, y = np.meshgrid(grid, grid)
+    inside = x**2 + y**2 <= 1.0
+    disc = np.stack([x[inside], y[inside]], -1)
+    owner = np.argmin(np.sum((disc[:, None, :] - points[None]) ** 2, axis=-1), axis=1)
+    counts = np.bincount(owner, minlength=n)
+    assert np.all(counts > 0)
+    centroids = np.stack([np.bincount(owner, disc[:, i], n) for i in range(2)], -1) / counts[:, None]
+    return float(np.max(np.linalg.norm(centroids - points, axis=1)) / np.sqrt(1.0 / n))
+
+
+@pytest.mark.parametrize("n", [11, 15, 19, 32])
+def test_spiral_samples_sit_at_their_cells_unlike_the_ring(n):
+    """Step 4 filters every sample over lobe area / N: that footprint covers the lobe only if
+    each sample sits near the centre of the part of the lobe it stands for. The spiral's samples
+    stay within half a footprint radius of their Voronoi cells' centroids at every N; the ring's
+    drift further out of their cells as N grows (its samples crowd one circle while the lobe's
+    rim is owned by samples at 40 % of the radius)."""
+    spiral = _voronoi_centroid_offset("spiral", n)
+    ring = _voronoi_centroid_offset("ring", n)
+    assert spiral < 0.5
+    assert ring > 0.9 and ring > 1.8 * spiral
+
+
+def _banded_radiance(dirs, lod):
+    """A bright band and smooth gradients: structure at a glossy lobe's scale (no filtering)."""
+    band = np.exp(-(((dirs[:, 0] - 0.25) / 0.08) ** 2))
+    return np.stack([1 + 5 * band, 1 + 0.7 * dirs[:, 1] ** 2 + 3 * band, 1.5 + dirs[:, 2]], -1)
+
+
+@pytest.mark.parametrize("preset", ["gold-ggx", "plastic", "frosted-glass"])
+def test_spiral_quadrature_beats_the_ring_at_many_samples(preset):
+    """Pattern quadrature alone (lookups unfiltered) against a 400 000-sample Monte Carlo
+    estimate: at N = 15 and 19 the spiral's error is below the ring's, whose samples never leave
+    their circle (measured: gold-ggx 0.041 / 0.074 vs 0.089 relative to the peak channel,
+    plastic 0.0037 / 0.0030 vs 0.009, frosted glass 0.100 / 0.045 vs 0.133)."""
+    bsdf = build_bsdf(PRESETS[preset])
+    spec = BSDF(specular_lobes(bsdf))
+    wo = direction_from_angles_deg(35, 60)
+    u = np.random.default_rng(4).random((2, 400_000))
+    s = spec.sample(u[0], u[1], wo)
+    reference = np.mean(s.weight * _banded_radiance(s.wi, None), axis=0)
+    for n in (15, 19):
+        errors = {}
+        for pattern in ("auto", "ring"):
+            value = integrate_specular(bsdf, wo, _banded_radiance, n, pattern=pattern)
+            errors[pattern] = np.max(np.abs(value - reference)) / np.max(reference)
+        assert errors["auto"] < 0.85 * errors["ring"], (n, errors)
 
 
 def test_theta_thresh_matches_equation_4_10():

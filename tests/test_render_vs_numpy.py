@@ -118,7 +118,9 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     + [(RATIONAL_GOLD, n, normalize) for n, normalize in ((7, False), (11, True))]
     # Eq. 4.24 (lobe-N+eq4.24) on the thesis' Fig. 4.24 materials.
     + [(p, n, "eq4.24") for p, n in (("gold-ggx", 15), ("alanod-2000gs-2lobe", 15), ("frosted-glass", 5),
-                                     ("lacquer", 7), (RATIONAL_GOLD, 7))],
+                                     ("lacquer", 7), (RATIONAL_GOLD, 7))]
+    # lobe-N+ring: the thesis' ring where the spiral is the default (N >= 11).
+    + [(p, 15, "ring") for p in ("gold-ggx", "frosted-glass")],
 )  # fmt: skip
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     from lobeview.core.methods import Method
@@ -127,8 +129,9 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     renderer, lookup = gl
     bsdf = build_bsdf(load_material(preset))
     weighting = "eq4.24" if normalize == "eq4.24" else "eq4.25"
+    pattern = "ring" if normalize == "ring" else "auto"
     normalize = normalize is True
-    method = Method("lobe", n, normalize, weighting=weighting)
+    method = Method("lobe", n, normalize, weighting=weighting, pattern=pattern)
     result = renderer.render(CAMERA, bsdf, method, background=False)
     assert not result.invalid.any()
     cube = renderer.cubes.radiance
@@ -142,7 +145,15 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
         for lobe in specular_lobes(bsdf):
             table = albedo_table_for(lobe) if normalize else None
             expected += integrate_lobe(
-                lobe, wo, radiance, n, renderer.cubes.face_size, frame, weighting=weighting, albedo_table=table
+                lobe,
+                wo,
+                radiance,
+                n,
+                renderer.cubes.face_size,
+                frame,
+                weighting=weighting,
+                albedo_table=table,
+                pattern=pattern,
             )
         kd = diffuse_albedo(bsdf)
         if np.any(kd > 0):

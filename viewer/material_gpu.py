@@ -25,7 +25,15 @@ from lobeview.materials.gltf import (
     GltfSpecular,
     GltfTransmission,
 )
-from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, AlbedoTable, choose_pattern, lattice_xi, pattern_xi
+from lobeview.materials.patterns import (
+    ALBEDO_MU,
+    ALBEDO_PHI,
+    AlbedoTable,
+    choose_pattern,
+    lattice_xi,
+    pattern_choice_n,
+    pattern_xi,
+)
 from lobeview.materials.rational import graded_exponents
 from lobeview.materials.rational_brdf import RationalLobe
 from lobeview.materials.thesis import KurtLobe
@@ -253,9 +261,10 @@ def _load_or_build_albedo_table(comp, key: tuple, directory: Path | None) -> Alb
     return table
 
 
-def pack_patterns(material: PackedMaterial, n: int, planar: bool = False) -> np.ndarray:
-    """(MAX_LOBES * MAX_PATTERN, 2) pattern coordinates of each lobe's ring, or with ``planar``
-    the multi-ring pattern of thesis 4.5.3 for objects shaded from a mirror buffer. The line
+def pack_patterns(material: PackedMaterial, n: int, planar: bool = False, pattern: str = "auto") -> np.ndarray:
+    """(MAX_LOBES * MAX_PATTERN, 2) pattern coordinates of each lobe's ring (or, with ``pattern``
+    'auto', its spiral from SPIRAL_MIN_SAMPLES on), or with ``planar`` the multi-ring pattern of
+    thesis 4.5.3 for objects shaded from a mirror buffer. The line
     patterns of strongly anisotropic lobes (:func:`lobeview.materials.patterns.choose_pattern`)
     are chosen and placed per pixel by shaders/integrate.glsl lobe_pattern_xi, since a roughness
     or anisotropy texture changes a lobe's anisotropy from pixel to pixel. A lobe sampled through
@@ -264,7 +273,7 @@ def pack_patterns(material: PackedMaterial, n: int, planar: bool = False) -> np.
     if not 1 <= n <= MAX_PATTERN:
         raise ValueError(f"lobe-N supports 1 <= N <= {MAX_PATTERN}, got {n}")
     out = np.zeros((MAX_LOBES * MAX_PATTERN, 2), dtype=np.float32)
-    ring = np.stack(pattern_xi(n, choose_pattern(1.0, 1.0, planar)), -1)  # ring or multi-ring
+    ring = np.stack(pattern_xi(n, choose_pattern(1.0, 1.0, planar, pattern_choice_n(n, pattern))), -1)
     lattice = np.stack(lattice_xi(n), -1)
     for i, comp in enumerate(material.lobe_components):
         out[i * MAX_PATTERN : i * MAX_PATTERN + n] = lattice if getattr(comp, "sampled_pattern", False) else ring

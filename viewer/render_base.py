@@ -193,7 +193,7 @@ class RendererBase:
         set_uniform(program, "u_lobe_count", material.lobe_count)
         write_uniform(program, "u_lobes", material.lobes)
         if method.kind == "lobe" and "u_pattern" in program:
-            write_uniform(program, "u_pattern", pack_patterns(material, method.samples, planar))
+            write_uniform(program, "u_pattern", pack_patterns(material, method.samples, planar, method.pattern))
         set_uniform(program, "u_kd", tuple(float(x) for x in material.kd))
         set_uniform(program, "u_gltf_diffuse", 1.0 if material.gltf_diffuse else 0.0)
         set_uniform(program, "u_tangent_rotation", float(material.tangent_rotation))
