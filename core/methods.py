@@ -222,11 +222,13 @@ def method_choice(method: Method) -> str:
     return str(method) if method.kind == "prefiltered" else method.kind
 
 
-def method_from_choice(choice: str, samples: int, normalize: bool) -> Method:
-    """The method a combo entry + sample slider + normalisation checkbox select."""
+def method_from_choice(choice: str, samples: int, normalize: bool, pattern: str = "auto") -> Method:
+    """The method a combo entry + sample slider + normalisation checkbox (+ for lobe-N the
+    thesis-ring checkbox, ``pattern``) select."""
     if choice.startswith("prefiltered"):
         return Method.parse(choice)
-    return Method(choice, 1).with_samples(samples).with_normalize(normalize)
+    method = Method(choice, 1).with_samples(samples).with_normalize(normalize)
+    return dataclasses.replace(method, pattern=pattern) if method.kind == "lobe" else method
 
 
 def resolve_cli_method(text: str, lobe_normalize: bool | None) -> Method:

@@ -74,6 +74,8 @@ def test_the_names_the_program_uses_are_canonical():
     assert Method.parse("lobe-15+norm+ring") == Method("lobe", 15, normalize=True, pattern="ring")
     assert Method.parse("lobe-15+norm+ring").family == "lobe+norm+ring"
     assert Method.parse("lobe-15+norm+ring").with_samples(7).pattern == "ring"
+    assert method_from_choice("lobe", 15, True, "ring") == Method.parse("lobe-15+norm+ring")
+    assert method_from_choice("fis", 16, True, "ring") == Method.parse("fis-16")  # the checkbox is lobe-N's
 
 
 @pytest.mark.parametrize(
