@@ -22,14 +22,17 @@ Steps, with the thesis equations:
      all of its samples at 40 % of the lobe radius: with more samples each one's footprint
      (lobe area / N) shrinks while the outer 60 % of the lobe stays unsampled, and PSNR fell as
      N grew (gold-ggx on interior.exr, 200 px: lobe-7 23.9 dB, lobe-15 22.5, lobe-19 21.8); the
-     spiral at N = 11 / 15 / 19 gives 25.7 / 26.1 / 25.9. At N <= 7 the ring is ahead (the
-     spiral's few samples are neither symmetric nor in the core: frosted glass lobe-7 22.9 dB
-     against the ring's 28.4), so :func:`choose_pattern` takes the spiral from
-     SPIRAL_MIN_SAMPLES on. :func:`choose_pattern` picks the line pattern from the anisotropy
-     ratio max(mx, my) / min(mx, my): >= 3 gives a line along the longer axis.
+     spiral at N = 15 / 19 gives 26.1 / 25.9. At N = 11 the ring is still ahead on wide lobes
+     without long tails (frosted glass 31.2 against 26.1 dB, a Beckmann alpha = 0.25 conductor
+     27.7 against 26.6), at N <= 7 on most (few spiral samples are neither symmetric nor in the
+     core), so :func:`choose_pattern` takes the spiral from SPIRAL_MIN_SAMPLES on (measured
+     ring vs spiral per N: bench/patterns.py). :func:`choose_pattern` picks the line pattern
+     from the anisotropy ratio max(mx, my) / min(mx, my): >= 3 gives a line along the longer
+     axis.
   4. MIP level per sample (Eq. 4.14-4.17): the lobe cross-section is an ellipse with semi-axes
-     tan(angle(w_C, w_U)), tan(angle(w_C, w_V)); its area divided by N is one sample's area at
-     unit distance, projected to the cube (x d^2 / cos(beta) = 1 / max|w|^3 for a unit cube of
+     2 sin(angle(w_C, w_U) / 2), 2 sin(angle(w_C, w_V) / 2) (the thesis: tan(angle), which
+     overstates wide lobes, see lobe_sample_area); its area divided by N is one sample's solid
+     angle, projected to the cube (x d^2 / cos(beta) = 1 / max|w|^3 for a unit cube of
      half-size 1) and converted to texels (face area 4 holds face_size^2 texels);
      lod = log4(texels).
   5. Quadrature (Eq. 4.25):  L = sum L_i cos_i^2 f_i^2 / p_i  /  sum f_i cos_i , with f the lobe
@@ -66,11 +69,13 @@ LOBE_LOD_BIAS = DEFAULT_LOBE_LOD_BIAS
 RING_XI1 = 0.6  # single ring at 40 % of the lobe radius (thesis 4.4.3)
 ANISOTROPY_LINE_RATIO = 3.0  # max/min roughness at which the line pattern replaces the ring
 MULTI_RING_SAMPLES_PER_RING = 3  # thesis 4.5.3 / Fig. 4.34: rings of three samples
-MAX_ELLIPSE_ANGLE = np.radians(80.0)  # Eq. 4.15 blows up at 90 deg; wider lobes are clamped
+# Widest lobe extent the footprint follows (lobe_sample_area): the thesis' tan form blows up at
+# 90 deg; the solid-angle form does not, and keeps the clamp so footprints stay below a hemisphere.
+MAX_ELLIPSE_ANGLE = np.radians(80.0)
 PATTERN_KINDS = ("ring", "multi_ring", "line_x", "line_y", "spiral")
 # lobe-N takes the spiral instead of the ring from this N on (step 3: measured on the preview
-# sphere, 7 presets, interior.exr; the ring stays the thesis' pattern below it and on request).
-SPIRAL_MIN_SAMPLES = 11
+# sphere, 7 presets x 2 captures; the ring stays the thesis' pattern below it and on request).
+SPIRAL_MIN_SAMPLES = 15
 # The golden angle in turns, 1 - 1 / golden ratio: successive spiral samples 137.5 deg apart.
 GOLDEN_ANGLE_TURNS = (3.0 - np.sqrt(5.0)) / 2.0
 # 1 / golden ratio: the rank-1 lattice of lattice_xi (a Fibonacci lattice for any n)
@@ -175,14 +180,24 @@ def pattern_half_vectors(
 def lobe_sample_area(
     distribution: MicrofacetDistribution, wo: np.ndarray, n: int, xi_border: float = XI_BORDER
 ) -> float:
-    """Eq. 4.14-4.15 divided by n: area at unit distance of one of n samples covering the
-    elliptical lobe cross-section around the mirror direction of ``wo`` (a single direction)."""
+    """Eq. 4.14-4.15 divided by n: solid angle of one of n samples covering the elliptical lobe
+    cross-section around the mirror direction of ``wo`` (a single direction).
+
+    The thesis measures the ellipse in the plane at unit distance, semi-axes tan(angle): for
+    wide lobes that overstates their solid angle (2.5x for a 56 deg cone, frosted glass), so
+    every sample was filtered about 0.66 MIP levels too coarse. Here the semi-axes are the
+    radii 2 sin(angle / 2) of Lambert's equal-area azimuthal projection, whose ellipse area is
+    exactly the solid angle 2 pi (1 - cos angle) of a circular cone and close to it for
+    elliptical ones (identical to the thesis' for narrow lobes). Measured (bench/patterns.py,
+    lobe-7+norm, 200 px): frosted glass 28.4 -> 31.1 dB (interior.exr), 21.0 -> 26.1
+    (courtyard.exr); GGX gold loses 0.4-1.2 dB, which the overstated footprint had made up for
+    the GGX tail beyond the pattern's core (theta_thresh)."""
     phis = np.array([0.0, np.pi / 2.0])
     h_border = spherical_direction(theta_thresh(distribution, phis, xi_border), phis)
     w_centre = reflect(wo, np.array([0.0, 0.0, 1.0]))
     w_border = reflect(np.broadcast_to(wo, h_border.shape), h_border)
     angles = np.arccos(np.clip(dot(w_border, w_centre), -1.0, 1.0))
-    u, v = np.tan(np.minimum(angles, MAX_ELLIPSE_ANGLE))
+    u, v = 2.0 * np.sin(0.5 * np.minimum(angles, MAX_ELLIPSE_ANGLE))
     return float(np.pi * u * v / n)
 
 

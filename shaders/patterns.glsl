@@ -1,7 +1,7 @@
 // GLSL twin of materials/patterns.py: the thesis' deterministic lobe patterns (Eq. 4.10-4.15)
 // and lobeview's per-lobe albedo table for the energy normalisation of Eq. 4.25 (AlbedoTable).
 
-// XI_BORDER (Eq. 4.10) and MAX_ELLIPSE_ANGLE (80 degrees, Eq. 4.15) come from patterns.py.
+// XI_BORDER (Eq. 4.10) and MAX_ELLIPSE_ANGLE (80 degrees, the footprint's widest lobe) come from patterns.py.
 
 // Eq. 4.10 with Beckmann's border for both distributions (GGX: its core; patterns.theta_thresh).
 float theta_thresh(Lobe l, float phi) {
@@ -16,7 +16,8 @@ vec3 pattern_half_vector(Lobe l, vec2 xi) {
     return spherical_dir((1.0 - xi.x) * theta_thresh(l, phi), phi);
 }
 
-// Eq. 4.14-4.15 divided by n: area of one sample at unit distance.
+// Eq. 4.14-4.15 divided by n: solid angle of one sample, the ellipse with the equal-area
+// radii 2 sin(angle / 2) instead of the thesis' tan(angle) (patterns.py lobe_sample_area).
 float lobe_sample_area(Lobe l, vec3 wo, int n) {
     vec3 centre = vec3(-wo.xy, wo.z);
     vec3 hu = spherical_dir(theta_thresh(l, 0.0), 0.0);
@@ -25,7 +26,7 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
     vec3 wv = 2.0 * dot(wo, hv) * hv - wo;
     float au = min(acos(clamp(dot(wu, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
     float av = min(acos(clamp(dot(wv, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
-    return PI * tan(au) * tan(av) / float(n);
+    return PI * 4.0 * sin(0.5 * au) * sin(0.5 * av) / float(n);
 }
 
 #if defined(LOBE_NORMALIZE)

@@ -199,7 +199,7 @@ def test_pattern_bench_reports_falls_and_writes_the_figure(tmp_path):
 
     assert patterns.falls([30.0, 31.0, 30.95, 29.0], (3, 7, 11, 15)) == "11->15 -1.95"
     assert patterns.falls([30.0, 31.0, 30.95], (3, 7, 11)) == "none"  # within the tolerance
-    argv = ["--envs", "builtin:studio", "--presets", "lacquer", "gold-ggx", "--samples", "7", "11",
+    argv = ["--envs", "builtin:studio", "--presets", "lacquer", "gold-ggx", "--samples", "7", "15",
             "--size", "24", "--spp", "64", "--out", str(tmp_path)]  # fmt: skip
     assert patterns.main(argv) == 0
     (report,) = tmp_path.glob("patterns-*.md")

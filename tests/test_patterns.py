@@ -8,6 +8,7 @@ import pytest
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.microfacet import MicrofacetDistribution
 from lobeview.materials.patterns import (
+    MAX_ELLIPSE_ANGLE,
     RING_XI1,
     SPIRAL_MIN_SAMPLES,
     XI_BORDER,
@@ -75,8 +76,8 @@ def test_pattern_layouts_follow_the_thesis():
     assert choose_pattern(0.2, 0.2, planar=True) == "multi_ring"
 
 
-def test_lobe_n_takes_the_spiral_from_eleven_samples_unless_asked_for_the_ring():
-    assert SPIRAL_MIN_SAMPLES == 11
+def test_lobe_n_takes_the_spiral_from_fifteen_samples_unless_asked_for_the_ring():
+    assert SPIRAL_MIN_SAMPLES == 15
     assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES - 1) == "ring"
     assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES) == "spiral"
     assert choose_pattern(0.1, 0.1, n=None) == "ring"  # lobe-N+ring
@@ -86,7 +87,7 @@ def test_lobe_n_takes_the_spiral_from_eleven_samples_unless_asked_for_the_ring()
     wo = direction_from_angles_deg(30)
     assert lobe_samples(lobe, wo, 15).kind == "spiral"
     assert lobe_samples(lobe, wo, 15, pattern="ring").kind == "ring"
-    assert lobe_samples(lobe, wo, 7).kind == "ring"
+    assert lobe_samples(lobe, wo, 11).kind == "ring"
     xi1, xi2 = pattern_xi(11, "spiral")
     assert xi1[0] == 1.0  # the centre first, as in the ring
     np.testing.assert_allclose(1.0 - xi1[1:], np.sqrt((np.arange(1, 11) + 0.5) / 11))
@@ -174,7 +175,28 @@ def test_lod_formula_equations_4_14_to_4_17():
     # Ellipse semi-axes from Eq. 4.14-4.15 at normal incidence: the mirror of a half vector at
     # theta_thresh is 2 theta_thresh away from the centre.
     t = theta_thresh(dist, np.array(0.0))
-    assert lobe_sample_area(dist, wo, 1) == pytest.approx(np.pi * np.tan(2 * t) ** 2)
+    cone = 2 * np.pi * (1 - np.cos(2 * t))  # solid angle of the circular cone of half-angle 2 t
+    assert lobe_sample_area(dist, wo, 1) == pytest.approx(cone, rel=1e-12)
+
+
+@pytest.mark.parametrize("alpha", [0.02, 0.12, 0.25, 0.35])
+def test_sample_footprint_is_the_lobe_solid_angle(alpha):
+    """The footprint of Eq. 4.14-4.15 as a solid angle: for an isotropic lobe at normal
+    incidence, n samples' areas add up to the cap inside the lobe's border, measured here by
+    counting directions of a fine Fibonacci sphere inside the border cone (independent of the
+    closed form). The thesis' tangent-plane area exceeds it by cos^2(a / 2) / cos^2(a) for a
+    cone of half-angle a (2.5x at alpha = 0.25, a = 56 deg)."""
+    dist = MicrofacetDistribution("beckmann", alpha, alpha)
+    wo = direction_from_angles_deg(0)
+    half_angle = 2 * float(theta_thresh(dist, np.array(0.0)))
+    count = 2_000_000
+    i = np.arange(count) + 0.5
+    z = 1 - 2 * i / count  # Fibonacci sphere: equal-area points
+    counted = 4 * np.pi * np.count_nonzero(z >= np.cos(half_angle)) / count
+    assert 7 * lobe_sample_area(dist, wo, 7) == pytest.approx(counted, rel=2e-3, abs=1e-5)
+    thesis = np.pi * np.tan(min(half_angle, MAX_ELLIPSE_ANGLE)) ** 2
+    # tan^2 a / (2 sin(a / 2))^2 = cos^2(a / 2) / cos^2 a
+    assert thesis / counted == pytest.approx((np.cos(half_angle / 2) / np.cos(half_angle)) ** 2, rel=3e-3)
 
 
 # Measured worst relative error over n = 5, 11, 19 and theta <= 50 deg, rounded up: lobes with
