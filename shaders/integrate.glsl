@@ -153,9 +153,15 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
 #if defined(LOBE_NORMALIZE)
     // lobeview's energy normalisation: Eq. 4.25 rescaled to be exact under uniform light.
     vec3 target = lobe_albedo(l, lobe_index, wo);
-    return vec3(num_unit.r > 0.0 ? num.r * target.r / num_unit.r : 0.0,
-                num_unit.g > 0.0 ? num.g * target.g / num_unit.g : 0.0,
-                num_unit.b > 0.0 ? num.b * target.b / num_unit.b : 0.0);
+    vec3 core = vec3(num_unit.r > 0.0 ? num.r / num_unit.r : 0.0, num_unit.g > 0.0 ? num.g / num_unit.g : 0.0,
+                     num_unit.b > 0.0 ? num.b / num_unit.b : 0.0);
+    if (l.dist != DIST_GGX) return core * target;
+    // GGX's tail beyond the pattern's core (patterns.py step 7): its share of the albedo read by
+    // one lookup at the lobe's centre, filtered over the cone of half-angle 2 atan(t alpha).
+    float half_angle = min(2.0 * atan(GGX_TAIL_MEDIAN_TAN * sqrt(l.ax * l.ay)), MAX_ELLIPSE_ANGLE);
+    vec3 centre = reflected_wi(l, vec3(-wo.xy, wo.z));
+    vec3 tail = incident(tbn * centre, 2.0 * PI * (1.0 - cos(half_angle)));
+    return target * ((1.0 - GGX_TAIL_FRACTION) * core + GGX_TAIL_FRACTION * tail);
 #else
     return vec3(den.r > 0.0 ? num.r / den.r : 0.0, den.g > 0.0 ? num.g / den.g : 0.0,
                 den.b > 0.0 ? num.b / den.b : 0.0);

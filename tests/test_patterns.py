@@ -8,6 +8,8 @@ import pytest
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.microfacet import MicrofacetDistribution
 from lobeview.materials.patterns import (
+    GGX_TAIL_FRACTION,
+    GGX_TAIL_MEDIAN_TAN,
     MAX_ELLIPSE_ANGLE,
     RING_XI1,
     SPIRAL_MIN_SAMPLES,
@@ -314,3 +316,55 @@ def test_frame_rotates_lookups_but_not_the_result_for_isotropic_light():
     b = integrate_lobe(lobe, wo, record, 7, frame=frame)
     np.testing.assert_allclose(a, b)
     np.testing.assert_allclose(seen[1], seen[0] @ frame.T)
+
+
+def test_ggx_tail_constants_match_the_distribution():
+    """Step 7's tail: the share of GGX's projected normal mass (integral of D cos theta_h) outside
+    the pattern's core tan(theta_h) <= sqrt(-ln xi_border) alpha, and the tan / alpha that splits
+    that tail in halves, integrated numerically from D (independent of the closed-form CDF)."""
+    alpha = 0.2
+    dist = MicrofacetDistribution("ggx", alpha, alpha)
+    theta = np.linspace(0.0, np.pi / 2, 400_001)[:-1]
+    h = np.stack([np.sin(theta), np.zeros_like(theta), np.cos(theta)], -1)
+    density = dist.D(h) * np.cos(theta) * np.sin(theta) * 2 * np.pi  # per d theta
+    cdf = np.concatenate([[0.0], np.cumsum(0.5 * (density[1:] + density[:-1]) * np.diff(theta))])
+    assert cdf[-1] == pytest.approx(1.0, abs=1e-4)
+    core_edge = np.arctan(np.sqrt(-np.log(XI_BORDER)) * alpha)
+    assert 1.0 - np.interp(core_edge, theta, cdf) == pytest.approx(GGX_TAIL_FRACTION, abs=2e-4)
+    median_edge = np.arctan(GGX_TAIL_MEDIAN_TAN * alpha)
+    assert 1.0 - np.interp(median_edge, theta, cdf) == pytest.approx(GGX_TAIL_FRACTION / 2, abs=2e-4)
+
+
+@pytest.mark.parametrize("preset", ["gold-ggx", "gltf-red-plastic"])
+def test_ggx_tail_keeps_the_normalised_quadrature_exact_under_uniform_light(preset):
+    from lobeview.materials.patterns import AlbedoTable, has_ggx_tail
+
+    bsdf = build_bsdf(PRESETS[preset])
+    lobes = specular_lobes(bsdf)
+    assert any(has_ggx_tail(lobe) for lobe in lobes)
+    for lobe in lobes:
+        table = AlbedoTable.build(lobe)
+        for theta in (0.0, 40.0, 70.0):
+            wo = direction_from_angles_deg(theta, 20)
+            value = integrate_lobe(lobe, wo, constant(2.5), 7, albedo_table=table)
+            np.testing.assert_allclose(value, 2.5 * table.lookup(wo), rtol=1e-12)
+
+
+def test_ggx_tail_lookup_is_wide_and_centred_on_the_mirror_direction():
+    from lobeview.materials.patterns import ggx_tail_radiance, ggx_tail_solid_angle, has_ggx_tail
+
+    seen = []
+
+    def radiance(dirs, lod):
+        seen.append((dirs.copy(), np.array(lod, dtype=float)))
+        return np.ones((len(dirs), 3))
+
+    lobe = build_bsdf(PRESETS["gold-ggx"]).components[-1]
+    wo = direction_from_angles_deg(30, 0)
+    ggx_tail_radiance(lobe, wo, radiance, 256, None)
+    ((dirs, lod),) = seen
+    np.testing.assert_allclose(dirs[0], [-wo[0], -wo[1], wo[2]])
+    core_area = lobe_sample_area(lobe.distribution, wo, 1)
+    assert ggx_tail_solid_angle(lobe.distribution) > 1.5 * core_area  # wider than the whole core
+    assert lod[0] > cube_map_lod(dirs, core_area, 256)[0]
+    assert has_ggx_tail(lobe) and not has_ggx_tail(KurtLobe(1.0, 0.2, 0.2, 1.0, 0.0))

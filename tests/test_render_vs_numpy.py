@@ -242,3 +242,49 @@ def test_reference_with_a_sun_matches_numpy_multiple_importance_sampling(preset)
         renderer.release()
     finally:
         ctx.release()
+
+
+@pytest.fixture(scope="module")
+def smooth_sphere():
+    ctx = create_headless_context()
+    env = EnvironmentMap.from_function(smooth_sky, height=256, name="smooth-sky")
+    renderer = PreviewRenderer(ctx, env, uv_sphere(rings=64, segments=128), size=(96, 96), face_size=128)
+    yield renderer
+    renderer.release()
+    ctx.release()
+
+
+# lobe-7+norm's relative RMSE against a 2048-spp reference on the smooth sky (measured 2026-11-25,
+# llvmpipe): GGX 0.033 / 0.060 / 0.076 at alpha 0.05 / 0.15 / 0.30 (0.054 / 0.102 / 0.135 before
+# the tail term of patterns.py step 7), Beckmann 0.017 / 0.042 / 0.053. Issue 20's target is 5 %:
+# met at alpha 0.05 (both) and Beckmann 0.15; GGX 0.15 / 0.30 and Beckmann 0.30 miss it (the
+# pattern's few lookups of a wide lobe through a box-filtered MIP chain; see the bench).
+SMOOTH_SKY_LOBE7_BOUNDS = {
+    ("ggx", 0.05): 0.045,
+    ("ggx", 0.15): 0.075,
+    ("ggx", 0.30): 0.095,
+    ("beckmann", 0.05): 0.025,
+    ("beckmann", 0.15): 0.05,
+    ("beckmann", 0.30): 0.065,
+}
+
+
+@pytest.mark.parametrize("distribution,alpha", sorted(SMOOTH_SKY_LOBE7_BOUNDS))
+def test_lobe7_is_close_to_the_converged_reference_on_a_smooth_sky(smooth_sphere, distribution, alpha):
+    """Issue 20: lobe-7 (the viewer's normalised form) on env-lit isotropic GGX / Beckmann
+    spheres with alpha <= 0.3 against `reference` (2048 samples per lobe, box-filtered pixels)
+    under a smooth environment, relative RMSE of linear radiance over the sphere."""
+    from lobeview.bench.metrics import relative_rmse
+
+    material = (
+        f'{{"model": "microfacet", "distribution": "{distribution}", "alpha": {alpha}, '
+        '"fresnel": {"type": "schlick", "r0": 0.9}}'
+    )
+    bsdf = build_bsdf(load_material(material))
+    reference = smooth_sphere.render(CAMERA, bsdf, "reference", spp=2048, background=False)
+    result = smooth_sphere.render(CAMERA, bsdf, "lobe-7+norm", background=False)
+    mask = reference.mask
+    error = relative_rmse(result.radiance[mask], reference.radiance[mask])
+    assert error < SMOOTH_SKY_LOBE7_BOUNDS[(distribution, alpha)], error
+    if alpha <= 0.05 or (distribution, alpha) == ("beckmann", 0.15):
+        assert error < 0.05  # the issue's target, where it is met

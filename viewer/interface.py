@@ -27,7 +27,15 @@ from lobeview.materials.banks import BANKS_AZIMUTHS
 from lobeview.materials.gltf import SHEEN_TABLE_SIZE
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
 from lobeview.materials.microfacet import ALPHA_MIN
-from lobeview.materials.patterns import ALBEDO_MU, ALBEDO_PHI, ANISOTROPY_LINE_RATIO, MAX_ELLIPSE_ANGLE, XI_BORDER
+from lobeview.materials.patterns import (
+    ALBEDO_MU,
+    ALBEDO_PHI,
+    ANISOTROPY_LINE_RATIO,
+    GGX_TAIL_FRACTION,
+    GGX_TAIL_MEDIAN_TAN,
+    MAX_ELLIPSE_ANGLE,
+    XI_BORDER,
+)
 from lobeview.materials.rational import MAX_TERMS as RATIONAL_MAX_TERMS
 from lobeview.materials.rational import graded_exponents
 from lobeview.materials.rsibr import (
@@ -131,6 +139,8 @@ SHADER_CONSTANTS: dict = {
     "ALBEDO_MU": ALBEDO_MU,
     "XI_BORDER": float(XI_BORDER),  # Eq. 4.10
     "MAX_ELLIPSE_ANGLE": float(MAX_ELLIPSE_ANGLE),  # Eq. 4.15 clamp
+    "GGX_TAIL_FRACTION": float(GGX_TAIL_FRACTION),  # materials/patterns.py step 7
+    "GGX_TAIL_MEDIAN_TAN": float(GGX_TAIL_MEDIAN_TAN),
     "ANISOTROPY_LINE_RATIO": float(ANISOTROPY_LINE_RATIO),  # materials/patterns.py choose_pattern
     "CDF_ROW": CDF_ROW,
     "MAX_PROXY_PLANES": MAX_PROXY_PLANES,
