@@ -49,15 +49,17 @@ Steps, with the thesis equations:
   7. GGX tails (lobeview's, with the energy normalisation only): the pattern covers GGX's core
      (step 1), and the normalisation used to pour the tail's 18 % of the energy into the core,
      which made highlights too sharp and lost the glow around them. lobe-N+norm instead gives
-     the core (1 - GGX_TAIL_FRACTION) of the lobe's albedo and the tail the rest, read by one
-     more lookup at the lobe's centre direction filtered over a cone of half-angle
-     2 atan(GGX_TAIL_MEDIAN_TAN alpha) (:func:`ggx_tail_solid_angle`; the tail is an annulus,
-     this disc around it is the one-lookup approximation; anisotropic lobes use sqrt(ax ay)).
-     Exact under uniform light like the normalisation itself. Measured (200 px sphere,
-     interior.exr, lobe-7+norm / lobe-19+norm): gold-ggx 23.5 -> 25.5 / 25.4 -> 26.9 dB,
-     gltf-red-plastic 29.2 -> 29.5 / 29.8 -> 30.1; relative RMSE of lobe-7+norm on a smooth sky
-     (tests/test_render_vs_numpy.py) 5.4 / 10.2 / 13.5 % -> 3.3 / 6.0 / 7.6 % at alpha 0.05 /
-     0.15 / 0.30.
+     the core (1 - GGX_TAIL_FRACTION) of the lobe's albedo and the tail the rest, the mean of
+     GGX_TAIL_SAMPLES = 4 more lookups on the tail's median cone (tan theta_h =
+     GGX_TAIL_MEDIAN_TAN alpha), each filtered over a quarter of the annulus between the core's
+     edge and the tail's third quartile (:func:`ggx_tail_solid_angle`; anisotropic lobes use
+     sqrt(ax ay)). Exact under uniform light like the normalisation itself. Measured (200 px
+     sphere, lobe-7+norm / lobe-19+norm, bench/patterns.py): gold-ggx 23.5 -> 26.3 / 25.4 ->
+     28.2 dB on interior.exr, 20.9 -> 21.5 / 22.8 -> 21.7 on courtyard.exr (its sun: a few
+     coarse lookups misplace its glow), gltf-red-plastic 29.2 -> 29.9 / 29.8 -> 30.8 and 31.2 ->
+     31.6 / 31.4 -> 31.9. One lookup at the lobe's centre over the whole tail cone was tried
+     first: 2-3 dB worse on courtyard.exr (the coarse box-filtered MIP level put the sun's glow
+     around the texel, not around the sun).
 """
 
 from __future__ import annotations
@@ -96,6 +98,9 @@ GOLDEN_ANGLE_TURNS = (3.0 - np.sqrt(5.0)) / 2.0
 GGX_TAIL_FRACTION = 1.0 / (1.0 - np.log(XI_BORDER))
 # The tail's median tan(theta_h) / alpha: the CDF reaches 1 - GGX_TAIL_FRACTION / 2 there.
 GGX_TAIL_MEDIAN_TAN = float(np.sqrt((1.0 - GGX_TAIL_FRACTION / 2.0) / (GGX_TAIL_FRACTION / 2.0)))
+# ... and its third quartile (CDF 1 - GGX_TAIL_FRACTION / 4): the outer edge of the footprints.
+GGX_TAIL_OUTER_TAN = float(np.sqrt((1.0 - GGX_TAIL_FRACTION / 4.0) / (GGX_TAIL_FRACTION / 4.0)))
+GGX_TAIL_SAMPLES = 4  # tail lookups on the median cone (one centre lookup: see step 7)
 # 1 / golden ratio: the rank-1 lattice of lattice_xi (a Fibonacci lattice for any n)
 GOLDEN_LATTICE_STEP = (np.sqrt(5.0) - 1.0) / 2.0
 # Second coordinate of the lattice's first point: 0.25 is the middle of the first half of [0, 1),
@@ -334,6 +339,7 @@ def integrate_lobe(
             if not has_ggx_tail(lobe):
                 return core * target
             tail = ggx_tail_radiance(lobe, wo, radiance, face_size, frame)
+            tail = core if tail is None else tail
             return target * ((1.0 - GGX_TAIL_FRACTION) * core + GGX_TAIL_FRACTION * tail)
     elif weighting == "eq4.24":
         num = np.sum(li * (cos_i**2)[:, None] * f, axis=0)
@@ -350,23 +356,35 @@ def has_ggx_tail(lobe) -> bool:
 
 
 def ggx_tail_solid_angle(distribution: MicrofacetDistribution) -> float:
-    """Step 7: the footprint of the tail lookup, the cone of half-angle 2 atan(t alpha) around
-    the mirror direction (at normal incidence the reflection of a half vector at theta_h is
-    2 theta_h away), t = GGX_TAIL_MEDIAN_TAN, alpha = sqrt(alpha_x alpha_y)."""
+    """Step 7: the footprint of one tail lookup, 1 / GGX_TAIL_SAMPLES of the annulus between the
+    reflected cones of the core's edge and of GGX_TAIL_OUTER_TAN (at normal incidence the
+    reflection of a half vector at theta_h is 2 theta_h away), alpha = sqrt(alpha_x alpha_y)."""
     alpha = np.sqrt(distribution.alpha_x * distribution.alpha_y)
-    half_angle = min(2.0 * np.arctan(GGX_TAIL_MEDIAN_TAN * alpha), MAX_ELLIPSE_ANGLE)
-    return float(2.0 * np.pi * (1.0 - np.cos(half_angle)))
+    inner = min(2.0 * np.arctan(np.sqrt(-np.log(XI_BORDER)) * alpha), MAX_ELLIPSE_ANGLE)
+    outer = min(2.0 * np.arctan(GGX_TAIL_OUTER_TAN * alpha), MAX_ELLIPSE_ANGLE)
+    return float(2.0 * np.pi * (np.cos(inner) - np.cos(outer)) / GGX_TAIL_SAMPLES)
 
 
-def ggx_tail_radiance(lobe, wo: np.ndarray, radiance: RadianceFn, face_size: int, frame) -> np.ndarray:
-    """Step 7: one lookup at the lobe's centre direction filtered over the tail's footprint."""
+def ggx_tail_half_vectors(distribution: MicrofacetDistribution) -> np.ndarray:
+    """Step 7: the GGX_TAIL_SAMPLES half vectors of the tail lookups, on the tail's median cone
+    tan(theta_h) = GGX_TAIL_MEDIAN_TAN alpha at azimuths 2 pi (k + 1/2) / GGX_TAIL_SAMPLES."""
+    alpha = np.sqrt(distribution.alpha_x * distribution.alpha_y)
+    phi = 2.0 * np.pi * (np.arange(GGX_TAIL_SAMPLES) + 0.5) / GGX_TAIL_SAMPLES
+    return spherical_direction(np.full(GGX_TAIL_SAMPLES, np.arctan(GGX_TAIL_MEDIAN_TAN * alpha)), phi)
+
+
+def ggx_tail_radiance(lobe, wo: np.ndarray, radiance: RadianceFn, face_size: int, frame) -> np.ndarray | None:
+    """Step 7: the mean of the tail lookups above the horizon (None if all are below it)."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
-    centre = np.array([[-wo[0], -wo[1], wo[2]]])  # Eq. 4.8 with h = n
-    if getattr(lobe, "transmission", False):
-        centre = mirror_z(centre)
-    world = centre if frame is None else centre @ np.asarray(frame, dtype=np.float64).T
+    h = ggx_tail_half_vectors(lobe.distribution)
+    wr = reflect(np.broadcast_to(wo, h.shape), h)
+    wr = wr[wr[:, 2] > 0.0]
+    if len(wr) == 0:
+        return None
+    wi = mirror_z(wr) if getattr(lobe, "transmission", False) else wr
+    world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
     lod = cube_map_lod(world, ggx_tail_solid_angle(lobe.distribution), face_size) + LOBE_LOD_BIAS
-    return np.asarray(radiance(world, lod), dtype=np.float64)[0]
+    return np.mean(np.asarray(radiance(world, lod), dtype=np.float64), axis=0)
 
 
 def integrate_sampled_lobe(

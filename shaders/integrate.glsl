@@ -157,10 +157,22 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
                      num_unit.b > 0.0 ? num.b / num_unit.b : 0.0);
     if (l.dist != DIST_GGX) return core * target;
     // GGX's tail beyond the pattern's core (patterns.py step 7): its share of the albedo read by
-    // one lookup at the lobe's centre, filtered over the cone of half-angle 2 atan(t alpha).
-    float half_angle = min(2.0 * atan(GGX_TAIL_MEDIAN_TAN * sqrt(l.ax * l.ay)), MAX_ELLIPSE_ANGLE);
-    vec3 centre = reflected_wi(l, vec3(-wo.xy, wo.z));
-    vec3 tail = incident(tbn * centre, 2.0 * PI * (1.0 - cos(half_angle)));
+    // GGX_TAIL_SAMPLES lookups on the tail's median cone, each over a quarter of its annulus.
+    float a = sqrt(l.ax * l.ay);
+    float inner = min(2.0 * atan(sqrt(-log(XI_BORDER)) * a), MAX_ELLIPSE_ANGLE);
+    float outer = min(2.0 * atan(GGX_TAIL_OUTER_TAN * a), MAX_ELLIPSE_ANGLE);
+    float tail_area = 2.0 * PI * (cos(inner) - cos(outer)) / float(GGX_TAIL_SAMPLES);
+    float tail_theta = atan(GGX_TAIL_MEDIAN_TAN * a);
+    vec3 tail = vec3(0.0);
+    int tail_count = 0;
+    for (int k = 0; k < GGX_TAIL_SAMPLES; ++k) {
+        vec3 h = spherical_dir(tail_theta, 2.0 * PI * (float(k) + 0.5) / float(GGX_TAIL_SAMPLES));
+        vec3 wr = 2.0 * dot(wo, h) * h - wo;
+        if (wr.z <= 0.0) continue;
+        tail += incident(tbn * reflected_wi(l, wr), tail_area);
+        ++tail_count;
+    }
+    tail = tail_count > 0 ? tail / float(tail_count) : core;
     return target * ((1.0 - GGX_TAIL_FRACTION) * core + GGX_TAIL_FRACTION * tail);
 #else
     return vec3(den.r > 0.0 ? num.r / den.r : 0.0, den.g > 0.0 ? num.g / den.g : 0.0,

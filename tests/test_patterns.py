@@ -10,6 +10,7 @@ from lobeview.materials.microfacet import MicrofacetDistribution
 from lobeview.materials.patterns import (
     GGX_TAIL_FRACTION,
     GGX_TAIL_MEDIAN_TAN,
+    GGX_TAIL_OUTER_TAN,
     MAX_ELLIPSE_ANGLE,
     RING_XI1,
     SPIRAL_MIN_SAMPLES,
@@ -333,6 +334,8 @@ def test_ggx_tail_constants_match_the_distribution():
     assert 1.0 - np.interp(core_edge, theta, cdf) == pytest.approx(GGX_TAIL_FRACTION, abs=2e-4)
     median_edge = np.arctan(GGX_TAIL_MEDIAN_TAN * alpha)
     assert 1.0 - np.interp(median_edge, theta, cdf) == pytest.approx(GGX_TAIL_FRACTION / 2, abs=2e-4)
+    outer_edge = np.arctan(GGX_TAIL_OUTER_TAN * alpha)
+    assert 1.0 - np.interp(outer_edge, theta, cdf) == pytest.approx(GGX_TAIL_FRACTION / 4, abs=2e-4)
 
 
 @pytest.mark.parametrize("preset", ["gold-ggx", "gltf-red-plastic"])
@@ -350,8 +353,13 @@ def test_ggx_tail_keeps_the_normalised_quadrature_exact_under_uniform_light(pres
             np.testing.assert_allclose(value, 2.5 * table.lookup(wo), rtol=1e-12)
 
 
-def test_ggx_tail_lookup_is_wide_and_centred_on_the_mirror_direction():
-    from lobeview.materials.patterns import ggx_tail_radiance, ggx_tail_solid_angle, has_ggx_tail
+def test_ggx_tail_lookups_sit_on_the_tail_cone_around_the_mirror_direction():
+    from lobeview.materials.patterns import (
+        GGX_TAIL_SAMPLES,
+        ggx_tail_radiance,
+        ggx_tail_solid_angle,
+        has_ggx_tail,
+    )
 
     seen = []
 
@@ -359,12 +367,23 @@ def test_ggx_tail_lookup_is_wide_and_centred_on_the_mirror_direction():
         seen.append((dirs.copy(), np.array(lod, dtype=float)))
         return np.ones((len(dirs), 3))
 
-    lobe = build_bsdf(PRESETS["gold-ggx"]).components[-1]
-    wo = direction_from_angles_deg(30, 0)
+    lobe = next(c for c in build_bsdf(PRESETS["gold-ggx"]).components if has_ggx_tail(c))
+    alpha = lobe.distribution.alpha_x
+    wo = direction_from_angles_deg(0)  # normal incidence: reflection doubles theta_h
     ggx_tail_radiance(lobe, wo, radiance, 256, None)
     ((dirs, lod),) = seen
-    np.testing.assert_allclose(dirs[0], [-wo[0], -wo[1], wo[2]])
-    core_area = lobe_sample_area(lobe.distribution, wo, 1)
-    assert ggx_tail_solid_angle(lobe.distribution) > 1.5 * core_area  # wider than the whole core
-    assert lod[0] > cube_map_lod(dirs, core_area, 256)[0]
-    assert has_ggx_tail(lobe) and not has_ggx_tail(KurtLobe(1.0, 0.2, 0.2, 1.0, 0.0))
+    assert len(dirs) == GGX_TAIL_SAMPLES
+    np.testing.assert_allclose(dirs[:, 2], np.cos(2 * np.arctan(GGX_TAIL_MEDIAN_TAN * alpha)))
+    np.testing.assert_allclose(dirs[:, :2].mean(axis=0), 0.0, atol=1e-12)  # around the mirror direction
+    # The footprints tile the annulus between the core's reflected edge and the tail's quartile.
+    inner = 2 * np.arctan(np.sqrt(-np.log(XI_BORDER)) * alpha)
+    outer = 2 * np.arctan(GGX_TAIL_OUTER_TAN * alpha)
+    annulus = 2 * np.pi * (np.cos(inner) - np.cos(outer))
+    assert GGX_TAIL_SAMPLES * ggx_tail_solid_angle(lobe.distribution) == pytest.approx(annulus)
+    core_sample = lobe_sample_area(lobe.distribution, wo, 7)
+    assert np.all(lod > cube_map_lod(dirs, core_sample, 256))  # wider than a lobe-7 core sample
+    assert not has_ggx_tail(KurtLobe(1.0, 0.2, 0.2, 1.0, 0.0))
+    # Grazing: tail lookups below the horizon are dropped (the mean is of those left).
+    assert ggx_tail_radiance(lobe, direction_from_angles_deg(89.0), radiance, 256, None) is not None
+    grazing_dirs = seen[-1][0]
+    assert 0 < len(grazing_dirs) < GGX_TAIL_SAMPLES and np.all(grazing_dirs[:, 2] > 0)

@@ -255,14 +255,14 @@ def smooth_sphere():
 
 
 # lobe-7+norm's relative RMSE against a 2048-spp reference on the smooth sky (measured 2026-11-25,
-# llvmpipe): GGX 0.033 / 0.060 / 0.076 at alpha 0.05 / 0.15 / 0.30 (0.054 / 0.102 / 0.135 before
+# llvmpipe): GGX 0.023 / 0.045 / 0.084 at alpha 0.05 / 0.15 / 0.30 (0.054 / 0.102 / 0.135 before
 # the tail term of patterns.py step 7), Beckmann 0.017 / 0.042 / 0.053. Issue 20's target is 5 %:
-# met at alpha 0.05 (both) and Beckmann 0.15; GGX 0.15 / 0.30 and Beckmann 0.30 miss it (the
-# pattern's few lookups of a wide lobe through a box-filtered MIP chain; see the bench).
+# met at alpha 0.05 and 0.15 for both; GGX 0.30 and Beckmann 0.30 miss it (seven lookups of a wide
+# lobe through a box-filtered MIP chain; lobe-15+norm: 0.115 / 0.086, the spiral no better there).
 SMOOTH_SKY_LOBE7_BOUNDS = {
-    ("ggx", 0.05): 0.045,
-    ("ggx", 0.15): 0.075,
-    ("ggx", 0.30): 0.095,
+    ("ggx", 0.05): 0.03,
+    ("ggx", 0.15): 0.05,
+    ("ggx", 0.30): 0.10,
     ("beckmann", 0.05): 0.025,
     ("beckmann", 0.15): 0.05,
     ("beckmann", 0.30): 0.065,
@@ -286,5 +286,5 @@ def test_lobe7_is_close_to_the_converged_reference_on_a_smooth_sky(smooth_sphere
     mask = reference.mask
     error = relative_rmse(result.radiance[mask], reference.radiance[mask])
     assert error < SMOOTH_SKY_LOBE7_BOUNDS[(distribution, alpha)], error
-    if alpha <= 0.05 or (distribution, alpha) == ("beckmann", 0.15):
+    if alpha <= 0.15:
         assert error < 0.05  # the issue's target, where it is met

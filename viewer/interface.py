@@ -33,6 +33,8 @@ from lobeview.materials.patterns import (
     ANISOTROPY_LINE_RATIO,
     GGX_TAIL_FRACTION,
     GGX_TAIL_MEDIAN_TAN,
+    GGX_TAIL_OUTER_TAN,
+    GGX_TAIL_SAMPLES,
     MAX_ELLIPSE_ANGLE,
     XI_BORDER,
 )
@@ -141,6 +143,8 @@ SHADER_CONSTANTS: dict = {
     "MAX_ELLIPSE_ANGLE": float(MAX_ELLIPSE_ANGLE),  # Eq. 4.15 clamp
     "GGX_TAIL_FRACTION": float(GGX_TAIL_FRACTION),  # materials/patterns.py step 7
     "GGX_TAIL_MEDIAN_TAN": float(GGX_TAIL_MEDIAN_TAN),
+    "GGX_TAIL_OUTER_TAN": float(GGX_TAIL_OUTER_TAN),
+    "GGX_TAIL_SAMPLES": GGX_TAIL_SAMPLES,
     "ANISOTROPY_LINE_RATIO": float(ANISOTROPY_LINE_RATIO),  # materials/patterns.py choose_pattern
     "CDF_ROW": CDF_ROW,
     "MAX_PROXY_PLANES": MAX_PROXY_PLANES,
