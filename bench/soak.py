@@ -100,16 +100,29 @@ def soak_script(
     return steps
 
 
+XVFB_ATTEMPTS = 20  # displays tried from the preferred one on (a stale server may hold one)
+
+
 def start_xvfb(display_number: int) -> tuple[subprocess.Popen, str]:
-    """A virtual X server ``:display_number`` (1024x768x24, no TCP) for the window tests."""
-    display = f":{display_number}"
-    proc = subprocess.Popen(
-        ["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    time.sleep(1.5)
-    return proc, display
+    """A virtual X server (1024x768x24, no TCP) for the window tests, on ``:display_number`` or
+    the next free display: one left behind by a killed run keeps its lock file and makes a new
+    server on the same number exit at once."""
+    proc = None
+    for number in range(display_number, display_number + XVFB_ATTEMPTS):
+        if Path(f"/tmp/.X{number}-lock").exists():
+            continue
+        display = f":{number}"
+        proc = subprocess.Popen(
+            ["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+        time.sleep(1.5)
+        if proc.poll() is None:
+            return proc, display
+    if proc is None:
+        raise RuntimeError(f"X displays :{display_number}..:{number} are all taken (lock files in /tmp)")
+    return proc, display  # the caller reports the last one that did not start
 
 
 def _display_for_soak() -> tuple[subprocess.Popen | None, str]:

@@ -6,6 +6,12 @@ CI runs a short soak (bench/soak.py) under Xvfb; the long run is
 
 from __future__ import annotations
 
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
 from lobeview.bench import soak
 
 
@@ -58,3 +64,25 @@ def test_viewer_survives_random_use_without_leaking(xvfb, tmp_path, monkeypatch)
     assert sum(result["actions"].get(a, 0) for a in ("set", "method", "click")) > 30, result["actions"]
     assert len(result["stats"]) >= 6
     assert soak.check(result, warmup_frame=40, max_gl_growth=16, max_rss_growth_mib=200) == []
+
+
+@pytest.mark.skipif(shutil.which("Xvfb") is None, reason="Xvfb not installed")
+def test_xvfb_skips_a_display_a_stale_server_holds():
+    """A server left behind by a killed run keeps /tmp/.X<n>-lock: the next run takes :n+1
+    instead of failing (seen: a killed CI left :259 and the next one's window tests errored)."""
+    from lobeview.bench.soak import start_xvfb
+
+    number = 700 + os.getpid() % 50
+    lock = Path(f"/tmp/.X{number}-lock")
+    if lock.exists() or Path(f"/tmp/.X{number + 1}-lock").exists():
+        pytest.skip(f"displays :{number} / :{number + 1} are in use here")
+    lock.write_text("stale\n")
+    try:
+        proc, display = start_xvfb(number)
+        try:
+            assert display == f":{number + 1}" and proc.poll() is None
+        finally:
+            proc.terminate()
+            proc.wait(timeout=10)
+    finally:
+        lock.unlink()
