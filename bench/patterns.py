@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.bench.metrics import exposure_for, psnr_8bit, relative_rmse
+from lobeview.bench.report import write_image_rows
 from lobeview.bench.targets import resolve_environment
 from lobeview.core.methods import Method
 from lobeview.materials.patterns import SPIRAL_MIN_SAMPLES
@@ -117,11 +118,7 @@ def main(argv=None) -> int:
     ctx.release()
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    from PIL import Image
-
-    figure = out / f"patterns-{stamp}.png"
-    Image.fromarray((np.concatenate(figure_rows, axis=0) * 255 + 0.5).astype(np.uint8)).save(figure)
+    figure = write_image_rows(out, f"patterns-{stamp}.png", figure_rows)
     n_text = " | ".join(f"N={n}" for n in samples)
     lines = [
         "# lobe-N against N: the thesis' ring and the Fibonacci spiral",

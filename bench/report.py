@@ -120,6 +120,17 @@ def write_plots(base: Path, cells, sweep, references) -> list[Path]:
     return paths
 
 
+def write_image_rows(out: Path, name: str, rows: list[np.ndarray]) -> Path:
+    """A figure of image rows (each (H, W, 3) in [0, 1], stacked top to bottom) as out/name,
+    8-bit PNG; the folder is made if missing."""
+    from PIL import Image
+
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / name
+    Image.fromarray((np.concatenate(rows, axis=0) * 255 + 0.5).astype(np.uint8)).save(path)
+    return path
+
+
 def _geomean(values) -> float:
     values = np.maximum(np.asarray(values, float), 1e-12)
     return float(np.exp(np.mean(np.log(values))))

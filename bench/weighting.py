@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.bench.metrics import exposure_for, psnr_8bit, relative_rmse
+from lobeview.bench.report import write_image_rows
 from lobeview.core.methods import Method
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.builtin_env import load_environment
@@ -107,11 +108,7 @@ def main(argv=None) -> int:
     ctx.release()
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    from PIL import Image
-
-    figure = out / f"weighting-{stamp}.png"
-    Image.fromarray((np.concatenate(figure_rows, axis=0) * 255 + 0.5).astype(np.uint8)).save(figure)
+    figure = write_image_rows(out, f"weighting-{stamp}.png", figure_rows)
     lines = [
         "# lobe-N: Eq. 4.24 against Eq. 4.25 (thesis Fig. 4.24)",
         "",
