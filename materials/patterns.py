@@ -108,17 +108,22 @@ GOLDEN_LATTICE_STEP = (np.sqrt(5.0) - 1.0) / 2.0
 LATTICE_U2_START = 0.25
 
 
-def choose_pattern(alpha_x: float, alpha_y: float, planar: bool = False, n: int | None = None) -> str:
+def choose_pattern(
+    alpha_x: float, alpha_y: float, planar: bool = False, n: int | None = None, pattern: str = "auto"
+) -> str:
     """The thesis' rule: line pattern along the longer axis for strongly anisotropic lobes,
-    otherwise the ring (cube maps) or the multi-ring (planar mirror buffers); with ``n`` (the
-    sample count; None: the thesis' ring whatever N, the method suffix +ring) the spiral
-    replaces the ring on cube maps from SPIRAL_MIN_SAMPLES samples on."""
+    otherwise the ring (cube maps) or the multi-ring (planar mirror buffers); with the sample
+    count ``n`` and ``pattern`` 'auto' the spiral replaces the ring on cube maps from
+    SPIRAL_MIN_SAMPLES samples on ('ring', the method suffix +ring: the thesis' ring at any N)."""
+    if pattern not in LOBE_PATTERNS:
+        raise ValueError(f"unknown lobe-N pattern choice {pattern!r}; use one of {LOBE_PATTERNS}")
     ratio = max(alpha_x, alpha_y) / min(alpha_x, alpha_y)
     if ratio >= ANISOTROPY_LINE_RATIO:
         return "line_y" if alpha_y > alpha_x else "line_x"
     if planar:
         return "multi_ring"
-    return "spiral" if n is not None and n >= SPIRAL_MIN_SAMPLES else "ring"
+    spiral = pattern == "auto" and n is not None and n >= SPIRAL_MIN_SAMPLES
+    return "spiral" if spiral else "ring"
 
 
 def pattern_xi(n: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
@@ -257,25 +262,28 @@ def lobe_samples(
     """``kind`` forces a pattern; otherwise :func:`choose_pattern` picks one, with ``pattern``
     'auto' (the spiral from SPIRAL_MIN_SAMPLES on) or 'ring' (the thesis' ring at every N)."""
     dist = lobe.distribution
-    kind = kind or choose_pattern(dist.alpha_x, dist.alpha_y, n=pattern_choice_n(n, pattern))
+    kind = kind or choose_pattern(dist.alpha_x, dist.alpha_y, n=n, pattern=pattern)
     xi1, xi2 = pattern_xi(n, kind)
-    h = pattern_half_vectors(dist, xi1, xi2, xi_border)
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
-    wi = reflect(np.broadcast_to(wo, h.shape), h)
-    transmission = getattr(lobe, "transmission", False)
-    valid = wi[:, 2] > 0.0
-    if transmission:
-        wi = mirror_z(wi)
+    wi, valid = lobe_directions(lobe, wo, pattern_half_vectors(dist, xi1, xi2, xi_border))
     area = lobe_sample_area(dist, wo, n, xi_border)
-    world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
-    return LobeSamples(wi=wi, valid=valid, lod=cube_map_lod(world, area, face_size) + lod_bias, kind=kind)
+    lod = cube_map_lod(to_world(wi, frame), area, face_size) + lod_bias
+    return LobeSamples(wi=wi, valid=valid, lod=lod, kind=kind)
 
 
-def pattern_choice_n(n: int, pattern: str) -> int | None:
-    """The N :func:`choose_pattern` sees for a lobe-N pattern choice ('auto' or 'ring')."""
-    if pattern not in LOBE_PATTERNS:
-        raise ValueError(f"unknown lobe-N pattern choice {pattern!r}; use one of {LOBE_PATTERNS}")
-    return n if pattern == "auto" else None
+def lobe_directions(lobe, wo: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eq. 4.8 for the half vectors ``h`` (n, 3): the incident directions of ``lobe`` (mirrored
+    below the surface for a transmission lobe, shaders/bsdf.glsl reflected_wi) and whether the
+    reflection is above the horizon (False: discarded)."""
+    wr = reflect(np.broadcast_to(wo, h.shape), h)
+    valid = wr[:, 2] > 0.0
+    return (mirror_z(wr) if getattr(lobe, "transmission", False) else wr), valid
+
+
+def to_world(dirs: np.ndarray, frame: np.ndarray | None) -> np.ndarray:
+    """Local-frame directions (n, 3) in world space; ``frame`` columns are tangent, bitangent,
+    normal (None: the identity)."""
+    return dirs if frame is None else dirs @ np.asarray(frame, dtype=np.float64).T
 
 
 RadianceFn = Callable[[np.ndarray, np.ndarray], np.ndarray]
@@ -317,7 +325,7 @@ def integrate_lobe(
         return np.zeros(3)
     wi = samples.wi[valid]
     wo_b = np.broadcast_to(np.asarray(wo, dtype=np.float64).reshape(3), wi.shape)
-    world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
+    world = to_world(wi, frame)
     li = np.asarray(radiance(world, samples.lod[valid]), dtype=np.float64)
     f = lobe.eval(wi, wo_b)
     p = lobe.lobe_pdf(wi, wo_b)
@@ -376,13 +384,10 @@ def ggx_tail_half_vectors(distribution: MicrofacetDistribution) -> np.ndarray:
 def ggx_tail_radiance(lobe, wo: np.ndarray, radiance: RadianceFn, face_size: int, frame) -> np.ndarray | None:
     """Step 7: the mean of the tail lookups above the horizon (None if all are below it)."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
-    h = ggx_tail_half_vectors(lobe.distribution)
-    wr = reflect(np.broadcast_to(wo, h.shape), h)
-    wr = wr[wr[:, 2] > 0.0]
-    if len(wr) == 0:
+    wi, valid = lobe_directions(lobe, wo, ggx_tail_half_vectors(lobe.distribution))
+    if not np.any(valid):
         return None
-    wi = mirror_z(wr) if getattr(lobe, "transmission", False) else wr
-    world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
+    world = to_world(wi[valid], frame)
     lod = cube_map_lod(world, ggx_tail_solid_angle(lobe.distribution), face_size) + LOBE_LOD_BIAS
     return np.mean(np.asarray(radiance(world, lod), dtype=np.float64), axis=0)
 
@@ -407,7 +412,7 @@ def integrate_sampled_lobe(
     if not np.any(ok):
         return np.zeros(3)
     wi, inverse_pdf = wi[ok], inverse_pdf[ok]
-    world = wi if frame is None else wi @ np.asarray(frame, dtype=np.float64).T
+    world = to_world(wi, frame)
     lod = cube_map_lod(world, inverse_pdf / n, face_size) + lod_bias
     li = np.asarray(radiance(world, lod), dtype=np.float64)
     weight = lobe.eval(wi, np.broadcast_to(wo, wi.shape)) * (wi[:, 2] * inverse_pdf)[:, None]  # f cos / p

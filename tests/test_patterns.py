@@ -83,7 +83,8 @@ def test_lobe_n_takes_the_spiral_from_fifteen_samples_unless_asked_for_the_ring(
     assert SPIRAL_MIN_SAMPLES == 15
     assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES - 1) == "ring"
     assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES) == "spiral"
-    assert choose_pattern(0.1, 0.1, n=None) == "ring"  # lobe-N+ring
+    assert choose_pattern(0.1, 0.1, n=None) == "ring"  # no N: the thesis' rule
+    assert choose_pattern(0.1, 0.1, n=19, pattern="ring") == "ring"  # lobe-N+ring
     assert choose_pattern(0.1, 0.1, planar=True, n=19) == "multi_ring"  # mirror buffers: not measured
     assert choose_pattern(0.3, 0.05, n=19) == "line_x"  # anisotropic lobes keep the line
     lobe = KurtLobe(1.0, 0.2, 0.2, 1.0, 0.0)

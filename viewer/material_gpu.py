@@ -31,7 +31,6 @@ from lobeview.materials.patterns import (
     AlbedoTable,
     choose_pattern,
     lattice_xi,
-    pattern_choice_n,
     pattern_xi,
 )
 from lobeview.materials.rational import graded_exponents
@@ -273,7 +272,7 @@ def pack_patterns(material: PackedMaterial, n: int, planar: bool = False, patter
     if not 1 <= n <= MAX_PATTERN:
         raise ValueError(f"lobe-N supports 1 <= N <= {MAX_PATTERN}, got {n}")
     out = np.zeros((MAX_LOBES * MAX_PATTERN, 2), dtype=np.float32)
-    ring = np.stack(pattern_xi(n, choose_pattern(1.0, 1.0, planar, pattern_choice_n(n, pattern))), -1)
+    ring = np.stack(pattern_xi(n, choose_pattern(1.0, 1.0, planar, n, pattern)), -1)
     lattice = np.stack(lattice_xi(n), -1)
     for i, comp in enumerate(material.lobe_components):
         out[i * MAX_PATTERN : i * MAX_PATTERN + n] = lattice if getattr(comp, "sampled_pattern", False) else ring
