@@ -43,7 +43,17 @@ def add_scene_arguments(p) -> None:
         "--face-size",
         type=int,
         default=DEFAULT_FACE_SIZE,
-        help=f"cube-map face resolution (default {DEFAULT_FACE_SIZE})",
+        help=f"cube-map face resolution of the narrowest lobes (default {DEFAULT_FACE_SIZE}); objects with wider "
+        "lobes get smaller faces (see --cube-sizes)",
+    )
+    a(
+        "--cube-sizes",
+        choices=CUBE_SIZE_CHOICES,
+        default="auto",
+        help="per-object cube-map face size: 'lobe' = the smallest power of two on which the object's finest "
+        "lobe-N lookups still read MIP level 0 or coarser (the scene analysis prints each size and why); 'full' = "
+        "every cube map at --face-size; 'auto' (default) = 'lobe', but 'full' for shot's reference, mc-N and "
+        "prefiltered methods, which read finer than lobe-N",
     )
     a(
         "--reflection-proxy",
@@ -265,8 +275,21 @@ def apply_reflection_proxy(scene, choice: str) -> None:
         obj.reflection_proxy = proxy
 
 
-def scene_renderer_from_args(ctx, scene, env, size, cache, args):
-    """The SceneRenderer of ``shot`` and ``view``: cube-map size, cache and mirror-pass options."""
+CUBE_SIZE_CHOICES = ("auto", "lobe", "full")
+FULL_CUBE_METHODS = ("reference", "mc", "prefiltered")  # --cube-sizes auto: full faces for these
+
+
+def lobe_width_cubes(args, method: Method | None = None) -> bool:
+    """``--cube-sizes``: whether cube maps shrink to their lobes' width (``method``: shot's)."""
+    choice = getattr(args, "cube_sizes", "auto")
+    if choice == "auto":
+        return method is None or method.kind not in FULL_CUBE_METHODS
+    return choice == "lobe"
+
+
+def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method | None = None):
+    """The SceneRenderer of ``shot`` and ``view``: cube-map size, cache and mirror-pass options
+    (``method``: what shot renders, for --cube-sizes auto)."""
     from lobeview.viewer.scene_renderer import SceneRenderer
 
     renderer = SceneRenderer(
@@ -277,6 +300,7 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args):
         cube_face_size=args.face_size,
         cache_dir=cache / "cubes",
         mirror_scale=args.mirror_scale,
+        lobe_width_cubes=lobe_width_cubes(args, method),
     )
     renderer.set_mirrors(args.mirrors)
     return renderer
@@ -312,6 +336,8 @@ def shot_command(
             parts.append(f"--env={shlex.quote(str(args.env))}")
         if args.face_size != DEFAULT_FACE_SIZE:
             parts.append(f"--face-size={args.face_size}")
+        if getattr(args, "cube_sizes", "auto") != "auto":
+            parts.append(f"--cube-sizes={args.cube_sizes}")
         if args.reflection_proxy != "scene":
             parts.append(f"--reflection-proxy={args.reflection_proxy}")
         if not args.mirrors:

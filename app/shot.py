@@ -239,7 +239,7 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
     stages["load"] = time.perf_counter() - t0
     ctx = create_context()
     args.gpu_timer = gpu_timer_meaningful(describe(ctx))
-    renderer = scene_renderer_from_args(ctx, scene, env, size, cache, args)
+    renderer = scene_renderer_from_args(ctx, scene, env, size, cache, args, method)
     print(renderer.analysis.report())
     result = renderer.render(camera, method, spp=args.spp, lod_bias=args.lod_bias, pixel_filter=args.pixel_filter)
     for line in renderer.mirror_report:

@@ -95,9 +95,12 @@ class DemoTarget:
         self.camera = Camera(position=position, target=target, up=up, fov_y=fov)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
+            # Every cube map at full size: the reference reads level 0, finer than the lobe-N
+            # footprints that size the faces by default (scenes/analysis.py).
             self.renderer = SceneRenderer(
-                ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cache / "cubes", progress=False
-            )
+                ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cache / "cubes", progress=False,
+                lobe_width_cubes=False,
+            )  # fmt: skip
 
     def set_material(self, preset: str) -> None:  # the scene's own materials
         pass

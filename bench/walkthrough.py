@@ -7,7 +7,9 @@ Scenes: the demo room (scenes/demo.py, its recorded path) and the apartment
 
 - start-up, cold (an empty cube-map cache: every cube map rendered, 2 bounces) and warm (the
   same cache folder again: cube maps read from disk), as SceneRenderer's stages;
-- cube maps: how many objects have one and their GPU memory (radiance cube with its MIP chain);
+- cube maps: how many objects have one, their face sizes (scenes/analysis.py sizes each face by
+  the object's lobes) and their GPU memory (radiance cube with its MIP chain), and in the same
+  run a cold start with every face at full size (what the lobe-width rule saves);
 - per frame of the path (``--frames`` times spread over it): the mirror passes alone (drawn,
   then glFinish) and the camera pass (draw + glFinish), objects drawn and culled in the camera
   pass and in the mirror passes, mirror passes drawn and skipped (and why); the occlusion test's
@@ -52,12 +54,14 @@ def cube_memory(renderer) -> tuple[int, int]:
     return len(cubes), sum(cube_bytes(c.face_size, int(np.log2(c.face_size)) + 1) for c in cubes)
 
 
-def start_renderer(ctx, scene, env, size, face_size: int, cube_dir: Path):
+def start_renderer(ctx, scene, env, size, face_size: int, cube_dir: Path, lobe_width_cubes: bool = True):
     """(renderer, seconds): SceneRenderer construction with its cube maps under ``cube_dir``."""
     from lobeview.viewer.scene_renderer import SceneRenderer
 
     t0 = time.perf_counter()
-    renderer = SceneRenderer(ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cube_dir)
+    renderer = SceneRenderer(
+        ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cube_dir, lobe_width_cubes=lobe_width_cubes
+    )
     ctx.finish()
     return renderer, time.perf_counter() - t0
 
@@ -129,8 +133,13 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
     """Cold and warm start-up, cube maps and the per-frame rows of one scene."""
     cube_dir = Path(tempfile.mkdtemp(prefix="lobeview-walk-"))
     try:
-        _say(f"[walkthrough] {label}: {len(scene.objects)} objects, cold start (every cube map rendered)")
+        _say(f"[walkthrough] {label}: {len(scene.objects)} objects, cold start with every cube map at full size")
+        renderer, cold_full = start_renderer(ctx, scene, env, size, face_size, cube_dir / "full", False)
+        _, memory_full = cube_memory(renderer)
+        renderer.release()
+        _say(f"[walkthrough] {label}: cold start (every cube map rendered at its lobes' face size)")
         renderer, cold = start_renderer(ctx, scene, env, size, face_size, cube_dir)
+        face_sizes = sorted(obj.cube.face_size for obj in renderer.objects if obj.cube is not None)
         cold_stages = dict(renderer.timings)
         cube_faces = renderer.draw_counts.of("cube map")
         cube_draws, cube_culled = cube_faces.drawn, cube_faces.culled
@@ -152,7 +161,10 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         "reflectors": reflectors,
         "cube_maps": cubes,
         "cube_memory_mb": memory / 2**20,
+        "cube_memory_full_mb": memory_full / 2**20,
+        "cube_face_sizes": {int(f): face_sizes.count(f) for f in sorted(set(face_sizes))},
         "startup_cold_s": cold,
+        "startup_cold_full_s": cold_full,
         "startup_warm_s": warm,
         "cold_stages": cold_stages,
         "warm_stages": warm_stages,
@@ -192,7 +204,8 @@ def _scene_markdown(result: dict) -> list[str]:
         f"### {result['scene']}",
         "",
         f"{result['objects']} objects, {result['reflectors']} planar reflectors, {result['cube_maps']} cube maps "
-        f"({result['cube_memory_mb']:.0f} MB).",
+        f"({result['cube_memory_mb']:.0f} MB; faces {_face_sizes(result)}; {result['cube_memory_full_mb']:.0f} MB "
+        f"and a cold start of {result['startup_cold_full_s']:.1f} s with every face at full size).",
         f"Start-up: cold {result['startup_cold_s']:.1f} s (cube maps {cold_cubes:.1f} s: "
         f"{result['cube_face_draws']} object draws into cube faces, {result['cube_face_culled']} culled), "
         f"warm {result['startup_warm_s']:.1f} s (cube maps {warm_cubes:.1f} s, from the cache).",
@@ -219,9 +232,14 @@ def _scene_markdown(result: dict) -> list[str]:
     return lines + [""]
 
 
+def _face_sizes(result: dict) -> str:
+    return ", ".join(f"{n} x {f}^2" for f, n in sorted(result["cube_face_sizes"].items(), key=lambda kv: -int(kv[0])))
+
+
 def _count_markdown(rows: list[dict]) -> list[str]:
     lines = [
-        "| rooms | objects | reflectors | cube maps | cube memory MB | start-up cold s | cube-face draws / culled "
+        "| rooms | objects | reflectors | cube maps | cube memory MB (all at full size) | start-up cold s (all at full "
+        "size) | cube-face draws / culled "
         "| start-up warm s | frame ms (median) | mirror ms (mean) | camera ms (mean) | camera draws / culled (mean) "
         "| mirror passes drawn / skipped (mean) | without the occlusion test: mirror passes, ms (mean) "
         "| camera ms without the depth pre-pass (mean) |",
@@ -231,7 +249,8 @@ def _count_markdown(rows: list[dict]) -> list[str]:
         s = _summary(r)
         lines.append(
             f"| {r['rooms']} | {r['objects']} | {r['reflectors']} | {r['cube_maps']} "
-            f"| {r['cube_memory_mb']:.0f} | {r['startup_cold_s']:.1f} "
+            f"| {r['cube_memory_mb']:.0f} ({r['cube_memory_full_mb']:.0f}) "
+            f"| {r['startup_cold_s']:.1f} ({r['startup_cold_full_s']:.1f}) "
             f"| {r['cube_face_draws']} / {r['cube_face_culled']} | {r['startup_warm_s']:.1f} "
             f"| {s['frame_ms_median']:.0f} | {s['mirror_ms_mean']:.0f} | {s['camera_ms_mean']:.0f} "
             f"| {s['camera_drawn_mean']:.0f} / {s['camera_culled_mean']:.0f} "

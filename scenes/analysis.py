@@ -8,13 +8,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from lobeview.materials.bsdf import diffuse_albedo
-from lobeview.materials.patterns import specular_lobes
+from lobeview.materials.patterns import finest_sample_solid_angle, lobe_width_face_size, specular_lobes
 from lobeview.materials.spec import build_bsdf
 
 from .planar_mirror import reflector_decision
 from .scene import Scene
 
 ANISOTROPY_RATIO = 1.5  # a lobe counts as anisotropic above this max/min roughness ratio
+DEFAULT_CUBE_FACE = 256  # SceneRenderer's default cube_face_size
 
 
 @dataclass
@@ -29,11 +30,27 @@ class ObjectNeeds:
     reflection_proxy: str = "-"  # the cube-map lookup correction (scenes/reflection_proxy.py)
     mirror: str = "-"  # planar reflector decision (scenes/planar_mirror.py)
     reflector: object | None = None  # scenes.planar_mirror.PlanarReflector when it gets a mirror pass
+    # Cube-map face size from the lobes' width (materials/patterns.py lobe_width_face_size): the
+    # smallest lobe-N sample footprint (sr) of the narrowest lobes the material can have, None
+    # when unknown (full size), and the face size that gives at the analysis' full size.
+    sample_solid_angle: float | None = None
+    cube_face: int = DEFAULT_CUBE_FACE
+    lobe_width_rule: bool = True  # False: every cube map at full size (SceneRenderer option)
 
     @property
     def needs_cube_map(self) -> bool:
         """Any view-dependent lobe is shaded from a cube map of the object's surroundings."""
         return self.specular_lobes + self.transmission_lobes > 0
+
+    @property
+    def cube_face_reason(self) -> str:
+        if not self.needs_cube_map:
+            return "-"
+        if not self.lobe_width_rule:
+            return "lobe-width rule off"
+        if self.sample_solid_angle is None:
+            return "footprint unknown: full size"
+        return f"finest lobe-N footprint {self.sample_solid_angle * 1e3:.2g} msr"
 
     @property
     def kind(self) -> str:
@@ -50,6 +67,7 @@ class ObjectNeeds:
 @dataclass
 class SceneAnalysis:
     objects: list[ObjectNeeds]
+    full_cube_face: int = DEFAULT_CUBE_FACE
 
     @property
     def cube_mapped(self) -> list[int]:
@@ -65,17 +83,42 @@ class SceneAnalysis:
         return bool(self.cube_mapped)
 
     def report(self) -> str:
-        lines = [f"{'object':<24} {'needs':<38} cube map  {'lightmap':<14} {'reflection proxy':<24} planar mirror"]
+        lines = [
+            f"{'object':<24} {'needs':<42} {'cube map (why that size)':<42} {'lightmap':<14} "
+            f"{'reflection proxy':<24} planar mirror"
+        ]
         for o in self.objects:
             lobes = f"{o.kind} ({o.specular_lobes} refl, {o.transmission_lobes} trans)" if o.needs_cube_map else o.kind
             lightmap = "yes" if o.has_lightmap else "NO (fallback)"
             proxy = o.reflection_proxy if o.needs_cube_map and o.reflector is None else "-"
-            cube = "yes" if o.needs_cube_map else "no"
-            lines.append(f"{o.name:<24} {lobes:<38} {cube:<9} {lightmap:<14} {proxy:<24} {o.mirror}")
+            cube = f"{o.cube_face}^2 ({o.cube_face_reason})" if o.needs_cube_map else "no"
+            lines.append(f"{o.name:<24} {lobes:<42} {cube:<42} {lightmap:<14} {proxy:<24} {o.mirror}")
         return "\n".join(lines)
 
 
-def analyse(scene: Scene) -> SceneAnalysis:
+def narrowest_lobe_desc(mat) -> dict:
+    """The material description with the narrowest lobes its textures can give a pixel (the
+    glTF roughness textures scale their factors; an anisotropy texture can only widen the
+    tangent axis, so its strength counts as 0): what the cube-map face size must resolve."""
+    desc = dict(mat.desc)
+    if desc.get("model") != "gltf" or not mat.textures:
+        return desc
+    if "metallic_roughness" in mat.textures:  # roughness = factor x G
+        roughness_map = mat.textures["metallic_roughness"].linear()[..., 1]
+        desc["roughness"] = float(desc.get("roughness", 1.0)) * float(roughness_map.min())
+    if "clearcoat" in mat.textures and desc.get("clearcoat"):  # clearcoat roughness = factor x G
+        desc["clearcoat_roughness"] = float(desc.get("clearcoat_roughness", 0.0)) * float(
+            mat.textures["clearcoat"].linear()[..., 1].min()
+        )
+    if "anisotropy" in mat.textures and desc.get("anisotropy"):
+        desc["anisotropy"] = 0.0
+    return desc
+
+
+def analyse(scene: Scene, full_cube_face: int = DEFAULT_CUBE_FACE, lobe_width_cubes: bool = True) -> SceneAnalysis:
+    """``full_cube_face``: the cube-map face size of the narrowest lobes; with ``lobe_width_cubes``
+    every object's face shrinks to what its lobes' lobe-N footprints resolve (issue 18; False:
+    every cube map at full size)."""
     needs = []
     low, high = scene.bounds if scene.objects else (np.zeros(3), np.zeros(3))
     scene_diagonal = float(np.linalg.norm(high - low))
@@ -93,6 +136,8 @@ def analyse(scene: Scene) -> SceneAnalysis:
         diffuse = bool(np.any(diffuse_albedo(bsdf) > 0))
         has_lightmap = mat.lightmap is not None and (mat.lightmap.tex_coord != 1 or obj.uv1 is not None)
         reflector, mirror = reflector_decision(obj.mesh, lobes, scene_diagonal, obj.planar_reflector)
+        footprint = finest_sample_solid_angle(specular_lobes(build_bsdf(narrowest_lobe_desc(mat)))) if lobes else None
+        face = lobe_width_face_size(footprint, full_cube_face) if lobe_width_cubes else int(full_cube_face)
         needs.append(
             ObjectNeeds(
                 obj.name,
@@ -105,9 +150,12 @@ def analyse(scene: Scene) -> SceneAnalysis:
                 _describe_proxy(obj.reflection_proxy),
                 mirror,
                 reflector,
+                footprint,
+                face,
+                lobe_width_cubes,
             )
         )
-    return SceneAnalysis(needs)
+    return SceneAnalysis(needs, int(full_cube_face))
 
 
 def _describe_proxy(proxy) -> str:

@@ -28,7 +28,8 @@ from .camera import perspective
 from .cubemap import RadianceCube
 from .frame import begin_pass, new_framebuffer
 
-CUBE_CACHE_VERSION = 4  # 4: glTF textures, alpha modes and culling change what cubes see
+CUBE_CACHE_VERSION = 5  # 5: per-object face sizes (supersampled); 4: glTF textures, alpha modes, culling
+CUBE_SUPERSAMPLE = 2
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
 
 
@@ -45,11 +46,14 @@ def face_view(face: int, eye) -> np.ndarray:
     return view
 
 
-def scene_content_key(scene, environment_key: str, face_size: int, bounces: int) -> str:
+def scene_content_key(scene, environment_key: str, face_size: int, bounces: int, sizes: dict | None = None) -> str:
     """What the cube maps depend on: geometry, lightmap coordinates, materials, emission,
-    lightmaps and base-colour textures, the environment, face size and bounces."""
+    lightmaps and base-colour textures, the environment, face size (and each object's, ``sizes``)
+    and bounces."""
     h = hashlib.sha256()
     h.update(f"v{CUBE_CACHE_VERSION} face{face_size} b{bounces} env{environment_key}".encode())
+    if sizes:
+        h.update(f"ss{CUBE_SUPERSAMPLE}".encode() + repr(sorted(sizes.items())).encode())
     for obj in scene.objects:
         h.update(obj.mesh.positions.tobytes())
         h.update(obj.mesh.indices.tobytes())
@@ -93,10 +97,20 @@ class CubeBake:
         self.progress = progress
         self.stale: list[int] = []  # cube maps that show an outdated appearance of another object
 
-    def render_faces(self, eye, exclude: int | None = None, specular: bool = False) -> np.ndarray:
-        """Six faces of the light-mapped scene seen from ``eye`` (float32, (6, S, S, 3)); with
-        ``specular``, objects that have cube maps are shaded with their lobes too."""
-        size = self.face_size
+    def render_faces(
+        self, eye, exclude: int | None = None, specular: bool = False, size: int | None = None
+    ) -> np.ndarray:
+        """Six faces of the light-mapped scene seen from ``eye`` (float32, (6, S, S, 3), S =
+        ``size`` or the full face size); with ``specular``, objects that have cube maps are shaded
+        with their lobes too."""
+        size = int(size or self.face_size)
+        factor = max(1, min(CUBE_SUPERSAMPLE, self.face_size // size))
+        if factor > 1:  # render finer and box-filter: level 0 then equals level k of the full face's chain
+            fine = self._render_faces(eye, exclude, specular, size * factor)
+            return fine.reshape(6, size, factor, size, factor, 3).mean(axis=(2, 4), dtype=np.float64).astype(np.float32)
+        return self._render_faces(eye, exclude, specular, size)
+
+    def _render_faces(self, eye, exclude: int | None, specular: bool, size: int) -> np.ndarray:
         color = self.ctx.texture((size, size), 4, dtype="f4")
         extra = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(3)]
         depth = self.ctx.depth_renderbuffer((size, size))
@@ -122,20 +136,27 @@ class CubeBake:
             self.ctx.viewport = viewport
         return faces
 
-    def build(self, objects: list, wanted: list[int], key: str, cache_dir: Path | None) -> None:
-        """Cube maps of the objects ``wanted``, from the disk cache when it has them all."""
+    def build(
+        self, objects: list, wanted: list[int], key: str, cache_dir: Path | None, sizes: dict | None = None
+    ) -> None:
+        """Cube maps of the objects ``wanted``, from the disk cache when it has them all; ``sizes``
+        gives an object's face size (default: the full one, scenes/analysis.py chooses)."""
         if not wanted:
             return
+        sizes = {i: int((sizes or {}).get(i, self.face_size)) for i in wanted}
         cache_file = Path(cache_dir) / f"cubes-{key}.npz" if cache_dir else None
-        shape = (6, self.face_size, self.face_size, 3)
 
         def read(path: Path) -> dict | None:
             with np.load(path, allow_pickle=False) as data:
                 if not {f"cube_{i}" for i in wanted} <= set(data.files):
                     return None  # another selection of objects (the scene analysis changed): render
                 cached = {i: data[f"cube_{i}"] for i in wanted}
-            if any(c.shape != shape or not np.all(np.isfinite(c)) for c in cached.values()):
-                raise ValueError(f"cube maps are not finite arrays of shape {shape}")
+            for i, c in cached.items():
+                shape = (6, sizes[i], sizes[i], 3)
+                if c.shape != shape:
+                    return None  # another face size for this object (its material changed): render
+                if not np.all(np.isfinite(c)):
+                    raise ValueError("cube maps are not finite")
             return cached
 
         cached = read_cache_file(cache_file, read, "cube maps")
@@ -147,14 +168,16 @@ class CubeBake:
         for bounce in range(self.bounces):
             t0 = time.perf_counter()
             for i in wanted:
-                faces[i] = self.render_faces(objects[i].centre, exclude=i, specular=bounce > 0)
+                faces[i] = self.render_faces(objects[i].centre, exclude=i, specular=bounce > 0, size=sizes[i])
             for i in wanted:
                 if objects[i].cube is not None:
                     objects[i].cube.release()
                 objects[i].cube = RadianceCube(self.ctx, faces[i])
             if self.progress:
+                counts = np.unique(list(sizes.values()), return_counts=True)
+                shapes = ", ".join(f"{c} of {s}^2" for s, c in zip(*counts, strict=True))
                 print(
-                    f"[cube] bounce {bounce + 1}: {len(wanted)} cube maps of {self.face_size}^2 x 6"
+                    f"[cube] bounce {bounce + 1}: {len(wanted)} cube maps x 6 faces ({shapes})"
                     f" in {time.perf_counter() - t0:.2f} s",
                     file=sys.stderr,
                     flush=True,
@@ -171,8 +194,10 @@ class CubeBake:
             obj = objects[index]
             if obj.cube is None:
                 continue
-            faces = self.render_faces(obj.centre, exclude=index, specular=self.bounces > 1)
+            faces = self.render_faces(obj.centre, exclude=index, specular=self.bounces > 1, size=obj.cube.face_size)
+            cache_dir = obj.cube.cache_dir
             obj.cube.release()
             obj.cube = RadianceCube(self.ctx, faces)
+            obj.cube.cache_dir = cache_dir
             return obj.name
         return None

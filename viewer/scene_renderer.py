@@ -135,6 +135,7 @@ class SceneRenderer(RendererBase):
         mirror_scale: float = 1.0,
         mirror_specular: bool = True,
         frustum_culling: bool = True,
+        lobe_width_cubes: bool = True,
     ):
         super().__init__(ctx, size)
         if not 0.05 <= float(mirror_scale) <= 2.0:
@@ -150,7 +151,10 @@ class SceneRenderer(RendererBase):
         self.mirrors_enabled = True
         self.enabled_reflectors: set | None = None  # None: every reflector of the analysis
         self.scene = scene
-        self.analysis = analyse(scene)
+        # Each object's cube map is as large as its lobes resolve (scenes/analysis.py, issue 18);
+        # cube_face_size is the narrowest lobes' size. False: every cube map at cube_face_size.
+        self.lobe_width_cubes = bool(lobe_width_cubes)
+        self.analysis = analyse(scene, cube_face_size, self.lobe_width_cubes)
         self.progress = progress
         self.timings: dict = {}
         t0 = time.perf_counter()
@@ -213,8 +217,9 @@ class SceneRenderer(RendererBase):
             functools.partial(self._draw_pass, pass_kind="cube map"),
             progress,
         )
-        key = scene_content_key(scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces)
-        self.cube_bake.build(self.objects, self.analysis.cube_mapped, key, self.cache_dir)
+        sizes = {i: self.analysis.objects[i].cube_face for i in self.analysis.cube_mapped}
+        key = scene_content_key(scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces, sizes)
+        self.cube_bake.build(self.objects, self.analysis.cube_mapped, key, self.cache_dir, sizes)
         for obj in self.objects:
             if obj.cube is not None:
                 obj.cube.cache_dir = self.cache_dir  # prefiltered maps are cached beside the cubes
@@ -379,9 +384,11 @@ class SceneRenderer(RendererBase):
             # (two sampler types on one unit fail the draw with GL_INVALID_OPERATION).
             bind_sampler(program, "u_dfg", self._dfg_texture() if per_pixel else self._white)
 
-    def render_cube_faces(self, eye, exclude: int | None = None, specular: bool = False) -> np.ndarray:
+    def render_cube_faces(
+        self, eye, exclude: int | None = None, specular: bool = False, size: int | None = None
+    ) -> np.ndarray:
         """Six faces of the scene seen from ``eye`` (viewer/cube_bake.py CubeBake.render_faces)."""
-        return self.cube_bake.render_faces(eye, exclude, specular)
+        return self.cube_bake.render_faces(eye, exclude, specular, size)
 
     # -- drawing -----------------------------------------------------------------------------
     def _program(
@@ -630,7 +637,7 @@ class SceneRenderer(RendererBase):
         material_index = self.scene.objects[index].material
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
-        self.analysis = analyse(self.scene)
+        self.analysis = analyse(self.scene, self.cube_face_size, self.lobe_width_cubes)
         # Everything else that reflects this object now sees an outdated appearance.
         self.cube_bake.stale = [
             i for i in self.analysis.cube_mapped if self.scene.objects[i].material != material_index
@@ -638,10 +645,15 @@ class SceneRenderer(RendererBase):
         for gpu_obj in self.objects:
             if self.scene.objects[gpu_obj.index].material == material_index:
                 gpu_obj.material = packed
-                if gpu_obj.cube is None and self.analysis.objects[gpu_obj.index].needs_cube_map:
-                    # A diffuse object that became glossy gets its cube map now (~0.1 s).
-                    faces = self.render_cube_faces(gpu_obj.centre, exclude=gpu_obj.index, specular=True)
+                needs = self.analysis.objects[gpu_obj.index]
+                if needs.needs_cube_map and (gpu_obj.cube is None or gpu_obj.cube.face_size != needs.cube_face):
+                    # A diffuse object that became glossy gets its cube map now (~0.1 s), and one
+                    # whose lobes narrowed or widened gets its cube at the face size they need.
+                    faces = self.render_cube_faces(gpu_obj.centre, gpu_obj.index, True, needs.cube_face)
+                    if gpu_obj.cube is not None:
+                        gpu_obj.cube.release()
                     gpu_obj.cube = RadianceCube(self.ctx, faces)
+                    gpu_obj.cube.cache_dir = self.cache_dir
 
     @property
     def has_rational(self) -> bool:
