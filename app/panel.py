@@ -133,6 +133,9 @@ def _material(window) -> None:
         chosen = None if choices[k] == "global" else method_from_choice(choices[k], n, window.lobe_normalize)
         renderer.set_object_method(index, chosen)
         window.dirty = True
+    needs = renderer.analysis.objects[index]
+    if needs.needs_cube_map:  # its face size and why (scenes/analysis.py)
+        imgui.text_wrapped(f"cube map {needs.cube_face}^2: {needs.cube_face_reason}")
     memory = renderer.prefiltered_memory(index)
     if memory:
         imgui.text(f"prefiltered maps: {sum(memory.values()) / 2**20:.1f} MB")
