@@ -79,6 +79,7 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
     """Per frame of ``path``: mirror-pass and camera-pass milliseconds and the draw counters.
     One untimed frame first (shader compilation)."""
     from lobeview.viewer.camera import Camera
+    from lobeview.viewer.mirror_pass import buffer_size
 
     rows = []
     times = path.frame_times(frames)
@@ -88,14 +89,25 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         camera = Camera.from_scene_camera(path.camera_at(float(t))).fitted_to(renderer.bounds)
         mirrors_drawn = method.kind != "prefiltered"
         unculled_ms, unculled_passes = 0.0, 0
-        if mirrors_drawn:  # first without the occlusion test: the frame then keeps its own buffers
+        unscissored_ms = 0.0
+        if mirrors_drawn:  # first without the occlusion test, then without the scissor: the
+            # frame then keeps its own buffers
             renderer.mirror_occlusion = False
-            unculled_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera)
+            unculled_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
             unculled_passes = len(renderer.mirror_passes.drawn)
             renderer.mirror_occlusion = True
+            renderer.mirror_scissor = False
+            renderer.invalidate_mirrors()
+            unscissored_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
+            renderer.mirror_scissor = True
         renderer.invalidate_mirrors()
         renderer.draw_counts.new_frame()
-        mirror_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera) if mirrors_drawn else 0.0
+        mirror_ms = (
+            _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method) if mirrors_drawn else 0.0
+        )
+        scissored_pixels = sum(renderer.mirror_passes.scissored_pixels.values())
+        width, height = buffer_size(renderer.size, renderer.mirror_scale)
+        buffer_pixels = renderer.mirror_passes.drawn_passes * width * height
         mirror = renderer.draw_counts.of("mirror")
         mirror_draws, mirror_culled = mirror.drawn, mirror.culled
         reasons = dict(Counter(renderer.mirror_passes.skipped.values()))
@@ -113,6 +125,9 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
                 "mirror_ms": mirror_ms,
                 "occlusion_test_ms": renderer.mirror_passes.occlusion_seconds * 1e3,
                 "mirror_ms_without_test": unculled_ms,
+                "mirror_ms_without_scissor": unscissored_ms,
+                "mirror_pixels_scissored": scissored_pixels,
+                "mirror_pixels": buffer_pixels,
                 "mirror_passes_without_test": unculled_passes,
                 "camera_ms": camera_ms,
                 "frame_ms": mirror_ms + camera_ms,
@@ -187,6 +202,9 @@ def _summary(result: dict) -> dict:
         "occlusion_test_ms_mean": mean("occlusion_test_ms"),
         "mirror_ms_without_test_mean": mean("mirror_ms_without_test"),
         "mirror_passes_without_test_mean": mean("mirror_passes_without_test"),
+        "mirror_ms_without_scissor_mean": mean("mirror_ms_without_scissor"),
+        "scissored_fraction": sum(r["mirror_pixels_scissored"] for r in rows)
+        / max(sum(r["mirror_pixels"] for r in rows), 1),
         "camera_ms_mean": mean("camera_ms"),
         "camera_ms_without_prepass_mean": mean("camera_ms_without_prepass"),
         "camera_drawn_mean": mean("camera_drawn"),
@@ -213,12 +231,14 @@ def _scene_markdown(result: dict) -> list[str]:
         f"{s['mirror_ms_mean']:.0f} ms (of which the occlusion test {s['occlusion_test_ms_mean']:.0f} ms), camera "
         f"pass {s['camera_ms_mean']:.0f} ms ({s['camera_ms_without_prepass_mean']:.0f} ms without the depth "
         "pre-pass). Without the occlusion test the mirror passes took "
-        f"{s['mirror_ms_without_test_mean']:.0f} ms ({s['mirror_passes_without_test_mean']:.1f} passes) on average.",
+        f"{s['mirror_ms_without_test_mean']:.0f} ms ({s['mirror_passes_without_test_mean']:.1f} passes) on average; "
+        f"without the scissor {s['mirror_ms_without_scissor_mean']:.0f} ms (the scissor skipped "
+        f"{100 * s['scissored_fraction']:.0f} % of the drawn passes' pixels).",
         "",
         "| frame | t (s) | frame ms | mirror passes ms | of which occlusion test ms | camera pass ms "
         "| camera draws / culled | mirror-pass draws / culled | mirror passes drawn / skipped | skipped because "
-        "| without the test: passes, ms |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| without the test: passes, ms | without the scissor: ms | pixels scissored away |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in result["frames"]:
         reasons = ", ".join(f"{k}: {v}" for k, v in sorted(r["skip_reasons"].items())) or "-"
@@ -227,9 +247,14 @@ def _scene_markdown(result: dict) -> list[str]:
             f"| {r['occlusion_test_ms']:.0f} | {r['camera_ms']:.0f} "
             f"| {r['camera_drawn']} / {r['camera_culled']} | {r['mirror_draws']} / {r['mirror_culled']} "
             f"| {r['mirror_passes']} / {r['mirror_skipped']} | {reasons} "
-            f"| {r['mirror_passes_without_test']}, {r['mirror_ms_without_test']:.0f} |"
+            f"| {r['mirror_passes_without_test']}, {r['mirror_ms_without_test']:.0f} "
+            f"| {r['mirror_ms_without_scissor']:.0f} | {_share(r['mirror_pixels_scissored'], r['mirror_pixels'])} |"
         )
     return lines + [""]
+
+
+def _share(part: int, whole: int) -> str:
+    return f"{100 * part / whole:.0f} %" if whole else "-"
 
 
 def _face_sizes(result: dict) -> str:
@@ -242,8 +267,9 @@ def _count_markdown(rows: list[dict]) -> list[str]:
         "size) | cube-face draws / culled "
         "| start-up warm s | frame ms (median) | mirror ms (mean) | camera ms (mean) | camera draws / culled (mean) "
         "| mirror passes drawn / skipped (mean) | without the occlusion test: mirror passes, ms (mean) "
+        "| mirror ms without the scissor (mean) | pass pixels scissored away "
         "| camera ms without the depth pre-pass (mean) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         s = _summary(r)
@@ -256,6 +282,7 @@ def _count_markdown(rows: list[dict]) -> list[str]:
             f"| {s['camera_drawn_mean']:.0f} / {s['camera_culled_mean']:.0f} "
             f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} "
             f"| {s['mirror_passes_without_test_mean']:.1f}, {s['mirror_ms_without_test_mean']:.0f} "
+            f"| {s['mirror_ms_without_scissor_mean']:.0f} | {100 * s['scissored_fraction']:.0f} % "
             f"| {s['camera_ms_without_prepass_mean']:.0f} |"
         )
     return lines

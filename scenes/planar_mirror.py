@@ -241,6 +241,77 @@ def mirror_camera(
     return MirrorCamera(mirror_view, oblique_projection(projection, plane_eye), np.array(projection), tuple(size), eye)
 
 
+# -- scissored passes (issue 18) ----------------------------------------------------------------
+# lobe-N's lookups of a reflector's pixels read its buffer near the reflector's own image: the
+# sample directions deviate at most ``angle`` from the mirror direction, and C' -> hit is a
+# positive combination of the mirror direction and the sample's, so the read lies within that
+# angle of the pixel's own position seen from C'. Each read is a trilinear MIP lookup whose level
+# comes from the sample's solid angle through the hit's tangent plane; SCISSOR_LOD_SLACK levels
+# allow for that Jacobian (grazing hits). The pass is drawn only inside the reflector's screen
+# rectangle grown by that reach; everything else holds the environment (drawn everywhere).
+SCISSOR_LOD_SLACK = 0.0
+SCISSOR_MAX_ANGLE = np.radians(80.0)  # a reach beyond this off the buffer's axis: no scissor
+
+
+def box_screen_rect(corners: np.ndarray, view_projection: np.ndarray, size) -> tuple[float, float, float, float] | None:
+    """Pixel rectangle (x0, y0, x1, y1), OpenGL rows (y up), of a box's image, its part behind
+    the eye clipped away (edges crossing w = 0 cut there); None when nothing of it lies in front."""
+    corners = np.asarray(corners, dtype=np.float64)
+    clip = np.concatenate([corners, np.ones((len(corners), 1))], axis=1) @ np.asarray(view_projection).T
+    near = 1e-6
+    points = [c for c in clip if c[3] > near]
+    for i in range(len(corners)):  # box edges: corners differing in one coordinate
+        for j in range(i + 1, len(corners)):
+            if np.count_nonzero(corners[i] != corners[j]) != 1:
+                continue
+            wi, wj = clip[i, 3], clip[j, 3]
+            if (wi > near) != (wj > near):
+                t = (near - wi) / (wj - wi)
+                points.append(clip[i] + t * (clip[j] - clip[i]))
+    if not points:
+        return None
+    points = np.array(points)
+    ndc = points[:, :2] / points[:, 3:4]
+    width, height = size
+    xy = (np.clip(ndc, -1e6, 1e6) * 0.5 + 0.5) * np.array([width, height], dtype=np.float64)
+    return float(xy[:, 0].min()), float(xy[:, 1].min()), float(xy[:, 0].max()), float(xy[:, 1].max())
+
+
+def mirror_scissor(
+    reflector: PlanarReflector, camera: MirrorCamera, spread: tuple[float, float] | None, lod_bias: float
+) -> tuple[int, int, int, int] | None:
+    """The buffer region (x, y, width, height; OpenGL rows) that lobe-N's lookups of the
+    reflector's pixels can read, from its lobes' ``spread`` (materials/patterns.py lobe_spread:
+    largest angle off the mirror direction, largest lookup solid angle); None: the whole buffer
+    (no bound: unknown spread, the region reaches the buffer's edges or too far off-axis)."""
+    if spread is None:
+        return None
+    angle, solid_angle = spread
+    width, height = camera.size
+    rect = box_screen_rect(reflector.corners(), camera.plain_view_projection, camera.size)
+    if rect is None:
+        return None
+    x0, y0, x1, y1 = np.clip(rect, [0, 0, 0, 0], [width, height, width, height])
+    focal = camera.focal_pixels
+    # Largest off-axis angle of the rectangle, and how far the reach carries beyond it.
+    tangents = np.array([[x - width / 2.0, y - height / 2.0] for x in (x0, x1) for y in (y0, y1)]) / focal
+    off_axis = float(np.arctan(np.max(np.linalg.norm(tangents, axis=1))))
+    outer = off_axis + angle
+    if outer >= SCISSOR_MAX_ANGLE:
+        return None
+    # Gnomonic projection: at most 1 / cos^2 pixels per radian along the way (radially).
+    reach = focal * angle / np.cos(outer) ** 2
+    lod = 0.5 * np.log2(max(solid_angle * focal**2 / np.cos(outer) ** 3, 1e-30)) + lod_bias + SCISSOR_LOD_SLACK
+    # A bilinear read at level L uses the texel holding it and the neighbour nearer to it: pixels
+    # up to 1.5 texels (of 2^ceil(L) pixels at the coarser of the two trilinear levels) away.
+    reach += 1.5 * 2.0 ** np.ceil(max(lod, 0.0)) + 1.0
+    x0, y0 = max(int(np.floor(x0 - reach)), 0), max(int(np.floor(y0 - reach)), 0)
+    x1, y1 = min(int(np.ceil(x1 + reach)), width), min(int(np.ceil(y1 + reach)), height)
+    if x1 <= x0 or y1 <= y0 or (x1 - x0) * (y1 - y0) >= width * height:
+        return None
+    return x0, y0, x1 - x0, y1 - y0
+
+
 # -- sampling the buffer (4.5.2-4.5.3) -----------------------------------------------------------
 @dataclass
 class MirrorBuffers:

@@ -30,6 +30,7 @@ from lobeview.scenes.planar_mirror import (
 )
 from lobeview.scenes.scene import SceneObject
 from lobeview.viewer.camera import Camera, perspective
+from lobeview.viewer.mirror_pass import unscissored
 
 SIZE = (240, 160)
 GREY = 0.5
@@ -293,7 +294,7 @@ def test_glsl_lobe_method_matches_the_numpy_reference_through_the_mirror_buffer(
 
     renderer = _renderer(ctx, mirror_floor_scene(0.01, roughness_y=0.2)) if anisotropic else glossy_floor
     result = renderer.render(_camera(), Method("lobe", 7), lod_bias=-20.0)
-    assert renderer.mirror_report == ["floor: mirror pass 240x160"]
+    assert unscissored(renderer.mirror_report) == ["floor: mirror pass 240x160"]
     buffers = _buffers(renderer)
     lobe = specular_lobes(build_bsdf(renderer.scene.materials[0].desc))[0]
     kind = choose_pattern(lobe.distribution.alpha_x, lobe.distribution.alpha_y, planar=True)
@@ -393,7 +394,7 @@ def test_sharp_mirror_floor_matches_a_ray_traced_reflection(ctx):
     renderer = _renderer(ctx, scene, size=(320, 200))
     camera = _camera()
     result = renderer.render(camera, "lobe-5")
-    assert renderer.mirror_report == ["floor: mirror pass 320x200"]
+    assert unscissored(renderer.mirror_report) == ["floor: mirror pass 320x200"]
     lobe = specular_lobes(build_bsdf(scene.materials[0].desc))[0]
     table = AlbedoTable.build(lobe)
     floor = result.object_id == 0
@@ -444,7 +445,7 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
     renderer = _renderer(ctx, mirror_floor_scene(0.05, extra_reflector=True))
     assert sorted(renderer.analysis.reflectors) == [0, 4]
     renderer.render(_camera(), "lobe-3")
-    assert renderer.mirror_report == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
+    assert unscissored(renderer.mirror_report) == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
     assert renderer.mirror_passes.drawn == [0, 4] and renderer.mirror_passes.skipped == {}
     below = Camera(position=(0.0, -1.0, 2.0), target=(0.0, -1.0, -1.0))
     renderer.render(below, "lobe-3")
@@ -454,7 +455,7 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
     renderer.render(away, "lobe-3")
     assert "glossy wall: no mirror pass (outside the view)" in renderer.mirror_report
     renderer.render(_camera(), Method.parse("prefiltered"))
-    assert renderer.mirror_report == [
+    assert unscissored(renderer.mirror_report) == [
         "floor: cube map (prefiltered method)",
         "glossy wall: cube map (prefiltered method)",
     ]
@@ -462,11 +463,11 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
     # Back to lobe-N with the same camera: the passes are drawn (and reported) again, not the
     # prefiltered frame's report kept.
     renderer.render(_camera(), "lobe-3")
-    assert renderer.mirror_report == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
+    assert unscissored(renderer.mirror_report) == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
     renderer.enabled_reflectors = {0}
     renderer.mirror_scale = 0.5
     result = renderer.render(_camera(), "lobe-3")
-    assert renderer.mirror_report == ["floor: mirror pass 120x80"]
+    assert unscissored(renderer.mirror_report) == ["floor: mirror pass 120x80"]
     assert np.all(np.isfinite(result.radiance)) and not result.invalid.any()
     renderer.release()
 
@@ -556,7 +557,7 @@ def test_sharp_pane_shows_the_scene_behind_it_times_its_transmittance(ctx):
     scene = pane_scene(0.002)
     renderer = _renderer(ctx, scene, size=size)
     result = renderer.render(_camera(), "lobe-5")
-    assert renderer.mirror_report == ["pane: see-through pass 320x200"]
+    assert unscissored(renderer.mirror_report) == ["pane: see-through pass 320x200"]
     renderer.release()
     scene.objects.pop()  # the same view without the pane
     bare = _renderer(ctx, scene, size=size)
@@ -594,7 +595,7 @@ def test_glsl_matches_the_numpy_reference_through_both_buffers_of_a_glossy_pane(
     scene = pane_scene(0.1, reflection=True)
     renderer = _renderer(ctx, scene)
     result = renderer.render(_camera(), Method("lobe", 7), lod_bias=-20.0)
-    assert renderer.mirror_report == ["pane: mirror pass 240x160", "pane: see-through pass 240x160"]
+    assert unscissored(renderer.mirror_report) == ["pane: mirror pass 240x160", "pane: see-through pass 240x160"]
     mirror, through = _buffers(renderer, 4, "mirror"), _buffers(renderer, 4, "see-through")
     lobes = specular_lobes(build_bsdf(scene.materials[-1].desc))
     assert sorted(lobe.transmission for lobe in lobes) == [False, True]

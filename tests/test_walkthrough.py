@@ -259,12 +259,18 @@ def test_walkthrough_report_tables(tmp_path):
     row = {"frame": 0, "t": 0.0, "mirror_ms": 3.0, "camera_ms": 5.0, "frame_ms": 8.0, "camera_drawn": 4,
            "camera_culled": 2, "mirror_draws": 7, "mirror_culled": 1, "mirror_passes": 1, "mirror_skipped": 2,
            "skip_reasons": {"outside the view": 2}, "occlusion_test_ms": 1.0, "mirror_ms_without_test": 9.0,
-           "mirror_passes_without_test": 2, "camera_ms_without_prepass": 6.0}  # fmt: skip
+           "mirror_passes_without_test": 2, "camera_ms_without_prepass": 6.0, "mirror_ms_without_scissor": 4.0,
+           "mirror_pixels_scissored": 300, "mirror_pixels": 1200}  # fmt: skip
     result = {"scene": "x", "objects": 6, "reflectors": 3, "cube_maps": 2, "cube_memory_mb": 16.0,
+              "cube_memory_full_mb": 20.0, "cube_face_sizes": {256: 1, 64: 1}, "startup_cold_full_s": 2.5,
               "startup_cold_s": 2.0, "startup_warm_s": 0.5, "cold_stages": {"cube maps": 1.5},
               "warm_stages": {"cube maps": 0.1}, "cube_face_draws": 40, "cube_face_culled": 20,
               "frames": [row], "rooms": 1}  # fmt: skip
     text = "\n".join(_scene_markdown(result) + _count_markdown([result]))
-    assert "| 0 | 0.0 | 8 | 3 | 1 | 5 | 4 / 2 | 7 / 1 | 1 / 2 | outside the view: 2 | 2, 9 |" in text
-    assert "| 1 | 6 | 3 | 2 | 16 | 2.0 | 40 / 20 | 0.5 | 8 | 3 | 5 | 4 / 2 | 1.0 / 2.0 | 2.0, 9 | 6 |" in text
+    assert "| 0 | 0.0 | 8 | 3 | 1 | 5 | 4 / 2 | 7 / 1 | 1 / 2 | outside the view: 2 | 2, 9 | 4 | 25 % |" in text
+    assert (
+        "| 1 | 6 | 3 | 2 | 16 (20) | 2.0 (2.5) | 40 / 20 | 0.5 | 8 | 3 | 5 | 4 / 2 | 1.0 / 2.0 | 2.0, 9 | 4 "
+        "| 25 % | 6 |" in text
+    )
+    assert "faces 1 x 256^2, 1 x 64^2" in text
     json.dumps(result)  # the record is JSON

@@ -56,12 +56,31 @@ def skip_reason(reflector, camera: Camera, view_proj: np.ndarray) -> str | None:
     return None
 
 
+def sub_rect_projection(rect, size) -> np.ndarray:
+    """Clip-space transform that maps the pixel rectangle ``rect`` (x, y, width, height) of a
+    ``size`` buffer onto the whole clip square: its frustum is the scissored pass's (culling)."""
+    x, y, w, h = rect
+    width, height = size
+    centre = ((x + w / 2.0) / width * 2.0 - 1.0, (y + h / 2.0) / height * 2.0 - 1.0)
+    half = (w / width, h / height)
+    m = np.eye(4)
+    m[0, 0], m[0, 3] = 1.0 / half[0], -centre[0] / half[0]
+    m[1, 1], m[1, 3] = 1.0 / half[1], -centre[1] / half[1]
+    return m
+
+
 def buffer_size(frame_size, scale: float) -> tuple[int, int]:
     width, height = frame_size
     return max(1, round(width * scale)), max(1, round(height * scale))
 
 
 HIDDEN = "hidden behind other objects"
+SCISSOR_NOTE = ", scissored to"  # how a report line says its pass was scissored
+
+
+def unscissored(report: list[str]) -> list[str]:
+    """The report's lines without their scissor notes (which passes were drawn, at what size)."""
+    return [line.split(SCISSOR_NOTE)[0] for line in report]
 
 
 class MirrorPasses:
@@ -91,6 +110,7 @@ class MirrorPasses:
         self.drawn: list[int] = []  # reflectors that got their passes in the last frame
         self.skipped: dict[int, str] = {}  # reflector -> why it got none in the last frame
         self.occlusion_seconds = 0.0  # the last drawn frame's occlusion test (0: not run)
+        self.scissored_pixels: dict[int, int] = {}  # reflector -> pixels the scissor saved, last frame
 
     def invalidate(self) -> None:
         """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
@@ -105,23 +125,30 @@ class MirrorPasses:
         scale: float,
         specular: bool,
         occlusion: bool = True,
+        spreads: dict | None = None,
+        lod_bias: float = 0.0,
     ) -> dict:
         """The buffers of the reflectors that need them for ``camera`` (index -> {'mirror' and/or
         'see-through': targets}); reused while the camera, the size, the options and the materials
         stay the same (refinement passes). ``specular``: glossy objects seen in a mirror are shaded
         from their cube maps (lobe-3) instead of the thesis' diffuse-only mirror pass.
-        ``occlusion``: a reflector that opaque objects hide at every pixel centre gets no pass."""
-        from lobeview.scenes.planar_mirror import mirror_camera
+        ``occlusion``: a reflector that opaque objects hide at every pixel centre gets no pass.
+        ``spreads``: reflector -> how far its lobe-N lookups reach (materials/patterns.py
+        lobe_spread; None or absent: unbounded), with the lookups' ``lod_bias``: each pass is
+        scissored to the region they can read (scenes/planar_mirror.py mirror_scissor)."""
+        from lobeview.scenes.planar_mirror import mirror_camera, mirror_scissor
 
+        spreads = spreads or {}
         width, height = frame_size
         view_proj = camera.view_projection(width / height)
         key = (
             tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y, camera.near, camera.far,
             tuple(frame_size), scale, specular, tuple(sorted(reflectors)), self.generation, occlusion,
+            tuple(sorted(spreads.items())), lod_bias,
         )  # fmt: skip
         if key == self._key:
             return self._active
-        report, active, skipped = [], {}, {}
+        report, active, skipped, scissored = [], {}, {}, {}
         size = buffer_size(frame_size, scale)
         projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
         reasons = {index: skip_reason(reflector, camera, view_proj) for index, reflector in reflectors.items()}
@@ -146,25 +173,43 @@ class MirrorPasses:
                         targets.release()
                     targets = self.targets[(index, kind)] = MirrorTargets(self.ctx, size)
                 buffer_camera = mirror_camera(camera.view(), projection, reflector, size, see_through=kind != "mirror")
+                rect = mirror_scissor(reflector, buffer_camera, spreads.get(index), lod_bias)
                 begin_pass(self.ctx, targets.fbo, size)
                 self.draw_background(self.environment, buffer_camera.plain_view_projection)
+                cull_view_projection = None
+                if rect is not None:  # the scene only where the reflector's lookups read
+                    self.ctx.scissor = rect
+                    cull_view_projection = sub_rect_projection(rect, size) @ buffer_camera.view_projection
                 self.draw_scene(
-                    buffer_camera.view_projection, buffer_camera.position, MIRROR_BOUNCE_METHOD, specular, index
-                )
+                    buffer_camera.view_projection, buffer_camera.position, MIRROR_BOUNCE_METHOD, specular, index,
+                    cull_view_projection=cull_view_projection,
+                )  # fmt: skip
+                self.ctx.scissor = None
                 targets.radiance.build_mipmaps()
                 targets.camera = buffer_camera
                 active[index][kind] = targets
-                report.append(f"{names[index]}: {kind} pass {size[0]}x{size[1]}")
+                pixels = size[0] * size[1] if rect is None else rect[2] * rect[3]
+                scissored.setdefault(index, 0)
+                scissored[index] += size[0] * size[1] - pixels
+                where = "" if rect is None else f"{SCISSOR_NOTE} {rect[2]}x{rect[3]} at ({rect[0]}, {rect[1]})"
+                report.append(f"{names[index]}: {kind} pass {size[0]}x{size[1]}{where}")
         self.ctx.viewport = (0, 0, width, height)
         self._key, self._active, self.report = key, active, report
         self.drawn, self.skipped = list(active), skipped
+        self.scissored_pixels = scissored  # reflector -> buffer pixels its passes did not shade
         return active
+
+    @property
+    def drawn_passes(self) -> int:
+        """Mirror and see-through passes of the last frame."""
+        return sum(len(kinds) for kinds in self._active.values()) if self.drawn else 0
 
     def skip_all(self, reflectors, names: list, reason: str) -> None:
         """No pass for any reflector this frame (the prefiltered method reads cube maps); the
         next render draws the buffers again rather than trusting ones kept from before."""
         self.report = [f"{names[index]}: {reason}" for index in reflectors]
         self.drawn, self.skipped = [], {index: reason for index in reflectors}
+        self.scissored_pixels = {}
         self._key = None
 
     def bind(self, program, reflector, buffers: dict, eye, dummy, previous_plane_states: list) -> None:

@@ -26,8 +26,9 @@ import moderngl
 import numpy as np
 
 from lobeview.core.cache import BoundedCache
-from lobeview.core.methods import Method
+from lobeview.core.methods import DEFAULT_LOBE_LOD_BIAS, Method
 from lobeview.materials.gltf import specular_f0_unclamped
+from lobeview.materials.patterns import lobe_spread, specular_lobes
 from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
@@ -195,6 +196,10 @@ class SceneRenderer(RendererBase):
         # Occlusion test of the reflectors (viewer/occlusion.py): no mirror pass for a reflector
         # that opaque objects hide from the camera (a floor behind a wall).
         self.mirror_occlusion = True
+        # Scissored mirror passes (scenes/planar_mirror.py mirror_scissor): a lobe-N reflector's
+        # pass shades only the buffer region its lookups can read.
+        self.mirror_scissor = True
+        self._spreads: dict = {}  # (reflector, N, normalize, pattern) -> materials.patterns.lobe_spread
         # Depth pre-pass of the camera pass (viewer/occlusion.py): shading once per pixel.
         self.depth_prepass = True
         self.occlusion = OcclusionTest(ctx, self.programs)
@@ -425,15 +430,35 @@ class SceneRenderer(RendererBase):
             found = {i: r for i, r in found.items() if i in self.enabled_reflectors}
         return found
 
-    def render_mirror_passes(self, camera: Camera, jitters: bool = False) -> dict:
+    def render_mirror_passes(
+        self, camera: Camera, jitters: bool = False, method: Method | None = None, lod_bias: float | None = None
+    ) -> dict:
         """This frame's mirror and see-through buffers (viewer/mirror_pass.py). ``jitters``: the
         frame's passes move off the pixel centres (box-filtered reference), where the occlusion
-        test, exact at pixel centres, does not apply."""
+        test, exact at pixel centres, does not apply. ``method`` (the frame's) and ``lod_bias``:
+        reflectors shaded by lobe-N get passes scissored to where their lookups read
+        (``mirror_scissor``; None: every pass whole)."""
         names = [obj.name for obj in self.objects]
         occlusion = self.mirror_occlusion and not jitters
+        reflectors = self.reflectors()
+        spreads = {}
+        if method is not None and self.mirror_scissor:
+            spreads = {index: self._lobe_spread(index, self._object_method(index, method)) for index in reflectors}
+        bias = DEFAULT_LOBE_LOD_BIAS if lod_bias is None else float(lod_bias)
         return self.mirror_passes.render(
-            camera, self.size, self.reflectors(), names, self.mirror_scale, self.mirror_specular, occlusion
+            camera, self.size, reflectors, names, self.mirror_scale, self.mirror_specular, occlusion, spreads, bias
         )
+
+    def _lobe_spread(self, index: int, method: Method) -> tuple[float, float] | None:
+        """How far the lobe-N lookups of reflector ``index`` reach (None: not lobe-N, unbounded)."""
+        mat = self.scene.materials[self.scene.objects[index].material]
+        if method.kind != "lobe" or per_pixel_lobes(mat):  # textures vary the lobes: no bound here
+            return None
+        key = (index, method.samples, method.normalize, method.pattern)
+        if key not in self._spreads:
+            lobes = specular_lobes(build_bsdf(mat.desc))
+            self._spreads[key] = lobe_spread(lobes, method.samples, method.normalize) if lobes else None
+        return self._spreads[key]
 
     def _opaque_objects(self, occluders_only: bool) -> list:
         """(GPU object, single-sided) for the objects the camera pass draws opaquely (no alphaMode
@@ -509,12 +534,15 @@ class SceneRenderer(RendererBase):
         mirrors: dict | None = None,
         cull: bool = False,
         pass_kind: str = "camera",
+        cull_view_projection=None,
     ):
         """Every object with its material whose bounding box reaches the frustum of
         ``view_proj`` (``frustum_culling``; counted in ``draw_counts[pass_kind]``). ``cull``: skip
         the back faces of single-sided materials (the camera pass only: mirror and cube-map
-        passes flip the winding)."""
+        passes flip the winding). ``cull_view_projection``: the frustum to cull against when it is
+        smaller than ``view_proj``'s (a scissored mirror pass)."""
         self.ctx.enable(moderngl.DEPTH_TEST)
+        cull_view_projection = view_proj if cull_view_projection is None else cull_view_projection
         mirrors = mirrors or {}
         counts = self.draw_counts.of(pass_kind)
         for obj, blended in self._draw_order(eye):
@@ -522,7 +550,7 @@ class SceneRenderer(RendererBase):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
                 # maps (as in the baker): a black pane would hide what lies behind it.
                 continue
-            if self.frustum_culling and outside_frustum(obj.corners, view_proj):
+            if self.frustum_culling and outside_frustum(obj.corners, cull_view_projection):
                 counts.culled += 1
                 continue
             counts.drawn += 1
@@ -584,9 +612,20 @@ class SceneRenderer(RendererBase):
         blended.sort(key=lambda o: -float(np.linalg.norm(o.centre - eye)))
         return [(o, False) for o in opaque] + [(o, True) for o in blended]
 
-    def _draw_pass(self, view_proj, eye, method: Method, specular: bool, exclude=None, pass_kind="cube map") -> None:
+    def _draw_pass(
+        self,
+        view_proj,
+        eye,
+        method: Method,
+        specular: bool,
+        exclude=None,
+        pass_kind="cube map",
+        cull_view_projection=None,
+    ) -> None:
         """The scene as the cube-map and mirror passes draw it (no per-frame state)."""
-        self._draw_objects(view_proj, eye, method, specular, exclude, pass_kind=pass_kind)
+        self._draw_objects(
+            view_proj, eye, method, specular, exclude, pass_kind=pass_kind, cull_view_projection=cull_view_projection
+        )
 
     def draw_frame(
         self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0, jitter=(0.0, 0.0)
@@ -606,7 +645,7 @@ class SceneRenderer(RendererBase):
             names = [obj.name for obj in self.objects]
             self.mirror_passes.skip_all(self.reflectors(), names, "cube map (prefiltered method)")
         else:
-            mirrors = self.render_mirror_passes(camera, jitters=method.kind == "reference")
+            mirrors = self.render_mirror_passes(camera, method.kind == "reference", method, lod_bias)
         self.frame.begin(averages_planes=any(self._averages_planes(self._object_method(i, method)) for i in mirrors))
         self.draw_background(self.environment, view_proj)
         if self.depth_prepass:
@@ -634,6 +673,7 @@ class SceneRenderer(RendererBase):
 
         desc = validate(desc)
         self.mirror_passes.generation += 1  # what the mirror buffers show changed
+        self._spreads.clear()  # a reflector's lobes may have changed
         material_index = self.scene.objects[index].material
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
