@@ -68,6 +68,15 @@ class ObjectNeeds:
 class SceneAnalysis:
     objects: list[ObjectNeeds]
     full_cube_face: int = DEFAULT_CUBE_FACE
+    # Planar reflectors get their cube maps only when a frame shades them from one (the renderer
+    # sets this; False: at start-up like every other glossy object).
+    reflector_cubes_on_demand: bool = False
+
+    @property
+    def cubes_at_start(self) -> list[int]:
+        """The objects whose cube maps are built at start-up."""
+        on_demand = self.reflector_cubes_on_demand
+        return [i for i in self.cube_mapped if not (on_demand and self.objects[i].reflector is not None)]
 
     @property
     def cube_mapped(self) -> list[int]:
@@ -92,6 +101,8 @@ class SceneAnalysis:
             lightmap = "yes" if o.has_lightmap else "NO (fallback)"
             proxy = o.reflection_proxy if o.needs_cube_map and o.reflector is None else "-"
             cube = f"{o.cube_face}^2 ({o.cube_face_reason})" if o.needs_cube_map else "no"
+            if o.needs_cube_map and o.reflector is not None and self.reflector_cubes_on_demand:
+                cube = f"on demand, {o.cube_face}^2 (mirror pass)"
             lines.append(f"{o.name:<24} {lobes:<42} {cube:<42} {lightmap:<14} {proxy:<24} {o.mirror}")
         return "\n".join(lines)
 

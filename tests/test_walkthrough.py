@@ -203,7 +203,10 @@ def test_walk_through_the_apartment_counts_add_up_and_skips_happen(small_apartme
         ctx.release()
     analysis = analyse(scene)
     assert result["objects"] == len(scene.objects)
-    assert result["cube_maps"] == len(analysis.cube_mapped)  # reflectors included: they still build one
+    # Reflectors build no cube map at start-up (their mirror passes shade them); every other
+    # glossy object does, at face 16 (MIN_CUBE_FACE: the lobe-width rule cannot go below it).
+    assert result["cube_maps"] == len(analysis.cube_mapped) - len(analysis.reflectors) > 0
+    assert result["cube_face_sizes"] == {16: result["cube_maps"]}
     assert result["cube_memory_mb"] == pytest.approx(
         result["cube_maps"] * 6 * 16 * sum(4**-k for k in range(5)) * 256 / 2**20
     )

@@ -187,6 +187,35 @@ class CubeBake:
             arrays = {f"cube_{i}": f.astype(np.float32) for i, f in faces.items()}
             write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, **arrays))  # read-only: re-render
 
+    def build_one(self, objects: list, index: int, size: int, key: str, cache_dir: Path | None) -> None:
+        """The cube map of one object on demand (a reflector whose mirror pass does not shade it
+        this frame): one bounce over the other objects' finished cube maps, which is what the
+        last bounce of :meth:`build` gives it; cached in its own file beside the others."""
+        cache_file = Path(cache_dir) / f"cubes-{key}-object{index}.npz" if cache_dir else None
+        shape = (6, size, size, 3)
+
+        def read(path: Path):
+            with np.load(path, allow_pickle=False) as data:
+                faces = data["cube"]
+            if faces.shape != shape or not np.all(np.isfinite(faces)):
+                raise ValueError(f"cube map is not a finite array of shape {shape}")
+            return faces
+
+        faces = read_cache_file(cache_file, read, "cube map")
+        if faces is None:
+            t0 = time.perf_counter()
+            faces = self.render_faces(objects[index].centre, exclude=index, specular=self.bounces > 1, size=size)
+            if self.progress:
+                print(
+                    f"[cube] {objects[index].name}: cube map of {size}^2 x 6 on demand in "
+                    f"{time.perf_counter() - t0:.2f} s",
+                    file=sys.stderr,
+                    flush=True,
+                )
+            if cache_file is not None:
+                write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, cube=faces.astype(np.float32)))
+        objects[index].cube = RadianceCube(self.ctx, faces.astype(np.float32))
+
     def refresh_one(self, objects: list) -> str | None:
         """Re-render the next stale cube map; returns its object's name (None: none was stale)."""
         while self.stale:

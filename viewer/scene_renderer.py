@@ -137,6 +137,7 @@ class SceneRenderer(RendererBase):
         mirror_specular: bool = True,
         frustum_culling: bool = True,
         lobe_width_cubes: bool = True,
+        reflector_cubes_on_demand: bool = True,
     ):
         super().__init__(ctx, size)
         if not 0.05 <= float(mirror_scale) <= 2.0:
@@ -156,6 +157,11 @@ class SceneRenderer(RendererBase):
         # cube_face_size is the narrowest lobes' size. False: every cube map at cube_face_size.
         self.lobe_width_cubes = bool(lobe_width_cubes)
         self.analysis = analyse(scene, cube_face_size, self.lobe_width_cubes)
+        # A planar reflector's mirror pass replaces its cube map (issue 18): it gets one only when
+        # a frame needs it (prefiltered method, its mirror pass turned off), and meanwhile other
+        # cube maps and mirror passes see it without its lobes (measured: tests/test_cube_sizes.py).
+        self.reflector_cubes_on_demand = bool(reflector_cubes_on_demand)
+        self.analysis.reflector_cubes_on_demand = self.reflector_cubes_on_demand
         self.progress = progress
         self.timings: dict = {}
         t0 = time.perf_counter()
@@ -224,7 +230,10 @@ class SceneRenderer(RendererBase):
         )
         sizes = {i: self.analysis.objects[i].cube_face for i in self.analysis.cube_mapped}
         key = scene_content_key(scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces, sizes)
-        self.cube_bake.build(self.objects, self.analysis.cube_mapped, key, self.cache_dir, sizes)
+        if self.reflector_cubes_on_demand:  # the second bounce then sees reflectors without lobes
+            key += "-r"
+        self._cube_key = key
+        self.cube_bake.build(self.objects, self.analysis.cubes_at_start, key, self.cache_dir, sizes)
         for obj in self.objects:
             if obj.cube is not None:
                 obj.cube.cache_dir = self.cache_dir  # prefiltered maps are cached beside the cubes
@@ -449,6 +458,25 @@ class SceneRenderer(RendererBase):
             camera, self.size, reflectors, names, self.mirror_scale, self.mirror_specular, occlusion, spreads, bias
         )
 
+    def _reflector_cubes_for(self, method: Method) -> None:
+        """Build the cube maps of reflectors that this frame shades from a cube map (the
+        prefiltered method, globally or as their override, or their mirror pass turned off)."""
+        enabled = self.reflectors()
+        for index in self.analysis.reflectors:
+            obj = self.objects[index]
+            if obj.cube is not None:
+                continue
+            if (
+                index in enabled
+                and method.kind != "prefiltered"
+                and self._object_method(index, method).kind != "prefiltered"
+            ):
+                continue
+            self.cube_bake.build_one(
+                self.objects, index, self.analysis.objects[index].cube_face, self._cube_key, self.cache_dir
+            )
+            obj.cube.cache_dir = self.cache_dir
+
     def _lobe_spread(self, index: int, method: Method) -> tuple[float, float] | None:
         """How far the lobe-N lookups of reflector ``index`` reach (None: not lobe-N, unbounded)."""
         mat = self.scene.materials[self.scene.objects[index].material]
@@ -563,10 +591,11 @@ class SceneRenderer(RendererBase):
                 self.ctx.enable(moderngl.CULL_FACE)  # glTF doubleSided false: back faces are not drawn
             else:
                 self.ctx.disable(moderngl.CULL_FACE)
-            use_specular = specular and obj.cube is not None
+            # A reflector drawn from its mirror buffer needs no cube map (on demand: it may have none).
+            mirror = mirrors.get(obj.index) if specular else None
+            use_specular = specular and (obj.cube is not None or mirror is not None)
             # Per-object real-time method (the panel's override); the reference ignores it.
             obj_method = self._object_method(obj.index, method)
-            mirror = mirrors.get(obj.index) if use_specular else None
             proxy = self.scene.objects[obj.index].reflection_proxy if use_specular and mirror is None else None
             program = self._program(
                 obj_method, use_specular, proxy is not None, mirror is not None, obj.material.has_rational
@@ -589,7 +618,8 @@ class SceneRenderer(RendererBase):
                 write_uniform(program, "u_irradiance_sh9", self.environment_sh9)
             self._bind_material(program, mat)
             if use_specular:
-                self.bind_cube(program, obj.cube, obj_method, obj.material, per_pixel_lobes(mat))
+                cube = obj.cube if obj.cube is not None else self.environment  # bound, unread under MIRROR
+                self.bind_cube(program, cube, obj_method, obj.material, per_pixel_lobes(mat))
                 if proxy is not None:
                     self._bind_proxy(program, obj, proxy)
                 if mirror is not None:
@@ -646,6 +676,7 @@ class SceneRenderer(RendererBase):
             self.mirror_passes.skip_all(self.reflectors(), names, "cube map (prefiltered method)")
         else:
             mirrors = self.render_mirror_passes(camera, method.kind == "reference", method, lod_bias)
+        self._reflector_cubes_for(method)
         self.frame.begin(averages_planes=any(self._averages_planes(self._object_method(i, method)) for i in mirrors))
         self.draw_background(self.environment, view_proj)
         if self.depth_prepass:
@@ -678,6 +709,7 @@ class SceneRenderer(RendererBase):
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
         self.analysis = analyse(self.scene, self.cube_face_size, self.lobe_width_cubes)
+        self.analysis.reflector_cubes_on_demand = self.reflector_cubes_on_demand
         # Everything else that reflects this object now sees an outdated appearance.
         self.cube_bake.stale = [
             i for i in self.analysis.cube_mapped if self.scene.objects[i].material != material_index
@@ -686,7 +718,12 @@ class SceneRenderer(RendererBase):
             if self.scene.objects[gpu_obj.index].material == material_index:
                 gpu_obj.material = packed
                 needs = self.analysis.objects[gpu_obj.index]
-                if needs.needs_cube_map and (gpu_obj.cube is None or gpu_obj.cube.face_size != needs.cube_face):
+                on_demand = gpu_obj.index not in self.analysis.cubes_at_start and gpu_obj.cube is None
+                if (
+                    needs.needs_cube_map
+                    and not on_demand
+                    and (gpu_obj.cube is None or gpu_obj.cube.face_size != needs.cube_face)
+                ):
                     # A diffuse object that became glossy gets its cube map now (~0.1 s), and one
                     # whose lobes narrowed or widened gets its cube at the face size they need.
                     faces = self.render_cube_faces(gpu_obj.centre, gpu_obj.index, True, needs.cube_face)
