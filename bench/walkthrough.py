@@ -163,10 +163,12 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         warm_stages = dict(renderer.timings)
         cubes, memory = cube_memory(renderer)
         reflectors = len(renderer.reflectors())
+        reflectors_deferred = len(renderer.analysis.cube_mapped) - len(renderer.analysis.cubes_at_start)
         _say(
             f"[walkthrough] {label}: start-up cold {cold:.1f} s, warm {warm:.1f} s; {cubes} cube maps; {frames} frames"
         )
         rows = walk_path(renderer, path, method, frames)
+        cubes_on_demand = cube_memory(renderer)[0] - cubes  # reflectors a frame shaded from a cube map
         renderer.release()
     finally:
         shutil.rmtree(cube_dir, ignore_errors=True)
@@ -177,6 +179,8 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         "cube_maps": cubes,
         "cube_memory_mb": memory / 2**20,
         "cube_memory_full_mb": memory_full / 2**20,
+        "reflector_cubes_deferred": reflectors_deferred,
+        "cubes_built_on_demand": cubes_on_demand,
         "cube_face_sizes": {int(f): face_sizes.count(f) for f in sorted(set(face_sizes))},
         "startup_cold_s": cold,
         "startup_cold_full_s": cold_full,
@@ -223,7 +227,9 @@ def _scene_markdown(result: dict) -> list[str]:
         "",
         f"{result['objects']} objects, {result['reflectors']} planar reflectors, {result['cube_maps']} cube maps "
         f"({result['cube_memory_mb']:.0f} MB; faces {_face_sizes(result)}; {result['cube_memory_full_mb']:.0f} MB "
-        f"and a cold start of {result['startup_cold_full_s']:.1f} s with every face at full size).",
+        f"and a cold start of {result['startup_cold_full_s']:.1f} s with every face at full size); "
+        f"{result['reflector_cubes_deferred']} reflectors without a cube map at start-up, "
+        f"{result['cubes_built_on_demand']} built on demand along the path.",
         f"Start-up: cold {result['startup_cold_s']:.1f} s (cube maps {cold_cubes:.1f} s: "
         f"{result['cube_face_draws']} object draws into cube faces, {result['cube_face_culled']} culled), "
         f"warm {result['startup_warm_s']:.1f} s (cube maps {warm_cubes:.1f} s, from the cache).",

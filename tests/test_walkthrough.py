@@ -207,6 +207,8 @@ def test_walk_through_the_apartment_counts_add_up_and_skips_happen(small_apartme
     # glossy object does, at face 16 (MIN_CUBE_FACE: the lobe-width rule cannot go below it).
     assert result["cube_maps"] == len(analysis.cube_mapped) - len(analysis.reflectors) > 0
     assert result["cube_face_sizes"] == {16: result["cube_maps"]}
+    assert result["reflector_cubes_deferred"] == len(analysis.reflectors)
+    assert result["cubes_built_on_demand"] == 0  # lobe-5 shades every reflector from its mirror pass
     assert result["cube_memory_mb"] == pytest.approx(
         result["cube_maps"] * 6 * 16 * sum(4**-k for k in range(5)) * 256 / 2**20
     )
@@ -266,6 +268,7 @@ def test_walkthrough_report_tables(tmp_path):
            "mirror_pixels_scissored": 300, "mirror_pixels": 1200}  # fmt: skip
     result = {"scene": "x", "objects": 6, "reflectors": 3, "cube_maps": 2, "cube_memory_mb": 16.0,
               "cube_memory_full_mb": 20.0, "cube_face_sizes": {256: 1, 64: 1}, "startup_cold_full_s": 2.5,
+              "reflector_cubes_deferred": 3, "cubes_built_on_demand": 0,
               "startup_cold_s": 2.0, "startup_warm_s": 0.5, "cold_stages": {"cube maps": 1.5},
               "warm_stages": {"cube maps": 0.1}, "cube_face_draws": 40, "cube_face_culled": 20,
               "frames": [row], "rooms": 1}  # fmt: skip
