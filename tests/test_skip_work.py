@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 import pytest
 
-from lobeview.viewer.camera import Camera, box_corners, outside_frustum, perspective
+from lobeview.viewer.camera import Camera, box_corners, outside_frustum, outside_frustum_many, perspective
 from lobeview.viewer.camera import look_at as camera_look_at
 
 
@@ -23,19 +23,24 @@ def test_box_test_never_drops_a_box_with_a_point_in_view_and_drops_far_away_boxe
     rng = np.random.default_rng(3)
     view_proj = perspective(60.0, 1.6, 0.1, 50.0) @ camera_look_at((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0, 1, 0))
     culled = kept_empty = 0
+    boxes, verdicts = [], []
     for _ in range(3000):
         centre = rng.uniform(-30.0, 30.0, 3)
         half = rng.uniform(0.05, 6.0, 3)
         corners = box_corners(centre - half, centre + half)
         points = centre + half * rng.uniform(-1.0, 1.0, (400, 3))
         visible = _points_in_frustum(np.vstack([points, corners]), view_proj).any()
-        if outside_frustum(corners, view_proj):
+        boxes.append(corners)
+        verdicts.append(outside_frustum(corners, view_proj))
+        if verdicts[-1]:
             culled += 1
             assert not visible, (centre, half)  # conservative: a visible box is never culled
         elif not visible:
             kept_empty += 1
     # Most boxes out of view are culled (the rest straddle a frustum edge outside two planes).
     assert culled > 1500 and kept_empty < 0.2 * culled, (culled, kept_empty)
+    # The per-pass batch (every object of a pass in one product) gives the same verdicts.
+    np.testing.assert_array_equal(outside_frustum_many(np.array(boxes), view_proj), verdicts)
     # Behind the eye (w < 0 at every corner) and beyond the far plane.
     assert outside_frustum(box_corners((-1, -1, 2), (1, 1, 4)), view_proj)
     assert outside_frustum(box_corners((-1, -1, -80), (1, 1, -60)), view_proj)
@@ -147,7 +152,11 @@ def test_a_damaged_cube_map_cache_is_warned_about_and_rendered_again(ctx, tmp_pa
     env = EnvironmentMap.from_function(lambda d: 0.5 + 0.5 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 16)
 
     def start():
-        return SceneRenderer(ctx, scene, env, size=(32, 20), cube_face_size=16, cache_dir=tmp_path, progress=False)
+        # The floor is a reflector: with its cube map built at start-up like any glossy object.
+        return SceneRenderer(
+            ctx, scene, env, size=(32, 20), cube_face_size=16, cache_dir=tmp_path, progress=False,
+            reflector_cubes_on_demand=False,
+        )  # fmt: skip
 
     first = start()
     (cache_file,) = tmp_path.glob("cubes-*.npz")

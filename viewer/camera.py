@@ -82,12 +82,19 @@ def outside_frustum(corners: np.ndarray, view_projection: np.ndarray) -> bool:
     -w <= x, and y, z alike) is a linear function of the homogeneous point, so the test holds for
     corners behind the eye (w < 0) and for oblique near planes too. Conservative: a volume that
     crosses a frustum edge outside every single plane's half-space is kept."""
-    clip = np.c_[np.asarray(corners, dtype=np.float64), np.ones(len(corners))] @ np.asarray(view_projection).T
-    w = clip[:, 3]
-    for axis in range(3):
-        if np.all(clip[:, axis] > w) or np.all(clip[:, axis] < -w):
-            return True
-    return False
+    return bool(outside_frustum_many(np.asarray(corners, dtype=np.float64)[None], view_projection)[0])
+
+
+def outside_frustum_many(corners: np.ndarray, view_projection: np.ndarray) -> np.ndarray:
+    """:func:`outside_frustum` of many volumes at once: ``corners`` (n, k, 3) -> (n,) bool (one
+    matrix product per pass instead of one per object)."""
+    corners = np.asarray(corners, dtype=np.float64)
+    view_projection = np.asarray(view_projection, dtype=np.float64)
+    clip = corners @ view_projection[:, :3].T + view_projection[:, 3]
+    w = clip[..., 3:4]
+    above = np.all(clip[..., :3] > w, axis=1)
+    below = np.all(clip[..., :3] < -w, axis=1)
+    return np.any(above | below, axis=-1)
 
 
 DEPTH_RANGE_RATIO = 5000.0  # far / near kept by fit_clip_planes: 24-bit depth resolves ~far/1e4 at far

@@ -16,7 +16,7 @@ from lobeview.core.methods import Method
 
 from .camera import Camera, outside_frustum, perspective
 from .frame import begin_pass, new_framebuffer
-from .interface import TEXTURE_UNITS, bind_sampler, set_uniform
+from .interface import TEXTURE_UNITS, bind_sampler, has_uniform, set_uniform
 
 MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # glossy objects inside mirror buffers (cheap)
 # Sampler-uniform prefixes of the mirror and see-through buffers (units: interface.TEXTURE_UNITS).
@@ -234,7 +234,7 @@ class MirrorPasses:
             )
             set_uniform(program, f"{prefix}_eye", tuple(float(x) for x in camera.position))
             set_uniform(program, f"{prefix}_focal_px", float(camera.focal_pixels))
-        if "u_plane_point_state" in program:
+        if has_uniform(program, "u_plane_point_state"):
             # Points (mirror, see-through), then normals: the order of the state attachments.
             for k, tex in enumerate(previous_plane_states):
                 bind_sampler(program, ("u_plane_point_state", "u_plane_normal_state")[k // 2], tex, index=k % 2)

@@ -25,6 +25,7 @@ from .interface import (
     LOBE_TABLE_ROWS,
     RATIONAL_BINDING,
     bind_sampler,
+    has_uniform,
     set_uniform,
     unit,
     write_uniform,
@@ -192,7 +193,7 @@ class RendererBase:
     ) -> None:
         set_uniform(program, "u_lobe_count", material.lobe_count)
         write_uniform(program, "u_lobes", material.lobes)
-        if method.kind == "lobe" and "u_pattern" in program:
+        if method.kind == "lobe" and has_uniform(program, "u_pattern"):
             write_uniform(program, "u_pattern", pack_patterns(material, method.samples, planar, method.pattern))
         set_uniform(program, "u_kd", tuple(float(x) for x in material.kd))
         set_uniform(program, "u_gltf_diffuse", 1.0 if material.gltf_diffuse else 0.0)
@@ -202,7 +203,7 @@ class RendererBase:
         set_uniform(program, "u_clearcoat", float(material.clearcoat))
         set_uniform(program, "u_transmission", float(material.transmission))
         set_uniform(program, "u_sheen_color", tuple(float(x) for x in material.sheen_color))
-        if "u_sheen_albedo" in program:
+        if has_uniform(program, "u_sheen_albedo"):
             write_uniform(program, "u_sheen_albedo", np.asarray(material.sheen_table, dtype=np.float32))
         set_uniform(program, "u_samples", method.samples)
         set_uniform(
@@ -213,7 +214,7 @@ class RendererBase:
         set_uniform(program, "u_sobol_count", self.sobol_count)
         set_uniform(program, "u_seed", int(seed))
         self._bind_rational(material)
-        if method.kind == "lobe" and method.normalize and "u_albedo" in program:
+        if method.kind == "lobe" and method.normalize and has_uniform(program, "u_albedo"):
 
             def albedo_texture():
                 data = albedo_texture_data(material, self.table_cache_root)

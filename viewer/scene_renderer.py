@@ -34,7 +34,7 @@ from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
 
-from .camera import Camera, box_corners, jittered, outside_frustum
+from .camera import Camera, box_corners, jittered, outside_frustum_many
 from .cube_bake import CubeBake, scene_content_key
 from .cubemap import RadianceCube, equirect_to_cube_faces
 from .interface import (
@@ -42,6 +42,7 @@ from .interface import (
     PROXY_KINDS,
     TEXTURE_UNITS,
     bind_sampler,
+    has_uniform,
     method_defines,
     set_uniform,
     write_uniform,
@@ -198,6 +199,7 @@ class SceneRenderer(RendererBase):
         # Frustum culling (issue 18): objects whose bounding box lies outside a pass's frustum are
         # not drawn; draw_counts says, per kind of pass, how many were drawn and culled.
         self.frustum_culling = bool(frustum_culling)
+        self._object_corners = np.array([obj.corners for obj in self.objects]).reshape(len(self.objects), 8, 3)
         self.draw_counts = DrawCounts()
         # Occlusion test of the reflectors (viewer/occlusion.py): no mirror pass for a reflector
         # that opaque objects hide from the camera (a floor behind a wall).
@@ -389,7 +391,7 @@ class SceneRenderer(RendererBase):
         write_uniform(program, "u_map_texcoord", np.asarray(texcoords, dtype=np.int32))
         write_uniform(program, "u_map_transform", np.asarray(transforms, dtype=np.float32))
         write_uniform(program, "u_map_mirrored", np.asarray(mirrored, dtype=np.int32))
-        if "u_albedo_per_pixel" in program:  # normalised lobe-N (shaders/patterns.glsl lobe_albedo)
+        if has_uniform(program, "u_albedo_per_pixel"):  # normalised lobe-N (shaders/patterns.glsl lobe_albedo)
             # Every texture but the normal maps, occlusion and emission changes the lobes' albedo.
             per_pixel = gltf_model and bool(set(mat.textures) - {"normal", "occlusion", "emissive", "clearcoat_normal"})
             set_uniform(program, "u_albedo_per_pixel", int(per_pixel))
@@ -571,6 +573,7 @@ class SceneRenderer(RendererBase):
         smaller than ``view_proj``'s (a scissored mirror pass)."""
         self.ctx.enable(moderngl.DEPTH_TEST)
         cull_view_projection = view_proj if cull_view_projection is None else cull_view_projection
+        culled = outside_frustum_many(self._object_corners, cull_view_projection) if self.frustum_culling else None
         mirrors = mirrors or {}
         counts = self.draw_counts.of(pass_kind)
         for obj, blended in self._draw_order(eye):
@@ -578,7 +581,7 @@ class SceneRenderer(RendererBase):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
                 # maps (as in the baker): a black pane would hide what lies behind it.
                 continue
-            if self.frustum_culling and outside_frustum(obj.corners, cull_view_projection):
+            if culled is not None and culled[obj.index]:
                 counts.culled += 1
                 continue
             counts.drawn += 1
