@@ -56,6 +56,15 @@ def add_scene_arguments(p) -> None:
         "prefiltered methods, which read finer than lobe-N",
     )
     a(
+        "--cube-budget",
+        type=float,
+        default=None,
+        metavar="MB",
+        help="GPU memory for cube maps (with MIP chains and prefiltered maps): after each frame the least "
+        "recently drawn ones are released until it holds, and restored (from the cache, else rendered) when "
+        "an object comes back into view; default: no budget",
+    )
+    a(
         "--reflection-proxy",
         choices=("scene", "none", "floor", "room"),
         default="scene",
@@ -144,6 +153,9 @@ def check_scene_options(args) -> None:
         raise OptionError(f"--face-size must be a power of two in [8, 2048], got {args.face_size}")
     if not 0.05 <= args.mirror_scale <= 2.0:
         raise OptionError(f"--mirror-scale must be in [0.05, 2], got {args.mirror_scale}")
+    budget = getattr(args, "cube_budget", None)
+    if budget is not None and not (np.isfinite(budget) and budget > 0):
+        raise OptionError(f"--cube-budget must be a positive number of MB, got {budget}")
     if args.materials is not None and not Path(args.materials).is_file():
         raise OptionError(f"--materials: no such file {args.materials!r}")
     scene = getattr(args, "scene", None)
@@ -301,6 +313,7 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method 
         cache_dir=cache / "cubes",
         mirror_scale=args.mirror_scale,
         lobe_width_cubes=lobe_width_cubes(args, method),
+        cube_budget_mb=getattr(args, "cube_budget", None),
     )
     renderer.set_mirrors(args.mirrors)
     return renderer
@@ -336,6 +349,8 @@ def shot_command(
             parts.append(f"--env={shlex.quote(str(args.env))}")
         if args.face_size != DEFAULT_FACE_SIZE:
             parts.append(f"--face-size={args.face_size}")
+        if getattr(args, "cube_budget", None) is not None:
+            parts.append(f"--cube-budget={args.cube_budget:g}")
         if getattr(args, "cube_sizes", "auto") != "auto":
             parts.append(f"--cube-sizes={args.cube_sizes}")
         if args.reflection_proxy != "scene":

@@ -49,6 +49,7 @@ def _status(window) -> None:
     fps = 1000.0 / window.frame_ms if window.frame_ms > 0 else 0.0
     imgui.text(f"{fps:.1f} fps, frame {window.frame_ms:.1f} ms")
     imgui.text(f"shading + accumulation {window.pass_ms:.1f} ms, last cube map {window.cube_ms:.1f} ms")
+    imgui.text_wrapped(window.renderer.residency.report(window.renderer.objects))
     refinement = window.refinement
     if refinement.samples:
         imgui.text_wrapped(refinement.status())

@@ -246,6 +246,7 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
         print(f"[mirror] {line}")
     for line in renderer.draw_report:
         print(f"[draw] {line}")
+    print(f"[cube] {renderer.residency.report(renderer.objects)}")
     _finish(result, out, args, stages)
     what = f"{'the demo scene' if args.scene is None else path.name} under {env.name}"
     _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe, args.pixel_filter)

@@ -76,6 +76,8 @@ def test_shot_reference_reports_samples(tmp_path, capsys):
             "roughness = 2",
         ),
         (["--object", "/no/such/mesh.obj"], "no such file"),
+        (["--cube-budget", "0"], "--cube-budget must be a positive number of MB"),
+        (["--cube-budget", "nan"], "--cube-budget must be a positive number of MB"),
     ],
 )
 def test_shot_bad_input_gives_a_clear_error(tmp_path, capsys, extra, message):

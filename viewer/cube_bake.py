@@ -24,7 +24,7 @@ from lobeview.core.cache import read_cache_file, write_cache_file
 from lobeview.core.cube_layout import face_point_directions
 from lobeview.core.methods import Method
 
-from .camera import perspective
+from .camera import outside_frustum_many, perspective
 from .cubemap import RadianceCube
 from .frame import begin_pass, new_framebuffer
 
@@ -216,6 +216,32 @@ class CubeBake:
                 write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, cube=faces.astype(np.float32)))
         objects[index].cube = RadianceCube(self.ctx, faces.astype(np.float32))
 
+    def restore(self, objects: list, index: int, size: int, key: str, cache_dir: Path | None, edited: bool) -> str:
+        """Bring back an evicted cube map (:class:`CubeResidency`): from the start-up cache file
+        when the scene is as it was then, else through :meth:`build_one` (its own file, or
+        rendered again: one bounce over the other cube maps, as a refreshed cube). Returns where
+        it came from."""
+        shape = (6, size, size, 3)
+        main = Path(cache_dir) / f"cubes-{key}.npz" if cache_dir and not edited else None
+
+        def read(path: Path):
+            with np.load(path, allow_pickle=False) as data:
+                if f"cube_{index}" not in data.files:
+                    return None
+                faces = data[f"cube_{index}"]
+            if faces.shape != shape or not np.all(np.isfinite(faces)):
+                raise ValueError(f"cube map is not a finite array of shape {shape}")
+            return faces
+
+        faces = read_cache_file(main, read, "cube maps")
+        if faces is not None:
+            objects[index].cube = RadianceCube(self.ctx, faces.astype(np.float32))
+            return "disk cache"
+        own = Path(cache_dir) / f"cubes-{key}-object{index}.npz" if cache_dir and not edited else None
+        from_disk = own is not None and own.exists()
+        self.build_one(objects, index, size, key, None if edited else cache_dir)
+        return "disk cache" if from_disk else "rendered"
+
     def refresh_one(self, objects: list) -> str | None:
         """Re-render the next stale cube map; returns its object's name (None: none was stale)."""
         while self.stale:
@@ -230,3 +256,69 @@ class CubeBake:
             obj.cube.cache_dir = cache_dir
             return obj.name
         return None
+
+
+class CubeResidency:
+    """A GPU memory budget for the cube maps (issue 18; ``SceneRenderer(cube_budget_mb=...)``,
+    ``--cube-budget``): after each frame, while the cube maps (with their MIP chains and any
+    prefiltered maps) exceed the budget, the least recently drawn are released, never one drawn
+    in that frame; before a pass draws an evicted object it is restored (viewer/cube_bake.py
+    CubeBake.restore). ``None``: no budget."""
+
+    def __init__(self, budget_bytes: int | None):
+        self.budget = None if budget_bytes is None else int(budget_bytes)
+        self.frame = 0
+        self.last_used: dict[int, int] = {}
+        self.evicted: set[int] = set()
+        self.evictions = 0
+        self.restores: dict[str, int] = {}  # where restored cube maps came from -> count
+        self.restore_seconds = 0.0
+
+    def touch(self, index: int) -> None:
+        self.last_used[index] = self.frame
+
+    def evict(self, objects: list) -> list[int]:
+        """End of a frame: release least recently drawn cube maps until under budget."""
+        self.frame += 1
+        if self.budget is None:
+            return []
+        resident = [obj for obj in objects if obj.cube is not None]
+        total = sum(cube_gpu_bytes(obj.cube) for obj in resident)
+        released = []
+        drawn_now = self.frame - 1
+        for obj in sorted(resident, key=lambda o: self.last_used.get(o.index, -1)):
+            if total <= self.budget or self.last_used.get(obj.index, -1) >= drawn_now:
+                break
+            total -= cube_gpu_bytes(obj.cube)
+            obj.cube.release()
+            obj.cube = None
+            self.evicted.add(obj.index)
+            released.append(obj.index)
+        self.evictions += len(released)
+        return released
+
+    def wanted(self, corners: np.ndarray, view_projection: np.ndarray, exclude=None) -> list[int]:
+        """Evicted objects whose bounding box reaches the frustum of ``view_projection``."""
+        if not self.evicted:
+            return []
+        indices = sorted(i for i in self.evicted if i != exclude)
+        inside = ~outside_frustum_many(corners[indices], view_projection)
+        return [i for i, keep in zip(indices, inside, strict=True) if keep]
+
+    def report(self, objects: list) -> str:
+        resident = [obj.cube for obj in objects if obj.cube is not None]
+        memory = sum(cube_gpu_bytes(cube) for cube in resident) / 2**20
+        budget = "no budget" if self.budget is None else f"budget {self.budget / 2**20:.0f} MB"
+        restored = ", ".join(f"{n} from {where}" for where, n in sorted(self.restores.items())) or "none"
+        return (
+            f"cube maps: {len(resident)} resident, {memory:.0f} MB ({budget}); {self.evictions} evicted, "
+            f"restored {restored} ({self.restore_seconds:.1f} s)"
+        )
+
+
+def cube_gpu_bytes(cube: RadianceCube) -> int:
+    """GPU bytes of a radiance cube with its MIP chain and the prefiltered maps built from it."""
+    from .prefiltered import cube_bytes
+
+    maps = cube.built_prefiltered_maps
+    return cube_bytes(cube.face_size, int(np.log2(cube.face_size)) + 1) + (maps.total_memory() if maps else 0)

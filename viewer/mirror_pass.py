@@ -87,7 +87,8 @@ class MirrorPasses:
     """``draw_background(cube, view_projection)`` and ``draw_scene(view_projection, eye, method,
     specular, exclude)`` are the renderer's; ``visible_samples(view_projection, indices)`` (the
     renderer's occlusion test, viewer/occlusion.py) says how many camera pixels of each
-    reflector no opaque object hides."""
+    reflector no opaque object hides; ``prepare_pass(view_projection, exclude)`` readies what a
+    pass will draw (evicted cube maps, viewer/cube_bake.py CubeResidency)."""
 
     def __init__(
         self,
@@ -96,8 +97,10 @@ class MirrorPasses:
         draw_background: Callable,
         draw_scene: Callable,
         visible_samples: Callable | None = None,
+        prepare_pass: Callable | None = None,
     ):
         self.ctx = ctx
+        self.prepare_pass = prepare_pass  # (view_projection, exclude): before a pass binds its buffers
         self.environment = environment
         self.draw_background = draw_background
         self.draw_scene = draw_scene
@@ -174,12 +177,17 @@ class MirrorPasses:
                     targets = self.targets[(index, kind)] = MirrorTargets(self.ctx, size)
                 buffer_camera = mirror_camera(camera.view(), projection, reflector, size, see_through=kind != "mirror")
                 rect = mirror_scissor(reflector, buffer_camera, spreads.get(index), lod_bias)
+                cull_view_projection = None
+                if rect is not None:
+                    cull_view_projection = sub_rect_projection(rect, size) @ buffer_camera.view_projection
+                if self.prepare_pass is not None:
+                    self.prepare_pass(
+                        buffer_camera.view_projection if cull_view_projection is None else cull_view_projection, index
+                    )
                 begin_pass(self.ctx, targets.fbo, size)
                 self.draw_background(self.environment, buffer_camera.plain_view_projection)
-                cull_view_projection = None
                 if rect is not None:  # the scene only where the reflector's lookups read
                     self.ctx.scissor = rect
-                    cull_view_projection = sub_rect_projection(rect, size) @ buffer_camera.view_projection
                 self.draw_scene(
                     buffer_camera.view_projection, buffer_camera.position, MIRROR_BOUNCE_METHOD, specular, index,
                     cull_view_projection=cull_view_projection,

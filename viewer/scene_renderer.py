@@ -35,7 +35,7 @@ from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
 
 from .camera import Camera, box_corners, jittered, outside_frustum_many
-from .cube_bake import CubeBake, scene_content_key
+from .cube_bake import CubeBake, CubeResidency, scene_content_key
 from .cubemap import RadianceCube, equirect_to_cube_faces
 from .interface import (
     ALPHA_MODES,
@@ -139,10 +139,13 @@ class SceneRenderer(RendererBase):
         frustum_culling: bool = True,
         lobe_width_cubes: bool = True,
         reflector_cubes_on_demand: bool = True,
+        cube_budget_mb: float | None = None,
     ):
         super().__init__(ctx, size)
         if not 0.05 <= float(mirror_scale) <= 2.0:
             raise ValueError(f"mirror_scale must be in [0.05, 2], got {mirror_scale}")
+        if cube_budget_mb is not None and not float(cube_budget_mb) > 0:
+            raise ValueError(f"cube_budget_mb must be positive, got {cube_budget_mb}")
         # Planar reflectors (thesis 4.5): one mirror pass per visible reflector per frame, at
         # mirror_scale times the frame's resolution; mirror_specular shades the glossy objects seen
         # in it from their cube maps (lobe-3) instead of the thesis' diffuse-only mirror pass.
@@ -217,6 +220,7 @@ class SceneRenderer(RendererBase):
             self.draw_background,
             functools.partial(self._draw_pass, pass_kind="mirror"),
             self._visible_samples,
+            self._restore_cubes,
         )
         self.bounds = scene.bounds  # static scene: near/far planes are fitted to it every frame
         extent = float(np.max(self.bounds[1] - self.bounds[0]))
@@ -240,6 +244,8 @@ class SceneRenderer(RendererBase):
             if obj.cube is not None:
                 obj.cube.cache_dir = self.cache_dir  # prefiltered maps are cached beside the cubes
         self.timings["cube maps"] = time.perf_counter() - t0
+        self.residency = CubeResidency(None if cube_budget_mb is None else int(float(cube_budget_mb) * 2**20))
+        self._edited = False  # a material edit makes the start-up cache files outdated
 
     @property
     def cube_face_size(self) -> int:
@@ -460,6 +466,21 @@ class SceneRenderer(RendererBase):
             camera, self.size, reflectors, names, self.mirror_scale, self.mirror_specular, occlusion, spreads, bias
         )
 
+    def _restore_cubes(self, view_projection, exclude: int | None = None) -> None:
+        """Restore the evicted cube maps (``cube_budget_mb``) of objects a pass with this frustum
+        may draw, before it binds its framebuffer (restoring renders or reads cube faces)."""
+        wanted = self.residency.wanted(self._object_corners, view_projection, exclude)
+        for index in wanted:
+            t0 = time.perf_counter()
+            where = self.cube_bake.restore(
+                self.objects, index, self.analysis.objects[index].cube_face, self._cube_key, self.cache_dir,
+                self._edited,
+            )  # fmt: skip
+            self.objects[index].cube.cache_dir = self.cache_dir
+            self.residency.evicted.discard(index)
+            self.residency.restores[where] = self.residency.restores.get(where, 0) + 1
+            self.residency.restore_seconds += time.perf_counter() - t0
+
     def _reflector_cubes_for(self, method: Method) -> None:
         """Build the cube maps of reflectors that this frame shades from a cube map (the
         prefiltered method, globally or as their override, or their mirror pass turned off)."""
@@ -597,6 +618,8 @@ class SceneRenderer(RendererBase):
             # A reflector drawn from its mirror buffer needs no cube map (on demand: it may have none).
             mirror = mirrors.get(obj.index) if specular else None
             use_specular = specular and (obj.cube is not None or mirror is not None)
+            if use_specular and obj.cube is not None and pass_kind != "cube map":
+                self.residency.touch(obj.index)
             # Per-object real-time method (the panel's override); the reference ignores it.
             obj_method = self._object_method(obj.index, method)
             proxy = self.scene.objects[obj.index].reflection_proxy if use_specular and mirror is None else None
@@ -673,6 +696,7 @@ class SceneRenderer(RendererBase):
         self.draw_counts.new_frame()
         # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
         # lookup per lobe, so there they keep their cube maps and no mirror pass is drawn.
+        self._restore_cubes(view_proj)
         if method.kind == "prefiltered":
             mirrors = {}
             names = [obj.name for obj in self.objects]
@@ -694,6 +718,7 @@ class SceneRenderer(RendererBase):
             view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors, cull=True
         )
         self.ctx.depth_func = "<"
+        self.residency.evict(self.objects)
 
     def pick(self, x: int, y: int) -> int | None:
         """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
@@ -707,6 +732,7 @@ class SceneRenderer(RendererBase):
 
         desc = validate(desc)
         self.mirror_passes.generation += 1  # what the mirror buffers show changed
+        self._edited = True
         self._spreads.clear()  # a reflector's lobes may have changed
         material_index = self.scene.objects[index].material
         self.scene.materials[material_index].desc = desc
