@@ -65,6 +65,12 @@ def add_arguments(p) -> None:
         type=int,
         help="walkthrough: apartment sizes of the object-count table (default 1 6 18; --quick 1 4)",
     )
+    a(
+        "--cube-budget",
+        type=float,
+        metavar="MB",
+        help="walkthrough: cube-map memory budget of the budget walk over the apartment's path (default 128)",
+    )
     a("--out", help="output folder (default bench/results); files are timestamped, never overwritten")
 
 

@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 DEFAULT_COUNT_ROOMS = (1, 6, 18)
+DEFAULT_BUDGET_MB = 128.0  # the budget walk's (the 12-room apartment's cube maps take ~330 MB)
 COUNT_BAKE = {"resolution": 512, "rays": 16, "bounces": 1}  # the object-count sweep's lightmaps
 
 
@@ -218,6 +219,80 @@ def _summary(result: dict) -> dict:
     }
 
 
+def budget_walk(ctx, label, scene, env, path, method, size, frames: int, face_size: int, budget_mb: float) -> dict:
+    """The recorded path drawn whole (mirror passes and camera pass, draw_frame) with and without
+    a cube-map memory budget (viewer/cube_bake.py CubeResidency), from a warm cache: per frame
+    the time of both, the cube maps evicted and restored, and the memory resident after it."""
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.cube_bake import cube_gpu_bytes
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    cube_dir = Path(tempfile.mkdtemp(prefix="lobeview-budget-"))
+    try:
+        _say(f"[walkthrough] {label}: the path with a cube-map budget of {budget_mb:g} MB")
+        renderers = {
+            budget: SceneRenderer(
+                ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cube_dir, progress=False,
+                cube_budget_mb=budget,
+            )
+            for budget in (None, budget_mb)
+        }  # fmt: skip
+        rows = []
+        cameras = [Camera.from_scene_camera(path.camera_at(float(t))) for t in path.frame_times(frames)]
+        for renderer in renderers.values():  # compile the variants
+            renderer.draw_frame(cameras[0], method)
+        budgeted = renderers[budget_mb]
+        residency = budgeted.residency
+        for n, camera in enumerate(cameras):
+            times = {}
+            for budget, renderer in renderers.items():
+                renderer.invalidate_mirrors()
+                evicted, restored = residency.evictions, sum(residency.restores.values())
+                times[budget] = _finished_ms(ctx, renderer.draw_frame, camera, method)
+            rows.append(
+                {
+                    "frame": n,
+                    "frame_ms": times[budget_mb],
+                    "frame_ms_without_budget": times[None],
+                    "evicted": residency.evictions - evicted,
+                    "restored": sum(residency.restores.values()) - restored,
+                    "resident_mb": sum(
+                        cube_gpu_bytes(obj.cube) for obj in budgeted.objects if obj.cube is not None
+                    ) / 2**20,
+                }
+            )  # fmt: skip
+        peak_without = cube_memory(renderers[None])[1] / 2**20
+        summary = residency.report(budgeted.objects)
+        for renderer in renderers.values():
+            renderer.release()
+    finally:
+        shutil.rmtree(cube_dir, ignore_errors=True)
+    return {"scene": label, "budget_mb": budget_mb, "memory_without_budget_mb": peak_without, "report": summary,
+            "frames": rows}  # fmt: skip
+
+
+def _budget_markdown(result: dict) -> list[str]:
+    rows = result["frames"]
+    lines = [
+        f"### {result['scene']} with a cube-map budget of {result['budget_mb']:g} MB",
+        "",
+        f"Without a budget the cube maps take {result['memory_without_budget_mb']:.0f} MB. With it: "
+        f"{result['report']}. Frame time (draw_frame, mirror passes included, restores inside the frame): "
+        f"median {statistics.median(r['frame_ms'] for r in rows):.0f} ms against "
+        f"{statistics.median(r['frame_ms_without_budget'] for r in rows):.0f} ms without a budget; max "
+        f"{max(r['frame_ms'] for r in rows):.0f} against {max(r['frame_ms_without_budget'] for r in rows):.0f} ms.",
+        "",
+        "| frame | frame ms | without the budget ms | evicted | restored | resident MB |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['frame']} | {r['frame_ms']:.0f} | {r['frame_ms_without_budget']:.0f} | {r['evicted']} "
+            f"| {r['restored']} | {r['resident_mb']:.0f} |"
+        )
+    return lines + [""]
+
+
 def _scene_markdown(result: dict) -> list[str]:
     s = _summary(result)
     cold_cubes = result["cold_stages"].get("cube maps", 0.0)
@@ -309,6 +384,7 @@ def run_walkthrough_bench(
     count_frames: int,
     cache: Path,
     quick: bool,
+    budget_mb: float = DEFAULT_BUDGET_MB,
 ) -> Path:
     from lobeview.app.options import load_scene_and_environment
     from lobeview.core.methods import Method
@@ -325,6 +401,9 @@ def run_walkthrough_bench(
     _, apartment, env, _ = load_scene_and_environment(scene_arg, None, str(cache))
     results.append(
         measure_scene(ctx, scene_arg, apartment, env, apartment_path(rooms), method_obj, size, frames, face_size)
+    )
+    budget = budget_walk(
+        ctx, scene_arg, apartment, env, apartment_path(rooms), method_obj, size, frames, face_size, budget_mb
     )
     count_rows = []
     for count in count_rooms:
@@ -356,6 +435,7 @@ def run_walkthrough_bench(
         "count_frames": count_frames,
         "count_bake": COUNT_BAKE,
         "scenes": results,
+        "budget": budget,
         "object_count": count_rows,
         "seconds": elapsed,
     }
@@ -382,6 +462,7 @@ def run_walkthrough_bench(
     ]
     for result in results:
         lines += _scene_markdown(result)
+    lines += ["## Cube-map memory budget", "", *_budget_markdown(budget)]
     md = out_dir / f"{stem}.md"
     md.write_text("\n".join(lines) + "\n")
     _say(f"[walkthrough] wrote {md} and {stem}.json ({elapsed / 60:.1f} min)")
@@ -416,6 +497,7 @@ def run_walkthrough_command(args, out_dir: Path, stamp: str) -> int:
         count_frames=args.frames or (4 if args.quick else 12),
         cache=cache_dir(args.cache),
         quick=args.quick,
+        budget_mb=args.cube_budget or DEFAULT_BUDGET_MB,
     )
     ctx.release()
     return 0

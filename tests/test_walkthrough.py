@@ -233,6 +233,31 @@ def test_walk_through_the_apartment_counts_add_up_and_skips_happen(small_apartme
     assert result["cube_face_culled"] > 0
 
 
+def test_budget_walk_evicts_and_restores_along_the_path(small_apartment):
+    from lobeview.bench.walkthrough import _budget_markdown, budget_walk
+    from lobeview.core.methods import Method
+    from lobeview.scenes.builtin_env import load_environment
+    from lobeview.viewer.context import create_headless_context
+
+    ctx = create_headless_context()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            result = budget_walk(
+                ctx, "apartment-4", small_apartment, load_environment("builtin:overcast"), apartment_path(4),
+                Method.parse("lobe-3"), (64, 40), 6, 16, 0.2,
+            )  # fmt: skip
+    finally:
+        ctx.release()
+    rows = result["frames"]
+    assert len(rows) == 6 and result["memory_without_budget_mb"] > 0.2
+    assert sum(r["evicted"] for r in rows) > 0 and sum(r["restored"] for r in rows) > 0
+    assert all(r["frame_ms"] > 0 and r["frame_ms_without_budget"] > 0 for r in rows)
+    text = "\n".join(_budget_markdown(result))
+    assert "with a cube-map budget of 0.2 MB" in text and "| 5 |" in text
+    json.dumps(result)
+
+
 def test_apartment_renders_lit_and_finite(small_apartment, tmp_path):
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.viewer.camera import Camera
