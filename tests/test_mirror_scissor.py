@@ -25,19 +25,7 @@ from lobeview.materials.vec import spherical_direction
 from lobeview.scenes import planar_mirror
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.mirror_scene import mirror_floor_scene
-from lobeview.viewer.camera import Camera, perspective
-
-
-def _look_at(eye, target):
-    eye, target = np.asarray(eye, float), np.asarray(target, float)
-    f = (target - eye) / np.linalg.norm(target - eye)
-    r = np.cross(f, [0.0, 1.0, 0.0])
-    r /= np.linalg.norm(r)
-    u = np.cross(r, f)
-    view = np.eye(4)
-    view[0, :3], view[1, :3], view[2, :3] = r, u, -f
-    view[:3, 3] = -view[:3, :3] @ eye
-    return view
+from lobeview.viewer.camera import Camera, look_at, perspective
 
 
 @pytest.mark.parametrize("eye", [(0.0, 1.0, 8.0), (0.3, 0.5, 0.5)])  # whole box in front / box around the eye
@@ -46,7 +34,7 @@ def test_box_screen_rect_bounds_every_visible_point_of_the_box(eye):
     lo, hi = np.array([-2.0, 0.0, -3.0]), np.array([2.0, 0.05, 1.0])
     corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
     size = (320, 200)
-    view_projection = perspective(60.0, 1.6, 0.05, 100.0) @ _look_at(eye, (0.0, 0.0, -2.0))
+    view_projection = perspective(60.0, 1.6, 0.05, 100.0) @ look_at(eye, (0.0, 0.0, -2.0), (0.0, 1.0, 0.0))
     rect = planar_mirror.box_screen_rect(corners, view_projection, size)
     assert rect is not None
     points = lo + rng.random((20000, 3)) * (hi - lo)
