@@ -32,6 +32,22 @@ def box_downsample_faces(faces: np.ndarray, size: int) -> np.ndarray:
     return faces.reshape(6, size, factor, size, factor, -1).mean(axis=(2, 4))
 
 
+TENT_WEIGHTS = np.array([1.0, 3.0, 3.0, 1.0]) / 8.0  # one MIP step of viewer/cubemap.py tent_mipmaps
+
+
+def tent_downsample_face(face: np.ndarray) -> np.ndarray:
+    """One face (S, S, C) -> (S/2, S/2, C) with the separable tent [1 3 3 1] / 8 over source
+    texels 2j-1 .. 2j+2 (numpy reference of shaders/cube_mip_tent.comp; the GPU reads across face
+    edges, this clamps at them, so the two agree away from the border)."""
+    face = np.asarray(face, dtype=np.float64)
+    size = face.shape[0]
+    if size % 2 or face.shape[1] != size:
+        raise ValueError(f"tent_downsample_face needs an even square face, got {face.shape}")
+    index = np.clip(2 * np.arange(size // 2)[:, None] + np.arange(-1, 3)[None, :], 0, size - 1)  # (S/2, 4)
+    rows = np.einsum("k,jk...->j...", TENT_WEIGHTS, face[index])  # filter along the rows' index
+    return np.einsum("k,ijk...->ij...", TENT_WEIGHTS, rows[:, index])
+
+
 def _mixed_probabilities(weight: np.ndarray, omega: np.ndarray, uniform_fraction: float) -> np.ndarray:
     """Texel probabilities: (1 - f) weight / sum + f omega / sum (every direction keeps a
     density); by solid angle alone when the weights are all zero or not finite."""

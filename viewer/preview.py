@@ -35,10 +35,12 @@ class PreviewRenderer(RendererBase):
         mesh: Mesh,
         size=(512, 512),
         face_size: int = 256,
+        mip_filter: str = "box",
     ):
         super().__init__(ctx, size)
         t0 = time.perf_counter()
-        self.cubes = EnvironmentCubes(ctx, env, face_size)
+        # mip_filter: how the environment cube's MIP levels are made (viewer/cubemap.py MIP_FILTERS)
+        self.cubes = EnvironmentCubes(ctx, env, face_size, mip_filter=mip_filter)
         self.setup_seconds = time.perf_counter() - t0
         self.mesh = mesh
         self.vbo = ctx.buffer(mesh.interleaved().tobytes())
