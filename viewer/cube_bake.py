@@ -309,6 +309,8 @@ class CubeResidency:
         resident = [obj.cube for obj in objects if obj.cube is not None]
         memory = sum(cube_gpu_bytes(cube) for cube in resident) / 2**20
         budget = "no budget" if self.budget is None else f"budget {self.budget / 2**20:.0f} MB"
+        if self.budget is not None and memory * 2**20 > self.budget:
+            budget += ", exceeded by what the last frame drew"
         restored = ", ".join(f"{n} from {where}" for where, n in sorted(self.restores.items())) or "none"
         return (
             f"cube maps: {len(resident)} resident, {memory:.0f} MB ({budget}); {self.evictions} evicted, "
