@@ -374,6 +374,9 @@ class LobeviewWindow(mglw.WindowConfig):
             self.realtime.reset()
             self.realtime.add(self.renderer.radiance_target, 1.0)
         elif refining:
+            # Refinement reads level 0: faces sized for lobe-N are re-rendered at full size, one
+            # per frame below, each restarting the accumulation (converges as shot's reference).
+            self.renderer.request_full_faces(camera)
             self._refine(camera)
         # else: nothing changed and nothing is left to refine; the last image is shown again
         if refinement.still_frames == 0 or refining:

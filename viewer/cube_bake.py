@@ -96,6 +96,9 @@ class CubeBake:
         self.draw_scene = draw_scene
         self.progress = progress
         self.stale: list[int] = []  # cube maps that show an outdated appearance of another object
+        # Sized cube maps to re-render at the full face size (refinement in view: SceneRenderer
+        # request_full_faces), after the stale ones.
+        self.upgrades: list[int] = []
 
     def render_faces(
         self, eye, exclude: int | None = None, specular: bool = False, size: int | None = None
@@ -243,7 +246,19 @@ class CubeBake:
         return "disk cache" if from_disk else "rendered"
 
     def refresh_one(self, objects: list) -> str | None:
-        """Re-render the next stale cube map; returns its object's name (None: none was stale)."""
+        """Re-render the next stale cube map, else the next queued upgrade to the full face size;
+        returns its object's name (None: nothing was waiting)."""
+        if not self.stale:
+            while self.upgrades:
+                obj = objects[self.upgrades.pop(0)]
+                if obj.cube is None or obj.cube.face_size >= self.face_size:
+                    continue
+                faces = self.render_faces(obj.centre, exclude=obj.index, specular=self.bounces > 1)
+                cache_dir = obj.cube.cache_dir
+                obj.cube.release()
+                obj.cube = RadianceCube(self.ctx, faces)
+                obj.cube.cache_dir = cache_dir
+                return obj.name
         while self.stale:
             index = self.stale.pop(0)
             obj = objects[index]

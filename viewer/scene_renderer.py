@@ -295,8 +295,9 @@ class SceneRenderer(RendererBase):
 
     @property
     def stale_cube_count(self) -> int:
-        """Cube maps still waiting to be re-rendered after a material edit."""
-        return len(self.cube_bake.stale)
+        """Cube maps still waiting to be re-rendered: made stale by a material edit, or queued for
+        the full face size by request_full_faces."""
+        return len(self.cube_bake.stale) + len(self.cube_bake.upgrades)
 
     def prefiltered_memory(self, index: int) -> dict[str, int]:
         """Bytes of each prefiltered map object ``index`` has built so far (empty: none)."""
@@ -765,6 +766,28 @@ class SceneRenderer(RendererBase):
     def has_rational(self) -> bool:
         """Whether any object draws a Rational BRDF (reference passes then shrink: Method.for_rational)."""
         return any(obj.material.has_rational for obj in self.objects)
+
+    def request_full_faces(self, camera: Camera) -> int:
+        """Queue the cube maps of the objects in view whose faces were sized by their lobes for
+        re-rendering at the full face size (one per ``refresh_one_stale_cube``): progressive
+        refinement reads level 0, finer than the lobe-N lookups the sizes were chosen for, and
+        should converge to what ``shot --method reference`` (full faces) renders. Returns how
+        many were queued."""
+        if not self.lobe_width_cubes:
+            return 0
+        width, height = self.size
+        view_projection = camera.fitted_to(self.bounds).view_projection(width / height)
+        culled = outside_frustum_many(self._object_corners, view_projection)
+        queued = [
+            obj.index
+            for obj in self.objects
+            if obj.cube is not None
+            and obj.cube.face_size < self.cube_face_size
+            and not culled[obj.index]
+            and obj.index not in self.cube_bake.upgrades
+        ]
+        self.cube_bake.upgrades.extend(queued)
+        return len(queued)
 
     def refresh_one_stale_cube(self) -> str | None:
         """Re-render one out-of-date cube map (after a material edit changed what it sees);
