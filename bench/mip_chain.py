@@ -13,7 +13,6 @@ box-filtered pixel `reference` (level 0: the same for both chains).
 
 from __future__ import annotations
 
-import argparse
 import datetime
 import time
 import warnings
@@ -22,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.bench.metrics import exposure_for, psnr_8bit
-from lobeview.bench.patterns import PRESETS
+from lobeview.bench.patterns import sphere_bench_parser
 from lobeview.bench.targets import resolve_environment
 from lobeview.core.methods import Method
 from lobeview.materials.spec import build_bsdf, load_material
@@ -38,15 +37,9 @@ BIASES = (-0.5, -1.0)
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--envs", nargs="+", default=["interior", "courtyard"],
-                        help="sphere environments: interior, courtyard, city, builtin:NAME or a file")  # fmt: skip
-    parser.add_argument("--presets", nargs="+", default=list(PRESETS))
+    parser = sphere_bench_parser(__doc__.split("\n\n")[0])
     parser.add_argument("--methods", nargs="+", default=list(METHODS))
     parser.add_argument("--biases", nargs="+", type=float, default=list(BIASES), help="LOD biases")
-    parser.add_argument("--size", type=int, default=200, help="image size in pixels (square; default 200)")
-    parser.add_argument("--spp", type=int, default=1024, help="reference samples per lobe (default 1024)")
-    parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
     args = parser.parse_args(argv)
 
     ctx = create_headless_context()

@@ -53,15 +53,22 @@ def falls(values: list[float], samples: tuple[int, ...]) -> str:
     return ", ".join(drops) if drops else "none"
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def sphere_bench_parser(description: str) -> argparse.ArgumentParser:
+    """The command line the preview-sphere benches share (this one and mip_chain.py): environments,
+    presets, image size, reference samples, output folder."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--envs", nargs="+", default=["interior", "courtyard"],
                         help="sphere environments: interior, courtyard, city, builtin:NAME or a file")  # fmt: skip
     parser.add_argument("--presets", nargs="+", default=list(PRESETS))
-    parser.add_argument("--samples", nargs="+", type=int, default=list(SAMPLES), help="the N of lobe-N")
     parser.add_argument("--size", type=int, default=200, help="image size in pixels (square; default 200)")
     parser.add_argument("--spp", type=int, default=1024, help="reference samples per lobe (default 1024)")
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = sphere_bench_parser(__doc__.split("\n\n")[0])
+    parser.add_argument("--samples", nargs="+", type=int, default=list(SAMPLES), help="the N of lobe-N")
     args = parser.parse_args(argv)
     samples = tuple(sorted(set(args.samples)))
 

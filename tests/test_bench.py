@@ -192,6 +192,23 @@ def test_mirror_bench_times_0_1_2_reflectors_and_writes_the_figure(tmp_path):
     assert pixels.std() > 10.0  # an image, not a flat fill
 
 
+def test_mip_chain_bench_writes_box_and_tent_per_method_and_bias(tmp_path):
+    from lobeview.bench import mip_chain
+
+    argv = ["--envs", "builtin:studio", "--presets", "plastic", "--methods", "lobe-7+norm", "fis-4",
+            "--biases", "-0.5", "-1", "--size", "24", "--spp", "32", "--out", str(tmp_path)]  # fmt: skip
+    assert mip_chain.main(argv) == 0
+    (report,) = tmp_path.glob("mip_chain-*.md")
+    text = report.read_text()
+    rows = [line.split(" | ") for line in text.splitlines() if line.startswith("| builtin:studio |")]
+    assert [(r[2], r[3]) for r in rows] == [("lobe-7+norm", "-0.5"), ("lobe-7+norm", "-1"), ("fis-4", "-0.5"),
+                                            ("fis-4", "-1")]  # fmt: skip
+    for r in rows:
+        box, tent, delta = float(r[4]), float(r[5]), float(r[6])
+        assert min(box, tent) > 10.0 and delta == pytest.approx(tent - box, abs=0.011)
+    assert "- lobe-7+norm: better on" in text and "- fis-4: better on" in text
+
+
 def test_pattern_bench_reports_falls_and_writes_the_figure(tmp_path):
     from PIL import Image
 
