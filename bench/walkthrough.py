@@ -36,8 +36,6 @@ import time
 from collections import Counter
 from pathlib import Path
 
-import numpy as np
-
 DEFAULT_COUNT_ROOMS = (1, 6, 18)
 DEFAULT_BUDGET_MB = 128.0  # the budget walk's (the 12-room apartment's cube maps take ~330 MB)
 COUNT_BAKE = {"resolution": 512, "rays": 16, "bounces": 1}  # the object-count sweep's lightmaps
@@ -48,11 +46,11 @@ def _say(text: str) -> None:
 
 
 def cube_memory(renderer) -> tuple[int, int]:
-    """(cube maps, GPU bytes of their radiance cubes with MIP chains)."""
-    from lobeview.viewer.prefiltered import cube_bytes
+    """(cube maps, GPU bytes of their radiance cubes with MIP chains and any prefiltered maps)."""
+    from lobeview.viewer.cube_bake import cube_gpu_bytes
 
     cubes = [obj.cube for obj in renderer.objects if obj.cube is not None]
-    return len(cubes), sum(cube_bytes(c.face_size, int(np.log2(c.face_size)) + 1) for c in cubes)
+    return len(cubes), sum(cube_gpu_bytes(c) for c in cubes)
 
 
 def start_renderer(ctx, scene, env, size, face_size: int, cube_dir: Path, lobe_width_cubes: bool = True):
@@ -224,7 +222,6 @@ def budget_walk(ctx, label, scene, env, path, method, size, frames: int, face_si
     a cube-map memory budget (viewer/cube_bake.py CubeResidency), from a warm cache: per frame
     the time of both, the cube maps evicted and restored, and the memory resident after it."""
     from lobeview.viewer.camera import Camera
-    from lobeview.viewer.cube_bake import cube_gpu_bytes
     from lobeview.viewer.scene_renderer import SceneRenderer
 
     cube_dir = Path(tempfile.mkdtemp(prefix="lobeview-budget-"))
@@ -256,9 +253,7 @@ def budget_walk(ctx, label, scene, env, path, method, size, frames: int, face_si
                     "frame_ms_without_budget": times[None],
                     "evicted": residency.evictions - evicted,
                     "restored": sum(residency.restores.values()) - restored,
-                    "resident_mb": sum(
-                        cube_gpu_bytes(obj.cube) for obj in budgeted.objects if obj.cube is not None
-                    ) / 2**20,
+                    "resident_mb": cube_memory(budgeted)[1] / 2**20,
                 }
             )  # fmt: skip
         peak_without = cube_memory(renderers[None])[1] / 2**20

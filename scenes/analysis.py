@@ -68,8 +68,8 @@ class ObjectNeeds:
 class SceneAnalysis:
     objects: list[ObjectNeeds]
     full_cube_face: int = DEFAULT_CUBE_FACE
-    # Planar reflectors get their cube maps only when a frame shades them from one (the renderer
-    # sets this; False: at start-up like every other glossy object).
+    # Planar reflectors get their cube maps only when a frame shades them from one (False: at
+    # start-up like every other glossy object).
     reflector_cubes_on_demand: bool = False
 
     @property
@@ -126,10 +126,16 @@ def narrowest_lobe_desc(mat) -> dict:
     return desc
 
 
-def analyse(scene: Scene, full_cube_face: int = DEFAULT_CUBE_FACE, lobe_width_cubes: bool = True) -> SceneAnalysis:
+def analyse(
+    scene: Scene,
+    full_cube_face: int = DEFAULT_CUBE_FACE,
+    lobe_width_cubes: bool = True,
+    reflector_cubes_on_demand: bool = False,
+) -> SceneAnalysis:
     """``full_cube_face``: the cube-map face size of the narrowest lobes; with ``lobe_width_cubes``
     every object's face shrinks to what its lobes' lobe-N footprints resolve (issue 18; False:
-    every cube map at full size)."""
+    every cube map at full size); ``reflector_cubes_on_demand``: planar reflectors' cube maps are
+    not built at start-up (SceneAnalysis.cubes_at_start)."""
     needs = []
     low, high = scene.bounds if scene.objects else (np.zeros(3), np.zeros(3))
     scene_diagonal = float(np.linalg.norm(high - low))
@@ -147,7 +153,12 @@ def analyse(scene: Scene, full_cube_face: int = DEFAULT_CUBE_FACE, lobe_width_cu
         diffuse = bool(np.any(diffuse_albedo(bsdf) > 0))
         has_lightmap = mat.lightmap is not None and (mat.lightmap.tex_coord != 1 or obj.uv1 is not None)
         reflector, mirror = reflector_decision(obj.mesh, lobes, scene_diagonal, obj.planar_reflector)
-        footprint = finest_sample_solid_angle(specular_lobes(build_bsdf(narrowest_lobe_desc(mat)))) if lobes else None
+        narrowest = narrowest_lobe_desc(mat)
+        if lobes and narrowest != mat.desc:  # textures can make the lobes narrower than the factors
+            lobes_for_face = specular_lobes(build_bsdf(narrowest))
+        else:
+            lobes_for_face = lobes
+        footprint = finest_sample_solid_angle(lobes_for_face) if lobes else None
         face = lobe_width_face_size(footprint, full_cube_face) if lobe_width_cubes else int(full_cube_face)
         needs.append(
             ObjectNeeds(
@@ -166,7 +177,7 @@ def analyse(scene: Scene, full_cube_face: int = DEFAULT_CUBE_FACE, lobe_width_cu
                 lobe_width_cubes,
             )
         )
-    return SceneAnalysis(needs, int(full_cube_face))
+    return SceneAnalysis(needs, int(full_cube_face), bool(reflector_cubes_on_demand))
 
 
 def _describe_proxy(proxy) -> str:

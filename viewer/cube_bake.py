@@ -86,8 +86,13 @@ class CubeBake:
         draw_background: Callable,
         draw_scene: Callable,
         progress: bool = True,
+        cache_dir: Path | None = None,
     ):
         self.ctx = ctx
+        # Where the cube maps are cached; every cube made here carries it, for the prefiltered
+        # maps cached beside it. The scene key is set by build().
+        self.cache_dir = Path(cache_dir) if cache_dir else None
+        self.key = ""
         self.face_size = int(face_size)
         self.bounces = max(1, int(bounces))
         self.scene_extent = float(scene_extent)
@@ -139,15 +144,40 @@ class CubeBake:
             self.ctx.viewport = viewport
         return faces
 
-    def build(
-        self, objects: list, wanted: list[int], key: str, cache_dir: Path | None, sizes: dict | None = None
-    ) -> None:
+    def _cache_file(self, index: int | None = None) -> Path | None:
+        """The start-up cache file (``index`` None) or one object's on-demand file."""
+        if self.cache_dir is None:
+            return None
+        return self.cache_dir / (f"cubes-{self.key}.npz" if index is None else f"cubes-{self.key}-object{index}.npz")
+
+    def _install(self, obj, faces: np.ndarray) -> None:
+        """Make ``faces`` the object's cube map (releasing the one it had)."""
+        if obj.cube is not None:
+            obj.cube.release()
+        obj.cube = RadianceCube(self.ctx, np.asarray(faces, dtype=np.float32))
+        obj.cube.cache_dir = self.cache_dir
+
+    @staticmethod
+    def _read_faces(path: Path, member: str, size: int) -> np.ndarray | None:
+        """One cube map of a cache file (None: the file does not hold it)."""
+        shape = (6, size, size, 3)
+        with np.load(path, allow_pickle=False) as data:
+            if member not in data.files:
+                return None
+            faces = data[member]
+        if faces.shape != shape or not np.all(np.isfinite(faces)):
+            raise ValueError(f"cube map is not a finite array of shape {shape}")
+        return faces
+
+    def build(self, objects: list, wanted: list[int], key: str, sizes: dict | None = None) -> None:
         """Cube maps of the objects ``wanted``, from the disk cache when it has them all; ``sizes``
-        gives an object's face size (default: the full one, scenes/analysis.py chooses)."""
+        gives an object's face size (default: the full one, scenes/analysis.py chooses); ``key``
+        names the cache files (scene_content_key)."""
+        self.key = key
         if not wanted:
             return
         sizes = {i: int((sizes or {}).get(i, self.face_size)) for i in wanted}
-        cache_file = Path(cache_dir) / f"cubes-{key}.npz" if cache_dir else None
+        cache_file = self._cache_file()
 
         def read(path: Path) -> dict | None:
             with np.load(path, allow_pickle=False) as data:
@@ -165,7 +195,7 @@ class CubeBake:
         cached = read_cache_file(cache_file, read, "cube maps")
         if cached is not None:
             for i in wanted:
-                objects[i].cube = RadianceCube(self.ctx, cached[i].astype(np.float32))
+                self._install(objects[i], cached[i])
             return
         faces = {}
         for bounce in range(self.bounces):
@@ -173,9 +203,7 @@ class CubeBake:
             for i in wanted:
                 faces[i] = self.render_faces(objects[i].centre, exclude=i, specular=bounce > 0, size=sizes[i])
             for i in wanted:
-                if objects[i].cube is not None:
-                    objects[i].cube.release()
-                objects[i].cube = RadianceCube(self.ctx, faces[i])
+                self._install(objects[i], faces[i])
             if self.progress:
                 counts = np.unique(list(sizes.values()), return_counts=True)
                 shapes = ", ".join(f"{c} of {s}^2" for s, c in zip(*counts, strict=True))
@@ -190,85 +218,52 @@ class CubeBake:
             arrays = {f"cube_{i}": f.astype(np.float32) for i, f in faces.items()}
             write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, **arrays))  # read-only: re-render
 
-    def build_one(self, objects: list, index: int, size: int, key: str, cache_dir: Path | None) -> None:
+    def build_one(self, objects: list, index: int, size: int, cached: bool = True) -> str:
         """The cube map of one object on demand (a reflector whose mirror pass does not shade it
-        this frame): one bounce over the other objects' finished cube maps, which is what the
-        last bounce of :meth:`build` gives it; cached in its own file beside the others."""
-        cache_file = Path(cache_dir) / f"cubes-{key}-object{index}.npz" if cache_dir else None
-        shape = (6, size, size, 3)
-
-        def read(path: Path):
-            with np.load(path, allow_pickle=False) as data:
-                faces = data["cube"]
-            if faces.shape != shape or not np.all(np.isfinite(faces)):
-                raise ValueError(f"cube map is not a finite array of shape {shape}")
-            return faces
-
-        faces = read_cache_file(cache_file, read, "cube map")
-        if faces is None:
-            t0 = time.perf_counter()
-            faces = self.render_faces(objects[index].centre, exclude=index, specular=self.bounces > 1, size=size)
-            if self.progress:
-                print(
-                    f"[cube] {objects[index].name}: cube map of {size}^2 x 6 on demand in "
-                    f"{time.perf_counter() - t0:.2f} s",
-                    file=sys.stderr,
-                    flush=True,
-                )
-            if cache_file is not None:
-                write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, cube=faces.astype(np.float32)))
-        objects[index].cube = RadianceCube(self.ctx, faces.astype(np.float32))
-
-    def restore(self, objects: list, index: int, size: int, key: str, cache_dir: Path | None, edited: bool) -> str:
-        """Bring back an evicted cube map (:class:`CubeResidency`): from the start-up cache file
-        when the scene is as it was then, else through :meth:`build_one` (its own file, or
-        rendered again: one bounce over the other cube maps, as a refreshed cube). Returns where
-        it came from."""
-        shape = (6, size, size, 3)
-        main = Path(cache_dir) / f"cubes-{key}.npz" if cache_dir and not edited else None
-
-        def read(path: Path):
-            with np.load(path, allow_pickle=False) as data:
-                if f"cube_{index}" not in data.files:
-                    return None
-                faces = data[f"cube_{index}"]
-            if faces.shape != shape or not np.all(np.isfinite(faces)):
-                raise ValueError(f"cube map is not a finite array of shape {shape}")
-            return faces
-
-        faces = read_cache_file(main, read, "cube maps")
+        this frame, or a restored one): one bounce over the other objects' finished cube maps,
+        which is what the last bounce of :meth:`build` gives it; cached in its own file beside the
+        others (``cached`` False: neither read nor written, the scene changed since start-up).
+        Returns where it came from: 'disk cache' or 'rendered'."""
+        cache_file = self._cache_file(index) if cached else None
+        faces = read_cache_file(cache_file, lambda path: self._read_faces(path, "cube", size), "cube map")
         if faces is not None:
-            objects[index].cube = RadianceCube(self.ctx, faces.astype(np.float32))
+            self._install(objects[index], faces)
             return "disk cache"
-        own = Path(cache_dir) / f"cubes-{key}-object{index}.npz" if cache_dir and not edited else None
-        from_disk = own is not None and own.exists()
-        self.build_one(objects, index, size, key, None if edited else cache_dir)
-        return "disk cache" if from_disk else "rendered"
+        t0 = time.perf_counter()
+        faces = self.render_faces(objects[index].centre, exclude=index, specular=self.bounces > 1, size=size)
+        if self.progress:
+            print(
+                f"[cube] {objects[index].name}: cube map of {size}^2 x 6 on demand in {time.perf_counter() - t0:.2f} s",
+                file=sys.stderr,
+                flush=True,
+            )
+        if cache_file is not None:
+            write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, cube=faces.astype(np.float32)))
+        self._install(objects[index], faces)
+        return "rendered"
+
+    def restore(self, objects: list, index: int, size: int, edited: bool) -> str:
+        """Bring back an evicted cube map (:class:`CubeResidency`): from the start-up cache file
+        when the scene is as it was then (not ``edited``), else through :meth:`build_one` (its own
+        file, or rendered again: one bounce over the other cube maps, as a refreshed cube).
+        Returns where it came from."""
+        main = None if edited else self._cache_file()
+        faces = read_cache_file(main, lambda path: self._read_faces(path, f"cube_{index}", size), "cube maps")
+        if faces is not None:
+            self._install(objects[index], faces)
+            return "disk cache"
+        return self.build_one(objects, index, size, cached=not edited)
 
     def refresh_one(self, objects: list) -> str | None:
-        """Re-render the next stale cube map, else the next queued upgrade to the full face size;
-        returns its object's name (None: nothing was waiting)."""
-        if not self.stale:
-            while self.upgrades:
-                obj = objects[self.upgrades.pop(0)]
-                if obj.cube is None or obj.cube.face_size >= self.face_size:
-                    continue
-                faces = self.render_faces(obj.centre, exclude=obj.index, specular=self.bounces > 1)
-                cache_dir = obj.cube.cache_dir
-                obj.cube.release()
-                obj.cube = RadianceCube(self.ctx, faces)
-                obj.cube.cache_dir = cache_dir
-                return obj.name
-        while self.stale:
-            index = self.stale.pop(0)
-            obj = objects[index]
-            if obj.cube is None:
+        """Re-render the next stale cube map (at its size), else the next queued upgrade to the
+        full face size; returns its object's name (None: nothing was waiting)."""
+        while self.stale or self.upgrades:
+            upgrade = not self.stale
+            obj = objects[(self.upgrades if upgrade else self.stale).pop(0)]
+            if obj.cube is None or (upgrade and obj.cube.face_size >= self.face_size):
                 continue
-            faces = self.render_faces(obj.centre, exclude=index, specular=self.bounces > 1, size=obj.cube.face_size)
-            cache_dir = obj.cube.cache_dir
-            obj.cube.release()
-            obj.cube = RadianceCube(self.ctx, faces)
-            obj.cube.cache_dir = cache_dir
+            size = self.face_size if upgrade else obj.cube.face_size
+            self._install(obj, self.render_faces(obj.centre, exclude=obj.index, specular=self.bounces > 1, size=size))
             return obj.name
         return None
 

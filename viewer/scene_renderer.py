@@ -160,12 +160,11 @@ class SceneRenderer(RendererBase):
         # Each object's cube map is as large as its lobes resolve (scenes/analysis.py, issue 18);
         # cube_face_size is the narrowest lobes' size. False: every cube map at cube_face_size.
         self.lobe_width_cubes = bool(lobe_width_cubes)
-        self.analysis = analyse(scene, cube_face_size, self.lobe_width_cubes)
         # A planar reflector's mirror pass replaces its cube map (issue 18): it gets one only when
         # a frame needs it (prefiltered method, its mirror pass turned off), and meanwhile other
         # cube maps and mirror passes see it without its lobes (measured: tests/test_cube_sizes.py).
         self.reflector_cubes_on_demand = bool(reflector_cubes_on_demand)
-        self.analysis.reflector_cubes_on_demand = self.reflector_cubes_on_demand
+        self.analysis = analyse(scene, cube_face_size, self.lobe_width_cubes, self.reflector_cubes_on_demand)
         self.progress = progress
         self.timings: dict = {}
         t0 = time.perf_counter()
@@ -233,16 +232,13 @@ class SceneRenderer(RendererBase):
             self.draw_background,
             functools.partial(self._draw_pass, pass_kind="cube map"),
             progress,
+            self.cache_dir,  # prefiltered maps are cached beside the cubes
         )
         sizes = {i: self.analysis.objects[i].cube_face for i in self.analysis.cube_mapped}
         key = scene_content_key(scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces, sizes)
         if self.reflector_cubes_on_demand:  # the second bounce then sees reflectors without lobes
             key += "-r"
-        self._cube_key = key
-        self.cube_bake.build(self.objects, self.analysis.cubes_at_start, key, self.cache_dir, sizes)
-        for obj in self.objects:
-            if obj.cube is not None:
-                obj.cube.cache_dir = self.cache_dir  # prefiltered maps are cached beside the cubes
+        self.cube_bake.build(self.objects, self.analysis.cubes_at_start, key, sizes)
         self.timings["cube maps"] = time.perf_counter() - t0
         self.residency = CubeResidency(None if cube_budget_mb is None else int(float(cube_budget_mb) * 2**20))
         self._edited = False  # a material edit makes the start-up cache files outdated
@@ -473,11 +469,7 @@ class SceneRenderer(RendererBase):
         wanted = self.residency.wanted(self._object_corners, view_projection, exclude)
         for index in wanted:
             t0 = time.perf_counter()
-            where = self.cube_bake.restore(
-                self.objects, index, self.analysis.objects[index].cube_face, self._cube_key, self.cache_dir,
-                self._edited,
-            )  # fmt: skip
-            self.objects[index].cube.cache_dir = self.cache_dir
+            where = self.cube_bake.restore(self.objects, index, self.analysis.objects[index].cube_face, self._edited)
             self.residency.evicted.discard(index)
             self.residency.restores[where] = self.residency.restores.get(where, 0) + 1
             self.residency.restore_seconds += time.perf_counter() - t0
@@ -496,10 +488,7 @@ class SceneRenderer(RendererBase):
                 and self._object_method(index, method).kind != "prefiltered"
             ):
                 continue
-            self.cube_bake.build_one(
-                self.objects, index, self.analysis.objects[index].cube_face, self._cube_key, self.cache_dir
-            )
-            obj.cube.cache_dir = self.cache_dir
+            self.cube_bake.build_one(self.objects, index, self.analysis.objects[index].cube_face)
 
     def _lobe_spread(self, index: int, method: Method) -> tuple[float, float] | None:
         """How far the lobe-N lookups of reflector ``index`` reach (None: not lobe-N, unbounded)."""
@@ -738,8 +727,7 @@ class SceneRenderer(RendererBase):
         material_index = self.scene.objects[index].material
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
-        self.analysis = analyse(self.scene, self.cube_face_size, self.lobe_width_cubes)
-        self.analysis.reflector_cubes_on_demand = self.reflector_cubes_on_demand
+        self.analysis = analyse(self.scene, self.cube_face_size, self.lobe_width_cubes, self.reflector_cubes_on_demand)
         # Everything else that reflects this object now sees an outdated appearance.
         self.cube_bake.stale = [
             i for i in self.analysis.cube_mapped if self.scene.objects[i].material != material_index
@@ -756,11 +744,7 @@ class SceneRenderer(RendererBase):
                 ):
                     # A diffuse object that became glossy gets its cube map now (~0.1 s), and one
                     # whose lobes narrowed or widened gets its cube at the face size they need.
-                    faces = self.render_cube_faces(gpu_obj.centre, gpu_obj.index, True, needs.cube_face)
-                    if gpu_obj.cube is not None:
-                        gpu_obj.cube.release()
-                    gpu_obj.cube = RadianceCube(self.ctx, faces)
-                    gpu_obj.cube.cache_dir = self.cache_dir
+                    self.cube_bake.build_one(self.objects, gpu_obj.index, needs.cube_face, cached=False)
 
     @property
     def has_rational(self) -> bool:
