@@ -14,6 +14,7 @@ import numpy as np
 
 from lobeview.core.methods import GRAMMAR_HELP, Method, method_cli_flags
 from lobeview.viewer.camera import Camera
+from lobeview.viewer.mip_chain import DEFAULT_MIP_FILTER, MIP_FILTERS
 
 SCENE_ENV = "builtin:overcast"
 DEFAULT_FACE_SIZE = 256
@@ -63,6 +64,14 @@ def add_scene_arguments(p) -> None:
         help="GPU memory for cube maps (with MIP chains and prefiltered maps): after each frame the least "
         "recently drawn ones are released until it holds, and restored (from the cache, else rendered) when "
         "an object comes back into view; default: no budget",
+    )
+    a(
+        "--mip-filter",
+        choices=MIP_FILTERS,
+        default=DEFAULT_MIP_FILTER,
+        help="how the MIP chains of cube maps and mirror buffers are made: 'tent' (default) = a [1 3 3 1]/8 "
+        "tent per level, read by lobe-N at LOD bias -1; 'box' = glGenerateMipmap's 2x2 box (the thesis' chain; "
+        "lobe-N reads it best at --lod-bias -0.5)",
     )
     a(
         "--reflection-proxy",
@@ -314,6 +323,7 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method 
         mirror_scale=args.mirror_scale,
         lobe_width_cubes=lobe_width_cubes(args, method),
         cube_budget_mb=getattr(args, "cube_budget", None),
+        mip_filter=getattr(args, "mip_filter", DEFAULT_MIP_FILTER),
     )
     renderer.set_mirrors(args.mirrors)
     return renderer
@@ -353,6 +363,8 @@ def shot_command(
             parts.append(f"--cube-budget={args.cube_budget:g}")
         if getattr(args, "cube_sizes", "auto") != "auto":
             parts.append(f"--cube-sizes={args.cube_sizes}")
+        if getattr(args, "mip_filter", DEFAULT_MIP_FILTER) != DEFAULT_MIP_FILTER:
+            parts.append(f"--mip-filter={args.mip_filter}")
         if args.reflection_proxy != "scene":
             parts.append(f"--reflection-proxy={args.reflection_proxy}")
         if not args.mirrors:

@@ -28,7 +28,7 @@ from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context, renderer_description
-from lobeview.viewer.cubemap import MIP_FILTERS
+from lobeview.viewer.mip_chain import MIP_FILTERS
 from lobeview.viewer.preview import PreviewRenderer
 from lobeview.viewer.tonemap import tonemap
 

@@ -67,9 +67,12 @@ MAX_REFERENCE_SPP = 65536
 # (fis-16: 31.3 dB vs 25.6 dB); lobe-N at -1 (lobe-7) to -0.5 (lobe-15), not the thesis' 0
 # (lobe-7: 30.8 dB vs 27.3 dB). The best bias grows with N for the ring pattern: its samples sit
 # on one ring, so the filter that closes the gaps shrinks more slowly than the lobe area / N of
-# Eq. 4.14.
+# Eq. 4.14. Those sweeps read box-filtered MIP chains (glGenerateMipmap); the chains are now
+# tent-filtered (viewer/mip_chain.py), whose levels are blurrier: lobe-N reads them best at -1
+# (bench/results/mip_chain-*.md: tent at -1 beats box at -0.5 on 11 of 14 sphere cells), fis-N
+# stays at -0.5 (tent ahead of box there on 8 of 14).
 DEFAULT_FIS_LOD_BIAS = -0.5
-DEFAULT_LOBE_LOD_BIAS = -0.5
+DEFAULT_LOBE_LOD_BIAS = -1.0
 
 _GRAMMAR = re.compile(
     r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?:(?P<norm>\+norm)|(?P<eq424>\+eq4\.24))?(?P<ring>\+ring)?"

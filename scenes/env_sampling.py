@@ -36,16 +36,20 @@ TENT_WEIGHTS = np.array([1.0, 3.0, 3.0, 1.0]) / 8.0  # one MIP step of viewer/cu
 
 
 def tent_downsample_face(face: np.ndarray) -> np.ndarray:
-    """One face (S, S, C) -> (S/2, S/2, C) with the separable tent [1 3 3 1] / 8 over source
-    texels 2j-1 .. 2j+2 (numpy reference of shaders/cube_mip_tent.comp; the GPU reads across face
-    edges, this clamps at them, so the two agree away from the border)."""
+    """One face or 2D level (H, W, C) -> (H/2, W/2, C) with the separable tent [1 3 3 1] / 8 over
+    source texels 2j-1 .. 2j+2 (numpy reference of shaders/mip_tent_cube.comp and mip_tent_2d.comp;
+    the cube shader reads across face edges, this clamps at them, so the two agree away from the
+    border; the 2D shader clamps like this)."""
     face = np.asarray(face, dtype=np.float64)
-    size = face.shape[0]
-    if size % 2 or face.shape[1] != size:
-        raise ValueError(f"tent_downsample_face needs an even square face, got {face.shape}")
-    index = np.clip(2 * np.arange(size // 2)[:, None] + np.arange(-1, 3)[None, :], 0, size - 1)  # (S/2, 4)
-    rows = np.einsum("k,jk...->j...", TENT_WEIGHTS, face[index])  # filter along the rows' index
-    return np.einsum("k,ijk...->ij...", TENT_WEIGHTS, rows[:, index])
+    height, width = face.shape[:2]
+    if height % 2 or width % 2:
+        raise ValueError(f"tent_downsample_face needs even sizes, got {face.shape}")
+
+    def taps(size: int) -> np.ndarray:  # (size/2, 4) source indices, clamped at the edges
+        return np.clip(2 * np.arange(size // 2)[:, None] + np.arange(-1, 3)[None, :], 0, size - 1)
+
+    rows = np.einsum("k,jk...->j...", TENT_WEIGHTS, face[taps(height)])  # filter along the rows' index
+    return np.einsum("k,ijk...->ij...", TENT_WEIGHTS, rows[:, taps(width)])
 
 
 def _mixed_probabilities(weight: np.ndarray, omega: np.ndarray, uniform_fraction: float) -> np.ndarray:

@@ -63,9 +63,10 @@ def test_narrow_lobes_keep_the_full_face_and_wide_ones_shrink():
 
     assert face("chrome") == face("clear-glass") == FULL
     assert face("frosted-glass") <= FULL // 4 and face("gold-ggx") <= FULL // 4
-    # A rough glTF material (roughness 1: alpha 1) needs very few texels.
+    # A rough glTF material (roughness 1: alpha 1) needs very few texels (16^2 at lobe-N's bias
+    # -0.5 of the box chain, 32^2 at the tent chain's -1).
     rough = specular_lobes(build_bsdf(validate({"model": "gltf", "base_color": [0.5] * 3, "roughness": 1.0})))
-    assert lobe_width_face_size(finest_sample_solid_angle(rough), FULL) == MIN_CUBE_FACE
+    assert lobe_width_face_size(finest_sample_solid_angle(rough), FULL) <= 2 * MIN_CUBE_FACE
     # Without a known footprint (None) the face stays full.
     assert lobe_width_face_size(None, FULL) == FULL
 

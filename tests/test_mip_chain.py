@@ -1,5 +1,5 @@
-"""The tent MIP chain of radiance cubes (viewer/cubemap.py tent_mipmaps, issue 20 item 1): the
-GPU levels against the numpy reference away from face edges, constants and means preserved
+"""The tent MIP chain of radiance cubes and mirror buffers (viewer/mip_chain.py, issue 20 item 1):
+the GPU levels against the numpy reference away from face edges, constants and means preserved
 across the seamless edges, and the numpy filter itself against its definition."""
 
 from __future__ import annotations
@@ -19,26 +19,15 @@ def test_numpy_tent_is_the_separable_1331_filter():
     expected = np.einsum("a,b,abc->c", w, w, face[2 * j - 1 : 2 * j + 3, 2 * i - 1 : 2 * i + 3])
     np.testing.assert_allclose(out[j, i], expected, rtol=1e-12)
     np.testing.assert_allclose(tent_downsample_face(np.full((8, 8, 1), 2.5)), 2.5)
-    with pytest.raises(ValueError, match="even square"):
-        tent_downsample_face(np.zeros((5, 5, 1)))
+    with pytest.raises(ValueError, match="even sizes"):
+        tent_downsample_face(np.zeros((5, 6, 1)))
+    assert tent_downsample_face(np.zeros((4, 10, 2))).shape == (2, 5, 2)
 
 
-def _levels(ctx, cube, size: int, count: int) -> list[np.ndarray]:
-    from lobeview.viewer.shaders import ProgramCache
+def _levels(ctx, cube, count: int) -> list[np.ndarray]:
+    from lobeview.viewer.mip_chain import read_cube_level
 
-    shader = ProgramCache(ctx).compute("cube_level_read.comp")
-    levels = []
-    for level in range(count):
-        face = max(size >> level, 1)
-        out = ctx.buffer(reserve=6 * face * face * 16)
-        cube.bind_to_image(0, read=True, write=False, level=level, format=0x8814)
-        shader["u_size"] = face
-        out.bind_to_storage_buffer(0)
-        shader.run((face + 7) // 8, (face + 7) // 8, 6)
-        ctx.finish()
-        levels.append(np.frombuffer(out.read(), dtype=np.float32).reshape(6, face, face, 4)[..., :3].copy())
-        out.release()
-    return levels
+    return [read_cube_level(ctx, cube, level)[..., :3] for level in range(count)]
 
 
 def test_gpu_tent_levels_match_numpy_inside_faces_and_keep_constants_and_means():
@@ -50,7 +39,7 @@ def test_gpu_tent_levels_match_numpy_inside_faces_and_keep_constants_and_means()
         rng = np.random.default_rng(1)
         faces = rng.random((6, 32, 32, 3)).astype(np.float32) * np.array([1.0, 5.0, 100.0], np.float32)
         cube = upload_cube(ctx, faces, mip_filter="tent")
-        levels = _levels(ctx, cube, 32, 3)
+        levels = _levels(ctx, cube, 3)
         np.testing.assert_array_equal(levels[0], faces)
         for level in (1, 2):
             for f in range(6):
@@ -65,10 +54,54 @@ def test_gpu_tent_levels_match_numpy_inside_faces_and_keep_constants_and_means()
             np.testing.assert_allclose(levels[level].mean(axis=(0, 1, 2)), faces.mean(axis=(0, 1, 2)), rtol=0.02)
         cube.release()
         constant = upload_cube(ctx, np.full((6, 16, 16, 3), 0.7, np.float32), mip_filter="tent")
-        for level in _levels(ctx, constant, 16, 5):
+        for level in _levels(ctx, constant, 5):
             np.testing.assert_allclose(level, 0.7, rtol=1e-6)
         constant.release()
         with pytest.raises(ValueError, match="unknown MIP filter"):
             upload_cube(ctx, faces, mip_filter="gauss")
+    finally:
+        ctx.release()
+
+
+def _levels_2d(ctx, texture, count: int) -> list[np.ndarray]:
+    """Levels of a 2D RGBA32F texture through a framebuffer per level."""
+    levels = []
+    for level in range(count):
+        width, height = max(texture.size[0] >> level, 1), max(texture.size[1] >> level, 1)
+        data = texture.read(level=level)
+        levels.append(np.frombuffer(data, np.float32).reshape(height, width, 4)[..., :3].copy())
+    return levels
+
+
+def test_gpu_tent_levels_of_2d_buffers_match_numpy_and_keep_constants():
+    """Mirror buffers are 2D and of any size: levels of an even-sized buffer equal the numpy tent
+    (clamped at the edges like the sampler), odd sizes keep constants and means."""
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.mip_chain import build_mip_chain
+
+    ctx = create_headless_context()
+    try:
+        rng = np.random.default_rng(2)
+        image = (rng.random((16, 40, 4)) * np.array([1.0, 5.0, 100.0, 1.0])).astype(np.float32)
+        texture = ctx.texture((40, 16), 4, image.tobytes(), dtype="f4")
+        build_mip_chain(ctx, texture, "tent")
+        levels = _levels_2d(ctx, texture, 4)
+        for level in (1, 2, 3):
+            np.testing.assert_allclose(levels[level], tent_downsample_face(levels[level - 1]), rtol=1e-5, atol=1e-5)
+        box = ctx.texture((40, 16), 4, image.tobytes(), dtype="f4")
+        build_mip_chain(ctx, box, "box")
+        assert np.abs(_levels_2d(ctx, box, 2)[1] - levels[1]).max() > 0.1  # the tent is not the box
+        odd = ctx.texture((37, 23), 4, np.full((23, 37, 4), 0.7, np.float32).tobytes(), dtype="f4")
+        build_mip_chain(ctx, odd, "tent")
+        for level in _levels_2d(ctx, odd, 6):  # 37x23 .. 1x1
+            np.testing.assert_allclose(level, 0.7, rtol=1e-6)
+        noisy = ctx.texture((37, 23), 4, rng.random((23, 37, 4)).astype(np.float32).tobytes(), dtype="f4")
+        build_mip_chain(ctx, noisy, "tent")
+        noisy_levels = _levels_2d(ctx, noisy, 3)
+        np.testing.assert_allclose(noisy_levels[2].mean(axis=(0, 1)), noisy_levels[0].mean(axis=(0, 1)), atol=0.03)
+        for item in (texture, box, odd, noisy):
+            item.release()
+        with pytest.raises(ValueError, match="unknown MIP filter"):
+            build_mip_chain(ctx, texture, "gauss")
     finally:
         ctx.release()

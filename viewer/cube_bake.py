@@ -27,6 +27,7 @@ from lobeview.core.methods import Method
 from .camera import outside_frustum_many, perspective
 from .cubemap import RadianceCube
 from .frame import begin_pass, new_framebuffer
+from .mip_chain import DEFAULT_MIP_FILTER, check_mip_filter, downsample_cube_faces
 
 CUBE_CACHE_VERSION = 5  # 5: per-object face sizes (supersampled); 4: glTF textures, alpha modes, culling
 CUBE_SUPERSAMPLE = 2
@@ -46,12 +47,14 @@ def face_view(face: int, eye) -> np.ndarray:
     return view
 
 
-def scene_content_key(scene, environment_key: str, face_size: int, bounces: int, sizes: dict | None = None) -> str:
+def scene_content_key(
+    scene, environment_key: str, face_size: int, bounces: int, sizes: dict | None = None, mip_filter: str = "tent"
+) -> str:
     """What the cube maps depend on: geometry, lightmap coordinates, materials, emission,
-    lightmaps and base-colour textures, the environment, face size (and each object's, ``sizes``)
-    and bounces."""
+    lightmaps and base-colour textures, the environment, face size (and each object's, ``sizes``),
+    bounces and the MIP chains (second-bounce lookups read them; sized faces are reduced by them)."""
     h = hashlib.sha256()
-    h.update(f"v{CUBE_CACHE_VERSION} face{face_size} b{bounces} env{environment_key}".encode())
+    h.update(f"v{CUBE_CACHE_VERSION} face{face_size} b{bounces} env{environment_key} mip-{mip_filter}".encode())
     if sizes:
         h.update(f"ss{CUBE_SUPERSAMPLE}".encode() + repr(sorted(sizes.items())).encode())
     for obj in scene.objects:
@@ -87,8 +90,10 @@ class CubeBake:
         draw_scene: Callable,
         progress: bool = True,
         cache_dir: Path | None = None,
+        mip_filter: str = DEFAULT_MIP_FILTER,
     ):
         self.ctx = ctx
+        self.mip_filter = check_mip_filter(mip_filter)  # of every cube map made here
         # Where the cube maps are cached; every cube made here carries it, for the prefiltered
         # maps cached beside it. The scene key is set by build().
         self.cache_dir = Path(cache_dir) if cache_dir else None
@@ -113,9 +118,9 @@ class CubeBake:
         with their lobes too."""
         size = int(size or self.face_size)
         factor = max(1, min(CUBE_SUPERSAMPLE, self.face_size // size))
-        if factor > 1:  # render finer and box-filter: level 0 then equals level k of the full face's chain
+        if factor > 1:  # render finer and reduce: level 0 then equals level k of the full face's chain
             fine = self._render_faces(eye, exclude, specular, size * factor)
-            return fine.reshape(6, size, factor, size, factor, 3).mean(axis=(2, 4), dtype=np.float64).astype(np.float32)
+            return downsample_cube_faces(self.ctx, fine, factor, self.mip_filter)
         return self._render_faces(eye, exclude, specular, size)
 
     def _render_faces(self, eye, exclude: int | None, specular: bool, size: int) -> np.ndarray:
@@ -154,7 +159,7 @@ class CubeBake:
         """Make ``faces`` the object's cube map (releasing the one it had)."""
         if obj.cube is not None:
             obj.cube.release()
-        obj.cube = RadianceCube(self.ctx, np.asarray(faces, dtype=np.float32))
+        obj.cube = RadianceCube(self.ctx, np.asarray(faces, dtype=np.float32), mip_filter=self.mip_filter)
         obj.cube.cache_dir = self.cache_dir
 
     @staticmethod

@@ -13,9 +13,8 @@ from lobeview.scenes.env_sampling import CubeImportance
 from lobeview.scenes.envmap import EnvironmentMap
 
 from .interface import CDF_ROW
+from .mip_chain import DEFAULT_MIP_FILTER, GL_TEXTURE_CUBE_MAP_SEAMLESS, build_mip_chain, check_mip_filter
 from .shaders import ProgramCache
-
-GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
 
 
 def equirect_to_cube_faces(env: EnvironmentMap, size: int, supersample: int = 2) -> np.ndarray:
@@ -29,53 +28,23 @@ def equirect_to_cube_faces(env: EnvironmentMap, size: int, supersample: int = 2)
     return faces
 
 
-# How a radiance cube's MIP levels are made (issue 20, item 1): "box" = glGenerateMipmap (2x2
-# box per level, the default every LOD bias was tuned with); "tent" = tent_mipmaps. Measured by
-# bench/mip_chain.py (results/mip_chain-*.md): the tent chain with lobe-N's bias at -1 beats the
-# box chain at -0.5 on 11 of 14 sphere cells by 0.4-2.6 dB; not the default yet (see there).
-MIP_FILTERS = ("box", "tent")
-
-
-def tent_mipmaps(ctx: moderngl.Context, cube: moderngl.TextureCube) -> None:
-    """Levels 1.. of ``cube`` from level 0 with a separable tent [1 3 3 1] / 8 per level
-    (shaders/cube_mip_tent.comp: four seamless bilinear reads at +-0.75 texels of the level above),
-    in place of glGenerateMipmap's 2x2 box: each level is a smoother, less aliased prefilter of
-    the one above."""
-    shader = ProgramCache(ctx).compute("cube_mip_tent.comp")
-    size = cube.size[0]
-    level = 0
-    cube.filter = (moderngl.LINEAR_MIPMAP_NEAREST, moderngl.LINEAR)
-    while size > 1:
-        size //= 2
-        level += 1
-        cube.use(0)
-        shader["u_source"] = 0
-        shader["u_source_lod"] = float(level - 1)
-        shader["u_size"] = size
-        cube.bind_to_image(0, read=False, write=True, level=level, format=0x8814)  # GL_RGBA32F
-        shader.run((size + 7) // 8, (size + 7) // 8, 6)
-        ctx.memory_barrier()
-
-
 def upload_cube(
-    ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True, mip_filter: str = "box"
+    ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True, mip_filter: str = DEFAULT_MIP_FILTER
 ) -> moderngl.TextureCube:
-    if mip_filter not in MIP_FILTERS:
-        raise ValueError(f"unknown MIP filter {mip_filter!r}; use one of {MIP_FILTERS}")
+    """An RGBA32F cube map of ``faces`` (6, S, S, 3), with a MIP chain made by ``mip_filter``
+    (viewer/mip_chain.py) or none."""
+    check_mip_filter(mip_filter)
     size = faces.shape[1]
     cube = ctx.texture_cube((size, size), 4, dtype="f4")
     rgba = np.concatenate([faces, np.ones(faces.shape[:-1] + (1,), np.float32)], axis=-1)
     for face in range(6):
         cube.write(face, np.ascontiguousarray(rgba[face], dtype=np.float32).tobytes())
+    ctx.enable_direct(GL_TEXTURE_CUBE_MAP_SEAMLESS)
     if mipmaps:
-        cube.build_mipmaps()
-        ctx.enable_direct(GL_TEXTURE_CUBE_MAP_SEAMLESS)
-        if mip_filter == "tent":
-            tent_mipmaps(ctx, cube)
+        build_mip_chain(ctx, cube, mip_filter)
         cube.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
     else:
         cube.filter = (moderngl.LINEAR, moderngl.LINEAR)
-    ctx.enable_direct(GL_TEXTURE_CUBE_MAP_SEAMLESS)
     return cube
 
 
@@ -86,9 +55,12 @@ class RadianceCube:
     cube of a real-time session, never builds it). No CPU copy of the faces is kept (4.7 MB per
     256^2 cube, 0.6 GB for the 18-room apartment): ``faces`` reads them back from the GPU."""
 
-    def __init__(self, ctx: moderngl.Context, faces: np.ndarray, importance_size: int = 64, mip_filter: str = "box"):
+    def __init__(
+        self, ctx: moderngl.Context, faces: np.ndarray, importance_size: int = 64, mip_filter: str = DEFAULT_MIP_FILTER
+    ):
         faces = np.asarray(faces, dtype=np.float32)
         self.face_size = faces.shape[1]
+        self.mip_filter = check_mip_filter(mip_filter)
         self.radiance = upload_cube(ctx, faces, mip_filter=mip_filter)
         self.importance_size = min(int(importance_size), self.face_size)
         self._importance: tuple | None = None  # (CubeImportance, env_cdf, env_pdf) once built
@@ -184,7 +156,7 @@ class EnvironmentCubes(RadianceCube):
         face_size: int = 256,
         irradiance_size: int = 16,
         importance_size: int = 64,
-        mip_filter: str = "box",
+        mip_filter: str = DEFAULT_MIP_FILTER,
     ):
         self.env = env
         super().__init__(ctx, equirect_to_cube_faces(env, face_size), importance_size, mip_filter)

@@ -17,6 +17,7 @@ from lobeview.core.methods import Method
 from .camera import Camera, outside_frustum, perspective
 from .frame import begin_pass, new_framebuffer
 from .interface import TEXTURE_UNITS, bind_sampler, has_uniform, set_uniform
+from .mip_chain import DEFAULT_MIP_FILTER, build_mip_chain
 
 MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # glossy objects inside mirror buffers (cheap)
 # Sampler-uniform prefixes of the mirror and see-through buffers (units: interface.TEXTURE_UNITS).
@@ -98,8 +99,10 @@ class MirrorPasses:
         draw_scene: Callable,
         visible_samples: Callable | None = None,
         prepare_pass: Callable | None = None,
+        mip_filter: str = DEFAULT_MIP_FILTER,
     ):
         self.ctx = ctx
+        self.mip_filter = mip_filter  # of the radiance buffers' MIP chains (viewer/mip_chain.py)
         self.prepare_pass = prepare_pass  # (view_projection, exclude): before a pass binds its buffers
         self.environment = environment
         self.draw_background = draw_background
@@ -193,7 +196,7 @@ class MirrorPasses:
                     cull_view_projection=cull_view_projection,
                 )  # fmt: skip
                 self.ctx.scissor = None
-                targets.radiance.build_mipmaps()
+                build_mip_chain(self.ctx, targets.radiance, self.mip_filter)
                 targets.camera = buffer_camera
                 active[index][kind] = targets
                 pixels = size[0] * size[1] if rect is None else rect[2] * rect[3]

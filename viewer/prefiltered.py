@@ -39,7 +39,11 @@ from lobeview.materials.prefilter import (
 )
 
 from .cubemap import RadianceCube
+from .mip_chain import read_cube_level
 from .shaders import ProgramCache
+
+# MIP bias of the prefilters' (and the RSIBR bake's) cube lookups, for the tent chain (see _bind_source).
+PREFILTER_LOD_BIAS = -0.5
 
 GL_RGBA32F = 0x8814
 SPLIT_SUM_KINDS = ("beckmann", "ggx")  # index = DIST_* in shaders/bsdf.glsl
@@ -180,7 +184,9 @@ class PrefilteredMaps:
         self.cache_dir = Path(cache_dir) if cache_dir else None
         self.rings = rings
         self.azimuths = azimuths
-        self._source_key = hashlib.sha1(np.ascontiguousarray(cube.faces).tobytes()).hexdigest()[:16]
+        # level 0, how the levels the prefilters read between were made, and their bias
+        source = np.ascontiguousarray(cube.faces).tobytes() + f"{cube.mip_filter} {PREFILTER_LOD_BIAS}".encode()
+        self._source_key = hashlib.sha1(source).hexdigest()[:16]
         self._split_sum: dict = {}
         self._lobe_maps: dict = {}
         self._by_fit: dict = {}
@@ -214,9 +220,11 @@ class PrefilteredMaps:
         shader["u_nodes"] = 1
         shader["u_source_face"] = float(self.cube.face_size)
         shader["u_azimuths"] = azimuths or self.azimuths
-        # Bias 0: against brute force, +1 (Colbert & Krivanek) blurred light out of bright
-        # regions (mean error 5.7 % vs 0.5 %, GGX alpha 0.16, tests/test_prefiltered_gpu.py).
-        shader["u_lod_bias"] = 0.0
+        # Against brute force, +1 (Colbert & Krivanek) blurred light out of bright regions (mean
+        # error 5.7 % vs 0.5 % at 0, GGX alpha 0.16, box chain, tests/test_prefiltered_gpu.py).
+        # On the tent chain (viewer/mip_chain.py) -0.5 is closer than 0 on 7 of 9 checked levels
+        # and slices (split-sum level 2 GGX: mean 0.7 % -> 0.14 %; level 4: 1.6 % -> 1.1 %).
+        shader["u_lod_bias"] = PREFILTER_LOD_BIAS
         return nodes_texture
 
     def _cache_file(self, kind: str, nodes: np.ndarray, extra: str) -> Path | None:
@@ -274,20 +282,8 @@ class PrefilteredMaps:
         return cube
 
     def _read_cube_levels(self, cube, size) -> list:
-        """Every MIP level, read back through a compute pass (moderngl reads level 0 only)."""
-        shader = self.programs.compute("cube_level_read.comp")
-        levels = []
-        for level in range(SPLIT_SUM_LEVELS):
-            face = max(size >> level, 1)
-            out = self.ctx.buffer(reserve=6 * face * face * 16)
-            cube.bind_to_image(0, read=True, write=False, level=level, format=GL_RGBA32F)
-            shader["u_size"] = face
-            out.bind_to_storage_buffer(0)
-            shader.run((face + 7) // 8, (face + 7) // 8, 6)
-            self.ctx.finish()
-            levels.append(np.frombuffer(out.read(), dtype=np.float32).reshape(6, face, face, 4).copy())
-            out.release()
-        return levels
+        """Every MIP level of a split-sum cube."""
+        return [read_cube_level(self.ctx, cube, level) for level in range(SPLIT_SUM_LEVELS)]
 
     def _write_cube_levels(self, cube, levels) -> None:
         shader = self.programs.compute("cube_level_write.comp")

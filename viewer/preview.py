@@ -22,6 +22,7 @@ from .camera import Camera, jittered
 from .cubemap import EnvironmentCubes
 from .interface import bind_sampler, method_defines, set_uniform
 from .material_gpu import pack_material
+from .mip_chain import DEFAULT_MIP_FILTER
 from .render_base import RendererBase, RenderResult
 
 __all__ = ["PreviewRenderer", "RenderResult"]
@@ -35,7 +36,7 @@ class PreviewRenderer(RendererBase):
         mesh: Mesh,
         size=(512, 512),
         face_size: int = 256,
-        mip_filter: str = "box",
+        mip_filter: str = DEFAULT_MIP_FILTER,
     ):
         super().__init__(ctx, size)
         t0 = time.perf_counter()

@@ -36,7 +36,7 @@ from lobeview.materials.rsibr import (
     map_rows,
 )
 
-from .prefiltered import GL_RGBA32F
+from .prefiltered import GL_RGBA32F, PREFILTER_LOD_BIAS
 
 RSIBR_BAKE_SAMPLES = 256  # fis-N per texel of a map (filtered lookups, LOD bias 0)
 RSIBR_CACHE_VERSION = 1
@@ -136,7 +136,7 @@ def bake_rsibr(renderer, cube, material, layout: RsibrLayout, texture) -> None:
     the material and the cube to the bake shader as for a fis-N draw."""
     method = Method("fis", RSIBR_BAKE_SAMPLES)
     shader = renderer.programs.compute("rsibr_bake.comp", {"METHOD_FIS": True})
-    renderer.set_material(shader, material, method, lod_bias=0.0, seed=0)
+    renderer.set_material(shader, material, method, lod_bias=PREFILTER_LOD_BIAS, seed=0)
     renderer.bind_cube(shader, cube, method)
     shader["u_rows"] = layout.rows
     shader["u_rsibr_lobes"] = layout.lobes

@@ -48,6 +48,7 @@ from .interface import (
     write_uniform,
 )
 from .material_gpu import PackedMaterial, pack_material
+from .mip_chain import DEFAULT_MIP_FILTER, check_mip_filter
 from .mirror_pass import MirrorPasses
 from .occlusion import OcclusionTest
 from .render_base import RendererBase, RenderResult
@@ -140,8 +141,11 @@ class SceneRenderer(RendererBase):
         lobe_width_cubes: bool = True,
         reflector_cubes_on_demand: bool = True,
         cube_budget_mb: float | None = None,
+        mip_filter: str = DEFAULT_MIP_FILTER,
     ):
         super().__init__(ctx, size)
+        # How the MIP chains of cube maps and mirror buffers are made (viewer/mip_chain.py).
+        self.mip_filter = check_mip_filter(mip_filter)
         if not 0.05 <= float(mirror_scale) <= 2.0:
             raise ValueError(f"mirror_scale must be in [0.05, 2], got {mirror_scale}")
         if cube_budget_mb is not None and not float(cube_budget_mb) > 0:
@@ -168,7 +172,7 @@ class SceneRenderer(RendererBase):
         self.progress = progress
         self.timings: dict = {}
         t0 = time.perf_counter()
-        self.environment = RadianceCube(ctx, equirect_to_cube_faces(environment, 256))
+        self.environment = RadianceCube(ctx, equirect_to_cube_faces(environment, 256), mip_filter=self.mip_filter)
         self.environment_name = environment.name
         # Diffuse light of objects without a lightmap: the environment's irradiance (SH9).
         self.environment_sh9 = environment.irradiance_sh9().astype(np.float32)
@@ -220,6 +224,7 @@ class SceneRenderer(RendererBase):
             functools.partial(self._draw_pass, pass_kind="mirror"),
             self._visible_samples,
             self._restore_cubes,
+            self.mip_filter,
         )
         self.bounds = scene.bounds  # static scene: near/far planes are fitted to it every frame
         extent = float(np.max(self.bounds[1] - self.bounds[0]))
@@ -233,9 +238,12 @@ class SceneRenderer(RendererBase):
             functools.partial(self._draw_pass, pass_kind="cube map"),
             progress,
             self.cache_dir,  # prefiltered maps are cached beside the cubes
+            self.mip_filter,
         )
         sizes = {i: self.analysis.objects[i].cube_face for i in self.analysis.cube_mapped}
-        key = scene_content_key(scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces, sizes)
+        key = scene_content_key(
+            scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces, sizes, self.mip_filter
+        )
         if self.reflector_cubes_on_demand:  # the second bounce then sees reflectors without lobes
             key += "-r"
         self.cube_bake.build(self.objects, self.analysis.cubes_at_start, key, sizes)

@@ -1,6 +1,6 @@
 #version 450 core
 // One MIP level of a radiance cube from the level above it with a separable tent [1 3 3 1] / 8
-// (viewer/cubemap.py tent_mipmaps): four bilinear reads at +-0.75 source texels around each
+// (viewer/mip_chain.py tent_mipmaps): four bilinear reads at +-0.75 source texels around each
 // destination texel centre, across face edges through seamless cube filtering.
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;
 #include "cube.glsl"
