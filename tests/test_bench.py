@@ -207,6 +207,10 @@ def test_mip_chain_bench_writes_box_and_tent_per_method_and_bias(tmp_path):
         box, tent, delta = float(r[4]), float(r[5]), float(r[6])
         assert min(box, tent) > 10.0 and delta == pytest.approx(tent - box, abs=0.011)
     assert "- lobe-7+norm: better on" in text and "- fis-4: better on" in text
+    from PIL import Image
+
+    (figure,) = tmp_path.glob("mip_chain-*.png")  # box | tent | reference | two errors, one row
+    assert Image.open(figure).size == (5 * 24, 24) and figure.name in text
 
 
 def test_pattern_bench_reports_falls_and_writes_the_figure(tmp_path):
