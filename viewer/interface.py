@@ -110,10 +110,13 @@ def _defines_of(prefix: str, codes: dict) -> dict:
 # Footprint of the direct cube read of a narrow fitted lobe (viewer/prefiltered.py lobe_direct_angle):
 # area = LOBE_DIRECT_AREA_PER_MEDIAN2 m^2 for a lobe of median angle m. A box with the variance of a
 # Gaussian lobe would be 12 m^2 / (2 ln 2) = 8.66 m^2, but the cube's trilinear reads add their own
-# tent: measured (chrome, preview sphere 128 px, interior HDR) PSNR 31.9 / 35.6 / 36.2 / 35.5 / 33.5
-# / 29.6 dB at 1 / 2 / 3 / 4 / 5.5 / 8.66 m^2 (lacquer 36.9 / 38.2 / 38.3 / 37.6 / 35.8 / 34.3; the
-# garden HDR with its sun: chrome 29.6 / 34.4 / 28.5 dB at 1 / 3 / 8.66).
-LOBE_DIRECT_AREA_PER_MEDIAN2 = 3.0
+# kernel. On the box MIP chain (measured: chrome, preview sphere 128 px, interior HDR) PSNR 31.9 /
+# 35.6 / 36.2 / 35.5 / 33.5 / 29.6 dB at 1 / 2 / 3 / 4 / 5.5 / 8.66 m^2 gave 3. The tent chain
+# (viewer/mip_chain.py, the default) blurs more per level: 200 px sphere, `prefiltered`, PSNR at
+# 1 / 1.5 / 2 / 3 m^2: chrome interior 31.1 / 32.9 / 33.8 / 32.8 (box chain at 3: 32.8), courtyard
+# 27.6 / 29.1 / 29.8 / 29.5 (box 28.9); lacquer courtyard 32.7 / 33.6 / 34.0 / 34.0 (box 33.4),
+# interior 35.5 / 35.4 / 35.4 / 35.3 (box 36.4: its split-sum base, not this read).
+LOBE_DIRECT_AREA_PER_MEDIAN2 = 2.0
 
 SHADER_CONSTANTS: dict = {
     "MAX_LOBES": MAX_LOBES,
