@@ -255,17 +255,18 @@ def smooth_sphere():
 
 
 # lobe-7+norm's relative RMSE against a 2048-spp reference on the smooth sky (measured 2026-11-25,
-# llvmpipe): GGX 0.023 / 0.045 / 0.084 at alpha 0.05 / 0.15 / 0.30 (0.054 / 0.102 / 0.135 before
-# the tail term of patterns.py step 7), Beckmann 0.017 / 0.042 / 0.053. Issue 20's target is 5 %:
-# met at alpha 0.05 and 0.15 for both; GGX 0.30 and Beckmann 0.30 miss it (seven lookups of a wide
-# lobe through a box-filtered MIP chain; lobe-15+norm: 0.115 / 0.086, the spiral no better there).
+# llvmpipe, tent MIP chain at lobe-N's bias -1): GGX 0.023 / 0.046 / 0.091 at alpha 0.05 / 0.15 /
+# 0.30, Beckmann 0.017 / 0.039 / 0.047 (box chain at -0.5: GGX 0.023 / 0.045 / 0.084, Beckmann
+# 0.017 / 0.042 / 0.053; before the tail term of patterns.py step 7 GGX 0.054 / 0.102 / 0.135).
+# Issue 20's target is 5 %: met everywhere but GGX 0.30, where lobe-15+norm is worse still
+# (0.115) and the MIP chain's kernel does not decide it (box 0.084, tent 0.091).
 SMOOTH_SKY_LOBE7_BOUNDS = {
     ("ggx", 0.05): 0.03,
     ("ggx", 0.15): 0.05,
     ("ggx", 0.30): 0.10,
     ("beckmann", 0.05): 0.025,
     ("beckmann", 0.15): 0.05,
-    ("beckmann", 0.30): 0.065,
+    ("beckmann", 0.30): 0.05,
 }
 
 
@@ -286,5 +287,5 @@ def test_lobe7_is_close_to_the_converged_reference_on_a_smooth_sky(smooth_sphere
     mask = reference.mask
     error = relative_rmse(result.radiance[mask], reference.radiance[mask])
     assert error < SMOOTH_SKY_LOBE7_BOUNDS[(distribution, alpha)], error
-    if alpha <= 0.15:
+    if alpha <= 0.15 or distribution == "beckmann":
         assert error < 0.05  # the issue's target, where it is met
