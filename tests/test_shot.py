@@ -38,6 +38,10 @@ def test_shot_writes_png_exr_and_npy(tmp_path, capsys):
 
     png = np.asarray(Image.open(tmp_path / "a.png"))
     assert png.shape == (48, 64, 3) and png.std() > 5
+    # --mip-filter reaches the object preview: the box chain's levels differ from the tent's.
+    assert main(common + ["--mip-filter", "box", "--out", str(tmp_path / "box.npy")]) == 0
+    box = np.load(tmp_path / "box.npy")
+    assert np.all(np.isfinite(box)) and np.abs(box - radiance).max() > 1e-3
 
 
 def test_shot_reference_reports_samples(tmp_path, capsys):
