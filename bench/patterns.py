@@ -3,7 +3,7 @@
 The thesis' ring puts every sample but the centre at 40 % of the lobe radius and filters each over
 lobe area / N (Eq. 4.14-4.17): as N grows the footprints shrink while the lobe's rim stays
 unsampled, so PSNR fell with N on glossy lobes. Since this change lobe-N takes a Fibonacci
-(Vogel) spiral from N = 15 on (materials/patterns.py step 3), whose samples sit at the centres of
+(Vogel) spiral from N = 15 on (11 for narrow lobes; materials/patterns.py step 3), whose samples sit at the centres of
 equal-area cells of the lobe. This bench renders lobe-N+norm (the viewer's default) with the
 default pattern and with ``+ring`` (the thesis' ring at every N) for N = 3..19 on the preview
 sphere under each environment, against the box-filtered `reference` (two halves: 'floor' is its

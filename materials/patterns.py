@@ -25,10 +25,11 @@ Steps, with the thesis equations:
      spiral at N = 15 / 19 gives 26.1 / 25.9. At N = 11 the ring is still ahead on wide lobes
      without long tails (frosted glass 31.2 against 26.1 dB, a Beckmann alpha = 0.25 conductor
      27.7 against 26.6), at N <= 7 on most (few spiral samples are neither symmetric nor in the
-     core), so :func:`choose_pattern` takes the spiral from SPIRAL_MIN_SAMPLES on (measured
-     ring vs spiral per N: bench/patterns.py). :func:`choose_pattern` picks the line pattern
-     from the anisotropy ratio max(mx, my) / min(mx, my): >= 3 gives a line along the longer
-     axis.
+     core), so :func:`choose_pattern` takes the spiral from SPIRAL_MIN_SAMPLES on, and for
+     narrow lobes, which the spiral serves better already at N = 11, from
+     SPIRAL_MIN_SAMPLES_NARROW on (measured ring vs spiral per N: bench/patterns.py).
+     :func:`choose_pattern` picks the line pattern from the anisotropy ratio max(mx, my) /
+     min(mx, my): >= 3 gives a line along the longer axis.
   4. MIP level per sample (Eq. 4.14-4.17): the lobe cross-section is an ellipse with semi-axes
      2 sin(angle(w_C, w_U) / 2), 2 sin(angle(w_C, w_V) / 2) (the thesis: tan(angle), which
      overstates wide lobes, see lobe_sample_area); its area divided by N is one sample's solid
@@ -90,6 +91,14 @@ PATTERN_KINDS = ("ring", "multi_ring", "line_x", "line_y", "spiral")
 # lobe-N takes the spiral instead of the ring from this N on (step 3: measured on the preview
 # sphere, 7 presets x 2 captures; the ring stays the thesis' pattern below it and on request).
 SPIRAL_MIN_SAMPLES = 15
+# ... and from this N on for narrow lobes (largest roughness <= NARROW_LOBE_ALPHA). Measured on the
+# tent MIP chain (bench/patterns.py, 200 px, spiral against ring at N = 11): chrome (alpha 0.01)
+# +0.8 / +1.5 dB, lacquer (0.02) +0.6 / +1.2 (interior / courtyard.exr), which turns their fall
+# from the ring at 7 to the ring at 11 into a rise; Alanod (0.11 x 0.07) +0.2, gold-ggx (0.15)
+# +0.2 / -0.1, but plastic (0.12) -2.2 / -1.3, glTF red plastic (0.16) -1.2 / -0.8, frosted glass
+# (0.25) -6.8: those keep the ring below SPIRAL_MIN_SAMPLES.
+SPIRAL_MIN_SAMPLES_NARROW = 11
+NARROW_LOBE_ALPHA = 0.05
 # The golden angle in turns, 1 - 1 / golden ratio: successive spiral samples 137.5 deg apart.
 GOLDEN_ANGLE_TURNS = (3.0 - np.sqrt(5.0)) / 2.0
 # Step 7, the GGX tail of lobe-N+norm: the pattern covers tan(theta_h) <= sqrt(T) alpha with
@@ -114,7 +123,8 @@ def choose_pattern(
     """The thesis' rule: line pattern along the longer axis for strongly anisotropic lobes,
     otherwise the ring (cube maps) or the multi-ring (planar mirror buffers); with the sample
     count ``n`` and ``pattern`` 'auto' the spiral replaces the ring on cube maps from
-    SPIRAL_MIN_SAMPLES samples on ('ring', the method suffix +ring: the thesis' ring at any N)."""
+    SPIRAL_MIN_SAMPLES samples on, for narrow lobes (both alphas <= NARROW_LOBE_ALPHA) from
+    SPIRAL_MIN_SAMPLES_NARROW on ('ring', the method suffix +ring: the thesis' ring at any N)."""
     if pattern not in LOBE_PATTERNS:
         raise ValueError(f"unknown lobe-N pattern choice {pattern!r}; use one of {LOBE_PATTERNS}")
     ratio = max(alpha_x, alpha_y) / min(alpha_x, alpha_y)
@@ -122,7 +132,9 @@ def choose_pattern(
         return "line_y" if alpha_y > alpha_x else "line_x"
     if planar:
         return "multi_ring"
-    spiral = pattern == "auto" and n is not None and n >= SPIRAL_MIN_SAMPLES
+    narrow = max(alpha_x, alpha_y) <= NARROW_LOBE_ALPHA
+    spiral_from = SPIRAL_MIN_SAMPLES_NARROW if narrow else SPIRAL_MIN_SAMPLES
+    spiral = pattern == "auto" and n is not None and n >= spiral_from
     return "spiral" if spiral else "ring"
 
 

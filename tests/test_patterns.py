@@ -79,6 +79,28 @@ def test_pattern_layouts_follow_the_thesis():
     assert choose_pattern(0.2, 0.2, planar=True) == "multi_ring"
 
 
+def test_narrow_lobes_take_the_spiral_from_eleven_samples_on_cube_maps_and_in_the_packed_patterns():
+    from lobeview.materials.patterns import NARROW_LOBE_ALPHA, SPIRAL_MIN_SAMPLES_NARROW
+    from lobeview.viewer.material_gpu import pack_material, pack_patterns
+
+    assert SPIRAL_MIN_SAMPLES_NARROW == 11 < SPIRAL_MIN_SAMPLES
+    assert choose_pattern(NARROW_LOBE_ALPHA, 0.02, n=11) == "spiral"
+    assert choose_pattern(0.02, 0.02, n=10) == "ring"
+    assert choose_pattern(NARROW_LOBE_ALPHA * 1.01, NARROW_LOBE_ALPHA, n=11) == "ring"  # the wider axis decides
+    assert choose_pattern(0.02, 0.02, n=11, pattern="ring") == "ring"
+    assert choose_pattern(0.02, 0.02, planar=True, n=11) == "multi_ring"
+    assert choose_pattern(0.005, 0.02, n=11) == "line_y"  # ratio 4: the line, whatever the width
+    # The GPU gets each lobe's own pattern: chrome (alpha 0.01) the spiral, plastic (0.12) the ring,
+    # equal to what the numpy lobe_samples takes for the same lobe.
+    wo = direction_from_angles_deg(30)
+    for preset, kind in (("chrome", "spiral"), ("plastic", "ring")):
+        material = pack_material(build_bsdf(PRESETS[preset]))
+        (lobe,) = material.lobe_components
+        assert lobe_samples(lobe, wo, 11).kind == kind
+        packed = pack_patterns(material, 11)[:11]
+        np.testing.assert_allclose(packed, np.stack(pattern_xi(11, kind), -1), rtol=1e-6, atol=1e-7)
+
+
 def test_lobe_n_takes_the_spiral_from_fifteen_samples_unless_asked_for_the_ring():
     assert SPIRAL_MIN_SAMPLES == 15
     assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES - 1) == "ring"

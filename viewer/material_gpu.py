@@ -262,8 +262,9 @@ def _load_or_build_albedo_table(comp, key: tuple, directory: Path | None) -> Alb
 
 def pack_patterns(material: PackedMaterial, n: int, planar: bool = False, pattern: str = "auto") -> np.ndarray:
     """(MAX_LOBES * MAX_PATTERN, 2) pattern coordinates of each lobe's ring (or, with ``pattern``
-    'auto', its spiral from SPIRAL_MIN_SAMPLES on), or with ``planar`` the multi-ring pattern of
-    thesis 4.5.3 for objects shaded from a mirror buffer. The line
+    'auto', its spiral from SPIRAL_MIN_SAMPLES on, SPIRAL_MIN_SAMPLES_NARROW for narrow lobes), or
+    with ``planar`` the multi-ring pattern of thesis 4.5.3 for objects shaded from a mirror
+    buffer. The line
     patterns of strongly anisotropic lobes (:func:`lobeview.materials.patterns.choose_pattern`)
     are chosen and placed per pixel by shaders/integrate.glsl lobe_pattern_xi, since a roughness
     or anisotropy texture changes a lobe's anisotropy from pixel to pixel. A lobe sampled through
@@ -272,8 +273,16 @@ def pack_patterns(material: PackedMaterial, n: int, planar: bool = False, patter
     if not 1 <= n <= MAX_PATTERN:
         raise ValueError(f"lobe-N supports 1 <= N <= {MAX_PATTERN}, got {n}")
     out = np.zeros((MAX_LOBES * MAX_PATTERN, 2), dtype=np.float32)
-    ring = np.stack(pattern_xi(n, choose_pattern(1.0, 1.0, planar, n, pattern)), -1)
     lattice = np.stack(lattice_xi(n), -1)
     for i, comp in enumerate(material.lobe_components):
-        out[i * MAX_PATTERN : i * MAX_PATTERN + n] = lattice if getattr(comp, "sampled_pattern", False) else ring
+        if getattr(comp, "sampled_pattern", False):
+            out[i * MAX_PATTERN : i * MAX_PATTERN + n] = lattice
+            continue
+        # Ring or spiral by the lobe's widest roughness (isotropic here: the line patterns are the
+        # shader's, per pixel); a roughness texture can only widen it (materials/gltf.py).
+        dist = getattr(comp, "distribution", None)
+        alpha = max(float(dist.alpha_x), float(dist.alpha_y)) if dist is not None else 1.0
+        out[i * MAX_PATTERN : i * MAX_PATTERN + n] = np.stack(
+            pattern_xi(n, choose_pattern(alpha, alpha, planar, n, pattern)), -1
+        )
     return out
