@@ -27,12 +27,13 @@ import numpy as np
 from lobeview.bench.metrics import exposure_for, psnr_8bit, relative_rmse
 from lobeview.bench.report import write_image_rows
 from lobeview.bench.targets import resolve_environment
-from lobeview.core.methods import Method
-from lobeview.materials.patterns import SPIRAL_MIN_SAMPLES
+from lobeview.core.methods import DEFAULT_LOBE_LOD_BIAS, Method
+from lobeview.materials.patterns import NARROW_LOBE_ALPHA, SPIRAL_MIN_SAMPLES, SPIRAL_MIN_SAMPLES_NARROW
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context, renderer_description
+from lobeview.viewer.mip_chain import DEFAULT_MIP_FILTER
 from lobeview.viewer.preview import PreviewRenderer
 from lobeview.viewer.tonemap import tonemap
 
@@ -133,8 +134,10 @@ def main(argv=None) -> int:
         f"Run {stamp}: `python -m lobeview.bench.patterns --envs {' '.join(args.envs)} --size {args.size} "
         f"--spp {args.spp}`; {device}; {time.perf_counter() - started:.0f} s.",
         f"Preview sphere {args.size}x{args.size}, cube faces 256 px, environments {', '.join(env_names)}.",
-        "Methods: lobe-N+norm (the viewer's default: Eq. 4.25, energy-normalised, LOD bias -0.5) with the",
-        f"default pattern ('auto': the ring below N = {SPIRAL_MIN_SAMPLES}, the spiral from N = {SPIRAL_MIN_SAMPLES})",
+        "Methods: lobe-N+norm (the viewer's default: Eq. 4.25, energy-normalised, "
+        f"LOD bias {DEFAULT_LOBE_LOD_BIAS:+g}, {DEFAULT_MIP_FILTER} MIP chain) with the default pattern ('auto': the ring below N = {SPIRAL_MIN_SAMPLES}, "
+        f"the spiral from N = {SPIRAL_MIN_SAMPLES}, from N = {SPIRAL_MIN_SAMPLES_NARROW} for roughness <= "
+        f"{NARROW_LOBE_ALPHA:g})",
         "and with +ring (the thesis' ring at every N); anisotropic lobes (max/min roughness >= 3) take the",
         "line pattern either way.",
         f"Reference: `reference`, {args.spp} samples per lobe, box-filtered pixel integral, two halves ('floor':",
