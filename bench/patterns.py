@@ -135,7 +135,8 @@ def main(argv=None) -> int:
         f"--spp {args.spp}`; {device}; {time.perf_counter() - started:.0f} s.",
         f"Preview sphere {args.size}x{args.size}, cube faces 256 px, environments {', '.join(env_names)}.",
         "Methods: lobe-N+norm (the viewer's default: Eq. 4.25, energy-normalised, "
-        f"LOD bias {DEFAULT_LOBE_LOD_BIAS:+g}, {DEFAULT_MIP_FILTER} MIP chain) with the default pattern ('auto': the ring below N = {SPIRAL_MIN_SAMPLES}, "
+        f"LOD bias {DEFAULT_LOBE_LOD_BIAS:+g}, {DEFAULT_MIP_FILTER} MIP chain) with the default pattern ('auto': "
+        f"the ring below N = {SPIRAL_MIN_SAMPLES}, "
         f"the spiral from N = {SPIRAL_MIN_SAMPLES}, from N = {SPIRAL_MIN_SAMPLES_NARROW} for roughness <= "
         f"{NARROW_LOBE_ALPHA:g})",
         "and with +ring (the thesis' ring at every N); anisotropic lobes (max/min roughness >= 3) take the",
