@@ -70,8 +70,8 @@ def add_scene_arguments(p) -> None:
         choices=MIP_FILTERS,
         default=DEFAULT_MIP_FILTER,
         help="how the MIP chains of cube maps and mirror buffers are made: 'tent' (default) = a [1 3 3 1]/8 "
-        "tent per level, read by lobe-N at LOD bias -1; 'box' = glGenerateMipmap's 2x2 box (the thesis' chain; "
-        "lobe-N reads it best at LOD bias -0.5: shot --lod-bias)",
+        "tent per level, read by lobe-N at LOD bias -1; 'box' = glGenerateMipmap's 2x2 box (the thesis' chain), "
+        "read by lobe-N at its best bias there, -0.5 (both measured; shot's --lod-bias overrides either)",
     )
     a(
         "--reflection-proxy",

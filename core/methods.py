@@ -73,6 +73,7 @@ MAX_REFERENCE_SPP = 65536
 # stays at -0.5 (tent ahead of box there on 8 of 14).
 DEFAULT_FIS_LOD_BIAS = -0.5
 DEFAULT_LOBE_LOD_BIAS = -1.0
+BOX_CHAIN_LOBE_LOD_BIAS = -0.5  # lobe-N's default on the box chain (--mip-filter box: as before the tent)
 
 _GRAMMAR = re.compile(
     r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?:(?P<norm>\+norm)|(?P<eq424>\+eq4\.24))?(?P<ring>\+ring)?"
@@ -182,8 +183,12 @@ class Method:
             return self
         return dataclasses.replace(self, normalize=bool(normalize))
 
-    def default_lod_bias(self) -> float:
-        return DEFAULT_FIS_LOD_BIAS if self.kind == "fis" else DEFAULT_LOBE_LOD_BIAS
+    def default_lod_bias(self, mip_filter: str = "tent") -> float:
+        """The measured best bias of this method on MIP chains made by ``mip_filter``
+        (viewer/mip_chain.py: "tent", the default, or "box")."""
+        if self.kind == "fis":
+            return DEFAULT_FIS_LOD_BIAS
+        return DEFAULT_LOBE_LOD_BIAS if mip_filter == "tent" else BOX_CHAIN_LOBE_LOD_BIAS
 
     def for_rational(self) -> Method:
         """This method with a reference pass small enough for a Rational BRDF's shader."""

@@ -105,3 +105,37 @@ def test_gpu_tent_levels_of_2d_buffers_match_numpy_and_keep_constants():
             build_mip_chain(ctx, texture, "gauss")
     finally:
         ctx.release()
+
+
+def test_lobe_n_default_bias_follows_the_chain_in_the_renderers():
+    """--mip-filter box renders lobe-N at the box chain's best bias (-0.5) and the tent chain at
+    -1 (core/methods.py); fis-N keeps -0.5 on both. The renderer's default equals the explicit bias."""
+    from lobeview.core.methods import Method
+    from lobeview.materials.spec import build_bsdf, load_material
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.preview import PreviewRenderer
+
+    lobe, fis = Method("lobe", 7, normalize=True), Method("fis", 8)
+    assert (lobe.default_lod_bias(), lobe.default_lod_bias("tent"), lobe.default_lod_bias("box")) == (-1.0, -1.0, -0.5)
+    assert fis.default_lod_bias("tent") == fis.default_lod_bias("box") == -0.5
+    ctx = create_headless_context()
+    try:
+        env = EnvironmentMap.from_function(lambda d: 1.0 + 4.0 * np.maximum(d[..., :1], 0.0) ** 8 * [1.0, 0.8, 0.6],
+                                           height=32, name="lobe")  # fmt: skip
+        bsdf = build_bsdf(load_material("gold-ggx"))
+        camera = Camera(position=(0.0, 0.35, 3.2), fov_y=40.0)
+        images = {}
+        for chain in ("box", "tent"):
+            renderer = PreviewRenderer(ctx, env, uv_sphere(rings=16, segments=32), size=(32, 32), face_size=32,
+                                       mip_filter=chain)  # fmt: skip
+            for bias in (None, -0.5, -1.0):
+                images[chain, bias] = renderer.render(camera, bsdf, lobe, lod_bias=bias, background=False).radiance
+            renderer.release()
+        np.testing.assert_array_equal(images["box", None], images["box", -0.5])
+        np.testing.assert_array_equal(images["tent", None], images["tent", -1.0])
+        assert np.abs(images["box", -0.5] - images["box", -1.0]).max() > 1e-4  # the bias matters here
+    finally:
+        ctx.release()

@@ -31,6 +31,7 @@ from .interface import (
     write_uniform,
 )
 from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
+from .mip_chain import DEFAULT_MIP_FILTER
 from .rsibr import bake_rsibr, rsibr_albedo, rsibr_cache_key, rsibr_layout, view_sphere_uniforms
 from .shaders import ProgramCache
 
@@ -130,6 +131,9 @@ class RendererBase:
     def __init__(self, ctx: moderngl.Context, size):
         self.ctx = ctx
         self.programs = ProgramCache(ctx)
+        # How the radiance MIP chains are made (viewer/mip_chain.py; subclasses set theirs):
+        # the default LOD bias of lobe-N depends on it.
+        self.mip_filter = DEFAULT_MIP_FILTER
         sobol = sobol_points()
         self.sobol = ctx.texture((SOBOL_SIDE, SOBOL_SIDE), 4, sobol.tobytes(), dtype="f4")
         self.sobol.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -209,7 +213,7 @@ class RendererBase:
         set_uniform(
             program,
             "u_lod_bias",
-            float(method.default_lod_bias() if lod_bias is None else lod_bias),
+            float(method.default_lod_bias(self.mip_filter) if lod_bias is None else lod_bias),
         )
         set_uniform(program, "u_sobol_count", self.sobol_count)
         set_uniform(program, "u_seed", int(seed))

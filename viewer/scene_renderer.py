@@ -26,7 +26,7 @@ import moderngl
 import numpy as np
 
 from lobeview.core.cache import BoundedCache
-from lobeview.core.methods import DEFAULT_LOBE_LOD_BIAS, Method
+from lobeview.core.methods import Method
 from lobeview.materials.gltf import specular_f0_unclamped
 from lobeview.materials.patterns import lobe_spread, specular_lobes
 from lobeview.materials.spec import build_bsdf
@@ -466,7 +466,7 @@ class SceneRenderer(RendererBase):
         spreads = {}
         if method is not None and self.mirror_scissor:
             spreads = {index: self._lobe_spread(index, self._object_method(index, method)) for index in reflectors}
-        bias = DEFAULT_LOBE_LOD_BIAS if lod_bias is None else float(lod_bias)
+        bias = Method("lobe", 1).default_lod_bias(self.mip_filter) if lod_bias is None else float(lod_bias)
         return self.mirror_passes.render(
             camera, self.size, reflectors, names, self.mirror_scale, self.mirror_specular, occlusion, spreads, bias
         )
