@@ -139,3 +139,28 @@ def test_lobe_n_default_bias_follows_the_chain_in_the_renderers():
         assert np.abs(images["box", -0.5] - images["box", -1.0]).max() > 1e-4  # the bias matters here
     finally:
         ctx.release()
+
+
+def test_chains_compile_their_shaders_once_per_context():
+    """A mirror buffer re-filtered every frame and cube maps uploaded one after another reuse the
+    context's compute shaders (a new GL program per chain was made and never released)."""
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.cubemap import upload_cube
+    from lobeview.viewer.mip_chain import build_mip_chain, read_cube_level
+
+    ctx = create_headless_context()
+    compiled = []
+    compile_shader = ctx.compute_shader
+    ctx.compute_shader = lambda source: compiled.append(source) or compile_shader(source)
+    try:
+        buffer = ctx.texture((24, 16), 4, dtype="f4")
+        buffer.build_mipmaps()
+        for _ in range(3):  # three frames of one mirror buffer
+            build_mip_chain(ctx, buffer, "tent", allocated=True)
+        for _ in range(2):
+            cube = upload_cube(ctx, np.full((6, 8, 8, 3), 0.5, np.float32), mip_filter="tent")
+            np.testing.assert_allclose(read_cube_level(ctx, cube, 1)[..., :3], 0.5, rtol=1e-6)
+            cube.release()
+        assert len(compiled) == 3  # the 2D tent, the cube tent, the level read-back: once each
+    finally:
+        ctx.release()

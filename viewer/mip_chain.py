@@ -24,6 +24,17 @@ GL_RGBA32F = 0x8814
 GL_TEXTURE_CUBE_MAP_SEAMLESS = 0x884F
 
 
+def _programs(ctx: moderngl.Context) -> ProgramCache:
+    """The chains' compute shaders, compiled once per context and kept on it: a ProgramCache per
+    call made a new GL program for every chain built (every mirror pass of every frame), never
+    released."""
+    programs = getattr(ctx, "_lobeview_mip_programs", None)
+    if programs is None:
+        programs = ProgramCache(ctx)
+        ctx._lobeview_mip_programs = programs
+    return programs
+
+
 def check_mip_filter(mip_filter: str) -> str:
     if mip_filter not in MIP_FILTERS:
         raise ValueError(f"unknown MIP filter {mip_filter!r}; use one of {MIP_FILTERS}")
@@ -33,7 +44,7 @@ def check_mip_filter(mip_filter: str) -> str:
 def tent_mipmaps(ctx: moderngl.Context, cube: moderngl.TextureCube) -> None:
     """Levels 1.. of an RGBA32F ``cube`` (levels allocated) from level 0 with the tent, read
     through seamless cube filtering across face edges."""
-    shader = ProgramCache(ctx).compute("mip_tent_cube.comp")
+    shader = _programs(ctx).compute("mip_tent_cube.comp")
     ctx.enable_direct(GL_TEXTURE_CUBE_MAP_SEAMLESS)
     size = cube.size[0]
     level = 0
@@ -54,7 +65,7 @@ def tent_mipmaps(ctx: moderngl.Context, cube: moderngl.TextureCube) -> None:
 def tent_mipmaps_2d(ctx: moderngl.Context, texture: moderngl.Texture) -> None:
     """Levels 1.. of an RGBA32F 2D ``texture`` (levels allocated, any size: GL's level sizes
     max(1, size >> level)) from level 0 with the tent, clamped at the edges."""
-    shader = ProgramCache(ctx).compute("mip_tent_2d.comp")
+    shader = _programs(ctx).compute("mip_tent_2d.comp")
     width, height = texture.size
     level = 0
     saved = texture.filter, texture.repeat_x, texture.repeat_y
@@ -75,10 +86,15 @@ def tent_mipmaps_2d(ctx: moderngl.Context, texture: moderngl.Texture) -> None:
     texture.filter, texture.repeat_x, texture.repeat_y = saved
 
 
-def build_mip_chain(ctx: moderngl.Context, texture, mip_filter: str = DEFAULT_MIP_FILTER) -> None:
-    """Levels 1.. of a cube or 2D RGBA32F ``texture`` from its level 0 by ``mip_filter``."""
+def build_mip_chain(
+    ctx: moderngl.Context, texture, mip_filter: str = DEFAULT_MIP_FILTER, allocated: bool = False
+) -> None:
+    """Levels 1.. of a cube or 2D RGBA32F ``texture`` from its level 0 by ``mip_filter``.
+    ``allocated``: its levels exist already (a buffer re-filtered every frame), so the tent
+    chain does not first make the box chain to allocate them."""
     check_mip_filter(mip_filter)
-    texture.build_mipmaps()  # allocates the levels (and is the whole chain for "box")
+    if mip_filter == "box" or not allocated:
+        texture.build_mipmaps()  # allocates the levels (and is the whole chain for "box")
     if mip_filter == "tent":
         if isinstance(texture, moderngl.TextureCube):
             tent_mipmaps(ctx, texture)
@@ -89,7 +105,7 @@ def build_mip_chain(ctx: moderngl.Context, texture, mip_filter: str = DEFAULT_MI
 def read_cube_level(ctx: moderngl.Context, cube: moderngl.TextureCube, level: int) -> np.ndarray:
     """(6, S, S, 4) float32 texels of one MIP level of an RGBA32F cube (moderngl reads level 0
     only), through a compute pass (shaders/cube_level_read.comp)."""
-    shader = ProgramCache(ctx).compute("cube_level_read.comp")
+    shader = _programs(ctx).compute("cube_level_read.comp")
     face = max(cube.size[0] >> level, 1)
     out = ctx.buffer(reserve=6 * face * face * 16)
     try:

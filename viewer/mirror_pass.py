@@ -31,6 +31,7 @@ class MirrorTargets:
     def __init__(self, ctx, size):
         self.size = size
         self.radiance = ctx.texture(size, 4, dtype="f4")
+        self.radiance.build_mipmaps()  # allocates the levels; each pass filters them again
         self.radiance.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.radiance.repeat_x = self.radiance.repeat_y = False
         self.position = ctx.texture(size, 4, dtype="f4")
@@ -196,7 +197,7 @@ class MirrorPasses:
                     cull_view_projection=cull_view_projection,
                 )  # fmt: skip
                 self.ctx.scissor = None
-                build_mip_chain(self.ctx, targets.radiance, self.mip_filter)
+                build_mip_chain(self.ctx, targets.radiance, self.mip_filter, allocated=True)
                 targets.camera = buffer_camera
                 active[index][kind] = targets
                 pixels = size[0] * size[1] if rect is None else rect[2] * rect[3]

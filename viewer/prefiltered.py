@@ -39,13 +39,12 @@ from lobeview.materials.prefilter import (
 )
 
 from .cubemap import RadianceCube
-from .mip_chain import read_cube_level
+from .mip_chain import GL_RGBA32F, read_cube_level
 from .shaders import ProgramCache
 
 # MIP bias of the prefilters' (and the RSIBR bake's) cube lookups, for the tent chain (see _bind_source).
 PREFILTER_LOD_BIAS = -0.5
 
-GL_RGBA32F = 0x8814
 SPLIT_SUM_KINDS = ("beckmann", "ggx")  # index = DIST_* in shaders/bsdf.glsl
 LOBE_MAP_MAX_HEIGHT = 256
 LOBE_MAP_MIN_HEIGHT = 16

@@ -40,7 +40,7 @@ class PreviewRenderer(RendererBase):
     ):
         super().__init__(ctx, size)
         t0 = time.perf_counter()
-        # mip_filter: how the environment cube's MIP levels are made (viewer/cubemap.py MIP_FILTERS)
+        # mip_filter: how the environment cube's MIP levels are made (viewer/mip_chain.py MIP_FILTERS)
         self.cubes = EnvironmentCubes(ctx, env, face_size, mip_filter=mip_filter)
         self.mip_filter = mip_filter  # lobe-N's default LOD bias follows it (Method.default_lod_bias)
         self.setup_seconds = time.perf_counter() - t0

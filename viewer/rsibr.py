@@ -36,9 +36,10 @@ from lobeview.materials.rsibr import (
     map_rows,
 )
 
-from .prefiltered import GL_RGBA32F, PREFILTER_LOD_BIAS
+from .mip_chain import GL_RGBA32F
+from .prefiltered import PREFILTER_LOD_BIAS
 
-RSIBR_BAKE_SAMPLES = 256  # fis-N per texel of a map (filtered lookups, LOD bias 0)
+RSIBR_BAKE_SAMPLES = 256  # fis-N per texel of a map (filtered lookups, LOD bias PREFILTER_LOD_BIAS)
 RSIBR_CACHE_VERSION = 1
 _ALBEDO_TABLES = BoundedCache(64)  # rsibr_cache_key -> albedo_table of the baked lobes (~0.7 s each)
 
