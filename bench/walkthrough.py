@@ -78,6 +78,7 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
     """Per frame of ``path``: mirror-pass and camera-pass milliseconds and the draw counters.
     One untimed frame first (shader compilation)."""
     from lobeview.viewer.camera import Camera
+    from lobeview.viewer.interface import UNIFORM_WRITES
     from lobeview.viewer.mirror_pass import buffer_size
 
     rows = []
@@ -101,6 +102,7 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
             renderer.mirror_scissor = True
         renderer.invalidate_mirrors()
         renderer.draw_counts.new_frame()
+        UNIFORM_WRITES.reset()
         mirror_ms = (
             _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method) if mirrors_drawn else 0.0
         )
@@ -112,8 +114,19 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         reasons = dict(Counter(renderer.mirror_passes.skipped.values()))
         # Reuses the mirror buffers just drawn (and resets the counters).
         camera_ms = _finished_ms(renderer.ctx, renderer.draw_frame, camera, method)
+        uniform_writes, uniform_values = UNIFORM_WRITES.written, UNIFORM_WRITES.written + UNIFORM_WRITES.skipped
         counts = renderer.draw_counts
         camera_drawn, camera_culled = counts.of("camera").drawn, counts.of("camera").culled
+        draws = camera_drawn + mirror_draws
+        # The same mirror and camera passes with every object's state set value by value
+        # (SceneRenderer.draw_records off): what recording it once saves.
+        renderer.draw_records = False
+        renderer.invalidate_mirrors()
+        unrecorded_ms = (
+            _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method) if mirrors_drawn else 0.0
+        )
+        unrecorded_ms += _finished_ms(renderer.ctx, renderer.draw_frame, camera, method)
+        renderer.draw_records = True
         renderer.depth_prepass = False  # the same camera pass without the depth pre-pass
         no_prepass_ms = _finished_ms(renderer.ctx, renderer.draw_frame, camera, method)
         renderer.depth_prepass = True
@@ -131,6 +144,10 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
                 "camera_ms": camera_ms,
                 "frame_ms": mirror_ms + camera_ms,
                 "camera_ms_without_prepass": no_prepass_ms,
+                "frame_ms_without_records": unrecorded_ms,
+                "draws": draws,
+                "uniform_values_set": uniform_values,
+                "uniform_writes": uniform_writes,
                 "camera_drawn": camera_drawn,
                 "camera_culled": camera_culled,
                 "mirror_draws": mirror_draws,
@@ -214,6 +231,11 @@ def _summary(result: dict) -> dict:
         "camera_culled_mean": mean("camera_culled"),
         "mirror_passes_mean": mean("mirror_passes"),
         "mirror_skipped_mean": mean("mirror_skipped"),
+        "frame_ms_without_records_mean": mean("frame_ms_without_records"),
+        "frame_ms_mean": mean("frame_ms"),
+        "draws_mean": mean("draws"),
+        "uniform_values_mean": mean("uniform_values_set"),
+        "uniform_writes_mean": mean("uniform_writes"),
     }
 
 
@@ -310,6 +332,10 @@ def _scene_markdown(result: dict) -> list[str]:
         f"{s['mirror_ms_without_test_mean']:.0f} ms ({s['mirror_passes_without_test_mean']:.1f} passes) on average; "
         f"without the scissor {s['mirror_ms_without_scissor_mean']:.0f} ms (the scissor skipped "
         f"{100 * s['scissored_fraction']:.0f} % of the drawn passes' pixels).",
+        f"Draw state: {s['draws_mean']:.0f} draws a frame set {s['uniform_values_mean']:.0f} uniform values, of "
+        f"which {s['uniform_writes_mean']:.0f} were not already in their program and went to GL; with every "
+        f"object's state set value by value (no draw records) the frame took {s['frame_ms_without_records_mean']:.0f}"
+        f" against {s['frame_ms_mean']:.0f} ms (means).",
         "",
         "| frame | t (s) | frame ms | mirror passes ms | of which occlusion test ms | camera pass ms "
         "| camera draws / culled | mirror-pass draws / culled | mirror passes drawn / skipped | skipped because "
@@ -344,8 +370,9 @@ def _count_markdown(rows: list[dict]) -> list[str]:
         "| start-up warm s | frame ms (median) | mirror ms (mean) | camera ms (mean) | camera draws / culled (mean) "
         "| mirror passes drawn / skipped (mean) | without the occlusion test: mirror passes, ms (mean) "
         "| mirror ms without the scissor (mean) | pass pixels scissored away "
-        "| camera ms without the depth pre-pass (mean) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| camera ms without the depth pre-pass (mean) | draws, uniform values set / sent (mean) "
+        "| frame ms without draw records (mean, with) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         s = _summary(r)
@@ -359,7 +386,9 @@ def _count_markdown(rows: list[dict]) -> list[str]:
             f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} "
             f"| {s['mirror_passes_without_test_mean']:.1f}, {s['mirror_ms_without_test_mean']:.0f} "
             f"| {s['mirror_ms_without_scissor_mean']:.0f} | {100 * s['scissored_fraction']:.0f} % "
-            f"| {s['camera_ms_without_prepass_mean']:.0f} |"
+            f"| {s['camera_ms_without_prepass_mean']:.0f} "
+            f"| {s['draws_mean']:.0f}, {s['uniform_values_mean']:.0f} / {s['uniform_writes_mean']:.0f} "
+            f"| {s['frame_ms_without_records_mean']:.0f} ({s['frame_ms_mean']:.0f}) |"
         )
     return lines
 

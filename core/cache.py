@@ -58,6 +58,7 @@ class BoundedCache:
         self.capacity = int(capacity)
         self.on_evict = on_evict
         self._items: OrderedDict = OrderedDict()
+        self.evictions = 0  # entries dropped so far (what was made from them may be stale)
 
     def get(self, key: Hashable, make: Callable[[], object]):
         if key in self._items:
@@ -67,6 +68,7 @@ class BoundedCache:
         self._items[key] = value
         while len(self._items) > self.capacity:
             _, old = self._items.popitem(last=False)
+            self.evictions += 1
             if self.on_evict is not None:
                 self.on_evict(old)
         return value
@@ -84,5 +86,6 @@ class BoundedCache:
         """Drop every entry (each passed to ``on_evict``)."""
         while self._items:
             _, old = self._items.popitem(last=False)
+            self.evictions += 1
             if self.on_evict is not None:
                 self.on_evict(old)

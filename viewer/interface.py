@@ -19,6 +19,8 @@
 from __future__ import annotations
 
 import re
+import struct
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -232,11 +234,62 @@ def has_uniform(program, name: str) -> bool:
     return program.get(name, None) is not None
 
 
+class UniformWrites:
+    """How many uniform values the helpers below sent to GL and how many they skipped because
+    the program already held those bytes (issue 18: state uploaded when it changes, not per draw)."""
+
+    def __init__(self):
+        self.written = 0
+        self.skipped = 0
+
+    def reset(self) -> None:
+        self.written = self.skipped = 0
+
+
+UNIFORM_WRITES = UniformWrites()
+
+
+def _pack(member, value) -> bytes:
+    """``value`` as the bytes moderngl's ``Uniform.value`` setter would write."""
+    if member.array_length > 1:
+        if member.dimension > 1:
+            return b"".join(struct.pack(member.fmt, *row) for row in value)
+        return b"".join(struct.pack(member.fmt, item) for item in value)
+    if member.dimension > 1:
+        return struct.pack(member.fmt, *value)
+    return struct.pack(member.fmt, value)
+
+
+def _store(program, name: str, member, data: bytes) -> None:
+    """Write ``data`` to ``member`` unless the program already holds exactly these bytes (a
+    shadow of each ProgramCache program's uniform state in ``program.extra``; every write to
+    such a program goes through here, so the shadow is GL's state). A :class:`DrawRecorder`
+    collects the write instead."""
+    extra = program.extra
+    if extra is None:  # a program not made by ProgramCache: no shadow
+        member.write(data)
+        return
+    record = extra.get("record")
+    if record is not None:
+        record[name] = (member, data)
+        return
+    shadow = extra.get("uniform_shadow")
+    if shadow is None:
+        shadow = extra["uniform_shadow"] = {}
+    if shadow.get(name) == data:
+        UNIFORM_WRITES.skipped += 1
+        return
+    member.write(data)
+    shadow[name] = data
+    UNIFORM_WRITES.written += 1
+
+
 def set_uniform(program, name: str, value) -> None:
-    """Set a declared uniform; skipped where the compiler optimised it out of this variant."""
+    """Set a declared uniform; skipped where the compiler optimised it out of this variant, and
+    where the program holds this value already."""
     member = program.get(name, None)
     if member is not None:
-        member.value = value
+        _store(program, name, member, _pack(member, value))
     else:
         _check_declared(program, name)
 
@@ -254,12 +307,75 @@ def write_uniform(program, name: str, data) -> None:
             f"uniform {name!r}: {len(data)} bytes written, the shader declares {expected} "
             f"({member.array_length} x {member.dimension} x 4): the packing and the GLSL layout disagree"
         )
-    member.write(data)
+    _store(program, name, member, data)
+
+
+def use_unit(program, resource, unit_index: int) -> None:
+    """Bind a texture or sampler object to a texture unit for ``program``'s next draw (recorded
+    as well when ``program`` is a :class:`DrawRecorder`)."""
+    uses = getattr(program, "recorded_uses", None)
+    if uses is not None:
+        uses.append((resource.use, unit_index))
+    resource.use(unit_index)
+
+
+def bind_storage(program, buffer, binding: int) -> None:
+    """Bind a storage buffer for ``program``'s next draw (recorded like :func:`use_unit`)."""
+    uses = getattr(program, "recorded_uses", None)
+    if uses is not None:
+        uses.append((buffer.bind_to_storage_buffer, binding))
+    buffer.bind_to_storage_buffer(binding)
+
+
+@dataclass(frozen=True)
+class DrawRecord:
+    """The uniform values and bindings one object's draw state sets, recorded once
+    (:class:`DrawRecorder`) and replayed per draw (:func:`replay`)."""
+
+    uniforms: tuple  # (name, (member, bytes)) in the order they were set
+    uses: tuple  # (bind method, unit or binding) in the order they were made
+
+
+class DrawRecorder:
+    """Stands in for a ProgramCache program while a renderer sets an object's draw state once:
+    the uniform helpers record into it instead of writing, texture and buffer bindings are made
+    and recorded. Replaying the record (:func:`replay`) then costs a bytes comparison per uniform
+    and one call per binding, instead of rebuilding every value per draw."""
+
+    def __init__(self, program):
+        self.program = program
+        self.extra = {**program.extra, "record": {}}
+        self.recorded_uses: list = []
+
+    def get(self, name: str, default=None):
+        return self.program.get(name, default)
+
+    def record(self) -> DrawRecord:
+        return DrawRecord(tuple(self.extra["record"].items()), tuple(self.recorded_uses))
+
+
+def replay(program, record: DrawRecord) -> None:
+    """Set what ``record`` holds on ``program``: uniform bytes it does not hold yet, every binding
+    (:func:`_store` inlined: this loop runs for every uniform of every draw)."""
+    extra = program.extra
+    shadow = extra.get("uniform_shadow")
+    if shadow is None:
+        shadow = extra["uniform_shadow"] = {}
+    written = 0
+    for name, (member, data) in record.uniforms:
+        if shadow.get(name) != data:
+            member.write(data)
+            shadow[name] = data
+            written += 1
+    UNIFORM_WRITES.written += written
+    UNIFORM_WRITES.skipped += len(record.uniforms) - written
+    for bind, target in record.uses:
+        bind(target)
 
 
 def bind_sampler(program, name: str, texture, index: int | None = None) -> None:
     """Bind ``texture`` to the unit of sampler ``name`` (of its element ``index``)."""
-    texture.use(unit(name, index or 0))
+    use_unit(program, texture, unit(name, index or 0))
     if index is None:
         units = TEXTURE_UNITS[name]
         set_uniform(program, name, list(units) if isinstance(units, tuple) else units)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from .camera import outside_frustum
+from .camera import outside_frustum_many
 from .frame import new_framebuffer
 from .interface import set_uniform
 
@@ -71,8 +71,9 @@ class OcclusionTest:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
         drawn = culled = 0
-        for obj, single_sided in objects:
-            if outside_frustum(obj.corners, view_proj):
+        outside = outside_frustum_many(np.array([obj.corners for obj, _ in objects]), view_proj) if objects else []
+        for (obj, single_sided), hidden in zip(objects, outside, strict=True):
+            if hidden:
                 culled += 1
                 continue
             if single_sided:

@@ -25,9 +25,11 @@ from .interface import (
     LOBE_TABLE_ROWS,
     RATIONAL_BINDING,
     bind_sampler,
+    bind_storage,
     has_uniform,
     set_uniform,
     unit,
+    use_unit,
     write_uniform,
 )
 from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
@@ -195,6 +197,23 @@ class RendererBase:
     def set_material(
         self, program, material: PackedMaterial, method: Method, lod_bias: float | None, seed: int, planar=False
     ) -> None:
+        self.set_material_state(program, material, method, planar)
+        self.set_pass_state(program, method, lod_bias, seed)
+
+    def set_pass_state(self, program, method: Method, lod_bias: float | None, seed: int) -> None:
+        """The uniforms a pass sets alike for every material: samples, LOD bias, Sobol table, seed."""
+        set_uniform(program, "u_samples", method.samples)
+        set_uniform(
+            program,
+            "u_lod_bias",
+            float(method.default_lod_bias(self.mip_filter) if lod_bias is None else lod_bias),
+        )
+        set_uniform(program, "u_sobol_count", self.sobol_count)
+        set_uniform(program, "u_seed", int(seed))
+
+    def set_material_state(self, program, material: PackedMaterial, method: Method, planar=False) -> None:
+        """The material's lobes, patterns (for ``method`` and a ``planar`` reflector), colours and
+        tables: what the scene renderer records once per object (viewer/interface.py DrawRecorder)."""
         set_uniform(program, "u_lobe_count", material.lobe_count)
         write_uniform(program, "u_lobes", material.lobes)
         if method.kind == "lobe" and has_uniform(program, "u_pattern"):
@@ -209,15 +228,7 @@ class RendererBase:
         set_uniform(program, "u_sheen_color", tuple(float(x) for x in material.sheen_color))
         if has_uniform(program, "u_sheen_albedo"):
             write_uniform(program, "u_sheen_albedo", np.asarray(material.sheen_table, dtype=np.float32))
-        set_uniform(program, "u_samples", method.samples)
-        set_uniform(
-            program,
-            "u_lod_bias",
-            float(method.default_lod_bias(self.mip_filter) if lod_bias is None else lod_bias),
-        )
-        set_uniform(program, "u_sobol_count", self.sobol_count)
-        set_uniform(program, "u_seed", int(seed))
-        self._bind_rational(material)
+        self._bind_rational(program, material)
         if method.kind == "lobe" and method.normalize and has_uniform(program, "u_albedo"):
 
             def albedo_texture():
@@ -233,7 +244,7 @@ class RendererBase:
             set_uniform(program, "u_albedo_per_pixel", 0)
             bind_sampler(program, "u_dfg", self._dummy_texture("2d"))
 
-    def _bind_rational(self, material: PackedMaterial) -> None:
+    def _bind_rational(self, program, material: PackedMaterial) -> None:
         """The Rational BRDF's storage buffer (shaders/rational.glsl); only HAS_RATIONAL programs
         (material.has_rational) declare it, so other materials bind nothing."""
         if material.rational is None:
@@ -243,7 +254,7 @@ class RendererBase:
         def make():
             return self.ctx.buffer(data.tobytes()), None
 
-        self._material_texture(("rational", material.lobes_key), make)[0].bind_to_storage_buffer(RATIONAL_BINDING)
+        bind_storage(program, self._material_texture(("rational", material.lobes_key), make)[0], RATIONAL_BINDING)
 
     def raise_on_gl_error(self, method) -> None:
         """Raise if GL flagged an error since the flag was last read: a failed draw call leaves
@@ -290,9 +301,9 @@ class RendererBase:
         self._bind_rsibr(program, maps, cube, material, method, per_pixel_lobes)
         for index, kind in enumerate(("beckmann", "ggx")):  # DIST_BECKMANN, DIST_GGX
             if any(p == "splitsum" and material.lobe_distributions[i].kind == kind for i, p in enumerate(plan)):
-                maps.split_sum(kind).use(unit("u_split_sum", index))
+                use_unit(program, maps.split_sum(kind), unit("u_split_sum", index))
             else:
-                self._dummy_texture("cube").use(unit("u_split_sum", index))
+                use_unit(program, self._dummy_texture("cube"), unit("u_split_sum", index))
         set_uniform(program, "u_split_sum", [unit("u_split_sum", 0), unit("u_split_sum", 1)])
         set_uniform(program, "u_split_sum_max_level", float(SPLIT_SUM_LEVELS - 1))
         bind_sampler(program, "u_dfg", maps.dfg())
@@ -321,7 +332,7 @@ class RendererBase:
                     texture = maps.lobe_map(fitted[i], f"lobe {i}")
                 modes[i], depth[i] = LOBE_MAP_MODES["lobes"], len(fitted[i][0].profiles)
                 direct[i] = lobe_direct_angle(plan[i])
-            texture.use(unit("u_lobe_maps", i))
+            use_unit(program, texture, unit("u_lobe_maps", i))
         set_uniform(program, "u_lobe_maps", [unit("u_lobe_maps", i) for i in range(MAX_LOBES)])
         for name, values in (
             ("u_lobe_map_mode", modes),

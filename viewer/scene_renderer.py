@@ -41,10 +41,13 @@ from .interface import (
     ALPHA_MODES,
     PROXY_KINDS,
     TEXTURE_UNITS,
+    DrawRecorder,
     bind_sampler,
     has_uniform,
     method_defines,
+    replay,
     set_uniform,
+    use_unit,
     write_uniform,
 )
 from .material_gpu import PackedMaterial, pack_material
@@ -55,6 +58,7 @@ from .render_base import RendererBase, RenderResult
 
 __all__ = ["SceneRenderer"]
 MAX_SCENE_TEXTURES = 256  # lightmaps and material textures kept on the GPU
+MAX_DRAW_RECORDS = 16384  # recorded object draw states (programs x objects x methods in use)
 GL_SRGB8_ALPHA8 = 0x8C43  # colour textures: the GPU decodes sRGB before filtering (glTF 3.9.2)
 
 
@@ -185,6 +189,11 @@ class SceneRenderer(RendererBase):
         self._white = ctx.texture((1, 1), 3, np.ones(3, np.float32).tobytes(), dtype="f4")
         self._samplers: dict = {}  # glTF sampler state -> moderngl.Sampler (a handful per scene)
         self._dfg = None  # made on first use by a textured glTF lobe under normalised lobe-N
+        # Per-object draw state recorded once and replayed per draw (_object_state).
+        self.draw_records = True
+        self._records = BoundedCache(MAX_DRAW_RECORDS)
+        self._record_generation = 0
+        self.record_builds = 0  # records made so far (a count for tests and benchmarks)
         self.objects = []
         for i, obj in enumerate(scene.objects):
             material = pack_material(build_bsdf(scene.materials[obj.material].desc))
@@ -364,6 +373,53 @@ class SceneRenderer(RendererBase):
             self._samplers[key] = sampler
         return sampler
 
+    def _object_state(self, program, obj: _GpuObject, method: Method, planar: bool, proxy) -> None:
+        """Everything an object's draw sets that the pass does not: material, textures, lightmap,
+        reflection proxy. Recorded once per program, object and method (``draw_records``,
+        viewer/interface.py DrawRecorder) and replayed, so a draw sends only the uniform bytes the
+        program does not hold yet (issue 18: state uploaded when it changes, not per draw). The
+        records are made again after a material edit or a proxy change (``_record_generation``)
+        and after a texture cache released a texture they bind."""
+        if not self.draw_records:
+            self._set_object_state(program, obj, method, planar, proxy)
+            return
+        key = (
+            program,
+            obj.index,
+            method,
+            planar,
+            proxy is not None,
+            self._record_generation,
+            self.textures.evictions,
+            self._material_textures.evictions,
+        )
+
+        def make():
+            recorder = DrawRecorder(program)
+            self._set_object_state(recorder, obj, method, planar, proxy)
+            self.record_builds += 1
+            return recorder.record()
+
+        replay(program, self._records.get(key, make))
+
+    def _set_object_state(self, program, obj: _GpuObject, method: Method, planar: bool, proxy) -> None:
+        mat = self.scene.materials[self.scene.objects[obj.index].material]
+        self.set_material_state(program, obj.material, method, planar)
+        set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
+        set_uniform(program, "u_object_id", float(obj.index))
+        lightmap = mat.lightmap
+        if lightmap is not None and (lightmap.tex_coord != 1 or self.scene.objects[obj.index].uv1 is not None):
+            bind_sampler(program, "u_lightmap", self._texture(lightmap.image))
+            set_uniform(program, "u_lightmap_texcoord", int(lightmap.tex_coord))
+            set_uniform(program, "u_lightmap_intensity", float(lightmap.intensity))
+        else:
+            bind_sampler(program, "u_lightmap", self._white)
+            set_uniform(program, "u_lightmap_texcoord", -1)
+            write_uniform(program, "u_irradiance_sh9", self.environment_sh9)
+        self._bind_material(program, mat)
+        if proxy is not None:
+            self._bind_proxy(program, obj, proxy)
+
     def _bind_material(self, program, mat: SceneMaterial) -> None:
         """glTF's per-pixel inputs (shaders/scene.frag): textures, factors, alpha mode."""
         desc = mat.desc
@@ -390,8 +446,8 @@ class SceneRenderer(RendererBase):
         for i, name in enumerate(TEXTURE_SLOTS):
             slot = mat.textures.get(name)
             unit = TEXTURE_UNITS["u_material_maps"][i]
-            (self._map_texture(slot) if slot is not None else self._white).use(unit)
-            self._map_sampler(slot).use(unit)
+            use_unit(program, self._map_texture(slot) if slot is not None else self._white, unit)
+            use_unit(program, self._map_sampler(slot), unit)
             texcoords.append(slot.tex_coord if slot is not None else -1)
             transform = np.asarray(slot.transform if slot is not None else np.eye(3), dtype=np.float32)
             transforms.append(transform.T)  # GLSL mat3 is column-major
@@ -539,6 +595,7 @@ class SceneRenderer(RendererBase):
         """Reflected-geometry correction for object ``index`` (scenes/reflection_proxy.py; None:
         the plain lookup). Takes effect on the next frame; the cube map itself is unchanged."""
         self.scene.objects[index].reflection_proxy = proxy
+        self._record_generation += 1
 
     def _bind_proxy(self, program, obj: _GpuObject, proxy) -> None:
         """The reflection proxy (scenes/reflection_proxy.py) as shaders/integrate.glsl PARALLAX reads it."""
@@ -595,6 +652,8 @@ class SceneRenderer(RendererBase):
         culled = outside_frustum_many(self._object_corners, cull_view_projection) if self.frustum_culling else None
         mirrors = mirrors or {}
         counts = self.draw_counts.of(pass_kind)
+        view_proj_values = tuple(view_proj.T.astype("f4").ravel())
+        eye_values = tuple(float(x) for x in eye)
         for obj, blended in self._draw_order(eye):
             if obj.index == exclude or (not specular and self.analysis.objects[obj.index].transmission_lobes):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
@@ -625,27 +684,14 @@ class SceneRenderer(RendererBase):
                 obj_method, use_specular, proxy is not None, mirror is not None, obj.material.has_rational
             )
             mat = self.scene.materials[self.scene.objects[obj.index].material]
-            set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
-            set_uniform(program, "u_camera_position", tuple(float(x) for x in eye))
-            self.set_material(program, obj.material, obj_method, lod_bias, seed, planar=mirror is not None)
+            set_uniform(program, "u_view_projection", view_proj_values)
+            set_uniform(program, "u_camera_position", eye_values)
+            self.set_pass_state(program, obj_method, lod_bias, seed)
             set_uniform(program, "u_sample_offset", int(sample_offset))
-            set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
-            set_uniform(program, "u_object_id", float(obj.index))
-            lightmap = mat.lightmap
-            if lightmap is not None and (lightmap.tex_coord != 1 or self.scene.objects[obj.index].uv1 is not None):
-                bind_sampler(program, "u_lightmap", self._texture(lightmap.image))
-                set_uniform(program, "u_lightmap_texcoord", int(lightmap.tex_coord))
-                set_uniform(program, "u_lightmap_intensity", float(lightmap.intensity))
-            else:
-                bind_sampler(program, "u_lightmap", self._white)
-                set_uniform(program, "u_lightmap_texcoord", -1)
-                write_uniform(program, "u_irradiance_sh9", self.environment_sh9)
-            self._bind_material(program, mat)
+            self._object_state(program, obj, obj_method, mirror is not None, proxy)
             if use_specular:
                 cube = obj.cube if obj.cube is not None else self.environment  # bound, unread under MIRROR
                 self.bind_cube(program, cube, obj_method, obj.material, per_pixel_lobes(mat))
-                if proxy is not None:
-                    self._bind_proxy(program, obj, proxy)
                 if mirror is not None:
                     self.mirror_passes.bind(
                         program, self.analysis.reflectors[obj.index], mirror, eye, self._white,
@@ -730,6 +776,7 @@ class SceneRenderer(RendererBase):
 
         desc = validate(desc)
         self.mirror_passes.generation += 1  # what the mirror buffers show changed
+        self._record_generation += 1  # the objects' recorded draw state (_object_state)
         self._edited = True
         self._spreads.clear()  # a reflector's lobes may have changed
         material_index = self.scene.objects[index].material
