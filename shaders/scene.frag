@@ -40,10 +40,13 @@ layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_position;
 layout(location = 2) out vec4 out_normal;
 layout(location = 3) out vec4 out_tangent;
-#if defined(PLANE_AVERAGE)
-layout(location = 4) out vec4 out_plane_point[2];   // averaged tangent planes (integrate.glsl), 4-5
-layout(location = 6) out vec4 out_plane_normal[2];  // 6-7
-#endif
+// Averaged tangent planes (integrate.glsl), 4-5 and 6-7. Every variant writes them: in a
+// refinement pass on reflectors (viewer/frame.py state framebuffers) an object drawn over a
+// reflector's pixel must leave no plane there, and an output a shader does not write is undefined
+// (llvmpipe left a varying value that the next pass averaged in). Other framebuffers have no
+// attachments at these locations and drop them.
+layout(location = 4) out vec4 out_plane_point[2];
+layout(location = 6) out vec4 out_plane_normal[2];
 
 // Twin of scenes/envmap.py sh9_basis / eval_sh9: order-2 real SH, clamped at zero.
 vec3 sh9_irradiance(vec3 n) {
@@ -184,6 +187,11 @@ void main() {
         bool keep = u_alpha_mode != ALPHA_BLEND;
         out_plane_point[side] = keep ? g_plane_point_sum[side] : vec4(0.0);
         out_plane_normal[side] = keep ? vec4(g_plane_normal_sum[side], 0.0) : vec4(0.0);
+    }
+#else
+    for (int side = 0; side < 2; ++side) {
+        out_plane_point[side] = vec4(0.0);
+        out_plane_normal[side] = vec4(0.0);
     }
 #endif
 }
