@@ -52,9 +52,10 @@ def add_scene_arguments(p) -> None:
         choices=CUBE_SIZE_CHOICES,
         default="auto",
         help="per-object cube-map face size: 'lobe' = the smallest power of two on which the object's finest "
-        "lobe-N lookups still read MIP level 0 or coarser (the scene analysis prints each size and why); 'full' = "
-        "every cube map at --face-size; 'auto' (default) = 'lobe', but 'full' for shot's reference, mc-N and "
-        "prefiltered methods, which read finer than lobe-N",
+        "lobe-N lookups still read MIP level 0 or coarser (the scene analysis prints each size and why), and "
+        "nearby small objects with wide lobes share one cube map (scenes/probe_groups.py); 'full' = every "
+        "object its own cube map at --face-size; 'auto' (default) = 'lobe', but 'full' for shot's reference, "
+        "mc-N and prefiltered methods, which read finer than lobe-N",
     )
     a(
         "--cube-budget",

@@ -137,6 +137,8 @@ def _material(window) -> None:
     needs = renderer.analysis.objects[index]
     if needs.needs_cube_map:  # its face size and why (scenes/analysis.py)
         imgui.text_wrapped(f"cube map {needs.cube_face}^2: {needs.cube_face_reason}")
+        if needs.shared_probe:  # scenes/probe_groups.py
+            imgui.text_wrapped(f"shared probe {needs.shared_probe} (scenes/probe_groups.py)")
     memory = renderer.prefiltered_memory(index)
     if memory:
         imgui.text(f"prefiltered maps: {sum(memory.values()) / 2**20:.1f} MB")

@@ -179,6 +179,7 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         warm_stages = dict(renderer.timings)
         cubes, memory = cube_memory(renderer)
         reflectors = len(renderer.reflectors())
+        probe_groups = [len(g.members) for g in renderer.probe_groups]  # shared probes (scenes/probe_groups.py)
         reflectors_deferred = len(renderer.analysis.cube_mapped) - len(renderer.analysis.cubes_at_start)
         _say(
             f"[walkthrough] {label}: start-up cold {cold:.1f} s, warm {warm:.1f} s; {cubes} cube maps; {frames} frames"
@@ -205,6 +206,7 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         "warm_stages": warm_stages,
         "cube_face_draws": cube_draws,
         "cube_face_culled": cube_culled,
+        "probe_groups": probe_groups,
         "frames": rows,
     }
 
@@ -321,7 +323,8 @@ def _scene_markdown(result: dict) -> list[str]:
         f"({result['cube_memory_mb']:.0f} MB; faces {_face_sizes(result)}; {result['cube_memory_full_mb']:.0f} MB "
         f"and a cold start of {result['startup_cold_full_s']:.1f} s with every face at full size); "
         f"{result['reflector_cubes_deferred']} reflectors without a cube map at start-up, "
-        f"{result['cubes_built_on_demand']} built on demand along the path.",
+        f"{result['cubes_built_on_demand']} built on demand along the path; "
+        f"{len(result.get('probe_groups', []))} shared probes serve {sum(result.get('probe_groups', []))} objects.",
         f"Start-up: cold {result['startup_cold_s']:.1f} s (cube maps {cold_cubes:.1f} s: "
         f"{result['cube_face_draws']} object draws into cube faces, {result['cube_face_culled']} culled), "
         f"warm {result['startup_warm_s']:.1f} s (cube maps {warm_cubes:.1f} s, from the cache).",

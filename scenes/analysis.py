@@ -36,6 +36,8 @@ class ObjectNeeds:
     sample_solid_angle: float | None = None
     cube_face: int = DEFAULT_CUBE_FACE
     lobe_width_rule: bool = True  # False: every cube map at full size (SceneRenderer option)
+    # Set by the renderer when the object reads a group's shared probe (scenes/probe_groups.py).
+    shared_probe: str = ""
 
     @property
     def needs_cube_map(self) -> bool:
@@ -103,6 +105,8 @@ class SceneAnalysis:
             cube = f"{o.cube_face}^2 ({o.cube_face_reason})" if o.needs_cube_map else "no"
             if o.needs_cube_map and o.reflector is not None and self.reflector_cubes_on_demand:
                 cube = f"on demand, {o.cube_face}^2 (mirror pass)"
+            if o.shared_probe:
+                cube = f"shared probe {o.shared_probe}"
             lines.append(f"{o.name:<24} {lobes:<42} {cube:<42} {lightmap:<14} {proxy:<24} {o.mirror}")
         return "\n".join(lines)
 

@@ -121,8 +121,15 @@ def demo_renderers():
         warnings.simplefilter("ignore")
         renderers = {
             lobe_width: SceneRenderer(
-                ctx, scene, env, size=(240, 150), cube_face_size=128, progress=False, lobe_width_cubes=lobe_width
-            )
+                ctx,
+                scene,
+                env,
+                size=(240, 150),
+                cube_face_size=128,
+                progress=False,
+                lobe_width_cubes=lobe_width,
+                shared_probes=False,  # the sizes alone (tests/test_probe_groups.py: sharing)
+            )  # fmt: skip
             for lobe_width in (False, True)
         }
     yield scene, renderers

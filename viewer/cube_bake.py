@@ -76,8 +76,9 @@ def scene_content_key(
 
 class CubeBake:
     """``draw_background(cube, view_projection)`` and ``draw_scene(view_projection, eye, method,
-    specular, exclude)`` are the renderer's; ``objects`` its GPU objects (``.centre``, ``.cube``,
-    ``.name``)."""
+    specular, exclude)`` are the renderer's; ``objects`` its GPU objects (``.cube``, ``.name``, and
+    ``.probe_centre`` / ``.probe_exclude``: where an object's cube map is rendered from and
+    without whom, scenes/probe_groups.py)."""
 
     def __init__(
         self,
@@ -110,12 +111,10 @@ class CubeBake:
         # request_full_faces), after the stale ones.
         self.upgrades: list[int] = []
 
-    def render_faces(
-        self, eye, exclude: int | None = None, specular: bool = False, size: int | None = None
-    ) -> np.ndarray:
+    def render_faces(self, eye, exclude=None, specular: bool = False, size: int | None = None) -> np.ndarray:
         """Six faces of the light-mapped scene seen from ``eye`` (float32, (6, S, S, 3), S =
-        ``size`` or the full face size); with ``specular``, objects that have cube maps are shaded
-        with their lobes too."""
+        ``size`` or the full face size) without the object(s) ``exclude`` (an index or a set);
+        with ``specular``, objects that have cube maps are shaded with their lobes too."""
         size = int(size or self.face_size)
         factor = max(1, min(CUBE_SUPERSAMPLE, self.face_size // size))
         if factor > 1:  # render finer and reduce: level 0 then equals level k of the full face's chain
@@ -123,7 +122,7 @@ class CubeBake:
             return downsample_cube_faces(self.ctx, fine, factor, self.mip_filter)
         return self._render_faces(eye, exclude, specular, size)
 
-    def _render_faces(self, eye, exclude: int | None, specular: bool, size: int) -> np.ndarray:
+    def _render_faces(self, eye, exclude, specular: bool, size: int) -> np.ndarray:
         color = self.ctx.texture((size, size), 4, dtype="f4")
         extra = [self.ctx.texture((size, size), 4, dtype="f4") for _ in range(3)]
         depth = self.ctx.depth_renderbuffer((size, size))
@@ -206,7 +205,8 @@ class CubeBake:
         for bounce in range(self.bounces):
             t0 = time.perf_counter()
             for i in wanted:
-                faces[i] = self.render_faces(objects[i].centre, exclude=i, specular=bounce > 0, size=sizes[i])
+                obj = objects[i]
+                faces[i] = self.render_faces(obj.probe_centre, obj.probe_exclude, specular=bounce > 0, size=sizes[i])
             for i in wanted:
                 self._install(objects[i], faces[i])
             if self.progress:
@@ -235,7 +235,8 @@ class CubeBake:
             self._install(objects[index], faces)
             return "disk cache"
         t0 = time.perf_counter()
-        faces = self.render_faces(objects[index].centre, exclude=index, specular=self.bounces > 1, size=size)
+        obj = objects[index]
+        faces = self.render_faces(obj.probe_centre, obj.probe_exclude, specular=self.bounces > 1, size=size)
         if self.progress:
             print(
                 f"[cube] {objects[index].name}: cube map of {size}^2 x 6 on demand in {time.perf_counter() - t0:.2f} s",
@@ -268,7 +269,9 @@ class CubeBake:
             if obj.cube is None or (upgrade and obj.cube.face_size >= self.face_size):
                 continue
             size = self.face_size if upgrade else obj.cube.face_size
-            self._install(obj, self.render_faces(obj.centre, exclude=obj.index, specular=self.bounces > 1, size=size))
+            self._install(
+                obj, self.render_faces(obj.probe_centre, obj.probe_exclude, specular=self.bounces > 1, size=size)
+            )
             return obj.name
         return None
 

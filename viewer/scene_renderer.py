@@ -32,6 +32,7 @@ from lobeview.materials.patterns import lobe_spread, specular_lobes
 from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
+from lobeview.scenes.probe_groups import SHARED_PROBE_LINK, SHARED_PROBE_MAX_FACE, group_probes
 from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
 
 from .camera import Camera, box_corners, jittered, outside_frustum_many
@@ -106,7 +107,13 @@ class _GpuObject:
         lo, hi = m.positions.min(axis=0), m.positions.max(axis=0)
         self.centre = (lo + hi) / 2.0
         self.corners = box_corners(lo, hi)  # world space (meshes are stored transformed): frustum culling
+        self.box = (lo, hi)
         self.cube: RadianceCube | None = None
+        # Shared probes (scenes/probe_groups.py): the object whose cube map this one reads (itself
+        # unless it shares a group's), and where its own cube map is rendered from and without whom.
+        self.probe_owner = index
+        self.probe_centre = self.centre
+        self.probe_exclude = frozenset((index,))
 
     def release(self):
         self.vbo.release()
@@ -146,6 +153,8 @@ class SceneRenderer(RendererBase):
         reflector_cubes_on_demand: bool = True,
         cube_budget_mb: float | None = None,
         mip_filter: str = DEFAULT_MIP_FILTER,
+        shared_probes: bool | None = None,
+        probe_link: float = SHARED_PROBE_LINK,
     ):
         super().__init__(ctx, size)
         # How the MIP chains of cube maps and mirror buffers are made (viewer/mip_chain.py).
@@ -215,6 +224,8 @@ class SceneRenderer(RendererBase):
         # not drawn; draw_counts says, per kind of pass, how many were drawn and culled.
         self.frustum_culling = bool(frustum_culling)
         self._object_corners = np.array([obj.corners for obj in self.objects]).reshape(len(self.objects), 8, 3)
+        # Per cube map, the box whose visibility needs it (a shared probe's: its group's).
+        self._probe_corners = self._object_corners.copy()
         self.draw_counts = DrawCounts()
         # Occlusion test of the reflectors (viewer/occlusion.py): no mirror pass for a reflector
         # that opaque objects hide from the camera (a floor behind a wall).
@@ -249,13 +260,20 @@ class SceneRenderer(RendererBase):
             self.cache_dir,  # prefiltered maps are cached beside the cubes
             self.mip_filter,
         )
-        sizes = {i: self.analysis.objects[i].cube_face for i in self.analysis.cube_mapped}
+        # Nearby small objects with wide lobes share one cube map (scenes/probe_groups.py); by
+        # default wherever faces follow the lobes' width (both trade exactness for fewer texels).
+        self.shared_probes = self.lobe_width_cubes if shared_probes is None else bool(shared_probes)
+        self.probe_link = float(probe_link)  # group_probes' link (bench/probe_sharing.py sweeps it)
+        self.probe_groups = self._assign_probes() if self.shared_probes else []
+        sizes = {i: self._cube_size(i) for i in self.analysis.cube_mapped}
         key = scene_content_key(
             scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces, sizes, self.mip_filter
         )
         if self.reflector_cubes_on_demand:  # the second bounce then sees reflectors without lobes
             key += "-r"
-        self.cube_bake.build(self.objects, self.analysis.cubes_at_start, key, sizes)
+        if self.probe_groups:
+            key += "-g" + hashlib.sha256(repr([g.members for g in self.probe_groups]).encode()).hexdigest()[:8]
+        self.cube_bake.build(self.objects, self._cubes_at_start(), key, sizes)
         self.timings["cube maps"] = time.perf_counter() - t0
         self.residency = CubeResidency(None if cube_budget_mb is None else int(float(cube_budget_mb) * 2**20))
         self._edited = False  # a material edit makes the start-up cache files outdated
@@ -263,6 +281,71 @@ class SceneRenderer(RendererBase):
     @property
     def cube_face_size(self) -> int:
         return self.cube_bake.face_size
+
+    # -- shared probes (scenes/probe_groups.py) ---------------------------------------------------
+    def _assign_probes(self) -> list:
+        """Group the objects that may share a probe and point each member at its group's owner;
+        the scene analysis says which object shares whose (its report and the panel)."""
+        candidates = {
+            i: self.objects[i].box
+            for i in self.analysis.cubes_at_start
+            if self.analysis.objects[i].reflector is None
+            and self.analysis.objects[i].cube_face <= SHARED_PROBE_MAX_FACE
+            and not self.analysis.objects[i].emissive  # a lamp left out of a probe would be missed
+            # What a pane transmits is what lies right behind it: seen from a probe elsewhere it
+            # moves (the demo's frosted pane grouped with the table: 11 % relative RMSE).
+            and not self.analysis.objects[i].transmission_lobes
+        }
+        groups = group_probes(candidates, link=self.probe_link)
+        for group in groups:
+            lo, hi = group.box_min, group.box_max
+            for index in group.members:
+                obj = self.objects[index]
+                obj.probe_owner = group.owner
+                if index == group.owner:
+                    obj.probe_centre = group.centre
+                    obj.probe_exclude = frozenset(group.members)
+                    self._probe_corners[index] = box_corners(lo, hi)  # restored when any member is in view
+        self._describe_probes(groups)
+        return groups
+
+    def _describe_probes(self, groups: list) -> None:
+        for group in groups:
+            names = [self.objects[i].name for i in group.members]
+            size = max(self.analysis.objects[i].cube_face for i in group.members)  # the owner's (_cube_size)
+            for index in group.members:
+                others = ", ".join(repr(n) for n in names if n != self.objects[index].name)
+                self.analysis.objects[index].shared_probe = f"{size}^2 with {others}"
+
+    def _cube_size(self, index: int) -> int:
+        """Face size of object ``index``'s own cube map: its lobes', or the widest of its group's."""
+        group = self._group_of(index)
+        members = group.members if group is not None and index == group.owner else (index,)
+        return max(self.analysis.objects[i].cube_face for i in members)
+
+    def _group_of(self, index: int):
+        return next((g for g in self.probe_groups if index in g.members), None)
+
+    def _cubes_at_start(self) -> list[int]:
+        """The objects that get their own cube map at start-up (group members read the owner's)."""
+        return [i for i in self.analysis.cubes_at_start if self.objects[i].probe_owner == i]
+
+    def _dissolve_group(self, index: int) -> None:
+        """Give every member of object ``index``'s group its own cube map again (a material edit
+        changed a member's lobes, or refinement wants every cube at full size), and say so."""
+        group = self._group_of(index)
+        if group is None:
+            return
+        self.probe_groups = [g for g in self.probe_groups if g is not group]
+        self._record_generation += 1  # the members' proxies used the group's centre
+        for member in group.members:
+            obj = self.objects[member]
+            obj.probe_owner, obj.probe_centre, obj.probe_exclude = member, obj.centre, frozenset((member,))
+            self._probe_corners[member] = obj.corners
+            self.analysis.objects[member].shared_probe = ""
+        for member in group.members:
+            if self.objects[member].cube is None and self.analysis.objects[member].needs_cube_map:
+                self.cube_bake.build_one(self.objects, member, self.analysis.objects[member].cube_face, cached=False)
 
     @property
     def cube_bounces(self) -> int:
@@ -314,7 +397,7 @@ class SceneRenderer(RendererBase):
 
     def prefiltered_memory(self, index: int) -> dict[str, int]:
         """Bytes of each prefiltered map object ``index`` has built so far (empty: none)."""
-        cube = self.objects[index].cube
+        cube = self.objects[self.objects[index].probe_owner].cube
         maps = cube.built_prefiltered_maps if cube is not None else None
         return dict(maps.memory) if maps is not None else {}
 
@@ -530,10 +613,10 @@ class SceneRenderer(RendererBase):
     def _restore_cubes(self, view_projection, exclude: int | None = None) -> None:
         """Restore the evicted cube maps (``cube_budget_mb``) of objects a pass with this frustum
         may draw, before it binds its framebuffer (restoring renders or reads cube faces)."""
-        wanted = self.residency.wanted(self._object_corners, view_projection, exclude)
+        wanted = self.residency.wanted(self._probe_corners, view_projection, exclude)
         for index in wanted:
             t0 = time.perf_counter()
-            where = self.cube_bake.restore(self.objects, index, self.analysis.objects[index].cube_face, self._edited)
+            where = self.cube_bake.restore(self.objects, index, self._cube_size(index), self._edited)
             self.residency.evicted.discard(index)
             self.residency.restores[where] = self.residency.restores.get(where, 0) + 1
             self.residency.restore_seconds += time.perf_counter() - t0
@@ -599,7 +682,8 @@ class SceneRenderer(RendererBase):
 
     def _bind_proxy(self, program, obj: _GpuObject, proxy) -> None:
         """The reflection proxy (scenes/reflection_proxy.py) as shaders/integrate.glsl PARALLAX reads it."""
-        set_uniform(program, "u_cube_centre", tuple(float(x) for x in obj.centre))
+        # The centre the cube map was rendered from (a shared probe's: its group's).
+        set_uniform(program, "u_cube_centre", tuple(float(x) for x in self.objects[obj.probe_owner].probe_centre))
         set_uniform(program, "u_proxy_kind", PROXY_KINDS[proxy.kind])
         set_uniform(program, "u_proxy_plane_count", len(proxy.planes) if proxy.kind == "planes" else 0)
         write_uniform(program, "u_proxy_planes", proxy.padded_planes())
@@ -654,8 +738,9 @@ class SceneRenderer(RendererBase):
         counts = self.draw_counts.of(pass_kind)
         view_proj_values = tuple(view_proj.T.astype("f4").ravel())
         eye_values = tuple(float(x) for x in eye)
+        excluded = exclude if isinstance(exclude, frozenset | set | tuple) else (exclude,)
         for obj, blended in self._draw_order(eye):
-            if obj.index == exclude or (not specular and self.analysis.objects[obj.index].transmission_lobes):
+            if obj.index in excluded or (not specular and self.analysis.objects[obj.index].transmission_lobes):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
                 # maps (as in the baker): a black pane would hide what lies behind it.
                 continue
@@ -674,9 +759,10 @@ class SceneRenderer(RendererBase):
                 self.ctx.disable(moderngl.CULL_FACE)
             # A reflector drawn from its mirror buffer needs no cube map (on demand: it may have none).
             mirror = mirrors.get(obj.index) if specular else None
-            use_specular = specular and (obj.cube is not None or mirror is not None)
-            if use_specular and obj.cube is not None and pass_kind != "cube map":
-                self.residency.touch(obj.index)
+            own_cube = self.objects[obj.probe_owner].cube  # its own, or its group's shared probe
+            use_specular = specular and (own_cube is not None or mirror is not None)
+            if use_specular and own_cube is not None and pass_kind != "cube map":
+                self.residency.touch(obj.probe_owner)
             # Per-object real-time method (the panel's override); the reference ignores it.
             obj_method = self._object_method(obj.index, method)
             proxy = self.scene.objects[obj.index].reflection_proxy if use_specular and mirror is None else None
@@ -690,7 +776,7 @@ class SceneRenderer(RendererBase):
             set_uniform(program, "u_sample_offset", int(sample_offset))
             self._object_state(program, obj, obj_method, mirror is not None, proxy)
             if use_specular:
-                cube = obj.cube if obj.cube is not None else self.environment  # bound, unread under MIRROR
+                cube = own_cube if own_cube is not None else self.environment  # bound, unread under MIRROR
                 self.bind_cube(program, cube, obj_method, obj.material, per_pixel_lobes(mat))
                 if mirror is not None:
                     self.mirror_passes.bind(
@@ -783,6 +869,11 @@ class SceneRenderer(RendererBase):
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
         self.analysis = analyse(self.scene, self.cube_face_size, self.lobe_width_cubes, self.reflector_cubes_on_demand)
+        self._describe_probes(self.probe_groups)
+        # A group whose member changed its lobes no longer follows the sharing rule.
+        for gpu_obj in self.objects:
+            if self.scene.objects[gpu_obj.index].material == material_index:
+                self._dissolve_group(gpu_obj.index)
         # Everything else that reflects this object now sees an outdated appearance.
         self.cube_bake.stale = [
             i for i in self.analysis.cube_mapped if self.scene.objects[i].material != material_index
@@ -817,6 +908,9 @@ class SceneRenderer(RendererBase):
         width, height = self.size
         view_projection = camera.fitted_to(self.bounds).view_projection(width / height)
         culled = outside_frustum_many(self._object_corners, view_projection)
+        for group in list(self.probe_groups):  # refinement converges to per-object cube maps
+            if not all(culled[i] for i in group.members):
+                self._dissolve_group(group.owner)
         queued = [
             obj.index
             for obj in self.objects
