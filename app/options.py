@@ -52,10 +52,17 @@ def add_scene_arguments(p) -> None:
         choices=CUBE_SIZE_CHOICES,
         default="auto",
         help="per-object cube-map face size: 'lobe' = the smallest power of two on which the object's finest "
-        "lobe-N lookups still read MIP level 0 or coarser (the scene analysis prints each size and why), and "
-        "nearby small objects with wide lobes share one cube map (scenes/probe_groups.py); 'full' = every "
-        "object its own cube map at --face-size; 'auto' (default) = 'lobe', but 'full' for shot's reference, "
-        "mc-N and prefiltered methods, which read finer than lobe-N",
+        "lobe-N lookups still read MIP level 0 or coarser (the scene analysis prints each size and why); 'full' = "
+        "every cube map at --face-size; 'auto' (default) = 'lobe', but 'full' for shot's reference, mc-N and "
+        "prefiltered methods, which read finer than lobe-N",
+    )
+    a(
+        "--shared-probes",
+        action="store_true",
+        help="nearby small objects with wide lobes share one cube map (scenes/probe_groups.py; fewer cube maps, "
+        "measured up to ~9 %% relative RMSE on a member's pixels, bench/probe_sharing.py); only where faces follow "
+        "the lobes (--cube-sizes lobe, or auto for real-time methods); refinement in the viewer gives the "
+        "members in view their own cube maps again",
     )
     a(
         "--cube-budget",
@@ -323,6 +330,7 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method 
         cache_dir=cache / "cubes",
         mirror_scale=args.mirror_scale,
         lobe_width_cubes=lobe_width_cubes(args, method),
+        shared_probes=bool(getattr(args, "shared_probes", False)) and lobe_width_cubes(args, method),
         cube_budget_mb=getattr(args, "cube_budget", None),
         mip_filter=getattr(args, "mip_filter", DEFAULT_MIP_FILTER),
     )
@@ -364,6 +372,8 @@ def shot_command(
             parts.append(f"--cube-budget={args.cube_budget:g}")
         if getattr(args, "cube_sizes", "auto") != "auto":
             parts.append(f"--cube-sizes={args.cube_sizes}")
+        if getattr(args, "shared_probes", False):
+            parts.append("--shared-probes")
         if getattr(args, "mip_filter", DEFAULT_MIP_FILTER) != DEFAULT_MIP_FILTER:
             parts.append(f"--mip-filter={args.mip_filter}")
         if args.reflection_proxy != "scene":

@@ -164,11 +164,13 @@ def run(links, size, cache: Path, with_cornell: bool = True) -> dict:
     try:
         for label, scene, env in _scenes(cache, with_cornell):
             print(f"[probes] {label}: {len(scene.objects)} objects", flush=True)
-            reference, ref_s, ref_cubes, ref_memory = _start(ctx, scene, env, size, folder / "own", shared_probes=False)
+            reference, ref_s, ref_cubes, ref_memory = _start(ctx, scene, env, size, folder / "own")
             entry = {"scene": label, "objects": len(scene.objects), "cube_maps": ref_cubes,
                      "cube_mb": ref_memory / 2**20, "startup_s": ref_s, "links": []}  # fmt: skip
             for link in links:
-                shared, seconds, cubes, memory = _start(ctx, scene, env, size, folder / f"l{link}", probe_link=link)
+                shared, seconds, cubes, memory = _start(
+                    ctx, scene, env, size, folder / f"l{link}", shared_probes=True, probe_link=link
+                )
                 views = _views(reference, shared.probe_groups, method)
                 errors = member_errors(reference, shared, views, method, figure if link == SHARED_PROBE_LINK else None)
                 groups = [[shared.objects[i].name for i in g.members] for g in shared.probe_groups]

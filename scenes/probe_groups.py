@@ -2,7 +2,8 @@
 
 An object's cube map is rendered from its bounding-box centre without the object itself
 (viewer/cube_bake.py). Objects whose lobes are wide enough that the lobe-width rule gives them a
-small face (scenes/analysis.py ``cube_face`` <= ``max_face``) gain little from a cube map of
+small face (materials/patterns.py ``lobe_width_face_size`` <= SHARED_PROBE_MAX_FACE out of the
+default 256, whatever the chosen full size) gain little from a cube map of
 their own when another such object stands close by: a group of them shares one cube map, rendered
 from the centre of the group's bounding box and without any member, and every member looks it up
 through its own reflection proxy with the probe's centre (shaders/incident.glsl PARALLAX), so the
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-SHARED_PROBE_MAX_FACE = 64  # lobes this wide or wider (lobe-width face <= 64^2) may share
+SHARED_PROBE_MAX_FACE = 64  # lobes this wide or wider (lobe-width face <= 64^2 of 256^2) may share
 SHARED_PROBE_LINK = 2.0  # centre distance <= LINK x (r_i + r_j) for every pair of members
 SHARED_PROBE_SIZE_RATIO = 2.0  # bounding radii of members within this ratio
 SHARED_PROBE_MAX_MEMBERS = 8

@@ -140,7 +140,8 @@ def test_shot_command_pastes_back_to_the_same_view(tmp_path):
 
     camera = Camera((-1.25, 0.5, -3.0), (-0.1, -0.2, 0.3), (-0.0153786, 0.98, -0.18), 37.5)
     options = argparse.Namespace(env="my env.exr", face_size=64, reflection_proxy="room", mirrors=False,
-                                 mirror_scale=0.5, cache=str(tmp_path / "a cache"), mip_filter="box")  # fmt: skip
+                                 mirror_scale=0.5, cache=str(tmp_path / "a cache"), mip_filter="box",
+                                 shared_probes=True)  # fmt: skip
     for method, spp in ((Method("lobe", 11, normalize=True), None), (Method("lobe", 5), None),
                         (Method.parse("reference"), 188), (Method.parse("prefiltered-lobe"), None)):  # fmt: skip
         line = shot_command(camera, (320, 200), method, tmp_path / "out dir" / "s.png", scene="my scene.glb",
@@ -154,6 +155,7 @@ def test_shot_command_pastes_back_to_the_same_view(tmp_path):
         assert (args.env, args.face_size, args.reflection_proxy, args.mirrors, args.mirror_scale, args.cache) == (
             "my env.exr", 64, "room", False, 0.5, str(tmp_path / "a cache"))  # fmt: skip
         assert args.materials == str(tmp_path / "m.json") and args.exposure == -1.5 and args.mip_filter == "box"
+        assert args.shared_probes
         pasted = camera_from_args(args, ((9, 9, 9), (0, 0, 0), (0, 1, 0), 90.0))  # every value overridden
         for name in ("position", "target", "up"):
             assert getattr(pasted, name) == pytest.approx(getattr(camera, name), abs=1e-8)

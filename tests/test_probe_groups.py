@@ -87,12 +87,13 @@ def _props_scene():
     from lobeview.scenes.meshes import quad, translated, uv_sphere
     from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
 
-    floor = SceneMaterial("floor", diffuse_material([0.5, 0.45, 0.4]))
-    plastic = SceneMaterial("plastic", load_material("plastic"))
+    materials = [SceneMaterial("floor", diffuse_material([0.5, 0.45, 0.4]))]
     objects = [SceneObject("floor", quad([-3, 0, 3], [6, 0, 0], [0, 0, -6]), 0, planar_reflector=False)]
-    for k, x in enumerate((-0.25, 0.0, 0.25, 2.7)):
-        objects.append(SceneObject(f"ball {k}", translated(uv_sphere(0.08, 16, 32), [x, 0.08, 0], f"ball {k}"), 1))
-    return Scene(objects, [floor, plastic])
+    for k, x in enumerate((-0.25, 0.0, 0.25, 2.7)):  # a material each: edits change one ball
+        materials.append(SceneMaterial(f"plastic {k}", load_material("plastic")))
+        mesh = translated(uv_sphere(0.08, 16, 32), [x, 0.08, 0], f"ball {k}")
+        objects.append(SceneObject(f"ball {k}", mesh, len(materials) - 1))
+    return Scene(objects, materials)
 
 
 @pytest.fixture(scope="module")
@@ -104,15 +105,20 @@ def ctx():
     context.release()
 
 
+def _env():
+    from lobeview.scenes.envmap import EnvironmentMap
+
+    return EnvironmentMap.from_function(
+        lambda d: 0.3 + np.clip(d[..., 1:2], 0, 1) * [1.0, 0.9, 0.8] + 3 * (d[..., 0:1] > 0.9), 32
+    )
+
+
 def _renderers(ctx, budget=None):
     import warnings
 
-    from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.viewer.scene_renderer import SceneRenderer
 
-    env = EnvironmentMap.from_function(
-        lambda d: 0.3 + np.clip(d[..., 1:2], 0, 1) * [1.0, 0.9, 0.8] + 3 * (d[..., 0:1] > 0.9), 32
-    )
+    env = _env()
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # no lightmaps here
@@ -158,21 +164,34 @@ def test_nearby_small_objects_share_one_cube_map_within_a_small_error(ctx):
         renderer.release()
 
 
-def test_an_edit_or_refinement_gives_the_members_their_own_cube_maps(ctx):
+def test_an_edit_regroups_as_a_fresh_start_and_refinement_dissolves(ctx):
+    from lobeview.materials.spec import load_material
     from lobeview.viewer.camera import Camera
 
     renderers = _renderers(ctx)
     shared = renderers[True]
-    shared.update_material(2, {"model": "gltf", "base_color": [0.9, 0.2, 0.1], "metallic": 0.0, "roughness": 0.5})
-    assert shared.probe_groups == []
-    assert all(shared.objects[i].cube is not None and shared.objects[i].probe_owner == i for i in (1, 2, 3))
-    assert "shared probe" not in shared.analysis.report()
-    other = renderers[False]
-    other.release()
-    fresh = _renderers(ctx)[True]
+    renderers[False].release()
+    # Ball 2 becomes chrome: its lobes are too narrow to share; balls 1 and 3 still link.
+    shared.update_material(2, load_material("chrome"))
+    assert [g.members for g in shared.probe_groups] == [(1, 3)]
+    assert shared.objects[2].probe_owner == 2 and shared.objects[2].cube is not None
+    assert shared.objects[3].probe_owner == 1 and shared.objects[3].cube is None
+    assert shared.objects[1].probe_exclude == frozenset((1, 3))
+    assert "shared probe" not in shared.analysis.report().splitlines()[3]  # ball 2's row
+    # A fresh renderer on the edited scene groups the same way.
+    import warnings
+
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fresh = SceneRenderer(ctx, shared.scene, _env(), size=(120, 80), cube_face_size=64,
+                              progress=False, shared_probes=True)  # fmt: skip
+    assert [g.members for g in fresh.probe_groups] == [(1, 3)]
     camera = Camera((0.0, 0.5, 0.9), (0.0, 0.08, 0.0), (0.0, 1.0, 0.0), 40.0)
     fresh.request_full_faces(camera)  # the group is in view: dissolved (then queued for full faces)
-    assert fresh.probe_groups == [] and all(fresh.objects[i].cube is not None for i in (1, 2, 3))
+    assert fresh.probe_groups == [] and all(fresh.objects[i].probe_owner == i for i in (1, 2, 3))
+    assert all(fresh.objects[i].cube is not None for i in (1, 2, 3))
     for renderer in (shared, fresh):
         renderer.release()
 
@@ -194,4 +213,24 @@ def test_a_member_in_view_restores_its_groups_evicted_probe(ctx):
     want, _ = _member_pixels(renderers[True], camera)
     np.testing.assert_array_equal(got, want)
     for renderer in renderers.values():
+        renderer.release()
+
+
+def test_the_option_shares_only_where_faces_follow_the_lobes(ctx, tmp_path):
+    """--shared-probes reaches the renderer for real-time methods; a reference keeps a cube map
+    per object (--cube-sizes auto), like the default without the option."""
+    import argparse
+    import warnings
+
+    from lobeview.app.options import scene_renderer_from_args
+    from lobeview.core.methods import Method
+
+    for flag, method, expected in ((True, "lobe-7", [(1, 2, 3)]), (True, "reference", []), (False, "lobe-7", [])):
+        args = argparse.Namespace(face_size=64, mirror_scale=1.0, mirrors=True, cube_sizes="auto", shared_probes=flag)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            renderer = scene_renderer_from_args(
+                ctx, _props_scene(), _env(), (64, 40), tmp_path, args, Method.parse(method)
+            )
+        assert [g.members for g in renderer.probe_groups] == expected, (flag, method)
         renderer.release()

@@ -28,9 +28,9 @@ import numpy as np
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import Method
 from lobeview.materials.gltf import specular_f0_unclamped
-from lobeview.materials.patterns import lobe_spread, specular_lobes
+from lobeview.materials.patterns import lobe_spread, lobe_width_face_size, specular_lobes
 from lobeview.materials.spec import build_bsdf
-from lobeview.scenes.analysis import analyse
+from lobeview.scenes.analysis import DEFAULT_CUBE_FACE, analyse
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.probe_groups import SHARED_PROBE_LINK, SHARED_PROBE_MAX_FACE, group_probes
 from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
@@ -153,7 +153,7 @@ class SceneRenderer(RendererBase):
         reflector_cubes_on_demand: bool = True,
         cube_budget_mb: float | None = None,
         mip_filter: str = DEFAULT_MIP_FILTER,
-        shared_probes: bool | None = None,
+        shared_probes: bool = False,
         probe_link: float = SHARED_PROBE_LINK,
     ):
         super().__init__(ctx, size)
@@ -260,11 +260,12 @@ class SceneRenderer(RendererBase):
             self.cache_dir,  # prefiltered maps are cached beside the cubes
             self.mip_filter,
         )
-        # Nearby small objects with wide lobes share one cube map (scenes/probe_groups.py); by
-        # default wherever faces follow the lobes' width (both trade exactness for fewer texels).
-        self.shared_probes = self.lobe_width_cubes if shared_probes is None else bool(shared_probes)
+        # Nearby small objects with wide lobes share one cube map (scenes/probe_groups.py): an
+        # option (--shared-probes), its error measured by bench/probe_sharing.py.
+        self.shared_probes = bool(shared_probes)
         self.probe_link = float(probe_link)  # group_probes' link (bench/probe_sharing.py sweeps it)
-        self.probe_groups = self._assign_probes() if self.shared_probes else []
+        self.probe_groups: list = []
+        self._apply_probe_groups(self._probe_rule_groups())
         sizes = {i: self._cube_size(i) for i in self.analysis.cube_mapped}
         key = scene_content_key(
             scene, self._env_hash, self.cube_bake.face_size, self.cube_bake.bounces, sizes, self.mip_filter
@@ -283,31 +284,50 @@ class SceneRenderer(RendererBase):
         return self.cube_bake.face_size
 
     # -- shared probes (scenes/probe_groups.py) ---------------------------------------------------
-    def _assign_probes(self) -> list:
-        """Group the objects that may share a probe and point each member at its group's owner;
-        the scene analysis says which object shares whose (its report and the panel)."""
+    def _probe_rule_groups(self) -> list:
+        """The groups scenes/probe_groups.py forms from the current analysis."""
         candidates = {
             i: self.objects[i].box
             for i in self.analysis.cubes_at_start
             if self.analysis.objects[i].reflector is None
-            and self.analysis.objects[i].cube_face <= SHARED_PROBE_MAX_FACE
+            and self._wide_lobes(i)
             and not self.analysis.objects[i].emissive  # a lamp left out of a probe would be missed
             # What a pane transmits is what lies right behind it: seen from a probe elsewhere it
             # moves (the demo's frosted pane grouped with the table: 11 % relative RMSE).
             and not self.analysis.objects[i].transmission_lobes
         }
-        groups = group_probes(candidates, link=self.probe_link)
+        return group_probes(candidates, link=self.probe_link) if self.shared_probes else []
+
+    def _wide_lobes(self, index: int) -> bool:
+        """Whether object ``index``'s lobes are wide enough to share: the lobe-width rule gives them
+        a face of at most SHARED_PROBE_MAX_FACE out of the default 256 (whatever --face-size is)."""
+        footprint = self.analysis.objects[index].sample_solid_angle
+        return footprint is not None and lobe_width_face_size(footprint, DEFAULT_CUBE_FACE) <= SHARED_PROBE_MAX_FACE
+
+    def _apply_probe_groups(self, groups: list) -> set:
+        """Point every member of ``groups`` at its group's owner and every other object at its own
+        cube map; the scene analysis says who shares with whom (its report and the panel). Returns
+        the objects whose probe changed."""
+        before = {obj.index: (obj.probe_owner, obj.probe_exclude) for obj in self.objects}
+        for obj in self.objects:
+            obj.probe_owner, obj.probe_centre, obj.probe_exclude = obj.index, obj.centre, frozenset((obj.index,))
+            self._probe_corners[obj.index] = obj.corners
+            self.analysis.objects[obj.index].shared_probe = ""
         for group in groups:
-            lo, hi = group.box_min, group.box_max
             for index in group.members:
                 obj = self.objects[index]
                 obj.probe_owner = group.owner
                 if index == group.owner:
                     obj.probe_centre = group.centre
                     obj.probe_exclude = frozenset(group.members)
-                    self._probe_corners[index] = box_corners(lo, hi)  # restored when any member is in view
-        self._describe_probes(groups)
-        return groups
+                    # restored when any member is in view
+                    self._probe_corners[index] = box_corners(group.box_min, group.box_max)
+        self.probe_groups = list(groups)
+        self._describe_probes(self.probe_groups)
+        changed = {o.index for o in self.objects if before[o.index] != (o.probe_owner, o.probe_exclude)}
+        if changed:
+            self._record_generation += 1  # the members' proxies read the probe's centre
+        return changed
 
     def _describe_probes(self, groups: list) -> None:
         for group in groups:
@@ -331,20 +351,13 @@ class SceneRenderer(RendererBase):
         return [i for i in self.analysis.cubes_at_start if self.objects[i].probe_owner == i]
 
     def _dissolve_group(self, index: int) -> None:
-        """Give every member of object ``index``'s group its own cube map again (a material edit
-        changed a member's lobes, or refinement wants every cube at full size), and say so."""
+        """Give every member of object ``index``'s group its own cube map again (refinement
+        converges to a cube map per object, as `shot --method reference` renders), and say so."""
         group = self._group_of(index)
         if group is None:
             return
-        self.probe_groups = [g for g in self.probe_groups if g is not group]
-        self._record_generation += 1  # the members' proxies used the group's centre
-        for member in group.members:
-            obj = self.objects[member]
-            obj.probe_owner, obj.probe_centre, obj.probe_exclude = member, obj.centre, frozenset((member,))
-            self._probe_corners[member] = obj.corners
-            self.analysis.objects[member].shared_probe = ""
-        for member in group.members:
-            if self.objects[member].cube is None and self.analysis.objects[member].needs_cube_map:
+        for member in sorted(self._apply_probe_groups([g for g in self.probe_groups if g is not group])):
+            if self.analysis.objects[member].needs_cube_map:
                 self.cube_bake.build_one(self.objects, member, self.analysis.objects[member].cube_face, cached=False)
 
     @property
@@ -868,29 +881,37 @@ class SceneRenderer(RendererBase):
         material_index = self.scene.objects[index].material
         self.scene.materials[material_index].desc = desc
         packed = pack_material(build_bsdf(desc))
+        edited = [o for o in self.objects if self.scene.objects[o.index].material == material_index]
+        for gpu_obj in edited:  # before any cube map is rendered below (and its draws recorded)
+            gpu_obj.material = packed
         self.analysis = analyse(self.scene, self.cube_face_size, self.lobe_width_cubes, self.reflector_cubes_on_demand)
-        self._describe_probes(self.probe_groups)
-        # A group whose member changed its lobes no longer follows the sharing rule.
-        for gpu_obj in self.objects:
-            if self.scene.objects[gpu_obj.index].material == material_index:
-                self._dissolve_group(gpu_obj.index)
+        # The same sharing rule as a fresh start on the edited scene (what `shot --materials` renders).
+        regrouped = self._apply_probe_groups(self._probe_rule_groups())
         # Everything else that reflects this object now sees an outdated appearance.
         self.cube_bake.stale = [
             i for i in self.analysis.cube_mapped if self.scene.objects[i].material != material_index
         ]
         for gpu_obj in self.objects:
-            if self.scene.objects[gpu_obj.index].material == material_index:
-                gpu_obj.material = packed
-                needs = self.analysis.objects[gpu_obj.index]
-                on_demand = gpu_obj.index not in self.analysis.cubes_at_start and gpu_obj.cube is None
-                if (
-                    needs.needs_cube_map
-                    and not on_demand
-                    and (gpu_obj.cube is None or gpu_obj.cube.face_size != needs.cube_face)
-                ):
-                    # A diffuse object that became glossy gets its cube map now (~0.1 s), and one
-                    # whose lobes narrowed or widened gets its cube at the face size they need.
-                    self.cube_bake.build_one(self.objects, gpu_obj.index, needs.cube_face, cached=False)
+            i = gpu_obj.index
+            if i in regrouped and gpu_obj.probe_owner != i and gpu_obj.cube is not None:
+                gpu_obj.cube.release()  # it reads its group's probe now
+                gpu_obj.cube = None
+                self.residency.evicted.discard(i)
+            if i not in regrouped and self.scene.objects[i].material != material_index:
+                continue
+            needs = self.analysis.objects[i]
+            on_demand = i not in self.analysis.cubes_at_start and gpu_obj.cube is None
+            size = self._cube_size(i)
+            if (
+                needs.needs_cube_map
+                and not on_demand
+                and gpu_obj.probe_owner == i
+                and (i in regrouped or gpu_obj.cube is None or gpu_obj.cube.face_size != size)
+            ):
+                # A diffuse object that became glossy gets its cube map now (~0.1 s), one whose
+                # lobes narrowed or widened gets it at the face size they need, and a probe whose
+                # group changed is rendered for its new members.
+                self.cube_bake.build_one(self.objects, i, size, cached=False)
 
     @property
     def has_rational(self) -> bool:
