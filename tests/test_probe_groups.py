@@ -234,3 +234,30 @@ def test_the_option_shares_only_where_faces_follow_the_lobes(ctx, tmp_path):
             )
         assert [g.members for g in renderer.probe_groups] == expected, (flag, method)
         renderer.release()
+
+
+def test_probe_sharing_bench_measures_each_member_and_reports(ctx):
+    """bench/probe_sharing.py on the props scene: views that show the group, an error per member
+    against a cube map per object, the figure row and the report's table."""
+    from lobeview.bench.probe_sharing import _views, markdown, member_errors
+    from lobeview.core.methods import Method
+
+    renderers = _renderers(ctx)
+    own, shared = renderers[False], renderers[True]
+    method = Method.parse("lobe-5")
+    views = _views(own, shared.probe_groups, method)
+    assert len(views) == 2 and all(members == (1, 2, 3) for members, _ in views)
+    figure = []
+    rows = member_errors(own, shared, views, method, figure)
+    assert {r["object"] for r in rows} == {"ball 0", "ball 1", "ball 2"}
+    assert all(0.0 < r["rel_rmse"] < 0.1 and r["pixels"] >= 30 for r in rows)
+    assert len(figure) == 1 and figure[0].shape == (80, 360, 3)
+    result = {"device": "test", "size": [120, 80], "method": "lobe-5", "scenes": [
+        {"scene": "props", "objects": 5, "cube_maps": 4, "cube_mb": 1.0, "startup_s": 0.5,
+         "links": [{"link": 2.0, "groups": [["ball 0", "ball 1", "ball 2"]], "cube_maps": 2, "cube_mb": 0.5,
+                    "startup_s": 0.4, "members": rows}]}]}  # fmt: skip
+    text = markdown(result, "stamp")
+    worst = max(r["rel_rmse"] for r in rows)
+    assert f"| props | 2.0 | 1 | 2 (4) | 0.5 (1.0) | 0.4 (0.5) | {len(rows)} | {worst:.3f} |" in text
+    for renderer in renderers.values():
+        renderer.release()
