@@ -5,6 +5,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
+from .interface import set_uniform
 from .shaders import ProgramCache
 from .tonemap import TONEMAPS
 
@@ -37,8 +38,8 @@ class Accumulator:
         self.ctx.enable(moderngl.BLEND)
         self.ctx.blend_func = moderngl.ONE, moderngl.ONE
         source.use(0)
-        self.accumulate["u_source"].value = 0
-        self.accumulate["u_weight"].value = float(weight)
+        set_uniform(self.accumulate, "u_source", 0)
+        set_uniform(self.accumulate, "u_weight", float(weight))
         self._vao_acc.render(moderngl.TRIANGLES, vertices=3)
         self.ctx.disable(moderngl.BLEND)
         self.weight += weight
@@ -48,9 +49,9 @@ class Accumulator:
         self.ctx.viewport = viewport
         self.ctx.disable(moderngl.DEPTH_TEST)
         self.texture.use(0)
-        self.display["u_source"].value = 0
-        self.display["u_exposure"].value = float(exposure)
-        self.display["u_operator"].value = TONEMAPS.index(operator)
+        set_uniform(self.display, "u_source", 0)
+        set_uniform(self.display, "u_exposure", float(exposure))
+        set_uniform(self.display, "u_operator", TONEMAPS.index(operator))
         self._vao_display.render(moderngl.TRIANGLES, vertices=3)
 
     def radiance(self) -> np.ndarray:
@@ -94,7 +95,7 @@ class RefinementBlend:
         for unit, texture in enumerate((refined.texture, realtime.texture, self.weight)):
             texture.use(unit)
         for unit, name in enumerate(("u_refined", "u_realtime", "u_weight")):
-            self.program[name].value = unit
+            set_uniform(self.program, name, unit)  # through the shadow (interface._store)
         self._vao.render(moderngl.TRIANGLES, vertices=3)
         target.weight = 1.0
 

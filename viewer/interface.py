@@ -262,9 +262,10 @@ def _pack(member, value) -> bytes:
 
 def _store(program, name: str, member, data: bytes) -> None:
     """Write ``data`` to ``member`` unless the program already holds exactly these bytes (a
-    shadow of each ProgramCache program's uniform state in ``program.extra``; every write to
-    such a program goes through here, so the shadow is GL's state). A :class:`DrawRecorder`
-    collects the write instead."""
+    shadow of each ProgramCache program's uniform state in ``program.extra``). A uniform written
+    here must never be written another way (``program[name] = ...``), or the shadow would hold a
+    value GL does not: programs that are set through these helpers are set only through them. A
+    :class:`DrawRecorder` collects the write instead."""
     extra = program.extra
     if extra is None:  # a program not made by ProgramCache: no shadow
         member.write(data)

@@ -36,6 +36,7 @@ from lobeview.materials.rsibr import (
     map_rows,
 )
 
+from .interface import set_uniform
 from .mip_chain import GL_RGBA32F
 from .prefiltered import PREFILTER_LOD_BIAS
 
@@ -139,15 +140,17 @@ def bake_rsibr(renderer, cube, material, layout: RsibrLayout, texture) -> None:
     shader = renderer.programs.compute("rsibr_bake.comp", {"METHOD_FIS": True})
     renderer.set_material(shader, material, method, lod_bias=PREFILTER_LOD_BIAS, seed=0)
     renderer.bind_cube(shader, cube, method)
-    shader["u_rows"] = layout.rows
-    shader["u_rsibr_lobes"] = layout.lobes
+    # Through set_uniform like set_material's: the program's uniform shadow (interface._store)
+    # must see every write to a program it tracks.
+    set_uniform(shader, "u_rows", layout.rows)
+    set_uniform(shader, "u_rsibr_lobes", layout.lobes)
     vertices, _ = geodesic_sphere(layout.subdivisions)
     texture.bind_to_image(0, read=False, write=True, level=0, format=GL_RGBA32F)
     groups = ((2 * layout.rows + 7) // 8, (layout.rows + 7) // 8, 1)
     for view_index, view in enumerate(vertices):
-        shader["u_view"] = tuple(float(x) for x in view)
+        set_uniform(shader, "u_view", tuple(float(x) for x in view))
         for k in range(layout.slices):
-            shader["u_tile"] = view_index * layout.slices + k
-            shader["u_angle"] = float(k * np.pi / layout.slices)
+            set_uniform(shader, "u_tile", view_index * layout.slices + k)
+            set_uniform(shader, "u_angle", float(k * np.pi / layout.slices))
             shader.run(*groups)
         renderer.ctx.finish()
