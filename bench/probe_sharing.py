@@ -106,10 +106,9 @@ def _views(renderer, groups, method) -> list:
 
 
 def _frame(renderer, camera, method):
-    renderer.draw_frame(camera, method)
-    renderer.ctx.finish()
-    ids = np.round(renderer.read(2)[..., 3]).astype(int) - 1  # G-buffer normal.w: object index + 1
-    return renderer.read(0)[..., :3].copy(), ids
+    """(radiance, object index per pixel) of one real-time frame."""
+    result = renderer.render(camera, method)
+    return result.radiance, result.object_id
 
 
 def member_errors(reference, shared, views, method, figure: list | None = None) -> list[dict]:

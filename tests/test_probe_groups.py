@@ -80,8 +80,8 @@ def test_bad_parameters_are_refused():
 # -- the renderer (viewer/scene_renderer.py) ------------------------------------------------------
 
 
-def _props_scene():
-    """A floor and four small plastic spheres: three 0.25 m apart, one 2.7 m away."""
+def _props_scene(material=None):
+    """A floor and four small spheres (plastic, or ``material``): three 0.25 m apart, one 2.7 m away."""
     from lobeview.materials.spec import load_material
     from lobeview.scenes.demo import diffuse_material
     from lobeview.scenes.meshes import quad, translated, uv_sphere
@@ -90,7 +90,7 @@ def _props_scene():
     materials = [SceneMaterial("floor", diffuse_material([0.5, 0.45, 0.4]))]
     objects = [SceneObject("floor", quad([-3, 0, 3], [6, 0, 0], [0, 0, -6]), 0, planar_reflector=False)]
     for k, x in enumerate((-0.25, 0.0, 0.25, 2.7)):  # a material each: edits change one ball
-        materials.append(SceneMaterial(f"plastic {k}", load_material("plastic")))
+        materials.append(SceneMaterial(f"ball {k}", material or load_material("plastic")))
         mesh = translated(uv_sphere(0.08, 16, 32), [x, 0.08, 0], f"ball {k}")
         objects.append(SceneObject(f"ball {k}", mesh, len(materials) - 1))
     return Scene(objects, materials)
@@ -133,9 +133,8 @@ def _renderers(ctx, budget=None):
 def _member_pixels(renderer, camera):
     from lobeview.core.methods import Method
 
-    renderer.draw_frame(camera, Method.parse("lobe-5"))
-    renderer.ctx.finish()
-    return renderer.read(0)[..., :3].copy(), np.round(renderer.read(2)[..., 3]).astype(int) - 1
+    result = renderer.render(camera, Method.parse("lobe-5"))
+    return result.radiance, result.object_id
 
 
 def test_nearby_small_objects_share_one_cube_map_within_a_small_error(ctx):
@@ -194,6 +193,26 @@ def test_an_edit_regroups_as_a_fresh_start_and_refinement_dissolves(ctx):
     assert all(fresh.objects[i].cube is not None for i in (1, 2, 3))
     for renderer in (shared, fresh):
         renderer.release()
+
+
+def test_a_member_edited_to_narrower_lobes_resizes_the_shared_probe(ctx):
+    import warnings
+
+    from lobeview.materials.spec import load_material, validate
+    from lobeview.viewer.scene_renderer import SceneRenderer
+
+    rough = validate({"model": "gltf", "base_color": [0.5, 0.5, 0.5], "metallic": 0.0, "roughness": 0.9})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        renderer = SceneRenderer(ctx, _props_scene(rough), _env(), size=(64, 40), cube_face_size=64, progress=False,
+                                 shared_probes=True)  # fmt: skip
+    assert [g.members for g in renderer.probe_groups] == [(1, 2, 3)]
+    assert renderer.objects[1].cube.face_size == 32
+    renderer.update_material(2, load_material("plastic"))  # a member, not the owner: still wide enough
+    assert [g.members for g in renderer.probe_groups] == [(1, 2, 3)]
+    assert renderer.objects[1].cube.face_size == 64 and renderer.objects[2].cube is None
+    assert "shared probe 64^2" in renderer.analysis.report()
+    renderer.release()
 
 
 def test_a_member_in_view_restores_its_groups_evicted_probe(ctx):

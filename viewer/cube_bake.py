@@ -48,7 +48,12 @@ def face_view(face: int, eye) -> np.ndarray:
 
 
 def scene_content_key(
-    scene, environment_key: str, face_size: int, bounces: int, sizes: dict | None = None, mip_filter: str = "tent"
+    scene,
+    environment_key: str,
+    face_size: int,
+    bounces: int,
+    sizes: dict | None = None,
+    mip_filter: str = DEFAULT_MIP_FILTER,
 ) -> str:
     """What the cube maps depend on: geometry, lightmap coordinates, materials, emission,
     lightmaps and base-colour textures, the environment, face size (and each object's, ``sizes``),

@@ -260,6 +260,14 @@ def _pack(member, value) -> bytes:
     return struct.pack(member.fmt, value)
 
 
+def _shadow(extra: dict) -> dict:
+    """The program's uniform name -> bytes it holds (made on first use)."""
+    shadow = extra.get("uniform_shadow")
+    if shadow is None:
+        shadow = extra["uniform_shadow"] = {}
+    return shadow
+
+
 def _store(program, name: str, member, data: bytes) -> None:
     """Write ``data`` to ``member`` unless the program already holds exactly these bytes (a
     shadow of each ProgramCache program's uniform state in ``program.extra``). A uniform written
@@ -274,9 +282,7 @@ def _store(program, name: str, member, data: bytes) -> None:
     if record is not None:
         record[name] = (member, data)
         return
-    shadow = extra.get("uniform_shadow")
-    if shadow is None:
-        shadow = extra["uniform_shadow"] = {}
+    shadow = _shadow(extra)
     if shadow.get(name) == data:
         UNIFORM_WRITES.skipped += 1
         return
@@ -358,10 +364,7 @@ class DrawRecorder:
 def replay(program, record: DrawRecord) -> None:
     """Set what ``record`` holds on ``program``: uniform bytes it does not hold yet, every binding
     (:func:`_store` inlined: this loop runs for every uniform of every draw)."""
-    extra = program.extra
-    shadow = extra.get("uniform_shadow")
-    if shadow is None:
-        shadow = extra["uniform_shadow"] = {}
+    shadow = _shadow(program.extra)
     written = 0
     for name, (member, data) in record.uniforms:
         if shadow.get(name) != data:

@@ -332,7 +332,7 @@ class SceneRenderer(RendererBase):
     def _describe_probes(self, groups: list) -> None:
         for group in groups:
             names = [self.objects[i].name for i in group.members]
-            size = max(self.analysis.objects[i].cube_face for i in group.members)  # the owner's (_cube_size)
+            size = self._cube_size(group.owner)
             for index in group.members:
                 others = ", ".join(repr(n) for n in names if n != self.objects[index].name)
                 self.analysis.objects[index].shared_probe = f"{size}^2 with {others}"
@@ -897,11 +897,14 @@ class SceneRenderer(RendererBase):
                 gpu_obj.cube.release()  # it reads its group's probe now
                 gpu_obj.cube = None
                 self.residency.evicted.discard(i)
-            if i not in regrouped and self.scene.objects[i].material != material_index:
+            size = self._cube_size(i)
+            # A shared probe is as fine as its narrowest member: an edited member may resize it.
+            cube_size = gpu_obj.cube.face_size if gpu_obj.cube is not None else size
+            resized_probe = self._group_of(i) is not None and cube_size != size
+            if i not in regrouped and self.scene.objects[i].material != material_index and not resized_probe:
                 continue
             needs = self.analysis.objects[i]
             on_demand = i not in self.analysis.cubes_at_start and gpu_obj.cube is None
-            size = self._cube_size(i)
             if (
                 needs.needs_cube_map
                 and not on_demand
