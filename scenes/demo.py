@@ -49,7 +49,7 @@ def add_showcase_presets(materials: list, index: dict) -> dict:
     return index
 
 
-DEMO_VERSION = 5  # bump when the geometry, materials or baker change (invalidates caches)
+DEMO_VERSION = 6  # bump when the geometry, materials or baker change (invalidates caches)
 DEMO_ENVIRONMENT = "builtin:overcast"
 DEFAULT_RESOLUTION = 512
 DEFAULT_RAYS = 128
@@ -242,30 +242,68 @@ def demo_path():
 
 
 def unwrap_lightmap_uvs(scene: Scene, resolution: int) -> Scene:
-    """One xatlas atlas for all objects; splits vertices along chart seams."""
+    """One xatlas atlas for all objects; splits vertices along chart seams.
+
+    All objects go to xatlas as ONE mesh. xatlas (0.0.11 and upstream master) runs each added
+    mesh's set-up on worker threads while the caller adds the next, and its add-mesh task queue is
+    the one queue it does not reserve: a worker keeps a pointer into the queue after unlocking it,
+    and the next ``add_mesh`` may reallocate that queue under it. That crashed a CI run (segfault
+    in a worker thread during ``add_mesh`` of the apartment's ~300 objects). With one mesh there is
+    one task and nothing to reallocate. Each object is moved into its own cell of a grid first, so
+    that vertices where two objects touch (a wall meeting a floor, coincident decals) are not
+    colocal and no chart spans two objects, as with one xatlas mesh per object; the move costs
+    float32 precision of about 1e-7 times the grid's size. The single output mesh keeps the
+    input's face order, so each object's faces are a contiguous range of it."""
     import xatlas
 
+    objects = scene.objects
+    if not objects:
+        return scene
+    lows = np.array([obj.mesh.positions.min(axis=0) if len(obj.mesh.positions) else np.zeros(3) for obj in objects])
+    highs = np.array([obj.mesh.positions.max(axis=0) if len(obj.mesh.positions) else np.zeros(3) for obj in objects])
+    cell = 1.25 * float(np.max(highs - lows)) + 1e-3
+    side = int(np.ceil(len(objects) ** (1.0 / 3.0) - 1e-9))
+    index = np.arange(len(objects))
+    cells = np.stack([index % side, (index // side) % side, index // (side * side)], axis=1)
+    offsets = cells * cell - 0.5 * (lows + highs)
+    positions = np.concatenate(
+        [obj.mesh.positions.astype(np.float64) + offsets[i] for i, obj in enumerate(objects)]
+    ).astype(np.float32)
+    normals = np.concatenate([obj.mesh.normals for obj in objects]).astype(np.float32)
+    vertex_counts = np.array([len(obj.mesh.positions) for obj in objects])
+    face_counts = np.array([len(obj.mesh.indices) for obj in objects])
+    first_vertex = np.concatenate([[0], np.cumsum(vertex_counts)])
+    first_face = np.concatenate([[0], np.cumsum(face_counts)])
+    indices = np.concatenate(
+        [obj.mesh.indices.astype(np.int64) + first_vertex[i] for i, obj in enumerate(objects)]
+    ).astype(np.uint32)
+
     atlas = xatlas.Atlas()
-    for obj in scene.objects:
-        atlas.add_mesh(obj.mesh.positions, obj.mesh.indices, obj.mesh.normals)
+    atlas.add_mesh(positions, indices, normals)
     pack = xatlas.PackOptions()
     pack.resolution = resolution
     pack.padding = 3
     pack.bilinear = True
     atlas.generate(pack_options=pack)
-    for i, obj in enumerate(scene.objects):
-        vmapping, indices, uvs = atlas[i]
+    vmapping, out_indices, uvs = atlas[0]
+    for i, obj in enumerate(objects):
+        # The output vertices of this object's faces, renumbered from 0 (in ascending order).
+        faces = out_indices[first_face[i] : first_face[i + 1]]
+        used, local_indices = np.unique(faces, return_inverse=True)
+        source = vmapping[used].astype(np.int64) - first_vertex[i]
+        if len(source) and (source.min() < 0 or source.max() >= vertex_counts[i]):
+            raise RuntimeError(f"xatlas mapped a face of {obj.name!r} to another object's vertex")
         m = obj.mesh
         obj.mesh = Mesh(
-            m.positions[vmapping],
-            m.normals[vmapping],
-            m.tangents[vmapping],
-            m.uvs[vmapping],
-            indices.astype(np.uint32),
+            m.positions[source],
+            m.normals[source],
+            m.tangents[source],
+            m.uvs[source],
+            local_indices.reshape(-1, 3).astype(np.uint32),
             m.name,
         )
-        obj.uv1 = uvs.astype(np.float32)
-        obj.vertex_map = vmapping if obj.vertex_map is None else obj.vertex_map[vmapping]
+        obj.uv1 = uvs[used].astype(np.float32)
+        obj.vertex_map = source if obj.vertex_map is None else obj.vertex_map[source]
     return scene
 
 

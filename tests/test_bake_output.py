@@ -299,3 +299,46 @@ def test_embedded_hdr_images_are_read_with_their_header_checked(tmp_path):
     refused = load_gltf(out, Limits(max_image_pixels=32 * 32))
     assert refused.materials[0].lightmap is None
     assert any("lightmap" in w and "1024 pixels" in w for w in refused.warnings), refused.warnings
+
+
+def test_unwrap_hands_xatlas_one_mesh_and_keeps_each_objects_charts_its_own(monkeypatch):
+    """xatlas' add-mesh queue can be reallocated under a worker thread between two add_mesh calls
+    (a CI run crashed there): the unwrap adds one mesh. Objects that touch (boxes sharing a face)
+    or coincide (two back-to-back quads) still get charts of their own, and every triangle keeps
+    its corners."""
+    import xatlas
+
+    from lobeview.scenes.meshes import box_mesh, quad
+    from lobeview.scenes.scene import Scene, SceneObject
+
+    added = []
+
+    class CountingAtlas(xatlas.Atlas):
+        def add_mesh(self, *args, **kwargs):
+            added.append(len(args[0]))
+            return super().add_mesh(*args, **kwargs)
+
+    monkeypatch.setattr(xatlas, "Atlas", CountingAtlas)
+    meshes = [
+        box_mesh((0.0, 0.5, 0.0), (1.0, 1.0, 1.0)),
+        box_mesh((1.0, 0.5, 0.0), (1.0, 1.0, 1.0)),  # shares the x = 0.5 face with the first
+        quad((2, 0, 0), (1, 0, 0), (0, 1, 0)),
+        quad((3, 0, 0), (-1, 0, 0), (0, 1, 0)),  # the same square, facing the other way
+        quad((4, 0, 0), (1, 0, 0), (0, 1, 0)),
+        quad((5, 0, 0), (1, 0, 0), (0, 1, 0)),  # coplanar with the one before, sharing an edge
+    ]
+    scene = Scene([SceneObject(f"object {i}", mesh, 0) for i, mesh in enumerate(meshes)], [])
+    corners_before = [mesh.positions[mesh.indices] for mesh in meshes]
+    unwrap_lightmap_uvs(scene, 128)
+
+    assert added == [sum(len(mesh.positions) for mesh in meshes)]
+    for obj, corners in zip(scene.objects, corners_before, strict=True):
+        np.testing.assert_array_equal(obj.mesh.positions[obj.mesh.indices], corners)
+        np.testing.assert_array_equal(obj.mesh.positions, meshes[scene.objects.index(obj)].positions[obj.vertex_map])
+        assert obj.uv1.shape == (len(obj.mesh.positions), 2) and 0.0 <= obj.uv1.min() and obj.uv1.max() <= 1.0
+    assert lightmap_uv_overlap(scene, 128) < 0.01
+    # One chart over two objects would give their shared edge the same lightmap coordinates.
+    for a in range(len(meshes)):
+        for b in range(a):
+            gaps = np.abs(scene.objects[a].uv1[:, None] - scene.objects[b].uv1[None]).max(axis=2)
+            assert gaps.min() > 1.0 / 128, (a, b)
