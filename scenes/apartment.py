@@ -46,7 +46,7 @@ from .meshes import Mesh, box_mesh, merge_meshes, quad, translated, uv_sphere
 from .reflection_proxy import ReflectionProxy
 from .scene import Scene, SceneCamera, SceneMaterial, SceneObject
 
-APARTMENT_VERSION = 3  # bump when the geometry, materials or baker settings change (invalidates caches)
+APARTMENT_VERSION = 4  # bump when the geometry, materials or baker settings change (invalidates caches)
 APARTMENT_ENVIRONMENT = "builtin:overcast"
 DEFAULT_ROOMS = 12
 MAX_ROOMS = 40

@@ -49,7 +49,7 @@ def add_showcase_presets(materials: list, index: dict) -> dict:
     return index
 
 
-DEMO_VERSION = 6  # bump when the geometry, materials or baker change (invalidates caches)
+DEMO_VERSION = 7  # bump when the geometry, materials or baker change (invalidates caches)
 DEMO_ENVIRONMENT = "builtin:overcast"
 DEFAULT_RESOLUTION = 512
 DEFAULT_RAYS = 128
@@ -249,11 +249,10 @@ def unwrap_lightmap_uvs(scene: Scene, resolution: int) -> Scene:
     the one queue it does not reserve: a worker keeps a pointer into the queue after unlocking it,
     and the next ``add_mesh`` may reallocate that queue under it. That crashed a CI run (segfault
     in a worker thread during ``add_mesh`` of the apartment's ~300 objects). With one mesh there is
-    one task and nothing to reallocate. Each object is moved into its own cell of a grid first, so
-    that vertices where two objects touch (a wall meeting a floor, coincident decals) are not
-    colocal and no chart spans two objects, as with one xatlas mesh per object; the move costs
-    float32 precision of about 1e-7 times the grid's size. The single output mesh keeps the
-    input's face order, so each object's faces are a contiguous range of it."""
+    one task and nothing to reallocate. The objects are moved apart first, so that vertices where
+    two objects touch (a wall meeting a floor, coincident decals) are not colocal and no chart spans
+    two objects, as with one xatlas mesh per object. The single output mesh keeps the input's face
+    order, so each object's faces are a contiguous range of it."""
     import xatlas
 
     objects = scene.objects
@@ -261,11 +260,15 @@ def unwrap_lightmap_uvs(scene: Scene, resolution: int) -> Scene:
         return scene
     lows = np.array([obj.mesh.positions.min(axis=0) if len(obj.mesh.positions) else np.zeros(3) for obj in objects])
     highs = np.array([obj.mesh.positions.max(axis=0) if len(obj.mesh.positions) else np.zeros(3) for obj in objects])
-    cell = 1.25 * float(np.max(highs - lows)) + 1e-3
-    side = int(np.ceil(len(objects) ** (1.0 / 3.0) - 1e-9))
-    index = np.arange(len(objects))
-    cells = np.stack([index % side, (index // side) % side, index // (side * side)], axis=1)
-    offsets = cells * cell - 0.5 * (lows + highs)
+    # Objects side by side along x, smallest first, a gap between them: an object's offset is at
+    # most the object count times its own size, so it keeps float32 precision of ~1e-7 x that.
+    extents = highs - lows
+    order = np.argsort(extents.max(axis=1), kind="stable")
+    widths = extents[order, 0] + 0.01 * extents[order].max(axis=1) + 1e-3
+    starts = np.empty(len(objects))
+    starts[order] = np.concatenate([[0.0], np.cumsum(widths)[:-1]])
+    offsets = -lows.astype(np.float64)
+    offsets[:, 0] += starts
     positions = np.concatenate(
         [obj.mesh.positions.astype(np.float64) + offsets[i] for i, obj in enumerate(objects)]
     ).astype(np.float32)

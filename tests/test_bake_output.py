@@ -342,3 +342,41 @@ def test_unwrap_hands_xatlas_one_mesh_and_keeps_each_objects_charts_its_own(monk
         for b in range(a):
             gaps = np.abs(scene.objects[a].uv1[:, None] - scene.objects[b].uv1[None]).max(axis=2)
             assert gaps.min() > 1.0 / 128, (a, b)
+
+
+def test_unwrap_keeps_a_small_object_exact_beside_a_large_one(monkeypatch):
+    """Moving the objects apart for the one xatlas mesh must not cost a small object its float32
+    precision: a 2 cm bead beside a 10 km ground reaches xatlas with its shape intact."""
+    import trimesh
+    import xatlas
+
+    from lobeview.scenes.meshes import Mesh, quad
+    from lobeview.scenes.scene import Scene, SceneObject
+
+    handed = []
+
+    class RecordingAtlas(xatlas.Atlas):
+        def add_mesh(self, positions, *args, **kwargs):
+            handed.append(np.array(positions))
+            return super().add_mesh(positions, *args, **kwargs)
+
+    monkeypatch.setattr(xatlas, "Atlas", RecordingAtlas)
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.01)
+    bead_positions = (sphere.vertices + [4999.0, 0.01, -4999.0]).astype(np.float32)
+    bead = Mesh(
+        bead_positions,
+        sphere.vertex_normals.astype(np.float32),
+        np.tile(np.array([[1, 0, 0, 1]], np.float32), (len(sphere.vertices), 1)),
+        np.zeros((len(sphere.vertices), 2), np.float32),
+        sphere.faces.astype(np.uint32),
+        "bead",
+    )
+    ground = quad((-5000, 0, 5000), (10000, 0, 0), (0, 0, -10000))
+    scene = Scene([SceneObject("ground", ground, 0), SceneObject("bead", bead, 0)], [])
+    unwrap_lightmap_uvs(scene, 512)
+    (positions,) = handed
+    handed_bead = positions[len(ground.positions) :]
+    shape_error = (handed_bead - handed_bead[0]) - (bead_positions - bead_positions[0])
+    assert np.abs(shape_error).max() < 1e-6 * 0.02
+    bead_uv = scene.objects[1].uv1[scene.objects[1].mesh.indices]
+    assert np.ptp(bead_uv.reshape(-1, 2), axis=0).min() > 0
