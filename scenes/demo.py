@@ -248,7 +248,7 @@ def unwrap_lightmap_uvs(scene: Scene, resolution: int) -> Scene:
     mesh's set-up on worker threads while the caller adds the next, and its add-mesh task queue is
     the one queue it does not reserve: a worker keeps a pointer into the queue after unlocking it,
     and the next ``add_mesh`` may reallocate that queue under it. That crashed a CI run (segfault
-    in a worker thread during ``add_mesh`` of the apartment's ~300 objects). With one mesh there is
+    in a worker thread during ``add_mesh`` of the apartment's objects). With one mesh there is
     one task and nothing to reallocate. The objects are moved apart first, so that vertices where
     two objects touch (a wall meeting a floor, coincident decals) are not colocal and no chart spans
     two objects, as with one xatlas mesh per object. The single output mesh keeps the input's face

@@ -301,24 +301,30 @@ def test_embedded_hdr_images_are_read_with_their_header_checked(tmp_path):
     assert any("lightmap" in w and "1024 pixels" in w for w in refused.warnings), refused.warnings
 
 
-def test_unwrap_hands_xatlas_one_mesh_and_keeps_each_objects_charts_its_own(monkeypatch):
+@pytest.fixture
+def xatlas_meshes(monkeypatch):
+    """The positions of every mesh the unwrap hands to xatlas, in order."""
+    import xatlas
+
+    handed = []
+
+    class RecordingAtlas(xatlas.Atlas):
+        def add_mesh(self, positions, *args, **kwargs):
+            handed.append(np.array(positions))
+            return super().add_mesh(positions, *args, **kwargs)
+
+    monkeypatch.setattr(xatlas, "Atlas", RecordingAtlas)
+    return handed
+
+
+def test_unwrap_hands_xatlas_one_mesh_and_keeps_each_objects_charts_its_own(xatlas_meshes):
     """xatlas' add-mesh queue can be reallocated under a worker thread between two add_mesh calls
     (a CI run crashed there): the unwrap adds one mesh. Objects that touch (boxes sharing a face)
     or coincide (two back-to-back quads) still get charts of their own, and every triangle keeps
     its corners."""
-    import xatlas
-
     from lobeview.scenes.meshes import box_mesh, quad
     from lobeview.scenes.scene import Scene, SceneObject
 
-    added = []
-
-    class CountingAtlas(xatlas.Atlas):
-        def add_mesh(self, *args, **kwargs):
-            added.append(len(args[0]))
-            return super().add_mesh(*args, **kwargs)
-
-    monkeypatch.setattr(xatlas, "Atlas", CountingAtlas)
     meshes = [
         box_mesh((0.0, 0.5, 0.0), (1.0, 1.0, 1.0)),
         box_mesh((1.0, 0.5, 0.0), (1.0, 1.0, 1.0)),  # shares the x = 0.5 face with the first
@@ -331,7 +337,7 @@ def test_unwrap_hands_xatlas_one_mesh_and_keeps_each_objects_charts_its_own(monk
     corners_before = [mesh.positions[mesh.indices] for mesh in meshes]
     unwrap_lightmap_uvs(scene, 128)
 
-    assert added == [sum(len(mesh.positions) for mesh in meshes)]
+    assert [len(positions) for positions in xatlas_meshes] == [sum(len(mesh.positions) for mesh in meshes)]
     for obj, corners in zip(scene.objects, corners_before, strict=True):
         np.testing.assert_array_equal(obj.mesh.positions[obj.mesh.indices], corners)
         np.testing.assert_array_equal(obj.mesh.positions, meshes[scene.objects.index(obj)].positions[obj.vertex_map])
@@ -344,23 +350,14 @@ def test_unwrap_hands_xatlas_one_mesh_and_keeps_each_objects_charts_its_own(monk
             assert gaps.min() > 1.0 / 128, (a, b)
 
 
-def test_unwrap_keeps_a_small_object_exact_beside_a_large_one(monkeypatch):
+def test_unwrap_keeps_a_small_object_exact_beside_a_large_one(xatlas_meshes):
     """Moving the objects apart for the one xatlas mesh must not cost a small object its float32
     precision: a 2 cm bead beside a 10 km ground reaches xatlas with its shape intact."""
     import trimesh
-    import xatlas
 
     from lobeview.scenes.meshes import Mesh, quad
     from lobeview.scenes.scene import Scene, SceneObject
 
-    handed = []
-
-    class RecordingAtlas(xatlas.Atlas):
-        def add_mesh(self, positions, *args, **kwargs):
-            handed.append(np.array(positions))
-            return super().add_mesh(positions, *args, **kwargs)
-
-    monkeypatch.setattr(xatlas, "Atlas", RecordingAtlas)
     sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.01)
     bead_positions = (sphere.vertices + [4999.0, 0.01, -4999.0]).astype(np.float32)
     bead = Mesh(
@@ -374,7 +371,7 @@ def test_unwrap_keeps_a_small_object_exact_beside_a_large_one(monkeypatch):
     ground = quad((-5000, 0, 5000), (10000, 0, 0), (0, 0, -10000))
     scene = Scene([SceneObject("ground", ground, 0), SceneObject("bead", bead, 0)], [])
     unwrap_lightmap_uvs(scene, 512)
-    (positions,) = handed
+    (positions,) = xatlas_meshes
     handed_bead = positions[len(ground.positions) :]
     shape_error = (handed_bead - handed_bead[0]) - (bead_positions - bead_positions[0])
     assert np.abs(shape_error).max() < 1e-6 * 0.02
