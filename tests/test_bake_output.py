@@ -319,9 +319,9 @@ def xatlas_meshes(monkeypatch):
 
 def test_unwrap_hands_xatlas_one_mesh_and_keeps_each_objects_charts_its_own(xatlas_meshes):
     """xatlas' add-mesh queue can be reallocated under a worker thread between two add_mesh calls
-    (a CI run crashed there): the unwrap adds one mesh. Objects that touch (boxes sharing a face)
-    or coincide (two back-to-back quads) still get charts of their own, and every triangle keeps
-    its corners."""
+    (a CI run crashed there): the unwrap adds one mesh. Objects that touch (boxes sharing a face),
+    coincide (two back-to-back quads) or continue each other in one plane still get charts of
+    their own, and every triangle keeps its corners."""
     from lobeview.scenes.meshes import box_mesh, quad
     from lobeview.scenes.scene import Scene, SceneObject
 
@@ -338,9 +338,9 @@ def test_unwrap_hands_xatlas_one_mesh_and_keeps_each_objects_charts_its_own(xatl
     unwrap_lightmap_uvs(scene, 128)
 
     assert [len(positions) for positions in xatlas_meshes] == [sum(len(mesh.positions) for mesh in meshes)]
-    for obj, corners in zip(scene.objects, corners_before, strict=True):
+    for obj, mesh, corners in zip(scene.objects, meshes, corners_before, strict=True):
         np.testing.assert_array_equal(obj.mesh.positions[obj.mesh.indices], corners)
-        np.testing.assert_array_equal(obj.mesh.positions, meshes[scene.objects.index(obj)].positions[obj.vertex_map])
+        np.testing.assert_array_equal(obj.mesh.positions, mesh.positions[obj.vertex_map])
         assert obj.uv1.shape == (len(obj.mesh.positions), 2) and 0.0 <= obj.uv1.min() and obj.uv1.max() <= 1.0
     assert lightmap_uv_overlap(scene, 128) < 0.01
     # One chart over two objects would give their shared edge the same lightmap coordinates.
