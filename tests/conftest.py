@@ -22,6 +22,16 @@ SHARED_ASSETS = Path(__file__).resolve().parents[1].parent / "shared" / "assets"
 HAVE_XVFB = shutil.which("Xvfb") is not None
 
 
+@pytest.fixture(scope="module")
+def ctx():
+    """A headless OpenGL context (EGL), one per test module, released after the module."""
+    from lobeview.viewer.context import create_headless_context
+
+    context = create_headless_context()
+    yield context
+    context.release()
+
+
 @pytest.fixture(scope="session")
 def xvfb():
     """A virtual X server for the window tests (real viewer, real events)."""

@@ -15,15 +15,6 @@ from lobeview.viewer.camera import Camera
 from lobeview.viewer.interface import UNIFORM_WRITES, DrawRecorder, replay, set_uniform
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from lobeview.viewer.context import create_headless_context
-
-    context = create_headless_context()
-    yield context
-    context.release()
-
-
 def _demo(ctx, **options):
     from lobeview.scenes.demo import build_demo_scene
     from lobeview.scenes.envmap import EnvironmentMap

@@ -139,15 +139,6 @@ def test_planar_reflector_extras_round_trip_through_gltf(tmp_path):
 
 
 # -- through the pipeline ----------------------------------------------------------------------
-@pytest.fixture(scope="module")
-def ctx():
-    from lobeview.viewer.context import create_headless_context
-
-    context = create_headless_context()
-    yield context
-    context.release()
-
-
 def _grey():
     from lobeview.scenes.envmap import EnvironmentMap
 

@@ -96,15 +96,6 @@ def _props_scene(material=None):
     return Scene(objects, materials)
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from lobeview.viewer.context import create_headless_context
-
-    context = create_headless_context()
-    yield context
-    context.release()
-
-
 def _env():
     from lobeview.scenes.envmap import EnvironmentMap
 

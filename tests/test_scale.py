@@ -49,15 +49,6 @@ def _scaled(scene, factor):
     return scene
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from lobeview.viewer.context import create_headless_context
-
-    context = create_headless_context()
-    yield context
-    context.release()
-
-
 def _render(ctx, factor):
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.viewer.scene_renderer import SceneRenderer

@@ -21,7 +21,6 @@ from lobeview.scenes.gltf_writer import write_glb
 from lobeview.scenes.meshes import box_mesh, quad
 from lobeview.scenes.scene import Lightmap, Scene, SceneCamera, SceneMaterial, SceneObject
 from lobeview.viewer.camera import Camera
-from lobeview.viewer.context import create_headless_context
 from lobeview.viewer.mirror_pass import unscissored
 from lobeview.viewer.scene_renderer import SceneRenderer
 
@@ -301,13 +300,6 @@ def _triangles(scene):
 
 
 # -- renderer ----------------------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def ctx():
-    context = create_headless_context()
-    yield context
-    context.release()
 
 
 def test_cube_faces_point_where_the_layout_says(ctx):

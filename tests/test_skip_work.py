@@ -48,15 +48,6 @@ def test_box_test_never_drops_a_box_with_a_point_in_view_and_drops_far_away_boxe
     assert not outside_frustum(box_corners((-1, -1, -1), (1, 1, 1)), view_proj)
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from lobeview.viewer.context import create_headless_context
-
-    context = create_headless_context()
-    yield context
-    context.release()
-
-
 def test_culling_skips_objects_and_changes_no_pixel(ctx):
     from lobeview.scenes.demo import build_demo_scene
     from lobeview.scenes.envmap import EnvironmentMap

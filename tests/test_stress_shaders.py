@@ -33,19 +33,11 @@ from lobeview.materials.bsdf import BSDF
 from lobeview.materials.patterns import specular_lobes
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import uv_sphere
-from lobeview.viewer.context import create_headless_context
 from lobeview.viewer.preview import PreviewRenderer
 
 SIZE = STRESS_SIZE
 CAMERA = STRESS_CAMERA
 METHODS = CI_METHODS
-
-
-@pytest.fixture(scope="module")
-def ctx():
-    context = create_headless_context()
-    yield context
-    context.release()
 
 
 @pytest.fixture(scope="module")
