@@ -317,21 +317,22 @@ def write_uniform(program, name: str, data) -> None:
     _store(program, name, member, data)
 
 
-def use_unit(program, resource, unit_index: int) -> None:
-    """Bind a texture or sampler object to a texture unit for ``program``'s next draw (recorded
-    as well when ``program`` is a :class:`DrawRecorder`)."""
+def _bind(program, bind, target) -> None:
+    """Call ``bind(target)`` now, and record the call when ``program`` is a :class:`DrawRecorder`."""
     uses = getattr(program, "recorded_uses", None)
     if uses is not None:
-        uses.append((resource.use, unit_index))
-    resource.use(unit_index)
+        uses.append((bind, target))
+    bind(target)
+
+
+def use_unit(program, resource, unit_index: int) -> None:
+    """Bind a texture or sampler object to a texture unit for ``program``'s next draw."""
+    _bind(program, resource.use, unit_index)
 
 
 def bind_storage(program, buffer, binding: int) -> None:
-    """Bind a storage buffer for ``program``'s next draw (recorded like :func:`use_unit`)."""
-    uses = getattr(program, "recorded_uses", None)
-    if uses is not None:
-        uses.append((buffer.bind_to_storage_buffer, binding))
-    buffer.bind_to_storage_buffer(binding)
+    """Bind a storage buffer for ``program``'s next draw."""
+    _bind(program, buffer.bind_to_storage_buffer, binding)
 
 
 @dataclass(frozen=True)
