@@ -26,6 +26,7 @@ from lobeview.materials import measurement as meas
 from lobeview.materials.fit import FitError, FitOptions, fit_thesis, material_error, measured_albedo
 from lobeview.materials.lobe_fit import LUMINANCE, is_isotropic
 from lobeview.materials.spec import build_bsdf, load_material
+from lobeview.materials.virtual import virtual_measurement
 
 
 def _float_list(text: str) -> list[float]:
@@ -94,7 +95,7 @@ def _virtual(material: str, args) -> meas.Measurement:
         raise FitError("--theta-step/--phi-step must be > 0, --noise in [0, 10], --outliers in [0, 1)")
     if not args.theta_i or not args.phi_i or not all(0 <= t < 90 for t in args.theta_i):
         raise FitError("--theta-i needs angles in [0, 90) and --phi-i at least one azimuth")
-    return meas.virtual_measurement(
+    return virtual_measurement(
         desc,
         args.theta_i,
         args.phi_i,

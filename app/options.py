@@ -12,17 +12,16 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.core.errors import OptionError
 from lobeview.core.methods import GRAMMAR_HELP, Method, method_cli_flags
+from lobeview.scenes.setup import (
+    BUILTIN_SCENES,
+    builtin_apartment_rooms,
+)
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.mip_chain import DEFAULT_MIP_FILTER, MIP_FILTERS
 
-SCENE_ENV = "builtin:overcast"
 DEFAULT_FACE_SIZE = 256
-NO_CAMERA_FOV = 50.0  # scenes without a camera: the default view's vertical field of view
-
-
-class OptionError(ValueError):
-    """A bad command-line value: printed as ``lobeview: error: ...`` with exit status 2."""
 
 
 # -- option declarations -------------------------------------------------------------------------
@@ -156,16 +155,6 @@ def parse_vec3(text: str, name: str) -> tuple[float, float, float]:
     return values
 
 
-def parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise OptionError(f"--size: expected WxH, got {text!r}") from None
-    if not (1 <= w <= 8192 and 1 <= h <= 8192):
-        raise OptionError(f"--size: width and height must be in [1, 8192], got {text!r}")
-    return w, h
-
-
 def check_scene_options(args) -> None:
     if not 8 <= args.face_size <= 2048 or args.face_size & (args.face_size - 1):
         raise OptionError(f"--face-size must be a power of two in [8, 2048], got {args.face_size}")
@@ -186,26 +175,6 @@ def check_scene_options(args) -> None:
     args.limits = trust_limits(args)
 
 
-def scene_view(scene, view: str | None):
-    """(position, target, up, fov) of ``--view`` (name or index; default the first camera), or a
-    view of the whole scene for scenes without cameras."""
-    if not scene.cameras:
-        lo, hi = scene.bounds
-        centre = (lo + hi) / 2
-        eye = centre + np.array([0.0, 0.25, 1.2]) * float(np.max(hi - lo))
-        return (tuple(eye), tuple(centre), (0.0, 1.0, 0.0), NO_CAMERA_FOV)
-    if view is None:
-        cam = scene.cameras[0]
-    elif view.isdigit() and int(view) < len(scene.cameras):
-        cam = scene.cameras[int(view)]
-    else:
-        matches = [c for c in scene.cameras if c.name == view]
-        if not matches:
-            raise OptionError(f"--view: no camera {view!r}; the scene has {[c.name for c in scene.cameras]}")
-        cam = matches[0]
-    return (tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
-
-
 def camera_from_args(args, default) -> Camera:
     position, target, up, fov = default
     if args.camera is not None:
@@ -222,48 +191,6 @@ def camera_from_args(args, default) -> Camera:
 
 
 # -- scene set-up ---------------------------------------------------------------------------------
-BUILTIN_SCENES = "builtin:demo, builtin:apartment (12 rooms) or builtin:apartment-N (N = 1..40 rooms)"
-
-
-def builtin_apartment_rooms(scene_arg: str) -> int:
-    """The room count of ``builtin:apartment`` / ``builtin:apartment-N``; anything else after
-    ``builtin:`` is an error naming the built-in scenes."""
-    from lobeview.scenes.apartment import DEFAULT_ROOMS, MAX_ROOMS
-
-    name = scene_arg.removeprefix("builtin:")
-    if name == "apartment":
-        return DEFAULT_ROOMS
-    count = name.removeprefix("apartment-")
-    if name.startswith("apartment-") and count.isdigit() and 1 <= int(count) <= MAX_ROOMS:
-        return int(count)
-    raise OptionError(f"unknown built-in scene {scene_arg!r}: the built-in scenes are {BUILTIN_SCENES}")
-
-
-def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache_arg: str | None, limits=None):
-    """(scene path, Scene, EnvironmentMap, cache folder) for ``shot`` and ``view``: the demo
-    (built and cached on first use) when no scene is given, with the matching default sky.
-    ``limits``: the trust boundary of the scene file (:func:`trust_limits`)."""
-    from lobeview.core.paths import cache_dir
-    from lobeview.core.trust import DEFAULT_LIMITS
-    from lobeview.scenes.builtin_env import load_environment
-    from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene
-    from lobeview.scenes.gltf_loader import load_gltf
-
-    cache = cache_dir(cache_arg)
-    if scene_arg is None or scene_arg == "builtin:demo":
-        path = build_demo_scene(directory=cache / "demo")
-        env_name = env_arg or DEMO_ENVIRONMENT
-    elif scene_arg.startswith("builtin:"):
-        from lobeview.scenes.apartment import APARTMENT_ENVIRONMENT, build_apartment_scene
-
-        path = build_apartment_scene(builtin_apartment_rooms(scene_arg), directory=cache / "apartment")
-        env_name = env_arg or APARTMENT_ENVIRONMENT
-    else:
-        path = Path(scene_arg)
-        env_name = env_arg or SCENE_ENV
-    return path, load_gltf(path, limits or DEFAULT_LIMITS), load_environment(env_name), cache
-
-
 def read_material_edits(path: str | Path) -> dict:
     """A materials file (material name -> description), as the viewer's save and F12 write it."""
     try:
@@ -321,21 +248,24 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method 
     """The SceneRenderer of ``shot`` and ``view``: cube-map size, cache and mirror-pass options
     (``method``: what shot renders, for --cube-sizes auto)."""
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     renderer = SceneRenderer(
         ctx,
         scene,
         env,
         size=size,
-        cube_face_size=args.face_size,
         cache_dir=cache / "cubes",
-        mirror_scale=args.mirror_scale,
-        lobe_width_cubes=lobe_width_cubes(args, method),
-        shared_probes=bool(getattr(args, "shared_probes", False)) and lobe_width_cubes(args, method),
-        cube_budget_mb=getattr(args, "cube_budget", None),
-        mip_filter=getattr(args, "mip_filter", DEFAULT_MIP_FILTER),
+        settings=RenderSettings(
+            cube_face_size=args.face_size,
+            mirror_scale=args.mirror_scale,
+            lobe_width_cubes=lobe_width_cubes(args, method),
+            shared_probes=bool(getattr(args, "shared_probes", False)) and lobe_width_cubes(args, method),
+            cube_budget_mb=getattr(args, "cube_budget", None),
+            mip_filter=getattr(args, "mip_filter", DEFAULT_MIP_FILTER),
+            mirrors=bool(args.mirrors),
+        ),
     )
-    renderer.set_mirrors(args.mirrors)
     return renderer
 
 

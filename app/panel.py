@@ -1,6 +1,6 @@
 """The viewer's ImGui panel: timings, the rendering options, the object list with the scene
 analysis' decisions, and the selected object's material editor. Everything it changes goes
-through the window's and the renderer's methods (set_method, select, set_mirrors,
+through the window's and the renderer's methods (set_method, select, configure,
 set_object_method, the MaterialEditor), never their attributes."""
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def _status(window) -> None:
     fps = 1000.0 / window.frame_ms if window.frame_ms > 0 else 0.0
     imgui.text(f"{fps:.1f} fps, frame {window.frame_ms:.1f} ms")
     imgui.text(f"shading + accumulation {window.pass_ms:.1f} ms, last cube map {window.cube_ms:.1f} ms")
-    imgui.text_wrapped(window.renderer.residency.report(window.renderer.objects))
+    imgui.text_wrapped(window.renderer.probes.residency.report(window.renderer.objects))
     refinement = window.refinement
     if refinement.samples:
         imgui.text_wrapped(refinement.status())
@@ -84,16 +84,16 @@ def _rendering(window) -> None:
     if c or c2 or c3 or c_ring:
         window.set_method(method_from_choice(kinds[k], n, window.lobe_normalize, "ring" if ring else "auto"))
     _, window.progressive = imgui.checkbox("refine when still", window.progressive)
-    c4, mirrors = imgui.checkbox("planar mirror passes", renderer.mirrors_enabled)
-    c5, scale = imgui.slider_float("mirror resolution", renderer.mirror_scale, 0.1, 1.0)
+    c4, mirrors = imgui.checkbox("planar mirror passes", renderer.settings.mirrors)
+    c5, scale = imgui.slider_float("mirror resolution", renderer.settings.mirror_scale, 0.1, 1.0)
     if c4 or c5:
-        renderer.set_mirrors(mirrors, scale)
+        renderer.configure(mirrors=mirrors, mirror_scale=scale)
         window.dirty = True
     passes = renderer.mirror_passes
     _report_lines(f"mirror passes: {len(passes.drawn)} reflectors drawn, {len(passes.skipped)} skipped", passes.report)
-    c6, culling = imgui.checkbox("frustum culling", renderer.frustum_culling)
+    c6, culling = imgui.checkbox("frustum culling", renderer.settings.frustum_culling)
     if c6:
-        renderer.frustum_culling = culling
+        renderer.configure(frustum_culling=culling)
         window.dirty = True  # the image is the same; the counts below are the next frame's
     for line in renderer.draw_report:
         imgui.text(line)
@@ -139,7 +139,7 @@ def _material(window) -> None:
         imgui.text_wrapped(f"cube map {needs.cube_face}^2: {needs.cube_face_reason}")
         if needs.shared_probe:  # scenes/probe_groups.py
             imgui.text_wrapped(f"shared probe {needs.shared_probe} (scenes/probe_groups.py)")
-    memory = renderer.prefiltered_memory(index)
+    memory = renderer.probes.prefiltered_memory(index)
     if memory:
         imgui.text(f"prefiltered maps: {sum(memory.values()) / 2**20:.1f} MB")
         for name, size in memory.items():
@@ -169,7 +169,7 @@ def _material(window) -> None:
     imgui.same_line()
     if imgui.button("load"):
         if sidecar.exists():
-            from lobeview.app.options import OptionError
+            from lobeview.core.errors import OptionError
             from lobeview.materials.spec import MaterialError
 
             try:

@@ -24,7 +24,7 @@ frame N (in order; steps of earlier frames first):
                       realtime=Y shown=Z finished=..." (F: the refined image's mean weight in
                       what is shown; X, Y, Z: estimated display RMS errors of the refined mean,
                       the real-time frame and the shown blend, x 255, -1 before the first
-                      estimate; app/refinement.py)
+                      estimate; viewer/refinement.py)
     quit
 """
 
@@ -182,7 +182,7 @@ def run_due_steps(window, steps: list[dict]) -> None:
         elif action == "stats":
             # GL objects held by the bounded caches on purpose (material tables, scene
             # textures): a leak is growth of the rest.
-            cached = len(window.renderer._material_textures) + len(window.renderer.textures)
+            cached = len(window.renderer.shading.material_textures) + len(window.renderer.shading.textures)
             live, rss = live_gl_objects(), resident_mib()
             print(f"stats frame={window.frame} gl_objects={live} rss_mib={rss:.0f} cached={cached}", flush=True)
         elif action == "refine":

@@ -16,32 +16,30 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.app.options import (
-    SCENE_ENV,
-    OptionError,
     add_method_arguments,
     add_scene_arguments,
     apply_material_edits,
     apply_reflection_proxy,
     camera_from_args,
     check_scene_options,
-    load_scene_and_environment,
-    parse_size,
     read_material_edits,
     scene_renderer_from_args,
-    scene_view,
 )
+from lobeview.core.errors import OptionError, parse_size
 from lobeview.core.methods import MAX_REFERENCE_SPP, PIXEL_FILTERS, Method, resolve_cli_method
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.builtin_env import load_environment
 from lobeview.scenes.hdrio import write_hdr_image
-from lobeview.scenes.meshes import load_mesh_file, uv_sphere
+from lobeview.scenes.mesh_files import load_mesh_file
+from lobeview.scenes.meshes import uv_sphere
+from lobeview.scenes.setup import SCENE_ENV, load_scene_and_environment, scene_view
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import gpu_timer_meaningful
+from lobeview.viewer.preview import PREVIEW_CAMERA
 from lobeview.viewer.tonemap import TONEMAPS, to_uint8, tonemap
 
 OUTPUT_SUFFIXES = (".png", ".exr", ".npy")
 PREVIEW_ENV = "builtin:studio"
-PREVIEW_CAMERA = ((0.0, 0.35, 3.2), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0)
 ShotError = OptionError  # the error type the command line reports as "lobeview: error: ..."
 
 
@@ -246,7 +244,7 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
         print(f"[mirror] {line}")
     for line in renderer.draw_report:
         print(f"[draw] {line}")
-    print(f"[cube] {renderer.residency.report(renderer.objects)}")
+    print(f"[cube] {renderer.probes.residency.report(renderer.objects)}")
     _finish(result, out, args, stages)
     what = f"{'the demo scene' if args.scene is None else path.name} under {env.name}"
     _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe, args.pixel_filter)

@@ -24,17 +24,16 @@ import sys
 from pathlib import Path
 
 from lobeview.app.options import (
-    OptionError,
     add_method_arguments,
     add_scene_arguments,
     apply_material_edits,
     apply_reflection_proxy,
     check_scene_options,
-    load_scene_and_environment,
-    parse_size,
     read_material_edits,
 )
+from lobeview.core.errors import OptionError, parse_size
 from lobeview.core.methods import resolve_cli_method
+from lobeview.scenes.setup import load_scene_and_environment
 
 
 def add_arguments(p) -> None:

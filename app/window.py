@@ -6,7 +6,7 @@ While the camera moves, every frame is rendered with the chosen real-time method
 the camera, the materials and the method stay still, each frame adds a batch of unbiased
 quasi-random MIS samples at another sub-pixel position to a float accumulation buffer, and the
 display shows the running mean (thesis 4.4.2) once its estimated error is below the real-time
-frame's; refinement stops when converged (app/refinement.py). A frame in which nothing changed
+frame's; refinement stops when converged (viewer/refinement.py). A frame in which nothing changed
 and nothing is refined is not rendered again: the last image is shown.
 """
 
@@ -23,15 +23,16 @@ from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
 
 from lobeview.app.editor import MaterialEditor
 from lobeview.app.fit_job import FitJob, lockable_parameters
-from lobeview.app.options import scene_renderer_from_args, scene_view, shot_command
+from lobeview.app.options import scene_renderer_from_args, shot_command
 from lobeview.app.panel import draw_panel
-from lobeview.app.refinement import Refinement, two_half_estimate
 from lobeview.app.script import run_due_steps
 from lobeview.app.walk import WalkCamera, walk_speed_for
 from lobeview.core.methods import Method
 from lobeview.scenes.hdrio import write_hdr_image
+from lobeview.scenes.setup import scene_view
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.display import Accumulator, RefinementBlend
+from lobeview.viewer.refinement import Refinement, two_half_estimate
 from lobeview.viewer.tonemap import to_uint8, tonemap
 
 FRAME_TIME_SMOOTHING = 0.2  # exponential smoothing of the shown frame interval
@@ -240,7 +241,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.accumulator = Accumulator(self.ctx, programs, size)  # the refinement's running mean
         self.halves = [Accumulator(self.ctx, programs, size) for _ in range(2)]  # its two-half estimate
         self.realtime = Accumulator(self.ctx, programs, size)  # the last real-time frame
-        self.shown = Accumulator(self.ctx, programs, size)  # their blend (app/refinement.py)
+        self.shown = Accumulator(self.ctx, programs, size)  # their blend (viewer/refinement.py)
         self.blend = RefinementBlend(self.ctx, programs, size)
 
     def _release_accumulators(self) -> None:
@@ -288,7 +289,7 @@ class LobeviewWindow(mglw.WindowConfig):
             tonemap=self.tonemap,
             exposure=self.exposure,
         )
-        note = "" if not self.renderer.object_methods else " (per-object methods are not reproduced)"
+        note = "" if not self.renderer.drawer.object_methods else " (per-object methods are not reproduced)"
         if estimate is not None:
             note += f" (shown: {100 * estimate.refined_share:.0f} % refined, blended per pixel with {self.method})"
         print(f"screenshot {directory / stem}.exr/.png{note}: {command}", flush=True)
@@ -404,7 +405,7 @@ class LobeviewWindow(mglw.WindowConfig):
 
     def _refine(self, camera) -> None:
         """One refinement pass: a batch of reference samples at the next sub-pixel position into
-        the running mean and one half; the two-half estimate when due (app/refinement.py)."""
+        the running mean and one half; the two-half estimate when due (viewer/refinement.py)."""
         refinement = self.refinement
         plan = refinement.next_pass()
         batch = Method("reference", plan.samples)

@@ -3,7 +3,7 @@
 The interactive viewer adds, per still frame, a batch of quasi-random MIS samples continuing
 the same Sobol sequence; rendering `reference` with spp = K x batch at the pixel centres
 (pixel_filter 'point') therefore equals K accumulated frames of one half of the viewer's
-refinement without its sub-pixel positions (app/refinement.py), whose error this
+refinement without its sub-pixel positions (viewer/refinement.py), whose error this
 measures. This script measures the relative RMSE against a reference of
 --reference-spp samples per lobe (a different per-pixel scrambling seed, so it is an
 independent estimate) for K = 1, 2, 4, ..., fits the log-log slope and plots error against K

@@ -22,6 +22,7 @@ from lobeview.materials import measurement as meas
 from lobeview.materials.fit import FitOptions, fit_thesis, material_error
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import build_bsdf, validate
+from lobeview.materials.virtual import virtual_measurement
 
 THESIS_TABLE_PRESETS = ("alanod-2000gs-1lobe", "alanod-2000gs-2lobe", "white-foil", "miro5-1lobe", "miro5-2lobe")
 
@@ -35,7 +36,7 @@ def _measure(name: str, quick: bool, **kw) -> meas.Measurement:
         theta_step_deg=10.0 if quick else 5.0,
         phi_step_deg=30.0 if quick else 15.0,
     )
-    return meas.virtual_measurement(desc, **{**angles, **kw})
+    return virtual_measurement(desc, **{**angles, **kw})
 
 
 def _albedo(desc: dict) -> tuple[float, float]:

@@ -26,7 +26,7 @@ Outcome classes: ``ok``, ``warned`` (a documented fallback, output finite), ``er
 lobeview error), and the failures ``traceback``, ``crash`` (signal), ``hang`` (past the time
 limit), ``memory`` (past the worker's address-space limit), ``escape`` (a canary or a system
 file opened), ``nonfinite`` (NaN/Inf/negative output). The worker is a plain script run with
-``python bench/fuzz.py --worker`` so the same cases can be run against another checkout of
+``python bench/fuzz_worker.py`` so the same cases can be run against another checkout of
 lobeview (``--pythonpath``) for a before/after comparison.
 """
 
@@ -49,13 +49,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .fuzz_worker import CANARY, SYSTEM_FILES
+
 FAILURES = ("traceback", "crash", "hang", "memory", "escape", "nonfinite")
 CLASSES = ("ok", "warned", "error") + FAILURES
 TIME_LIMIT_S = {"load": 60, "env": 60, "material": 60, "edits": 60, "shot": 300, "bake": 300}
-WORKER_ADDRESS_LIMIT = 12 << 30  # llvmpipe maps generously; Python allocations hit this first
-CANARY = "canary.txt"
 CANARY_TEXT = "lobeview fuzz canary: this file lies outside every scene folder\n"
-SYSTEM_FILES = ("/etc/passwd", "/etc/shadow", "/dev/zero", "/dev/urandom", "/proc/self/cmdline", "/proc/self/environ")
 
 HOSTILE_VALUES = [
     -1,
@@ -499,155 +498,6 @@ def make_case(index: int, seed: int, sources: dict[str, str], source_dir: Path, 
     return Case(index, source, operator, target, detail, str(path.relative_to(work)))
 
 
-# -- the worker ----------------------------------------------------------------------------------
-
-
-def _finite(array) -> bool:
-    a = np.asarray(array, dtype=np.float64)
-    return bool(np.all(np.isfinite(a)))
-
-
-def _run_target(case: dict, work: Path) -> tuple[str, str]:
-    """Run one case in this process; returns (outcome, message)."""
-    import contextlib
-    import io
-    import warnings
-
-    entry = work / case["entry"]
-    case_dir = entry.parent
-    target = case["target"]
-    stderr = io.StringIO()
-    with warnings.catch_warnings(record=True) as caught, contextlib.redirect_stderr(stderr):
-        warnings.simplefilter("always")
-        if target == "load":
-            from lobeview.scenes.analysis import analyse
-            from lobeview.scenes.gltf_loader import GltfError, load_gltf
-
-            try:
-                scene = load_gltf(entry)
-            except GltfError as exc:
-                return "error", str(exc)
-            analyse(scene)
-            for obj in scene.objects:
-                if not all(_finite(a) for a in (obj.mesh.positions, obj.mesh.normals, obj.mesh.tangents, obj.mesh.uvs)):
-                    return "nonfinite", f"object {obj.name} has NaN/Inf vertex data"
-            for mat in scene.materials:
-                images = [slot.linear() for slot in mat.textures.values()]
-                for image in (*images, mat.lightmap.image if mat.lightmap else None):
-                    if image is not None and not (_finite(image) and np.min(image) >= 0):
-                        return "nonfinite", f"material {mat.name} has a NaN/Inf/negative image"
-        elif target == "env":
-            from lobeview.scenes.builtin_env import load_environment
-            from lobeview.scenes.hdrio import HDRImageError
-
-            try:
-                env = load_environment(str(entry))
-            except (HDRImageError, ValueError) as exc:
-                return "error", str(exc)
-            if not (_finite(env.image) and env.image.min() >= 0):
-                return "nonfinite", "environment has NaN/Inf/negative texels"
-        else:
-            from lobeview.app.cli import main
-
-            out = case_dir / "out.npy"
-            argv = {
-                "material": ["material", "show", str(entry)],
-                "edits": [
-                    "shot",
-                    str(case_dir / "lit.glb"),
-                    "--materials",
-                    str(entry),
-                    "--size",
-                    "24x16",
-                    "--face-size",
-                    "8",
-                    "--out",
-                    str(out),
-                ],
-                "shot": ["shot", "--size", "24x16", "--face-size", "8", "--out", str(out)]
-                + (
-                    ["--object", "sphere", "--env", str(entry)]
-                    if entry.suffix in (".exr", ".hdr")
-                    else [str(entry), "--env", "builtin:studio"]
-                ),
-                "bake": [
-                    "bake",
-                    str(entry),
-                    "--resolution",
-                    "16",
-                    "--rays",
-                    "4",
-                    "--bounces",
-                    "1",
-                    "--light-samples",
-                    "2",
-                    "--out",
-                    str(case_dir / "baked" / "out.glb"),
-                ],
-            }[target]
-            with contextlib.redirect_stdout(io.StringIO()):
-                rc = main(argv)
-            if rc != 0:
-                text = stderr.getvalue().strip().splitlines()
-                return ("error" if text and "lobeview: error" in text[-1] else "traceback"), (text[-1] if text else "")
-            if out.exists():
-                radiance = np.load(out)
-                if not (_finite(radiance) and radiance.min() >= 0):
-                    return "nonfinite", "rendered image has NaN/Inf/negative pixels"
-                if radiance.max() <= 0:
-                    return "nonfinite", "rendered image is black"
-    messages = [str(w.message) for w in caught] + [
-        line for line in stderr.getvalue().splitlines() if "warning" in line.lower()
-    ]
-    return ("warned" if messages else "ok"), (messages[0][:300] if messages else "")
-
-
-def worker(work: Path, start: int) -> int:
-    """Run cases from ``start``; one JSON line per case on stdout (flushed before the next)."""
-    import resource
-
-    resource.setrlimit(resource.RLIMIT_AS, (WORKER_ADDRESS_LIMIT, WORKER_ADDRESS_LIMIT))
-    cases = [json.loads(line) for line in (work / "cases.jsonl").read_text().splitlines()]
-    watched = {os.path.realpath(work / CANARY), *SYSTEM_FILES}
-    opened: list[str] = []
-
-    def audit(event, args):
-        if event == "open" and args and isinstance(args[0], (str, bytes, os.PathLike)):
-            try:
-                real = os.path.realpath(os.fsdecode(args[0]))
-            except (TypeError, ValueError):
-                return
-            if real in watched or real.startswith("/proc/self/"):
-                opened.append(real)
-
-    sys.addaudithook(audit)
-    out = sys.stdout
-    sys.stdout = sys.stderr  # nothing but results on the pipe
-    for case in cases[start:]:
-        opened.clear()
-        t0 = time.perf_counter()
-        print(json.dumps({"start": case["index"]}), file=out, flush=True)
-        try:
-            outcome, message = _run_target(case, work)
-        except MemoryError:
-            outcome, message = "memory", "MemoryError"
-        except Exception as exc:  # noqa: BLE001 - that is exactly what the fuzzer looks for
-            import traceback
-
-            outcome = "traceback"
-            frames = traceback.extract_tb(exc.__traceback__)
-            where = f"{Path(frames[-1].filename).name}:{frames[-1].lineno} {frames[-1].name}" if frames else ""
-            message = f"{type(exc).__name__}: {str(exc)[:200]} at {where}"
-        if "out of memory" in message:
-            outcome = "memory"
-        escaped = sorted({p for p in opened if not p.startswith("/proc/self/fd")})
-        if escaped:
-            outcome, message = "escape", f"opened {escaped}"
-        result = {"index": case["index"], "outcome": outcome, "message": message, "seconds": time.perf_counter() - t0}
-        print(json.dumps(result), file=out, flush=True)
-    return 0
-
-
 # -- the driver ----------------------------------------------------------------------------------
 
 
@@ -682,7 +532,7 @@ def run_fuzz(
     t_start = time.perf_counter()
     while position < len(todo):
         proc = subprocess.Popen(
-            [sys.executable, str(Path(__file__).resolve()), "--worker", str(work), "--start", str(position)],
+            [sys.executable, str(Path(__file__).resolve().parent / "fuzz_worker.py"), str(work), str(position)],
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,
             env=env,
@@ -785,11 +635,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--quick", action="store_true", help="no bake cases (what CI runs)")
     p.add_argument("--report", default=None, help="write the JSON report here (default bench/results/fuzz_SEED.json)")
     p.add_argument("--pythonpath", default=None, help="run the cases against the lobeview found on this path")
-    p.add_argument("--worker", default=None, help=argparse.SUPPRESS)
-    p.add_argument("--start", type=int, default=0, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
-    if args.worker:
-        return worker(Path(args.worker), args.start)
     if args.cases < 1:
         p.error("--cases must be at least 1")
     import tempfile
@@ -818,8 +664,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    if "--worker" in sys.argv:
-        # Run as a script: make sure 'lobeview' resolves to the checkout on PYTHONPATH (or the
-        # installed one), not to this file's folder.
-        sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
     sys.exit(main())

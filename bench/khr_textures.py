@@ -176,6 +176,7 @@ def render_figure(gltf: Path, env_spec: str, size: tuple[int, int], method: str,
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
     from lobeview.viewer.tonemap import tonemap
 
     scene = load_gltf(gltf)
@@ -189,7 +190,9 @@ def render_figure(gltf: Path, env_spec: str, size: tuple[int, int], method: str,
     for label, variant in (("factors only", factors_only), ("with the extension textures", scene)):
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # "no usable lightmap": lit by the environment, as intended
-            renderer = SceneRenderer(ctx, variant, env, size=size, cube_face_size=128, progress=False)
+            renderer = SceneRenderer(
+                ctx, variant, env, size=size, progress=False, settings=RenderSettings(cube_face_size=128)
+            )
         result = renderer.render(camera, method)
         renderer.release()
         if not np.all(np.isfinite(result.radiance)) or result.invalid.any():
@@ -204,7 +207,7 @@ def render_figure(gltf: Path, env_spec: str, size: tuple[int, int], method: str,
 
 
 def main(argv=None) -> int:
-    from lobeview.app.options import parse_size
+    from lobeview.core.errors import parse_size
 
     p = argparse.ArgumentParser(prog="python -m lobeview.bench.khr_textures", description=__doc__.split("\n\n")[0])
     p.add_argument("--env", default="builtin:studio", help="environment (default builtin:studio)")

@@ -60,7 +60,7 @@ class Progress:
 
 
 def _settings(args) -> dict:
-    from lobeview.app.options import parse_size
+    from lobeview.core.errors import parse_size
 
     quick = args.quick
     methods = list(QUICK_METHODS if quick else FULL_METHODS) if args.methods is None else args.methods

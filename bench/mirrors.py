@@ -77,7 +77,7 @@ def run_mirror_bench(ctx, device: str, out_dir: Path, stamp: str, resolutions, s
     for size in resolutions:
         renderer = SceneRenderer(ctx, mirror_floor_scene(0.05, extra_reflector=True), env, size=size, progress=False)
         for count, enabled in ((0, set()), (1, {0}), (2, {0, 4})):
-            renderer.enabled_reflectors = enabled
+            renderer.configure(enabled_reflectors=enabled)
             row = {"size": f"{size[0]}x{size[1]}", "reflectors": count, "frame_ms": {}}
             for method in methods:
                 ms, pass_ms, result = _frame_ms(renderer, camera, method, repeats)
@@ -207,6 +207,7 @@ def refinement_against_ray_tracing(ctx, camera, size, spp: int, figure_path: Pat
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.mirror_scene import CAMERA, mirror_floor_scene, traced_floor_reflection
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
     from lobeview.viewer.tonemap import tonemap
 
     from .metrics import relative_rmse
@@ -217,10 +218,12 @@ def refinement_against_ray_tracing(ctx, camera, size, spp: int, figure_path: Pat
     rows, panels = [], None
     for roughness in REFINEMENT_ROUGHNESS:
         scene = mirror_floor_scene(roughness)
-        renderer = SceneRenderer(ctx, scene, grey, size=size, cube_face_size=64, progress=False)
+        renderer = SceneRenderer(
+            ctx, scene, grey, size=size, progress=False, settings=RenderSettings(cube_face_size=64)
+        )
         images = {}
         for averaged in (False, True):
-            renderer.mirror_plane_average = averaged
+            renderer.configure(mirror_plane_average=averaged)
             # at the pixel centres: the ray tracer below starts from the G-buffer's points
             result = renderer.render(camera, "reference", spp=spp, pixel_filter="point")
             images[averaged] = result.radiance
@@ -256,7 +259,7 @@ def refinement_against_ray_tracing(ctx, camera, size, spp: int, figure_path: Pat
 
 def run_mirrors_command(args, out_dir: Path, stamp: str) -> int:
     """``lobeview bench mirrors``: the run above with the command line's sizes, samples and spp."""
-    from lobeview.app.options import parse_size
+    from lobeview.core.errors import parse_size
     from lobeview.viewer.context import create_headless_context, renderer_description
 
     default_sizes = ["320x200"] if args.quick else ["640x400", "1680x1050"]

@@ -57,7 +57,7 @@ def prop_shelf(scene):
 
 
 def _scenes(cache: Path, with_cornell: bool):
-    from lobeview.app.options import load_scene_and_environment
+    from lobeview.scenes.setup import load_scene_and_environment
 
     found = []
     _, apartment, env, _ = load_scene_and_environment("builtin:apartment-1", None, str(cache))
@@ -170,9 +170,9 @@ def run(links, size, cache: Path, with_cornell: bool = True) -> dict:
                 shared, seconds, cubes, memory = _start(
                     ctx, scene, env, size, folder / f"l{link}", shared_probes=True, probe_link=link
                 )
-                views = _views(reference, shared.probe_groups, method)
+                views = _views(reference, shared.probes.groups, method)
                 errors = member_errors(reference, shared, views, method, figure if link == SHARED_PROBE_LINK else None)
-                groups = [[shared.objects[i].name for i in g.members] for g in shared.probe_groups]
+                groups = [[shared.objects[i].name for i in g.members] for g in shared.probes.groups]
                 entry["links"].append(
                     {
                         "link": link,

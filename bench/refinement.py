@@ -1,4 +1,4 @@
-"""How good the viewer's refinement estimates are (app/refinement.py): on a demo view, the
+"""How good the viewer's refinement estimates are (viewer/refinement.py): on a demo view, the
 window's refinement is replayed headless (two independently randomised halves, one sub-pixel
 position per pass) and at each checkpoint the two-half estimates of the refined mean's error,
 the real-time frame's error and the shown blend's error are set beside their true values
@@ -27,8 +27,8 @@ CHECKPOINTS = (8, 16, 32, 64, 128, 256, 512)
 def replay(renderer, camera, realtime: np.ndarray, batch: int, checkpoints, say):
     """Yield (spp, mean, estimate) at each checkpoint of a refinement replayed as the window
     runs it (app/window.py _refine, with a fixed batch), against the real-time frame ``realtime``."""
-    from lobeview.app.refinement import Refinement, two_half_estimate
     from lobeview.core.methods import Method
+    from lobeview.viewer.refinement import Refinement, two_half_estimate
 
     refinement = Refinement()
     refinement.batch = batch
@@ -50,14 +50,16 @@ def replay(renderer, camera, realtime: np.ndarray, batch: int, checkpoints, say)
 def main(argv=None) -> int:
     from PIL import Image
 
-    from lobeview.app.options import parse_size, scene_view
+    from lobeview.core.errors import parse_size
     from lobeview.core.methods import Method
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene
     from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.setup import scene_view
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context, renderer_description
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
     from lobeview.viewer.tonemap import to_uint8, tonemap
 
     parser = argparse.ArgumentParser(prog="python -m lobeview.bench.refinement", description=__doc__.split("\n\n")[0])
@@ -77,7 +79,7 @@ def main(argv=None) -> int:
     camera = Camera(*scene_view(scene, args.view))
     ctx = create_headless_context()
     env = load_environment(DEMO_ENVIRONMENT)
-    renderer = SceneRenderer(ctx, scene, env, size=size, cube_face_size=64, progress=False)
+    renderer = SceneRenderer(ctx, scene, env, size=size, progress=False, settings=RenderSettings(cube_face_size=64))
     t0 = time.perf_counter()
     truth = renderer.render(camera, "reference", spp=args.reference_spp).radiance.astype(np.float64)
     say(f"[refinement] reference ({args.reference_spp} spp, box filter) in {time.perf_counter() - t0:.1f} s")

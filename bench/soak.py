@@ -248,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--all-methods", action="store_true", help=f"also switch to {', '.join(SLOW_METHODS)} (slow)")
     p.add_argument("--report", default=None, help="JSON report (default bench/results/soak_FRAMES.json)")
     args = p.parse_args(argv)
-    from lobeview.app.options import parse_size
+    from lobeview.core.errors import parse_size
     from lobeview.core.paths import bench_results_dir
 
     size = parse_size(args.size)

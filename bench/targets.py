@@ -43,10 +43,12 @@ class SphereTarget:
     """The preview sphere under a distant environment (no lightmaps)."""
 
     def __init__(self, ctx, env_name: str, size, face_size: int):
-        from lobeview.app.shot import PREVIEW_CAMERA  # the camera of `lobeview shot --object`
         from lobeview.scenes.meshes import uv_sphere
         from lobeview.viewer.camera import Camera
-        from lobeview.viewer.preview import PreviewRenderer
+        from lobeview.viewer.preview import (
+            PREVIEW_CAMERA,  # the camera of `lobeview shot --object`
+            PreviewRenderer,
+        )
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # capture clamps (a few negative texels) are not news here
@@ -75,7 +77,7 @@ class SphereTarget:
         return result.mask
 
     def memory(self, method: Method) -> int:
-        return sum(self.renderer.method_memory(self.renderer.cubes, self.packed, method).values())
+        return sum(self.renderer.shading.method_memory(self.renderer.cubes, self.packed, method).values())
 
     def release(self):
         self.renderer.release()
@@ -85,9 +87,10 @@ class DemoTarget:
     """The built-in demo scene from one of its cameras; its materials are the scene's."""
 
     def __init__(self, ctx, view: str, size, face_size: int, cache):
-        from lobeview.app.options import load_scene_and_environment, scene_view
+        from lobeview.scenes.setup import load_scene_and_environment, scene_view
         from lobeview.viewer.camera import Camera
         from lobeview.viewer.scene_renderer import SceneRenderer
+        from lobeview.viewer.settings import RenderSettings
 
         _, scene, env, cache = load_scene_and_environment(None, None, cache)
         self.env_label = Path(env.name).name
@@ -98,9 +101,14 @@ class DemoTarget:
             # Every cube map at full size: the reference reads level 0, finer than the lobe-N
             # footprints that size the faces by default (scenes/analysis.py).
             self.renderer = SceneRenderer(
-                ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cache / "cubes", progress=False,
-                lobe_width_cubes=False,
-            )  # fmt: skip
+                ctx,
+                scene,
+                env,
+                size=size,
+                cache_dir=cache / "cubes",
+                progress=False,
+                settings=RenderSettings(cube_face_size=face_size, lobe_width_cubes=False),
+            )
 
     def set_material(self, preset: str) -> None:  # the scene's own materials
         pass
@@ -116,7 +124,7 @@ class DemoTarget:
         total = 0
         for obj in self.renderer.objects:
             if obj.cube is not None:
-                total += sum(self.renderer.method_memory(obj.cube, obj.material, method).values())
+                total += sum(self.renderer.shading.method_memory(obj.cube, obj.material, method).values())
         return total
 
     def release(self):

@@ -32,13 +32,14 @@ def untextured(scene, slots=None):
 
 
 def run(scene_path: Path, size: tuple[int, int], frames: int) -> str:
-    from lobeview.app.options import scene_view
     from lobeview.core.methods import Method
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.setup import scene_view
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context, renderer_description
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     ctx = create_headless_context()
     scene = load_gltf(scene_path)
@@ -46,8 +47,12 @@ def run(scene_path: Path, size: tuple[int, int], frames: int) -> str:
     position, target, up, fov = scene_view(scene, None)
     camera = Camera(position, target, up, fov)
     renderers = {
-        "textured": SceneRenderer(ctx, scene, env, size=size, cube_face_size=128, progress=False),
-        "factors only": SceneRenderer(ctx, untextured(scene), env, size=size, cube_face_size=128, progress=False),
+        "textured": SceneRenderer(
+            ctx, scene, env, size=size, progress=False, settings=RenderSettings(cube_face_size=128)
+        ),
+        "factors only": SceneRenderer(
+            ctx, untextured(scene), env, size=size, progress=False, settings=RenderSettings(cube_face_size=128)
+        ),
     }
     rows = []
     for method in METHODS:
@@ -83,7 +88,7 @@ def run(scene_path: Path, size: tuple[int, int], frames: int) -> str:
 
 
 def main(argv=None) -> int:
-    from lobeview.app.options import parse_size
+    from lobeview.core.errors import parse_size
     from lobeview.core.paths import bench_results_dir
 
     p = argparse.ArgumentParser(prog="python -m lobeview.bench.textures", description=__doc__.split("\n\n")[0])

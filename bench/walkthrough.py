@@ -56,10 +56,16 @@ def cube_memory(renderer) -> tuple[int, int]:
 def start_renderer(ctx, scene, env, size, face_size: int, cube_dir: Path, lobe_width_cubes: bool = True):
     """(renderer, seconds): SceneRenderer construction with its cube maps under ``cube_dir``."""
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     t0 = time.perf_counter()
     renderer = SceneRenderer(
-        ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cube_dir, lobe_width_cubes=lobe_width_cubes
+        ctx,
+        scene,
+        env,
+        size=size,
+        cache_dir=cube_dir,
+        settings=RenderSettings(cube_face_size=face_size, lobe_width_cubes=lobe_width_cubes),
     )
     ctx.finish()
     return renderer, time.perf_counter() - t0
@@ -92,14 +98,14 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         unscissored_ms = 0.0
         if mirrors_drawn:  # first without the occlusion test, then without the scissor: the
             # frame then keeps its own buffers
-            renderer.mirror_occlusion = False
+            renderer.configure(mirror_occlusion=False)
             unculled_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
             unculled_passes = len(renderer.mirror_passes.drawn)
-            renderer.mirror_occlusion = True
-            renderer.mirror_scissor = False
+            renderer.configure(mirror_occlusion=True)
+            renderer.configure(mirror_scissor=False)
             renderer.invalidate_mirrors()
             unscissored_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
-            renderer.mirror_scissor = True
+            renderer.configure(mirror_scissor=True)
         renderer.invalidate_mirrors()
         renderer.draw_counts.new_frame()
         UNIFORM_WRITES.reset()
@@ -107,7 +113,7 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
             _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method) if mirrors_drawn else 0.0
         )
         scissored_pixels = sum(renderer.mirror_passes.scissored_pixels.values())
-        width, height = buffer_size(renderer.size, renderer.mirror_scale)
+        width, height = buffer_size(renderer.size, renderer.settings.mirror_scale)
         buffer_pixels = renderer.mirror_passes.drawn_passes * width * height
         mirror = renderer.draw_counts.of("mirror")
         mirror_draws, mirror_culled = mirror.drawn, mirror.culled
@@ -119,17 +125,17 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         camera_drawn, camera_culled = counts.of("camera").drawn, counts.of("camera").culled
         draws = camera_drawn + mirror_draws
         # The same mirror and camera passes with every object's state set value by value
-        # (SceneRenderer.draw_records off): what recording it once saves.
-        renderer.draw_records = False
+        # (RenderSettings.draw_records off): what recording it once saves.
+        renderer.configure(draw_records=False)
         renderer.invalidate_mirrors()
         unrecorded_ms = (
             _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method) if mirrors_drawn else 0.0
         )
         unrecorded_ms += _finished_ms(renderer.ctx, renderer.draw_frame, camera, method)
-        renderer.draw_records = True
-        renderer.depth_prepass = False  # the same camera pass without the depth pre-pass
+        renderer.configure(draw_records=True)
+        renderer.configure(depth_prepass=False)  # the same camera pass without the depth pre-pass
         no_prepass_ms = _finished_ms(renderer.ctx, renderer.draw_frame, camera, method)
-        renderer.depth_prepass = True
+        renderer.configure(depth_prepass=True)
         rows.append(
             {
                 "frame": n,
@@ -179,7 +185,7 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         warm_stages = dict(renderer.timings)
         cubes, memory = cube_memory(renderer)
         reflectors = len(renderer.reflectors())
-        probe_groups = [len(g.members) for g in renderer.probe_groups]  # shared probes (scenes/probe_groups.py)
+        probe_groups = [len(g.members) for g in renderer.probes.groups]  # shared probes (scenes/probe_groups.py)
         reflectors_deferred = len(renderer.analysis.cube_mapped) - len(renderer.analysis.cubes_at_start)
         _say(
             f"[walkthrough] {label}: start-up cold {cold:.1f} s, warm {warm:.1f} s; {cubes} cube maps; {frames} frames"
@@ -247,14 +253,15 @@ def budget_walk(ctx, label, scene, env, path, method, size, frames: int, face_si
     the time of both, the cube maps evicted and restored, and the memory resident after it."""
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     cube_dir = Path(tempfile.mkdtemp(prefix="lobeview-budget-"))
     try:
         _say(f"[walkthrough] {label}: the path with a cube-map budget of {budget_mb:g} MB")
         renderers = {
             budget: SceneRenderer(
-                ctx, scene, env, size=size, cube_face_size=face_size, cache_dir=cube_dir, progress=False,
-                cube_budget_mb=budget,
+                ctx, scene, env, size=size, cache_dir=cube_dir, progress=False,
+                settings=RenderSettings(cube_face_size=face_size, cube_budget_mb=budget),
             )
             for budget in (None, budget_mb)
         }  # fmt: skip
@@ -263,7 +270,7 @@ def budget_walk(ctx, label, scene, env, path, method, size, frames: int, face_si
         for renderer in renderers.values():  # compile the variants
             renderer.draw_frame(cameras[0], method)
         budgeted = renderers[budget_mb]
-        residency = budgeted.residency
+        residency = budgeted.probes.residency
         for n, camera in enumerate(cameras):
             times = {}
             for budget, renderer in renderers.items():
@@ -413,11 +420,11 @@ def run_walkthrough_bench(
     quick: bool,
     budget_mb: float = DEFAULT_BUDGET_MB,
 ) -> Path:
-    from lobeview.app.options import load_scene_and_environment
     from lobeview.core.methods import Method
     from lobeview.scenes.apartment import apartment_path, build_apartment_scene
     from lobeview.scenes.demo import demo_path
     from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.setup import load_scene_and_environment
 
     method_obj = Method.parse(method)
     t_start = time.perf_counter()
@@ -498,7 +505,7 @@ def run_walkthrough_bench(
 
 def run_walkthrough_command(args, out_dir: Path, stamp: str) -> int:
     """``lobeview bench walkthrough`` with the command line's options."""
-    from lobeview.app.options import parse_size
+    from lobeview.core.errors import parse_size
     from lobeview.core.paths import cache_dir
     from lobeview.scenes.apartment import DEFAULT_ROOMS
     from lobeview.viewer.context import create_headless_context, renderer_description

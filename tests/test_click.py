@@ -33,19 +33,25 @@ def _click_targets():
     the panel), from a headless render of the overview at the window's size."""
     from scipy.ndimage import distance_transform_edt
 
-    from lobeview.app.options import scene_view
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene
     from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.setup import scene_view
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = load_gltf(build_demo_scene())
     position, target, up, fov = scene_view(scene, "overview")
     ctx = create_headless_context()
     renderer = SceneRenderer(
-        ctx, scene, load_environment(DEMO_ENVIRONMENT), size=SIZE, cube_face_size=16, progress=False
+        ctx,
+        scene,
+        load_environment(DEMO_ENVIRONMENT),
+        size=SIZE,
+        progress=False,
+        settings=RenderSettings(cube_face_size=16),
     )
     renderer.render(Camera(position, target, up, fov), "lobe-3")
     width, height = SIZE

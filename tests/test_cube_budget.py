@@ -19,10 +19,10 @@ SIZE = (160, 100)
 
 @pytest.fixture(scope="module")
 def demo():
-    from lobeview.app.options import scene_view
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene
     from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.setup import scene_view
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
 
@@ -35,11 +35,20 @@ def demo():
 
 def _renderer(demo, cache_dir, budget):
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     ctx, scene, env, _ = demo
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return SceneRenderer(ctx, scene, env, size=SIZE, cache_dir=cache_dir, progress=False, cube_budget_mb=budget)
+        return SceneRenderer(
+            ctx,
+            scene,
+            env,
+            size=SIZE,
+            cache_dir=cache_dir,
+            progress=False,
+            settings=RenderSettings(cube_budget_mb=budget),
+        )
 
 
 def _resident_bytes(renderer) -> int:
@@ -51,13 +60,13 @@ def test_budget_evicts_what_the_frame_did_not_draw_and_restores_it_exactly(demo,
     method = Method.parse("lobe-7+norm")
     plain = _renderer(demo, tmp_path, None)
     expected = {view: plain.render(camera, method).radiance for view, camera in cameras.items()}
-    assert plain.residency.evictions == 0
+    assert plain.probes.residency.evictions == 0
     plain.release()
     budgeted = _renderer(demo, tmp_path, BUDGET_MB)  # the same cache folder: start-up from disk
     try:
         table = budgeted.render(cameras["table"], method)
         drawn = set(np.unique(table.object_id)) - {-1}
-        residency = budgeted.residency
+        residency = budgeted.probes.residency
         assert residency.evictions > 0
         for obj in budgeted.objects:
             if obj.index in residency.evicted:
@@ -84,7 +93,7 @@ def test_without_a_cache_evicted_cube_maps_are_rendered_again(demo):
         before = budgeted.render(cameras["overview"], method).radiance
         budgeted.render(cameras["table"], method)
         after = budgeted.render(cameras["overview"], method).radiance
-        assert budgeted.residency.restores.get("rendered", 0) > 0
+        assert budgeted.probes.residency.restores.get("rendered", 0) > 0
         # Rendered again as one bounce over the final cube maps (as a refreshed cube): close to
         # the start-up cube map, not bit-identical.
         assert np.abs(after - before).max() <= 0.05 * before.max()

@@ -113,6 +113,7 @@ def demo_renderers():
     from lobeview.scenes.gltf_loader import load_gltf
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = load_gltf(build_demo_scene())
     env = load_environment(DEMO_ENVIRONMENT)
@@ -125,11 +126,9 @@ def demo_renderers():
                 scene,
                 env,
                 size=(240, 150),
-                cube_face_size=128,
                 progress=False,
-                lobe_width_cubes=lobe_width,
-                shared_probes=False,  # the sizes alone (tests/test_probe_groups.py: sharing)
-            )  # fmt: skip
+                settings=RenderSettings(cube_face_size=128, lobe_width_cubes=lobe_width, shared_probes=False),
+            )
             for lobe_width in (False, True)
         }
     yield scene, renderers
@@ -158,8 +157,8 @@ def test_frame_with_lobe_width_faces_stays_close_to_full_faces(demo_renderers, m
     30 dB PSNR at the frame's exposure (measured: the gold torus at 32^2 33.5 dB with lobe-11,
     45.3 with lobe-3, 35.9 with fis-16; table, table top, spheres and frosted pane 58-76 dB), the
     glossy pixels within 2 % relative RMSE (measured 0.4-0.6 %)."""
-    from lobeview.app.options import scene_view
     from lobeview.bench.metrics import exposure_for, psnr_8bit, relative_rmse
+    from lobeview.scenes.setup import scene_view
     from lobeview.viewer.camera import Camera
 
     scene, renderers = demo_renderers
@@ -205,12 +204,13 @@ def test_reflectors_get_cube_maps_only_when_a_frame_shades_them_from_one(demo_re
     bounce and from the mirror passes (overview, lobe-11, full face 128, 240x150): glossy pixels
     within 4 % relative RMSE (measured 2.4 % at 400x250; the panes, which see the floor, and
     the chrome sphere lowest), the chrome sphere above 35 dB (measured 38.5)."""
-    from lobeview.app.options import scene_view
     from lobeview.bench.metrics import exposure_for, psnr_8bit, relative_rmse
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.scenes.demo import DEMO_ENVIRONMENT
+    from lobeview.scenes.setup import scene_view
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene, renderers = demo_renderers
     renderer = renderers[True]
@@ -222,9 +222,13 @@ def test_reflectors_get_cube_maps_only_when_a_frame_shades_them_from_one(demo_re
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         eager = SceneRenderer(
-            renderer.ctx, scene, load_environment(DEMO_ENVIRONMENT), size=(240, 150), cube_face_size=128,
-            progress=False, reflector_cubes_on_demand=False,
-        )  # fmt: skip
+            renderer.ctx,
+            scene,
+            load_environment(DEMO_ENVIRONMENT),
+            size=(240, 150),
+            progress=False,
+            settings=RenderSettings(cube_face_size=128, reflector_cubes_on_demand=False),
+        )
     try:
         assert all(eager.objects[i].cube is not None for i in reflectors)
         expected = eager.render(camera, Method.parse("lobe-11+norm"))
@@ -237,7 +241,7 @@ def test_reflectors_get_cube_maps_only_when_a_frame_shades_them_from_one(demo_re
     scale = 2.0 ** exposure_for(expected.radiance, glossy)
     chrome = expected.object_id == next(i for i, o in enumerate(scene.objects) if o.name == "chrome sphere")
     assert psnr_8bit(*(np.clip(r.radiance[chrome] * scale, 0, 1) for r in (result, expected))) > 35.0
-    renderer.set_mirrors(False)  # the reflectors are now shaded from cube maps: built on demand
+    renderer.configure(mirrors=False)  # the reflectors are now shaded from cube maps: built on demand
     try:
         renderer.render(camera, Method.parse("lobe-3+norm"))
         assert all(renderer.objects[i].cube is not None for i in reflectors)
@@ -245,15 +249,15 @@ def test_reflectors_get_cube_maps_only_when_a_frame_shades_them_from_one(demo_re
             renderer.analysis.objects[i].cube_face for i in reflectors
         ]
     finally:
-        renderer.set_mirrors(True)
+        renderer.configure(mirrors=True)
 
 
 def test_refinement_gets_full_faces_for_the_objects_in_view(demo_renderers):
     """The viewer's refinement reads level 0: request_full_faces queues the sized cube maps in view
     and refresh_one_stale_cube re-renders them at full size, after which a reference frame is
     closer to the all-full renderer's (same samples) than before."""
-    from lobeview.app.options import scene_view
     from lobeview.bench.metrics import relative_rmse
+    from lobeview.scenes.setup import scene_view
     from lobeview.viewer.camera import Camera
 
     scene, renderers = demo_renderers
@@ -272,7 +276,7 @@ def test_refinement_gets_full_faces_for_the_objects_in_view(demo_renderers):
     before = error()
     queued = sized.request_full_faces(camera)
     small_in_view = {"gold torus", "table"} & {
-        obj.name for obj in sized.objects if obj.index in sized.cube_bake.upgrades
+        obj.name for obj in sized.objects if obj.index in sized.probes.bake.upgrades
     }
     assert queued >= 2 and small_in_view == {"gold torus", "table"}
     assert sized.stale_cube_count == queued

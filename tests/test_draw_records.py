@@ -20,18 +20,21 @@ def _demo(ctx, **options):
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.gltf_loader import load_gltf
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = load_gltf(build_demo_scene())
     env = EnvironmentMap.from_function(_smooth_env, height=32, name="smooth")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        renderer = SceneRenderer(ctx, scene, env, size=(96, 60), cube_face_size=32, progress=False, **options)
+        renderer = SceneRenderer(
+            ctx, scene, env, size=(96, 60), progress=False, **options, settings=RenderSettings(cube_face_size=32)
+        )
     cam = next(c for c in scene.cameras if c.name == "overview")
     return renderer, Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
 
 
 def _frame(renderer, camera, method, records: bool, spp: int = 1) -> np.ndarray:
-    renderer.draw_records = records
+    renderer.configure(draw_records=records)
     renderer.invalidate_mirrors()
     return renderer.render(camera, method, spp=spp).radiance
 
@@ -41,16 +44,16 @@ def test_recorded_draw_state_renders_the_frames_bit_for_bit(ctx, method):
     renderer, camera = _demo(ctx)
     spp = 3 if method == "reference" else 1  # passes with their own seeds and sample offsets
     plain = _frame(renderer, camera, method, records=False, spp=spp)
-    builds = renderer.record_builds
+    builds = renderer.shading.record_builds
     recorded = _frame(renderer, camera, method, records=True, spp=spp)
-    assert renderer.record_builds > builds  # the records were made by this frame
+    assert renderer.shading.record_builds > builds  # the records were made by this frame
     np.testing.assert_array_equal(recorded, plain)
     # Drawn again, nothing is recorded anew and most uniform values are already in place.
-    builds = renderer.record_builds
+    builds = renderer.shading.record_builds
     UNIFORM_WRITES.reset()
     again = _frame(renderer, camera, method, records=True, spp=spp)
     np.testing.assert_array_equal(again, plain)
-    assert renderer.record_builds == builds
+    assert renderer.shading.record_builds == builds
     assert UNIFORM_WRITES.skipped > 2 * UNIFORM_WRITES.written > 0
     renderer.release()
 
@@ -58,12 +61,15 @@ def test_recorded_draw_state_renders_the_frames_bit_for_bit(ctx, method):
 def test_textured_gltf_material_replays_its_maps_and_samplers(ctx):
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = _textured_quad_scene()
     env = EnvironmentMap.from_function(_smooth_env, height=32, name="smooth")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        renderer = SceneRenderer(ctx, scene, env, size=(64, 64), cube_face_size=32, progress=False)
+        renderer = SceneRenderer(
+            ctx, scene, env, size=(64, 64), progress=False, settings=RenderSettings(cube_face_size=32)
+        )
     camera = Camera((0.0, 1.2, 1.4), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 50.0)
     for method in ("lobe-5", "lobe-5+norm"):
         plain = _frame(renderer, camera, method, records=False)
@@ -79,7 +85,7 @@ def test_records_follow_material_edits_and_proxy_changes(ctx):
 
     recorded, camera = _demo(ctx)
     plain, _ = _demo(ctx)
-    plain.draw_records = False
+    plain.configure(draw_records=False)
     before = _frame(recorded, camera, "lobe-5", records=True)
     index = next(i for i, o in enumerate(recorded.objects) if o.name == "gold torus")
     desc = dict(recorded.scene.materials[recorded.scene.objects[index].material].desc)

@@ -24,13 +24,14 @@ from lobeview.materials.fit import (
 )
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import build_bsdf, load_material, validate
+from lobeview.materials.virtual import virtual_measurement
 
 # A coarse goniophotometer keeps each fit to about a second; the peak scan still resolves lobes.
 COARSE = dict(theta_i_deg=(0.0, 20.0, 50.0, 65.0), phi_i_deg=(0.0, 45.0, 90.0), theta_step_deg=10.0, phi_step_deg=30.0)
 
 
 def _virtual(name, **kw):
-    return meas.virtual_measurement(validate(PRESETS[name]), **{**COARSE, **kw})
+    return virtual_measurement(validate(PRESETS[name]), **{**COARSE, **kw})
 
 
 def _albedo(desc, theta_deg=0.0):

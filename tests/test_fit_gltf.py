@@ -12,6 +12,7 @@ from lobeview.materials import measurement as meas
 from lobeview.materials.fit import FitError, material_error
 from lobeview.materials.fit_gltf import GltfFitOptions, GltfFitProblem, best_scale, fit_gltf
 from lobeview.materials.spec import build_bsdf, load_material, validate
+from lobeview.materials.virtual import virtual_measurement
 
 # A coarse goniophotometer (the peak scan still resolves the lobes) keeps each fit to seconds.
 COARSE = dict(theta_i_deg=(0.0, 20.0, 50.0, 65.0), phi_i_deg=(0.0, 45.0, 90.0), theta_step_deg=10.0, phi_step_deg=30.0)
@@ -22,7 +23,7 @@ def _gltf(**kw) -> dict:
 
 
 def _measure(desc: dict, **kw) -> meas.Measurement:
-    return meas.virtual_measurement(desc, **{**COARSE, **kw})
+    return virtual_measurement(desc, **{**COARSE, **kw})
 
 
 def test_model_is_multilinear_in_metallic_transmission_and_base_colour():

@@ -46,11 +46,14 @@ def _spp(method: str) -> int:
 def _renderer(ctx, scene, size=SIZE, **options):
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     env = EnvironmentMap.from_function(_smooth_env, height=32, name="smooth")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return SceneRenderer(ctx, scene, env, size=size, cube_face_size=32, progress=False, **options)
+        return SceneRenderer(
+            ctx, scene, env, size=size, progress=False, **options, settings=RenderSettings(cube_face_size=32)
+        )
 
 
 def _scene_camera(scene, name=None) -> Camera:

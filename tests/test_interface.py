@@ -34,7 +34,7 @@ SHADER_FILES = sorted(p.name for p in resources.files("lobeview.shaders").iterdi
 
 @pytest.fixture(scope="module")
 def programs():
-    from lobeview.bench.testing import headless_gl
+    from lobeview.viewer.gl_probes import headless_gl
 
     with headless_gl() as ctx:
         yield ProgramCache(ctx)

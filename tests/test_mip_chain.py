@@ -32,7 +32,7 @@ def _levels(ctx, cube, count: int) -> list[np.ndarray]:
 
 def test_gpu_tent_levels_match_numpy_inside_faces_and_keep_constants_and_means():
     from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.cubemap import upload_cube
+    from lobeview.viewer.mip_chain import upload_cube
 
     ctx = create_headless_context()
     try:
@@ -145,8 +145,7 @@ def test_chains_compile_their_shaders_once_per_context():
     """A mirror buffer re-filtered every frame and cube maps uploaded one after another reuse the
     context's compute shaders (a new GL program per chain was made and never released)."""
     from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.cubemap import upload_cube
-    from lobeview.viewer.mip_chain import build_mip_chain, read_cube_level
+    from lobeview.viewer.mip_chain import build_mip_chain, read_cube_level, upload_cube
 
     ctx = create_headless_context()
     compiled = []

@@ -91,20 +91,21 @@ FLOOR_ROUGHNESS = 0.01  # polished: a margin of ~20 px; the glossy wall (0.05) r
 def far_floor():
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     ctx = create_headless_context()
     sky = EnvironmentMap.from_function(
         lambda d: np.where(d[..., 1:2] > 0.3, np.array([4.0, 3.5, 3.0]), np.full(3, GREY)), height=32, name="sky"
     )
     scene = mirror_floor_scene(FLOOR_ROUGHNESS, extra_reflector=True)
-    renderer = SceneRenderer(ctx, scene, sky, size=SIZE, cube_face_size=32, progress=False)
+    renderer = SceneRenderer(ctx, scene, sky, size=SIZE, progress=False, settings=RenderSettings(cube_face_size=32))
     yield renderer
     renderer.release()
     ctx.release()
 
 
 def _frame(renderer, method: str, scissor: bool):
-    renderer.mirror_scissor = scissor
+    renderer.configure(mirror_scissor=scissor)
     renderer.invalidate_mirrors()
     result = renderer.render(FAR, Method.parse(method))
     return result.radiance, dict(renderer.mirror_passes.scissored_pixels), list(renderer.mirror_report)

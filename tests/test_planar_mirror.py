@@ -147,8 +147,9 @@ def _grey():
 
 def _renderer(ctx, scene, size=SIZE):
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
-    return SceneRenderer(ctx, scene, _grey(), size=size, cube_face_size=64, progress=False)
+    return SceneRenderer(ctx, scene, _grey(), size=size, progress=False, settings=RenderSettings(cube_face_size=64))
 
 
 def _buffers(renderer, index=0, kind="mirror") -> MirrorBuffers:
@@ -331,7 +332,7 @@ def test_refinement_averages_the_tangent_planes_across_passes(glossy_floor):
     schemes apart."""
     from lobeview.core.methods import REFERENCE_BATCH
     from lobeview.scenes.planar_mirror import TangentPlaneAverage, project_samples_averaged
-    from lobeview.viewer.render_base import sobol_points
+    from lobeview.viewer.shading import sobol_points
 
     renderer = glossy_floor
     # Point-sampled: the numpy side shades the pixel centres the G-buffer holds.
@@ -455,8 +456,8 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
     # prefiltered frame's report kept.
     renderer.render(_camera(), "lobe-3")
     assert unscissored(renderer.mirror_report) == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
-    renderer.enabled_reflectors = {0}
-    renderer.mirror_scale = 0.5
+    renderer.configure(enabled_reflectors={0})
+    renderer.configure(mirror_scale=0.5)
     result = renderer.render(_camera(), "lobe-3")
     assert unscissored(renderer.mirror_report) == ["floor: mirror pass 120x80"]
     assert np.all(np.isfinite(result.radiance)) and not result.invalid.any()
@@ -512,12 +513,12 @@ def test_reflector_hidden_behind_opaque_objects_gets_no_mirror_pass(ctx, case, x
     assert 0 in renderer.mirror_passes.drawn  # the floor in front of the screen is seen
     if hidden:
         assert "glossy wall: no mirror pass (hidden behind other objects)" in renderer.mirror_report
-        renderer.mirror_occlusion = False
+        renderer.configure(mirror_occlusion=False)
         drawn = renderer.render(_camera(), "lobe-3")
         assert WALL in renderer.mirror_passes.drawn
         np.testing.assert_array_equal(drawn.radiance, culled.radiance)
         # The box-filtered reference shades off the pixel centres: the test does not apply.
-        renderer.mirror_occlusion = True
+        renderer.configure(mirror_occlusion=True)
         renderer.render(_camera(), "reference", spp=1)
         assert WALL in renderer.mirror_passes.drawn
     else:

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from test_render_vs_numpy import CAMERA, SIZE, _frame, _pixels, smooth_sky
 
-from lobeview.bench.testing import CubeLookup
 from lobeview.core.methods import Method
 from lobeview.materials import prefilter as pf
 from lobeview.materials.banks import fit_banks
@@ -28,6 +27,7 @@ from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.envmap import EnvironmentMap, equirect_direction
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.context import create_headless_context
+from lobeview.viewer.gl_probes import CubeLookup
 from lobeview.viewer.material_gpu import pack_material
 from lobeview.viewer.preview import PreviewRenderer
 
@@ -248,7 +248,7 @@ def test_narrow_fitted_lobes_read_the_cube_and_build_no_map(gl):
     fit = fit_lobe_map(comp, "lobe")
     assert not needs_lobe_map([fit], "lobe")
     assert max(p.median_angle for p in fit.profiles) < lobe_direct_angle("lobe")
-    memory = renderer.method_memory(renderer.cubes, pack_material(bsdf), Method.parse("prefiltered"))
+    memory = renderer.shading.method_memory(renderer.cubes, pack_material(bsdf), Method.parse("prefiltered"))
     assert not any(key.startswith("lobe map") for key in memory), memory
     result = renderer.render(CAMERA, bsdf, "prefiltered", background=False)
     assert not result.invalid.any()
@@ -362,10 +362,10 @@ def test_per_material_textures_are_made_once_across_frames(gl):
     normalised = dataclasses.replace(Method.parse("lobe-7"), normalize=True)
     for method in (normalised, Method.parse("prefiltered-multi")):
         renderer.render(CAMERA, bsdf, method, background=False)
-    textures = len(renderer._material_textures)
+    textures = len(renderer.shading.material_textures)
     maps = len(renderer.cubes.prefiltered_maps()._by_fit)
     for _ in range(2):
         for method in (normalised, Method.parse("prefiltered-multi")):
             renderer.render(CAMERA, bsdf, method, background=False)
-    assert len(renderer._material_textures) == textures
+    assert len(renderer.shading.material_textures) == textures
     assert len(renderer.cubes.prefiltered_maps()._by_fit) == maps

@@ -108,6 +108,7 @@ def _renderers(ctx, budget=None):
     import warnings
 
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     env = _env()
     out = {}
@@ -115,9 +116,13 @@ def _renderers(ctx, budget=None):
         warnings.simplefilter("ignore")  # no lightmaps here
         for shared in (False, True):
             out[shared] = SceneRenderer(
-                ctx, _props_scene(), env, size=(120, 80), cube_face_size=64, progress=False,
-                shared_probes=shared, cube_budget_mb=budget,
-            )  # fmt: skip
+                ctx,
+                _props_scene(),
+                env,
+                size=(120, 80),
+                progress=False,
+                settings=RenderSettings(cube_face_size=64, shared_probes=shared, cube_budget_mb=budget),
+            )
     return out
 
 
@@ -133,8 +138,8 @@ def test_nearby_small_objects_share_one_cube_map_within_a_small_error(ctx):
 
     renderers = _renderers(ctx)
     own, shared = renderers[False], renderers[True]
-    assert [g.members for g in shared.probe_groups] == [(1, 2, 3)]
-    assert own.probe_groups == []
+    assert [g.members for g in shared.probes.groups] == [(1, 2, 3)]
+    assert own.probes.groups == []
     assert [o.cube is not None for o in shared.objects] == [False, True, False, False, True]
     assert [o.cube is not None for o in own.objects] == [False, True, True, True, True]
     assert shared.objects[1].probe_centre == pytest.approx([0.0, 0.08, 0.0], abs=1e-6)
@@ -163,7 +168,7 @@ def test_an_edit_regroups_as_a_fresh_start_and_refinement_dissolves(ctx):
     renderers[False].release()
     # Ball 2 becomes chrome: its lobes are too narrow to share; balls 1 and 3 still link.
     shared.update_material(2, load_material("chrome"))
-    assert [g.members for g in shared.probe_groups] == [(1, 3)]
+    assert [g.members for g in shared.probes.groups] == [(1, 3)]
     assert shared.objects[2].probe_owner == 2 and shared.objects[2].cube is not None
     assert shared.objects[3].probe_owner == 1 and shared.objects[3].cube is None
     assert shared.objects[1].probe_exclude == frozenset((1, 3))
@@ -172,15 +177,22 @@ def test_an_edit_regroups_as_a_fresh_start_and_refinement_dissolves(ctx):
     import warnings
 
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fresh = SceneRenderer(ctx, shared.scene, _env(), size=(120, 80), cube_face_size=64,
-                              progress=False, shared_probes=True)  # fmt: skip
-    assert [g.members for g in fresh.probe_groups] == [(1, 3)]
+        fresh = SceneRenderer(
+            ctx,
+            shared.scene,
+            _env(),
+            size=(120, 80),
+            progress=False,
+            settings=RenderSettings(cube_face_size=64, shared_probes=True),
+        )
+    assert [g.members for g in fresh.probes.groups] == [(1, 3)]
     camera = Camera((0.0, 0.5, 0.9), (0.0, 0.08, 0.0), (0.0, 1.0, 0.0), 40.0)
     fresh.request_full_faces(camera)  # the group is in view: dissolved (then queued for full faces)
-    assert fresh.probe_groups == [] and all(fresh.objects[i].probe_owner == i for i in (1, 2, 3))
+    assert fresh.probes.groups == [] and all(fresh.objects[i].probe_owner == i for i in (1, 2, 3))
     assert all(fresh.objects[i].cube is not None for i in (1, 2, 3))
     for renderer in (shared, fresh):
         renderer.release()
@@ -191,16 +203,23 @@ def test_a_member_edited_to_narrower_lobes_resizes_the_shared_probe(ctx):
 
     from lobeview.materials.spec import load_material, validate
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     rough = validate({"model": "gltf", "base_color": [0.5, 0.5, 0.5], "metallic": 0.0, "roughness": 0.9})
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        renderer = SceneRenderer(ctx, _props_scene(rough), _env(), size=(64, 40), cube_face_size=64, progress=False,
-                                 shared_probes=True)  # fmt: skip
-    assert [g.members for g in renderer.probe_groups] == [(1, 2, 3)]
+        renderer = SceneRenderer(
+            ctx,
+            _props_scene(rough),
+            _env(),
+            size=(64, 40),
+            progress=False,
+            settings=RenderSettings(cube_face_size=64, shared_probes=True),
+        )
+    assert [g.members for g in renderer.probes.groups] == [(1, 2, 3)]
     assert renderer.objects[1].cube.face_size == 32
     renderer.update_material(2, load_material("plastic"))  # a member, not the owner: still wide enough
-    assert [g.members for g in renderer.probe_groups] == [(1, 2, 3)]
+    assert [g.members for g in renderer.probes.groups] == [(1, 2, 3)]
     assert renderer.objects[1].cube.face_size == 64 and renderer.objects[2].cube is None
     assert "shared probe 64^2" in renderer.analysis.report()
     renderer.release()
@@ -219,7 +238,7 @@ def test_a_member_in_view_restores_its_groups_evicted_probe(ctx):
     camera = Camera((0.25, 0.35, 0.45), (0.25, 0.08, 0.0), (0.0, 1.0, 0.0), 20.0)
     got, ids = _member_pixels(shared, camera)
     assert (ids == 3).sum() > 100 and not (ids == 1).any()
-    assert shared.residency.restores  # restored for the member
+    assert shared.probes.residency.restores  # restored for the member
     want, _ = _member_pixels(renderers[True], camera)
     np.testing.assert_array_equal(got, want)
     for renderer in renderers.values():
@@ -242,7 +261,7 @@ def test_the_option_shares_only_where_faces_follow_the_lobes(ctx, tmp_path):
             renderer = scene_renderer_from_args(
                 ctx, _props_scene(), _env(), (64, 40), tmp_path, args, Method.parse(method)
             )
-        assert [g.members for g in renderer.probe_groups] == expected, (flag, method)
+        assert [g.members for g in renderer.probes.groups] == expected, (flag, method)
         renderer.release()
 
 
@@ -255,7 +274,7 @@ def test_probe_sharing_bench_measures_each_member_and_reports(ctx):
     renderers = _renderers(ctx)
     own, shared = renderers[False], renderers[True]
     method = Method.parse("lobe-5")
-    views = _views(own, shared.probe_groups, method)
+    views = _views(own, shared.probes.groups, method)
     assert len(views) == 2 and all(members == (1, 2, 3) for members, _ in views)
     figure = []
     rows = member_errors(own, shared, views, method, figure)

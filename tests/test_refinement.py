@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 from conftest import run_scripted_view
 
-from lobeview.app.refinement import (
+from lobeview.core.methods import MAX_REFERENCE_SPP, MIN_PIXEL_POSITIONS, REFERENCE_BATCH, Method, MethodError
+from lobeview.viewer.camera import Camera, jittered, pixel_offset
+from lobeview.viewer.refinement import (
     CONVERGED_NOISE,
     FIRST_ESTIMATE_AT,
     HALF_SAMPLE_BUDGET,
@@ -19,8 +21,6 @@ from lobeview.app.refinement import (
     RefinementEstimate,
     two_half_estimate,
 )
-from lobeview.core.methods import MAX_REFERENCE_SPP, MIN_PIXEL_POSITIONS, REFERENCE_BATCH, Method, MethodError
-from lobeview.viewer.camera import Camera, jittered, pixel_offset
 from lobeview.viewer.tonemap import tonemap
 
 
@@ -106,12 +106,12 @@ def test_reference_is_the_box_filtered_pixel_integral_of_a_mirror_sphere():
     """Issue 20: `reference` on an env-lit mirror sphere equals the box-filtered pixel integral
     of a ray-traced analytic sphere. The point-sampled reference (pixel centres) is ~14x
     further off (measured: relative RMSE 0.3 % box, 4.2 % point), so the test tells them apart."""
-    from lobeview.bench.testing import CubeLookup
     from lobeview.materials.microfacet import ALPHA_MIN
     from lobeview.materials.spec import build_bsdf
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.meshes import uv_sphere
     from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.gl_probes import CubeLookup
     from lobeview.viewer.preview import PreviewRenderer
 
     size = (48, 48)

@@ -172,11 +172,19 @@ def tiled_floor():
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     ctx = create_headless_context()
     env = EnvironmentMap.from_function(lambda d: np.full(d.shape[:-1] + (3,), 0.5), height=16, name="grey")
     renderers = [
-        SceneRenderer(ctx, _tiled_floor_scene(uniform), env, size=(320, 240), cube_face_size=512, progress=False)
+        SceneRenderer(
+            ctx,
+            _tiled_floor_scene(uniform),
+            env,
+            size=(320, 240),
+            progress=False,
+            settings=RenderSettings(cube_face_size=512),
+        )
         for uniform in (False, True)
     ]
     camera = Camera(position=(0.0, 0.75, 1.6), target=(0.0, 0.35, 0.0), fov_y=45.0)

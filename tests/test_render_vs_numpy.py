@@ -9,7 +9,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lobeview.bench.testing import CubeLookup
 from lobeview.core.cube_layout import face_directions
 from lobeview.materials.bsdf import BSDF, diffuse_albedo
 from lobeview.materials.patterns import integrate_lobe, specular_lobes
@@ -18,6 +17,7 @@ from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context
+from lobeview.viewer.gl_probes import CubeLookup
 from lobeview.viewer.preview import PreviewRenderer
 
 

@@ -162,10 +162,10 @@ def test_map_rows_follow_the_narrowest_lobe():
 def gl():
     from test_render_vs_numpy import SIZE, smooth_sky
 
-    from lobeview.bench.testing import CubeLookup
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.meshes import uv_sphere
     from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.gl_probes import CubeLookup
     from lobeview.viewer.preview import PreviewRenderer
 
     ctx = create_headless_context()
@@ -252,7 +252,7 @@ def test_render_matches_the_numpy_warp_and_blend(gl, preset):
 def test_plan_bakes_reflection_lobes_and_leaves_the_rest_to_auto():
     from lobeview.materials.spec import build_bsdf, load_material
     from lobeview.viewer.material_gpu import pack_material
-    from lobeview.viewer.render_base import prefilter_plan
+    from lobeview.viewer.shading import prefilter_plan
 
     frosted = pack_material(build_bsdf(load_material("frosted-glass")))
     assert prefilter_plan(frosted, "rsibr") == ["rsibr", "lobe"]  # the thin transmission lobe: a lobe map
@@ -266,7 +266,7 @@ def test_scene_materials_with_lobe_textures_are_not_baked():
     occlusion, emission and (without a clearcoat) the normal map: such materials keep the
     automatic lookup under prefiltered-rsibr."""
     from lobeview.scenes.scene import SceneMaterial
-    from lobeview.viewer.scene_renderer import per_pixel_lobes
+    from lobeview.viewer.scene_shading import per_pixel_lobes
 
     gltf = {"model": "gltf", "base_color": [0.8, 0.8, 0.8], "metallic": 1.0, "roughness": 0.3}
     slot = object()  # only the slot names matter here

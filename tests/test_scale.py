@@ -52,6 +52,7 @@ def _scaled(scene, factor):
 def _render(ctx, factor):
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = _scaled(mirror_floor_scene(roughness=0.05), factor)
     environment = EnvironmentMap.from_function(
@@ -59,7 +60,9 @@ def _render(ctx, factor):
         height=32,
         name="gradient",
     )
-    renderer = SceneRenderer(ctx, scene, environment, size=SIZE, cube_face_size=32, progress=False)
+    renderer = SceneRenderer(
+        ctx, scene, environment, size=SIZE, progress=False, settings=RenderSettings(cube_face_size=32)
+    )
     try:
         camera = Camera(tuple(CAMERA.position * factor), tuple(CAMERA.target * factor), (0, 1, 0), CAMERA.fov_y)
         return renderer.render(camera, "lobe-5").radiance

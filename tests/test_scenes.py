@@ -16,13 +16,15 @@ from lobeview.scenes.analysis import analyse
 from lobeview.scenes.baker import bake_lightmap
 from lobeview.scenes.demo import build_demo_scene
 from lobeview.scenes.envmap import EnvironmentMap
-from lobeview.scenes.gltf_loader import GltfError, GltfWarning, load_gltf
+from lobeview.scenes.gltf_common import GltfError, GltfWarning
+from lobeview.scenes.gltf_loader import load_gltf
 from lobeview.scenes.gltf_writer import write_glb
 from lobeview.scenes.meshes import box_mesh, quad
 from lobeview.scenes.scene import Lightmap, Scene, SceneCamera, SceneMaterial, SceneObject
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.mirror_pass import unscissored
 from lobeview.viewer.scene_renderer import SceneRenderer
+from lobeview.viewer.settings import RenderSettings
 
 
 def _diffuse(kd):
@@ -323,8 +325,8 @@ def test_cube_faces_point_where_the_layout_says(ctx):
             Scene(objects, materials),
             EnvironmentMap(np.zeros((8, 16, 3), np.float32)),
             size=(8, 8),
-            cube_face_size=16,
             progress=False,
+            settings=RenderSettings(cube_face_size=16),
         )
     faces = renderer.render_cube_faces(np.zeros(3))
     for face in range(6):
@@ -364,8 +366,8 @@ def test_chrome_box_in_a_uniform_room_reflects_the_room(ctx):
             room,
             EnvironmentMap(np.zeros((8, 16, 3), np.float32)),
             size=(48, 48),
-            cube_face_size=32,
             progress=False,
+            settings=RenderSettings(cube_face_size=32),
         )
     result = renderer.render(Camera((0.0, 0.0, 2.5), (0.0, 0.0, 0.0)), "reference", spp=256)
     centre = result.radiance[20:28, 20:28]
@@ -391,9 +393,9 @@ def test_demo_scene_builds_renders_and_is_cached(ctx, tmp_path):
         scene,
         EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), 16),
         size=(64, 40),
-        cube_face_size=32,
         cache_dir=tmp_path / "cubes",
         progress=False,
+        settings=RenderSettings(cube_face_size=32),
     )
     cam = scene.cameras[0]
     result = renderer.render(Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y), "lobe-5")

@@ -154,7 +154,7 @@ def test_object_mesh_files_keep_their_surface(tmp_path, capsys):
     import trimesh
 
     from lobeview.scenes.gltf_loader import load_gltf
-    from lobeview.scenes.meshes import load_mesh_file
+    from lobeview.scenes.mesh_files import load_mesh_file
 
     soup_sphere = trimesh.creation.icosphere(3)
     triangles = soup_sphere.vertices[soup_sphere.faces].reshape(-1, 3)

@@ -53,6 +53,7 @@ def test_culling_skips_objects_and_changes_no_pixel(ctx):
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.gltf_loader import load_gltf
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = load_gltf(build_demo_scene())
     env = EnvironmentMap.from_function(lambda d: 0.5 + 0.5 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 16)
@@ -61,7 +62,12 @@ def test_culling_skips_objects_and_changes_no_pixel(ctx):
         warnings.simplefilter("ignore")
         for culling in (True, False):
             renderers[culling] = SceneRenderer(
-                ctx, scene, env, size=(96, 60), cube_face_size=32, progress=False, frustum_culling=culling
+                ctx,
+                scene,
+                env,
+                size=(96, 60),
+                progress=False,
+                settings=RenderSettings(cube_face_size=32, frustum_culling=culling),
             )
     # Real-time methods never build the environment importance tables (nor does the bake).
     assert not any(o.cube.importance_built for r in renderers.values() for o in r.objects if o.cube is not None)
@@ -105,6 +111,7 @@ def test_depth_pre_pass_draws_the_opaque_objects_and_leaves_the_frame_as_it_was(
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.gltf_loader import load_gltf
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = load_gltf(build_demo_scene())
     scene.materials[0].alpha_mode = "BLEND"  # blended and masked surfaces write no pre-pass depth
@@ -112,15 +119,18 @@ def test_depth_pre_pass_draws_the_opaque_objects_and_leaves_the_frame_as_it_was(
     env = EnvironmentMap.from_function(lambda d: 0.5 + 0.5 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 16)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        renderer = SceneRenderer(ctx, scene, env, size=(160, 100), cube_face_size=32, progress=False)
+        renderer = SceneRenderer(
+            ctx, scene, env, size=(160, 100), progress=False, settings=RenderSettings(cube_face_size=32)
+        )
     not_opaque = {i for i, o in enumerate(scene.objects) if o.material in (0, 1)}
     assert not_opaque
-    assert {obj.index for obj, _ in renderer._opaque_objects(False)} == set(range(len(scene.objects))) - not_opaque
+    opaque = {obj.index for obj, _ in renderer.drawer.opaque_objects(False)}
+    assert opaque == set(range(len(scene.objects))) - not_opaque
     cam = next(c for c in scene.cameras if c.name == "table")
     camera = Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
     images = {}
     for prepass in (False, True):
-        renderer.depth_prepass = prepass
+        renderer.configure(depth_prepass=prepass)
         images[prepass] = renderer.render(camera, "lobe-5", spp=1).radiance
         counts = renderer.draw_counts.of("depth pre-pass")
         if prepass:
@@ -138,6 +148,7 @@ def test_a_damaged_cube_map_cache_is_warned_about_and_rendered_again(ctx, tmp_pa
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.mirror_scene import mirror_floor_scene
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = mirror_floor_scene(0.05)
     env = EnvironmentMap.from_function(lambda d: 0.5 + 0.5 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 16)
@@ -145,9 +156,14 @@ def test_a_damaged_cube_map_cache_is_warned_about_and_rendered_again(ctx, tmp_pa
     def start():
         # The floor is a reflector: with its cube map built at start-up like any glossy object.
         return SceneRenderer(
-            ctx, scene, env, size=(32, 20), cube_face_size=16, cache_dir=tmp_path, progress=False,
-            reflector_cubes_on_demand=False,
-        )  # fmt: skip
+            ctx,
+            scene,
+            env,
+            size=(32, 20),
+            cache_dir=tmp_path,
+            progress=False,
+            settings=RenderSettings(cube_face_size=16, reflector_cubes_on_demand=False),
+        )
 
     first = start()
     (cache_file,) = tmp_path.glob("cubes-*.npz")

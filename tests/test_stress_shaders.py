@@ -28,11 +28,11 @@ from lobeview.bench.stress import (
     white_environment,
 )
 from lobeview.bench.stress import thesis_material as thesis
-from lobeview.bench.testing import CubeLookup
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.patterns import specular_lobes
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.meshes import uv_sphere
+from lobeview.viewer.gl_probes import CubeLookup
 from lobeview.viewer.preview import PreviewRenderer
 
 SIZE = STRESS_SIZE

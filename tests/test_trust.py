@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from lobeview.core.trust import Limits, LoadBudget, parse_budget, resolve_reference
-from lobeview.scenes.gltf_loader import GltfError, GltfWarning, load_gltf
+from lobeview.scenes.gltf_common import GltfError, GltfWarning
+from lobeview.scenes.gltf_loader import load_gltf
 from lobeview.scenes.hdrio import HDRImageError, read_hdr_image
 
 TRIANGLE = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32).tobytes()

@@ -23,6 +23,7 @@ from lobeview.scenes.hdrio import read_hdr_image
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.context import create_headless_context
 from lobeview.viewer.scene_renderer import SceneRenderer
+from lobeview.viewer.settings import RenderSettings
 
 
 def _project(camera: Camera, point, size):
@@ -124,8 +125,8 @@ def test_material_edits_survive_save_and_load_exactly(tmp_path):
                 scene,
                 EnvironmentMap(np.ones((8, 16, 3), np.float32)),
                 size=(32, 20),
-                cube_face_size=16,
                 progress=False,
+                settings=RenderSettings(cube_face_size=16),
             )
         editor = MaterialEditor(renderer)
         index = next(i for i, o in enumerate(scene.objects) if o.name == "brushed panel")

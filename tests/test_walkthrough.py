@@ -159,7 +159,8 @@ def test_apartment_bakes_writes_and_loads_with_its_path(tmp_path):
 
 
 def test_builtin_scene_names():
-    from lobeview.app.options import OptionError, builtin_apartment_rooms
+    from lobeview.core.errors import OptionError
+    from lobeview.scenes.setup import builtin_apartment_rooms
 
     assert builtin_apartment_rooms("builtin:apartment") == 12
     assert builtin_apartment_rooms("builtin:apartment-3") == 3
@@ -265,14 +266,21 @@ def test_apartment_renders_lit_and_finite(small_apartment, tmp_path):
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
 
     scene = small_apartment
     ctx = create_headless_context()
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            renderer = SceneRenderer(ctx, scene, load_environment("builtin:overcast"), size=(160, 100),
-                                     cube_face_size=32, progress=False)  # fmt: skip
+            renderer = SceneRenderer(
+                ctx,
+                scene,
+                load_environment("builtin:overcast"),
+                size=(160, 100),
+                progress=False,
+                settings=RenderSettings(cube_face_size=32),
+            )
         path = apartment_path(4)
         for t in (0.0, path.times[3]):
             result = renderer.render(Camera.from_scene_camera(path.camera_at(t)), "lobe-5", spp=1)

@@ -40,7 +40,7 @@ def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.
 
 PIXEL_OFFSET_TABLE = 4096  # sub-pixel offsets tabulated at once; later passes wrap (pixel_offset)
 # Toroidal shifts of the offset sequence per stream: stream 0 starts at the pixel centre, stream 1
-# (the refinement's second half, app/refinement.py) is the same sequence moved by the R2
+# (the refinement's second half, viewer/refinement.py) is the same sequence moved by the R2
 # sequence's generator, so that its positions differ from stream 0's at every index.
 PIXEL_OFFSET_SHIFTS = ((0.5, 0.5), (0.5 + 0.7548776662466927, 0.5 + 0.5698402909980532))
 

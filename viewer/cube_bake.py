@@ -14,7 +14,6 @@ from __future__ import annotations
 import hashlib
 import sys
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 import moderngl
@@ -80,10 +79,10 @@ def scene_content_key(
 
 
 class CubeBake:
-    """``draw_background(cube, view_projection)`` and ``draw_scene(view_projection, eye, method,
-    specular, exclude)`` are the renderer's; ``objects`` its GPU objects (``.cube``, ``.name``, and
-    ``.probe_centre`` / ``.probe_exclude``: where an object's cube map is rendered from and
-    without whom, scenes/probe_groups.py)."""
+    """Renders cube maps through ``drawer`` (viewer/object_drawer.py ObjectDrawer: its
+    environment, background and draw loop); ``objects`` are its GPU objects (``.cube``,
+    ``.name``, and ``.probe_centre`` / ``.probe_exclude``: where an object's cube map is rendered
+    from and without whom, scenes/probe_groups.py)."""
 
     def __init__(
         self,
@@ -91,9 +90,7 @@ class CubeBake:
         face_size: int,
         bounces: int,
         scene_extent: float,
-        environment: RadianceCube,
-        draw_background: Callable,
-        draw_scene: Callable,
+        drawer,
         progress: bool = True,
         cache_dir: Path | None = None,
         mip_filter: str = DEFAULT_MIP_FILTER,
@@ -107,9 +104,8 @@ class CubeBake:
         self.face_size = int(face_size)
         self.bounces = max(1, int(bounces))
         self.scene_extent = float(scene_extent)
-        self.environment = environment
-        self.draw_background = draw_background
-        self.draw_scene = draw_scene
+        self.environment = drawer.environment
+        self.drawer = drawer
         self.progress = progress
         self.stale: list[int] = []  # cube maps that show an outdated appearance of another object
         # Sized cube maps to re-render at the full face size (refinement in view: SceneRenderer
@@ -139,8 +135,8 @@ class CubeBake:
             for face in range(6):
                 view_proj = proj @ face_view(face, eye)
                 begin_pass(self.ctx, fbo, (size, size))
-                self.draw_background(self.environment, view_proj)
-                self.draw_scene(view_proj, eye, CUBE_BOUNCE_METHOD, specular, exclude)
+                self.drawer.draw_background(self.environment, view_proj)
+                self.drawer.draw(view_proj, eye, CUBE_BOUNCE_METHOD, specular, exclude, pass_kind="cube map")
                 self.ctx.finish()
                 data = np.frombuffer(fbo.read(components=4, attachment=0, dtype="f4"), np.float32)
                 faces[face] = data.reshape(size, size, 4)[..., :3]  # row 0 = t = 0, no flip

@@ -13,7 +13,7 @@ from lobeview.scenes.env_sampling import CubeImportance
 from lobeview.scenes.envmap import EnvironmentMap
 
 from .interface import CDF_ROW
-from .mip_chain import DEFAULT_MIP_FILTER, GL_TEXTURE_CUBE_MAP_SEAMLESS, build_mip_chain, check_mip_filter
+from .mip_chain import DEFAULT_MIP_FILTER, check_mip_filter, upload_cube
 from .shaders import ProgramCache
 
 
@@ -26,26 +26,6 @@ def equirect_to_cube_faces(env: EnvironmentMap, size: int, supersample: int = 2)
         values = env.lookup(dirs.reshape(-1, 3)).reshape(dirs.shape[:-1] + (3,))
         faces[face] = values.mean(axis=2) if supersample > 1 else values
     return faces
-
-
-def upload_cube(
-    ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True, mip_filter: str = DEFAULT_MIP_FILTER
-) -> moderngl.TextureCube:
-    """An RGBA32F cube map of ``faces`` (6, S, S, 3), with a MIP chain made by ``mip_filter``
-    (viewer/mip_chain.py) or none."""
-    check_mip_filter(mip_filter)
-    size = faces.shape[1]
-    cube = ctx.texture_cube((size, size), 4, dtype="f4")
-    rgba = np.concatenate([faces, np.ones(faces.shape[:-1] + (1,), np.float32)], axis=-1)
-    for face in range(6):
-        cube.write(face, np.ascontiguousarray(rgba[face], dtype=np.float32).tobytes())
-    ctx.enable_direct(GL_TEXTURE_CUBE_MAP_SEAMLESS)
-    if mipmaps:
-        build_mip_chain(ctx, cube, mip_filter)
-        cube.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-    else:
-        cube.filter = (moderngl.LINEAR, moderngl.LINEAR)
-    return cube
 
 
 class RadianceCube:

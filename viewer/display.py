@@ -69,7 +69,7 @@ class Accumulator:
 
 class RefinementBlend:
     """Mixes the refinement's running mean with the real-time frame per pixel, by a weight
-    image (app/refinement.py two_half_estimate), into an Accumulator that the window shows."""
+    image (viewer/refinement.py two_half_estimate), into an Accumulator that the window shows."""
 
     def __init__(self, ctx: moderngl.Context, programs: ProgramCache, size):
         self.ctx = ctx

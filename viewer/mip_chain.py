@@ -119,12 +119,30 @@ def read_cube_level(ctx: moderngl.Context, cube: moderngl.TextureCube, level: in
         out.release()
 
 
+def upload_cube(
+    ctx: moderngl.Context, faces: np.ndarray, mipmaps: bool = True, mip_filter: str = DEFAULT_MIP_FILTER
+) -> moderngl.TextureCube:
+    """An RGBA32F cube map of ``faces`` (6, S, S, 3), with a MIP chain made by ``mip_filter``
+    (viewer/mip_chain.py) or none."""
+    check_mip_filter(mip_filter)
+    size = faces.shape[1]
+    cube = ctx.texture_cube((size, size), 4, dtype="f4")
+    rgba = np.concatenate([faces, np.ones(faces.shape[:-1] + (1,), np.float32)], axis=-1)
+    for face in range(6):
+        cube.write(face, np.ascontiguousarray(rgba[face], dtype=np.float32).tobytes())
+    ctx.enable_direct(GL_TEXTURE_CUBE_MAP_SEAMLESS)
+    if mipmaps:
+        build_mip_chain(ctx, cube, mip_filter)
+        cube.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+    else:
+        cube.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    return cube
+
+
 def downsample_cube_faces(ctx: moderngl.Context, faces: np.ndarray, factor: int, mip_filter: str) -> np.ndarray:
     """(6, S, S, 3) faces -> (6, S/factor, S/factor, 3) as level log2(factor) of their MIP chain
     by ``mip_filter`` (factor a power of two): what a cube rendered finer and then reduced holds
     at level 0 equals that level of the finer cube's own chain."""
-    from .cubemap import upload_cube  # cubemap builds on this module
-
     level = int(factor).bit_length() - 1
     if factor < 1 or 1 << level != factor:
         raise ValueError(f"downsample factor must be a power of two, got {factor}")

@@ -2,22 +2,25 @@
 reflector per frame, the scene drawn from the camera mirrored about its plane (and, for panes,
 from the camera itself behind the plane: the see-through pass) with Lengyel's oblique near plane
 into a buffer of radiance (MIP chain), world position and normal; reused while nothing changes.
-The pass draws through the renderer's callables, so it holds no shading code of its own."""
+The pass draws through the scene's object drawer (viewer/object_drawer.py), so it holds no shading
+code of its own."""
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
 import moderngl
 import numpy as np
 
 from lobeview.core.methods import Method
+from lobeview.materials.patterns import lobe_spread, specular_lobes
+from lobeview.materials.spec import build_bsdf
 
 from .camera import Camera, outside_frustum, perspective
 from .frame import begin_pass, new_framebuffer
 from .interface import TEXTURE_UNITS, bind_sampler, has_uniform, set_uniform
 from .mip_chain import DEFAULT_MIP_FILTER, build_mip_chain
+from .scene_shading import per_pixel_lobes
 
 MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # glossy objects inside mirror buffers (cheap)
 # Sampler-uniform prefixes of the mirror and see-through buffers (units: interface.TEXTURE_UNITS).
@@ -86,29 +89,17 @@ def unscissored(report: list[str]) -> list[str]:
 
 
 class MirrorPasses:
-    """``draw_background(cube, view_projection)`` and ``draw_scene(view_projection, eye, method,
-    specular, exclude)`` are the renderer's; ``visible_samples(view_projection, indices)`` (the
-    renderer's occlusion test, viewer/occlusion.py) says how many camera pixels of each
-    reflector no opaque object hides; ``prepare_pass(view_projection, exclude)`` readies what a
-    pass will draw (evicted cube maps, viewer/cube_bake.py CubeResidency)."""
+    """Draws through ``drawer`` (viewer/object_drawer.py ObjectDrawer: its environment,
+    background, draw loop and the reflectors' occlusion test); ``probes`` (viewer/cube_probes.py
+    CubeProbes) restores the evicted cube maps a pass will read before it binds its buffers."""
 
-    def __init__(
-        self,
-        ctx: moderngl.Context,
-        environment,
-        draw_background: Callable,
-        draw_scene: Callable,
-        visible_samples: Callable | None = None,
-        prepare_pass: Callable | None = None,
-        mip_filter: str = DEFAULT_MIP_FILTER,
-    ):
+    def __init__(self, ctx: moderngl.Context, drawer, probes=None, mip_filter: str = DEFAULT_MIP_FILTER):
         self.ctx = ctx
         self.mip_filter = mip_filter  # of the radiance buffers' MIP chains (viewer/mip_chain.py)
-        self.prepare_pass = prepare_pass  # (view_projection, exclude): before a pass binds its buffers
-        self.environment = environment
-        self.draw_background = draw_background
-        self.draw_scene = draw_scene
-        self.visible_samples = visible_samples
+        self.drawer = drawer
+        self.probes = probes
+        self.environment = drawer.environment
+        self._spreads: dict = {}  # (reflector, N, normalize, pattern) -> materials.patterns.lobe_spread
         self.targets: dict[tuple[int, str], MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
@@ -122,6 +113,22 @@ class MirrorPasses:
     def invalidate(self) -> None:
         """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
         self._key = None
+
+    def materials_changed(self) -> None:
+        """What the buffers show and a reflector's lobes may have changed (a material edit)."""
+        self.generation += 1
+        self._spreads.clear()
+
+    def lobe_spread(self, index: int, method: Method) -> tuple[float, float] | None:
+        """How far the lobe-N lookups of reflector ``index`` reach (None: not lobe-N, unbounded)."""
+        mat = self.drawer.material_of(index)
+        if method.kind != "lobe" or per_pixel_lobes(mat):  # textures vary the lobes: no bound here
+            return None
+        key = (index, method.samples, method.normalize, method.pattern)
+        if key not in self._spreads:
+            lobes = specular_lobes(build_bsdf(mat.desc))
+            self._spreads[key] = lobe_spread(lobes, method.samples, method.normalize) if lobes else None
+        return self._spreads[key]
 
     def render(
         self,
@@ -161,9 +168,11 @@ class MirrorPasses:
         reasons = {index: skip_reason(reflector, camera, view_proj) for index, reflector in reflectors.items()}
         candidates = [index for index, reason in reasons.items() if reason is None]
         self.occlusion_seconds = 0.0
-        if occlusion and self.visible_samples is not None and candidates:
+        if occlusion and candidates:
             t0 = time.perf_counter()
-            samples = self.visible_samples(view_proj, candidates)  # reading the queries waits for the GPU
+            samples = self.drawer.visible_samples(
+                view_proj, frame_size, candidates
+            )  # reading the queries waits for the GPU
             self.occlusion_seconds = time.perf_counter() - t0
             reasons.update({index: HIDDEN for index in candidates if samples[index] == 0})
         for index, reflector in reflectors.items():
@@ -184,17 +193,17 @@ class MirrorPasses:
                 cull_view_projection = None
                 if rect is not None:
                     cull_view_projection = sub_rect_projection(rect, size) @ buffer_camera.view_projection
-                if self.prepare_pass is not None:
-                    self.prepare_pass(
+                if self.probes is not None:
+                    self.probes.restore(
                         buffer_camera.view_projection if cull_view_projection is None else cull_view_projection, index
                     )
                 begin_pass(self.ctx, targets.fbo, size)
-                self.draw_background(self.environment, buffer_camera.plain_view_projection)
+                self.drawer.draw_background(self.environment, buffer_camera.plain_view_projection)
                 if rect is not None:  # the scene only where the reflector's lookups read
                     self.ctx.scissor = rect
-                self.draw_scene(
+                self.drawer.draw(
                     buffer_camera.view_projection, buffer_camera.position, MIRROR_BOUNCE_METHOD, specular, index,
-                    cull_view_projection=cull_view_projection,
+                    pass_kind="mirror", cull_view_projection=cull_view_projection,
                 )  # fmt: skip
                 self.ctx.scissor = None
                 build_mip_chain(self.ctx, targets.radiance, self.mip_filter, allocated=True)

@@ -38,7 +38,6 @@ from lobeview.materials.prefilter import (
     split_sum_profile,
 )
 
-from .cubemap import RadianceCube
 from .mip_chain import GL_RGBA32F, read_cube_level
 from .shaders import ProgramCache
 
@@ -168,10 +167,13 @@ def _texels_reader(shape: tuple):
 
 
 class PrefilteredMaps:
+    """The prefiltered maps of one radiance cube (``cube``: viewer/cubemap.py RadianceCube, which
+    makes this object on first use), made on demand and cached under ``cache_dir``."""
+
     def __init__(
         self,
         ctx: moderngl.Context,
-        cube: RadianceCube,
+        cube,
         programs: ProgramCache | None = None,
         cache_dir: Path | None = None,
         rings: int = 24,

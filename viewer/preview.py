@@ -25,7 +25,9 @@ from .material_gpu import pack_material
 from .mip_chain import DEFAULT_MIP_FILTER
 from .render_base import RendererBase, RenderResult
 
-__all__ = ["PreviewRenderer", "RenderResult"]
+__all__ = ["PREVIEW_CAMERA", "PreviewRenderer", "RenderResult"]
+# The camera of `lobeview shot --object` (position, target, up, vertical fov) for a unit-sized object.
+PREVIEW_CAMERA = ((0.0, 0.35, 3.2), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0)
 
 
 class PreviewRenderer(RendererBase):
@@ -38,11 +40,11 @@ class PreviewRenderer(RendererBase):
         face_size: int = 256,
         mip_filter: str = DEFAULT_MIP_FILTER,
     ):
-        super().__init__(ctx, size)
+        # mip_filter: how the environment cube's MIP levels are made (viewer/mip_chain.py
+        # MIP_FILTERS); lobe-N's default LOD bias follows it (Method.default_lod_bias)
+        super().__init__(ctx, size, mip_filter=mip_filter)
         t0 = time.perf_counter()
-        # mip_filter: how the environment cube's MIP levels are made (viewer/mip_chain.py MIP_FILTERS)
         self.cubes = EnvironmentCubes(ctx, env, face_size, mip_filter=mip_filter)
-        self.mip_filter = mip_filter  # lobe-N's default LOD bias follows it (Method.default_lod_bias)
         self.setup_seconds = time.perf_counter() - t0
         self.mesh = mesh
         self.vbo = ctx.buffer(mesh.interleaved().tobytes())
@@ -87,8 +89,8 @@ class PreviewRenderer(RendererBase):
         set_uniform(program, "u_model", tuple(model.T.astype("f4").ravel()))
         set_uniform(program, "u_normal_matrix", tuple(normal_matrix.T.astype("f4").ravel()))
         set_uniform(program, "u_camera_position", tuple(float(x) for x in camera.position))
-        self.set_material(program, material, method, lod_bias, seed)
-        self.bind_cube(program, self.cubes, method, material)
+        self.shading.set_material(program, material, method, lod_bias, seed)
+        self.shading.bind_cube(program, self.cubes, method, material)
         bind_sampler(program, "u_irradiance", self.cubes.irradiance)
 
         passes = len(offsets)

@@ -1,114 +1,22 @@
-"""What the preview and scene renderers share: method parsing, the Sobol table, float render
-targets with a G-buffer, material/cube uniforms and the environment background."""
+"""What the preview and scene renderers share: float render targets with a G-buffer, the pass
+plan of a method, the shading binder (viewer/shading.py) and the environment background."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import moderngl
 import numpy as np
-from scipy.stats import qmc
 
-from lobeview.core.cache import BoundedCache
-from lobeview.core.methods import MAX_LOBES, MAX_REFERENCE_SPP, Method
-from lobeview.materials.banks import BANKS_AZIMUTHS, fit_banks
-from lobeview.materials.conductor import MicrofacetReflection
-from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_maps, is_isotropic
-from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
+from lobeview.core.methods import Method
 
 from .camera import pixel_offset
 from .cubemap import RadianceCube
 from .frame import FrameTargets
-from .interface import (
-    LOBE_MAP_MODES,
-    LOBE_TABLE_ROWS,
-    RATIONAL_BINDING,
-    bind_sampler,
-    bind_storage,
-    has_uniform,
-    set_uniform,
-    unit,
-    use_unit,
-    write_uniform,
-)
-from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
+from .interface import bind_sampler, set_uniform
 from .mip_chain import DEFAULT_MIP_FILTER
-from .rsibr import bake_rsibr, rsibr_albedo, rsibr_cache_key, rsibr_layout, view_sphere_uniforms
 from .shaders import ProgramCache
-
-SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
-assert SOBOL_SIDE * SOBOL_SIDE == MAX_REFERENCE_SPP  # a reference never wraps around the table
-SOBOL_SEED = 20100501
-MAX_MATERIAL_TEXTURES = 64  # per-material textures kept (live material edits make new ones)
-
-
-def prefilter_plan(material: PackedMaterial, mode: str, per_pixel_lobes: bool = False) -> list[str]:
-    """Per lobe: 'splitsum', 'banks', 'rsibr' or the lobe-map fit mode ('lobe', 'lobe2d',
-    'phong', 'multi'). Split-sum needs a microfacet BRDF (its DFG table), so the thesis' Kurt
-    lobes use lobe maps; a Banks map needs an anisotropic lobe (a fibre direction), so isotropic
-    lobes use lobe maps under 'banks'; under 'rsibr' the lobes viewer/rsibr.py bakes into its maps
-    (none where ``per_pixel_lobes``: textures change them) and the automatic choice for the rest."""
-    if mode == "rsibr":
-        baked = rsibr_layout(material, per_pixel_lobes).lobes
-        return ["rsibr" if baked >> i & 1 else kind for i, kind in enumerate(prefilter_plan(material, "auto"))]
-    plan = []
-    for comp in material.lobe_components:
-        microfacet = isinstance(comp, MicrofacetReflection)  # includes glTF specular
-        if mode in ("auto", "splitsum"):
-            plan.append("splitsum" if microfacet else "lobe")
-        elif mode == "banks":
-            anisotropic = getattr(comp, "distribution", None) is not None and not is_isotropic(comp)
-            plan.append("banks" if anisotropic else "lobe")
-        else:
-            plan.append(mode)
-    return plan
-
-
-def lobe_table(plan: list[str], fitted: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The lobe-map and Banks parameters the shader reads (shaders/integrate.glsl), as
-    (table, counts, fibres). ``fitted``: per lobe, the BanksFit ('banks'), the list of
-    LobeMapFit (lobe-map modes) or None ('splitsum'). table: (MAX_LOBES * LOBE_TABLE_ROWS,
-    2 LOBE_SLICES, 4); component i owns rows i LOBE_TABLE_ROWS + j: for lobe maps, fitted lobe
-    j's axis relative to the slice's mirror direction (LobeMapFit.mirror_relative_axes) and median
-    angle (w) in texels 0..S-1 and its energy in S..2S-1; for a Banks
-    map, the albedo at view azimuth j pi / (2 (BANKS_AZIMUTHS - 1)) from the fibre in texels
-    S..2S-1. counts: fitted lobes per component; fibres: the Banks fibre axis (0 = tangent,
-    1 = bitangent)."""
-    table = np.zeros((MAX_LOBES * LOBE_TABLE_ROWS, 2 * LOBE_SLICES, 4), dtype=np.float32)
-    counts = np.zeros(MAX_LOBES, dtype=np.int32)
-    fibres = np.zeros(MAX_LOBES, dtype=np.int32)
-    for i, (kind, fit) in enumerate(zip(plan, fitted, strict=True)):
-        base = i * LOBE_TABLE_ROWS
-        if kind == "banks":
-            table[base : base + BANKS_AZIMUTHS, LOBE_SLICES:, :3] = fit.energy.transpose(1, 0, 2)
-            counts[i], fibres[i] = 1, fit.axis
-        elif kind not in ("splitsum", "rsibr"):
-            for j, lobe in enumerate(fit):
-                table[base + j, :LOBE_SLICES, :3] = lobe.mirror_relative_axes()
-                # w: the lobe's median angle per slice (the direct read of narrow lobes)
-                table[base + j, :LOBE_SLICES, 3] = [lobe.profile(s).median_angle for s in range(LOBE_SLICES)]
-                table[base + j, LOBE_SLICES:, :3] = lobe.energy
-            counts[i] = len(fit)
-    return table, counts, fibres
-
-
-def fit_plan(plan: list[str], components: list, directory=None) -> list:
-    """Per lobe what its prefiltered map is built from: a BanksFit, a list of LobeMapFit (cached
-    under ``directory``, fit_lobe_maps), or None for split-sum (lobe_table's ``fitted``)."""
-    fits = []
-    for kind, comp in zip(plan, components, strict=True):
-        if kind == "banks":
-            fits.append(fit_banks(comp))
-        else:
-            fits.append(None if kind in ("splitsum", "rsibr") else fit_lobe_maps(comp, kind, directory=directory))
-    return fits
-
-
-def sobol_points(count: int = SOBOL_SIDE * SOBOL_SIDE, seed: int = SOBOL_SEED) -> np.ndarray:
-    """Owen-scrambled 4D Sobol points (scipy's generator), fixed seed: a frame renders the same
-    image every time. Dimensions 0-1 drive BSDF sampling, 2-3 environment sampling."""
-    return qmc.Sobol(d=4, scramble=True, seed=seed).random(count).astype(np.float32)
+from .shading import ShadingBinder
 
 
 @dataclass
@@ -125,30 +33,28 @@ class RenderResult:
 
 
 class RendererBase:
-    """The frame targets (viewer/frame.py), the Sobol table, material/cube binding and the
-    environment background."""
+    """The frame targets (viewer/frame.py), the shading binder (material and cube-map state,
+    viewer/shading.py) and the environment background."""
 
     PLANE_STATE = False  # whether the frame has the averaged-tangent-plane state targets
 
-    def __init__(self, ctx: moderngl.Context, size):
+    def __init__(
+        self, ctx: moderngl.Context, size, shading: ShadingBinder | None = None, mip_filter: str | None = None
+    ):
         self.ctx = ctx
-        self.programs = ProgramCache(ctx)
-        # How the radiance MIP chains are made (viewer/mip_chain.py; subclasses set theirs):
-        # the default LOD bias of lobe-N depends on it.
-        self.mip_filter = DEFAULT_MIP_FILTER
-        sobol = sobol_points()
-        self.sobol = ctx.texture((SOBOL_SIDE, SOBOL_SIDE), 4, sobol.tobytes(), dtype="f4")
-        self.sobol.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.sobol_count = len(sobol)
+        # ``shading``: the scene renderer's own binder (viewer/scene_shading.py); otherwise a plain
+        # one whose MIP chains are made by ``mip_filter`` (lobe-N's default LOD bias follows it).
+        self.shading = (
+            shading if shading is not None else ShadingBinder(ctx, ProgramCache(ctx), mip_filter or DEFAULT_MIP_FILTER)
+        )
+        self.programs = self.shading.programs
         self._vaos: dict = {}
-        # (kind, ..., lobes_key) -> (texture, derived data); live material edits make new ones
-        self._material_textures = BoundedCache(MAX_MATERIAL_TEXTURES, on_evict=lambda item: item[0].release())
-        self._dummy_textures: dict = {}
         self._timer = None
-        # The cache folder of derived tables (albedo tables of normalised lobe-N, lobe-map fits):
-        # None is core/paths.py's default; the scene renderer uses its cube maps' (--cache).
-        self.table_cache_root: Path | None = None
         self.frame = FrameTargets(ctx, size, plane_state=self.PLANE_STATE)
+
+    @property
+    def mip_filter(self) -> str:
+        return self.shading.mip_filter
 
     def resize(self, size):
         self.frame.resize(size)
@@ -194,68 +100,6 @@ class RendererBase:
         """(H, W, 4) of G-buffer target ``attachment``, row 0 at the top."""
         return self.frame.read(attachment)
 
-    def set_material(
-        self, program, material: PackedMaterial, method: Method, lod_bias: float | None, seed: int, planar=False
-    ) -> None:
-        self.set_material_state(program, material, method, planar)
-        self.set_pass_state(program, method, lod_bias, seed)
-
-    def set_pass_state(self, program, method: Method, lod_bias: float | None, seed: int) -> None:
-        """The uniforms a pass sets alike for every material: samples, LOD bias, Sobol table, seed."""
-        set_uniform(program, "u_samples", method.samples)
-        set_uniform(
-            program,
-            "u_lod_bias",
-            float(method.default_lod_bias(self.mip_filter) if lod_bias is None else lod_bias),
-        )
-        set_uniform(program, "u_sobol_count", self.sobol_count)
-        set_uniform(program, "u_seed", int(seed))
-
-    def set_material_state(self, program, material: PackedMaterial, method: Method, planar=False) -> None:
-        """The material's lobes, patterns (for ``method`` and a ``planar`` reflector), colours and
-        tables: what the scene renderer records once per object (viewer/interface.py DrawRecorder)."""
-        set_uniform(program, "u_lobe_count", material.lobe_count)
-        write_uniform(program, "u_lobes", material.lobes)
-        if method.kind == "lobe" and has_uniform(program, "u_pattern"):
-            write_uniform(program, "u_pattern", pack_patterns(material, method.samples, planar, method.pattern))
-        set_uniform(program, "u_kd", tuple(float(x) for x in material.kd))
-        set_uniform(program, "u_gltf_diffuse", 1.0 if material.gltf_diffuse else 0.0)
-        set_uniform(program, "u_tangent_rotation", float(material.tangent_rotation))
-        set_uniform(program, "u_dielectric_f0", tuple(float(x) for x in material.dielectric_f0))
-        set_uniform(program, "u_specular_weight", float(material.specular_weight))
-        set_uniform(program, "u_clearcoat", float(material.clearcoat))
-        set_uniform(program, "u_transmission", float(material.transmission))
-        set_uniform(program, "u_sheen_color", tuple(float(x) for x in material.sheen_color))
-        if has_uniform(program, "u_sheen_albedo"):
-            write_uniform(program, "u_sheen_albedo", np.asarray(material.sheen_table, dtype=np.float32))
-        self._bind_rational(program, material)
-        if method.kind == "lobe" and method.normalize and has_uniform(program, "u_albedo"):
-
-            def albedo_texture():
-                data = albedo_texture_data(material, self.table_cache_root)
-                tex = self.ctx.texture((data.shape[1], data.shape[0]), 3, data.tobytes(), dtype="f4")
-                tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
-                tex.repeat_x = tex.repeat_y = False
-                return tex, None
-
-            bind_sampler(program, "u_albedo", self._material_texture(("albedo", material.lobes_key), albedo_texture)[0])
-            # Per-pixel glTF albedo (patterns.glsl) is the scene renderer's (textured materials);
-            # its table sampler still needs a 2D texture on its own unit, not unit 0's cube.
-            set_uniform(program, "u_albedo_per_pixel", 0)
-            bind_sampler(program, "u_dfg", self._dummy_texture("2d"))
-
-    def _bind_rational(self, program, material: PackedMaterial) -> None:
-        """The Rational BRDF's storage buffer (shaders/rational.glsl); only HAS_RATIONAL programs
-        (material.has_rational) declare it, so other materials bind nothing."""
-        if material.rational is None:
-            return
-        data = material.rational
-
-        def make():
-            return self.ctx.buffer(data.tobytes()), None
-
-        bind_storage(program, self._material_texture(("rational", material.lobes_key), make)[0], RATIONAL_BINDING)
-
     def raise_on_gl_error(self, method) -> None:
         """Raise if GL flagged an error since the flag was last read: a failed draw call leaves
         objects out of the image (or the whole image empty) without any other sign."""
@@ -263,170 +107,27 @@ class RendererBase:
         if error != "GL_NO_ERROR":
             raise RuntimeError(f"OpenGL reported {error} while drawing {method}: a renderer bug, please report it")
 
-    def _material_texture(self, key: tuple, make) -> tuple:
-        """(texture, derived data) of a material, made by ``make()`` on first use and cached by
-        content; the least recently used is released beyond MAX_MATERIAL_TEXTURES."""
-        return self._material_textures.get(key, make)
-
-    def bind_cube(
-        self,
-        program,
-        cube: RadianceCube,
-        method: Method,
-        material: PackedMaterial | None = None,
-        per_pixel_lobes: bool = False,
-    ) -> None:
-        """The radiance cube and Sobol table; the importance tables (reference only) and the
-        prefiltered maps and lobe table (prefiltered only, built on first use for this cube and
-        material; ``per_pixel_lobes``: textures change the lobes, so none is baked into RSIBR
-        maps). Units: viewer/interface.py TEXTURE_UNITS."""
-        if method.kind == "prefiltered":
-            self.bind_prefiltered(program, cube, material, method, per_pixel_lobes)
-        bind_sampler(program, "u_radiance", cube.radiance)
-        bind_sampler(program, "u_sobol", self.sobol)
-        set_uniform(program, "u_face_size", float(cube.face_size))
-        if method.kind == "reference":
-            bind_sampler(program, "u_env_cdf", cube.env_cdf)
-            bind_sampler(program, "u_env_pdf", cube.env_pdf)
-            set_uniform(program, "u_env_texels", int(cube.importance.probabilities.size))
-            set_uniform(program, "u_env_size", int(cube.importance.size))
-
-    def bind_prefiltered(
-        self, program, cube: RadianceCube, material: PackedMaterial, method: Method, per_pixel_lobes: bool = False
-    ) -> None:
-        from .prefiltered import lobe_direct_angle, needs_lobe_map
-
-        maps = cube.prefiltered_maps(self.programs)
-        plan = prefilter_plan(material, method.mode, per_pixel_lobes)
-        self._bind_rsibr(program, maps, cube, material, method, per_pixel_lobes)
-        for index, kind in enumerate(("beckmann", "ggx")):  # DIST_BECKMANN, DIST_GGX
-            if any(p == "splitsum" and material.lobe_distributions[i].kind == kind for i, p in enumerate(plan)):
-                use_unit(program, maps.split_sum(kind), unit("u_split_sum", index))
-            else:
-                use_unit(program, self._dummy_texture("cube"), unit("u_split_sum", index))
-        set_uniform(program, "u_split_sum", [unit("u_split_sum", 0), unit("u_split_sum", 1)])
-        set_uniform(program, "u_split_sum_max_level", float(SPLIT_SUM_LEVELS - 1))
-        bind_sampler(program, "u_dfg", maps.dfg())
-
-        def lobe_table_texture():
-            fitted = fit_plan(plan, material.lobe_components, self.table_cache_root)
-            table, counts, fibres = lobe_table(plan, fitted)
-            tex = self.ctx.texture((table.shape[1], table.shape[0]), 4, table.tobytes(), dtype="f4")
-            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
-            return tex, (fitted, counts, fibres)
-
-        table, (fitted, counts, fibres) = self._material_texture(
-            ("lobe table", method.mode, per_pixel_lobes, material.lobes_key), lobe_table_texture
-        )
-        bind_sampler(program, "u_lobe_table", table)
-        modes = np.full(MAX_LOBES, LOBE_MAP_MODES["splitsum"], dtype=np.int32)
-        depth = np.ones(MAX_LOBES, dtype=np.int32)
-        direct = np.zeros(MAX_LOBES, dtype=np.float32)  # 0: never read the cube directly
-        for i in range(MAX_LOBES):
-            texture = self._dummy_texture("3d")
-            if i < len(plan) and plan[i] == "banks":
-                texture = maps.banks_map(fitted[i], f"lobe {i}")
-                modes[i], depth[i] = LOBE_MAP_MODES["banks"], len(fitted[i].profiles)
-            elif i < len(plan) and plan[i] not in ("splitsum", "rsibr"):
-                if needs_lobe_map(fitted[i], plan[i]):
-                    texture = maps.lobe_map(fitted[i], f"lobe {i}")
-                modes[i], depth[i] = LOBE_MAP_MODES["lobes"], len(fitted[i][0].profiles)
-                direct[i] = lobe_direct_angle(plan[i])
-            use_unit(program, texture, unit("u_lobe_maps", i))
-        set_uniform(program, "u_lobe_maps", [unit("u_lobe_maps", i) for i in range(MAX_LOBES)])
-        for name, values in (
-            ("u_lobe_map_mode", modes),
-            ("u_lobe_map_depth", depth),
-            ("u_lobe_map_count", counts),
-            ("u_banks_fibre", fibres),
-            ("u_lobe_direct_angle", direct),
-        ):
-            write_uniform(program, name, values)
-
-    def _bind_rsibr(self, program, maps, cube, material, method: Method, per_pixel_lobes: bool) -> None:
-        """prefiltered-rsibr's maps and view sphere (shaders/rsibr.glsl); u_rsibr_lobes 0 in
-        every other mode, and for materials with nothing to bake."""
-        layout = rsibr_layout(material, per_pixel_lobes) if method.mode == "rsibr" else None
-        if layout is None or not layout.lobes:
-            set_uniform(program, "u_rsibr_lobes", 0)
-            bind_sampler(program, "u_rsibr_maps", self._dummy_texture("array"))
-            return
-        key = rsibr_cache_key(material, layout)
-        texture = maps.rsibr_map(layout, key, lambda tex: bake_rsibr(self, cube, material, layout, tex))
-        bind_sampler(program, "u_rsibr_maps", texture)
-        for name, value in (
-            ("u_rsibr_lobes", layout.lobes),
-            ("u_rsibr_slices", layout.slices),
-            ("u_rsibr_face_count", layout.faces),
-        ):
-            set_uniform(program, name, value)
-        for name, values in view_sphere_uniforms(layout.subdivisions).items():
-            write_uniform(program, name, values)
-        write_uniform(program, "u_rsibr_albedo", rsibr_albedo(material, layout, key).astype(np.float32))
-
-    def method_memory(self, cube: RadianceCube, material: PackedMaterial, method: Method) -> dict[str, int]:
-        """Bytes of the GPU resources that shading ``material`` with ``method`` reads from one
-        cube (the bench's memory column): the radiance cube with its MIP chain, plus the
-        importance tables (reference), the albedo table (normalised lobe-N) or the prefiltered
-        maps (prefiltered)."""
-        from .prefiltered import DFG_SIZE, banks_map_shape, cube_bytes, lobe_map_shape, needs_lobe_map
-
-        face = cube.face_size
-        memory = {"radiance cube": cube_bytes(face, int(np.log2(face)) + 1)}
-        if method.kind == "reference":
-            memory["importance tables"] = cube.importance_memory()
-        if method.kind == "lobe" and method.normalize:
-            memory["albedo table"] = int(albedo_texture_data(material).size * 4)
-        if method.kind == "prefiltered":
-            plan = prefilter_plan(material, method.mode)
-            for i, kind in enumerate(plan):
-                if kind == "splitsum":
-                    distribution = material.lobe_distributions[i].kind
-                    memory[f"split-sum {distribution}"] = cube_bytes(face, SPLIT_SUM_LEVELS)
-                    memory["DFG table"] = DFG_SIZE * DFG_SIZE * 16
-                elif kind == "rsibr":
-                    memory["RSIBR maps"] = rsibr_layout(material).bytes
-                elif kind == "banks":
-                    width, height, depth = banks_map_shape(fit_banks(material.lobe_components[i]))
-                    memory[f"Banks map {i}"] = width * height * depth * 16
-                else:
-                    fits = fit_lobe_maps(material.lobe_components[i], kind, directory=self.table_cache_root)
-                    if needs_lobe_map(fits, kind):
-                        width, height, depth = lobe_map_shape(fits)
-                        memory[f"lobe map {i}"] = width * height * depth * 16
-        return memory
-
-    def _dummy_texture(self, kind: str):
-        """A 1-texel black texture for sampler slots a material does not use."""
-        if kind not in self._dummy_textures:
-            if kind == "cube":
-                tex = self.ctx.texture_cube((1, 1), 4, b"\0" * 16 * 6, dtype="f4")
-            elif kind == "2d":
-                tex = self.ctx.texture((1, 1), 4, b"\0" * 16, dtype="f4")
-            elif kind == "array":
-                tex = self.ctx.texture_array((1, 1, 1), 4, b"\0" * 16, dtype="f4")
-            else:
-                tex = self.ctx.texture3d((1, 1, 1), 4, b"\0" * 16, dtype="f4")
-            self._dummy_textures[kind] = tex
-        return self._dummy_textures[kind]
-
     def draw_background(self, cube: RadianceCube, view_proj: np.ndarray) -> None:
         """Environment behind everything (depth test off, so it writes no depth)."""
-        program = self.programs.program("background.vert", "background.frag", {})
-        key = ("background", id(program))
-        if key not in self._vaos:
-            self._vaos[key] = self.ctx.vertex_array(program, [])
-        set_uniform(program, "u_inverse_view_projection", tuple(np.linalg.inv(view_proj).T.astype("f4").ravel()))
-        bind_sampler(program, "u_radiance", cube.radiance)
-        self.ctx.disable(moderngl.DEPTH_TEST)
-        self._vaos[key].render(moderngl.TRIANGLES, vertices=3)
+        draw_environment(self.ctx, self.programs, self._vaos, cube, view_proj)
 
     def release(self):
-        self._material_textures.clear()
-        for tex in self._dummy_textures.values():
-            tex.release()
+        self.shading.release()
         for vao in self._vaos.values():
             vao.release()
+        self._vaos.clear()
         self._timer = None  # moderngl 5 queries have no release(); freed with the context
         self.frame.release()
-        self.sobol.release()
+
+
+def draw_environment(ctx, programs: ProgramCache, vaos: dict, cube: RadianceCube, view_proj: np.ndarray) -> None:
+    """The environment ``cube`` behind everything drawn with ``view_proj`` (depth test off, so it
+    writes no depth); its vertex array is kept in ``vaos``."""
+    program = programs.program("background.vert", "background.frag", {})
+    key = ("background", id(program))
+    if key not in vaos:
+        vaos[key] = ctx.vertex_array(program, [])
+    set_uniform(program, "u_inverse_view_projection", tuple(np.linalg.inv(view_proj).T.astype("f4").ravel()))
+    bind_sampler(program, "u_radiance", cube.radiance)
+    ctx.disable(moderngl.DEPTH_TEST)
+    vaos[key].render(moderngl.TRIANGLES, vertices=3)

@@ -8,7 +8,7 @@ the object's radiance cube, which is the part of lobeview that already integrate
 (Kurt, microfacet, glTF lobes with their Fresnel terms); the maps are cached beside the other
 prefiltered maps (viewer/prefiltered.py) and their bytes reported with them.
 
-Which lobes go into the maps (:func:`rsibr_layout`; render_base.prefilter_plan): reflection lobes with a microfacet
+Which lobes go into the maps (:func:`rsibr_layout`; shading.prefilter_plan): reflection lobes with a microfacet
 distribution, when no texture changes the lobes per pixel. The rest keep the automatic
 prefiltered lookup: thin transmission lobes (the mirror warp cannot follow a lobe centred on -v),
 Rational lobes (no distribution to size the maps by), and every lobe of a textured glTF material
@@ -133,13 +133,13 @@ def rsibr_albedo(material, layout: RsibrLayout, key: str) -> np.ndarray:
     return _ALBEDO_TABLES.get(key, lambda: albedo_table(components))
 
 
-def bake_rsibr(renderer, cube, material, layout: RsibrLayout, texture) -> None:
-    """Fill ``texture`` (RGBA32F array, layout.shape) tile by tile: ``renderer`` (RendererBase) binds
-    the material and the cube to the bake shader as for a fis-N draw."""
+def bake_rsibr(shading, cube, material, layout: RsibrLayout, texture) -> None:
+    """Fill ``texture`` (RGBA32F array, layout.shape) tile by tile: ``shading`` (viewer/shading.py
+    ShadingBinder) binds the material and the cube to the bake shader as for a fis-N draw."""
     method = Method("fis", RSIBR_BAKE_SAMPLES)
-    shader = renderer.programs.compute("rsibr_bake.comp", {"METHOD_FIS": True})
-    renderer.set_material(shader, material, method, lod_bias=PREFILTER_LOD_BIAS, seed=0)
-    renderer.bind_cube(shader, cube, method)
+    shader = shading.programs.compute("rsibr_bake.comp", {"METHOD_FIS": True})
+    shading.set_material(shader, material, method, lod_bias=PREFILTER_LOD_BIAS, seed=0)
+    shading.bind_cube(shader, cube, method)
     # Through set_uniform like set_material's: the program's uniform shadow (interface._store)
     # must see every write to a program it tracks.
     set_uniform(shader, "u_rows", layout.rows)
@@ -153,4 +153,4 @@ def bake_rsibr(renderer, cube, material, layout: RsibrLayout, texture) -> None:
             set_uniform(shader, "u_tile", view_index * layout.slices + k)
             set_uniform(shader, "u_angle", float(k * np.pi / layout.slices))
             shader.run(*groups)
-        renderer.ctx.finish()
+        shading.ctx.finish()

@@ -1,4 +1,4 @@
-"""GPU probes and fixtures that the test suite and the benchmarks share (shipped, so a user can
+"""GPU probes the test suite uses (shipped, so a user can
 run the same checks on their own GPU): a headless GL context, and CubeLookup, which reads a cube
 map at arbitrary directions and MIP levels through the driver's own filtering."""
 

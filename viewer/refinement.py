@@ -38,7 +38,7 @@ import numpy as np
 from scipy.ndimage import uniform_filter
 
 from lobeview.viewer.camera import pixel_offset
-from lobeview.viewer.render_base import SOBOL_SIDE
+from lobeview.viewer.shading import SOBOL_SIDE
 from lobeview.viewer.tonemap import tonemap
 
 TARGET_FRAME_MS = 50.0

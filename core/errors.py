@@ -1,0 +1,19 @@
+"""The error of a bad user-given value (a command-line option, a scene name, a size): printed by
+the command line as ``lobeview: error: ...`` with exit status 2. In the ground floor, so that the
+scene set-up (scenes/setup.py), the benchmarks and the app raise the same one."""
+
+from __future__ import annotations
+
+
+class OptionError(ValueError):
+    """A bad command-line value: printed as ``lobeview: error: ...`` with exit status 2."""
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise OptionError(f"--size: expected WxH, got {text!r}") from None
+    if not (1 <= w <= 8192 and 1 <= h <= 8192):
+        raise OptionError(f"--size: width and height must be in [1, 8192], got {text!r}")
+    return w, h

@@ -1,0 +1,297 @@
+"""The scene's objects on the GPU and the loop that draws them (issue 38): vertex and index
+buffers, vertex arrays, the shader variant of each object's method, frustum culling, draw order
+(glTF alpha modes), the depth pre-pass and the reflectors' occlusion test. Every pass draws
+through it: the camera pass, the mirror passes (viewer/mirror_pass.py) and the cube-map faces
+(viewer/cube_bake.py); the shading binder (viewer/scene_shading.py) sets what each draw reads."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from lobeview.core.methods import Method
+from lobeview.scenes.scene import Scene
+
+from .camera import box_corners, outside_frustum_many
+from .cubemap import RadianceCube
+from .interface import method_defines, set_uniform
+from .material_gpu import PackedMaterial
+from .occlusion import OcclusionTest
+from .render_base import draw_environment
+from .scene_shading import SceneShading, per_pixel_lobes
+from .settings import RenderSettings
+
+
+@dataclass
+class PassCounts:
+    drawn: int = 0
+    culled: int = 0
+
+
+class DrawCounts:
+    """Objects drawn and culled (frustum) per kind of pass: 'camera' and 'mirror' for the last
+    frame (new_frame resets them), 'cube map' since start-up (bake and refreshes)."""
+
+    PER_FRAME = ("camera", "mirror", "depth pre-pass")
+
+    def __init__(self):
+        self.passes: dict[str, PassCounts] = {}
+
+    def of(self, pass_kind: str) -> PassCounts:
+        return self.passes.setdefault(pass_kind, PassCounts())
+
+    def new_frame(self) -> None:
+        for kind in self.PER_FRAME:
+            self.passes[kind] = PassCounts()
+
+    def report(self) -> list[str]:
+        labels = {"camera": "camera pass", "mirror": "mirror passes", "cube map": "cube-map faces since start"}
+        return [
+            f"{labels.get(kind, kind)}: {c.drawn} object draws, {c.culled} culled (outside the frustum)"
+            for kind, c in self.passes.items()
+            if c.drawn or c.culled
+        ]
+
+
+class GpuObject:
+    def __init__(self, ctx, obj, material: PackedMaterial, index: int):
+        m = obj.mesh
+        uv1 = obj.uv1 if obj.uv1 is not None else np.zeros((len(m.positions), 2), np.float32)
+        data = np.concatenate([m.positions, m.normals, m.tangents, m.uvs, uv1], axis=1).astype(np.float32)
+        self.vbo = ctx.buffer(data.tobytes())
+        self.ibo = ctx.buffer(np.ascontiguousarray(m.indices, dtype=np.uint32).tobytes())
+        self.material = material
+        self.index = index
+        self.name = obj.name
+        lo, hi = m.positions.min(axis=0), m.positions.max(axis=0)
+        self.centre = (lo + hi) / 2.0
+        self.corners = box_corners(lo, hi)  # world space (meshes are stored transformed): frustum culling
+        self.box = (lo, hi)
+        self.cube: RadianceCube | None = None
+        # Shared probes (scenes/probe_groups.py): the object whose cube map this one reads (itself
+        # unless it shares a group's), and where its own cube map is rendered from and without whom.
+        self.probe_owner = index
+        self.probe_centre = self.centre
+        self.probe_exclude = frozenset((index,))
+
+    def release(self):
+        self.vbo.release()
+        self.ibo.release()
+        if self.cube is not None:
+            self.cube.release()
+
+
+class ObjectDrawer:
+    """Draws the scene's objects. ``settings``: the renderer's RenderSettings (frustum culling,
+    plane averaging), replaced by SceneRenderer.configure; ``analysis``: what each object needs
+    (scenes/analysis.py), replaced after a material edit; ``residency`` (viewer/cube_bake.py
+    CubeResidency) hears of every cube map a draw reads; ``mirror_passes`` binds a reflector's
+    buffers (set once the mirror passes exist: they draw through this drawer)."""
+
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        scene: Scene,
+        materials: list[PackedMaterial],
+        shading: SceneShading,
+        environment,
+        frame,
+        settings: RenderSettings,
+        analysis,
+    ):
+        self.ctx = ctx
+        self.scene = scene
+        self.shading = shading
+        self.programs = shading.programs
+        self.environment = environment  # bound where an object has no cube map (unread there)
+        self.frame = frame
+        self.settings = settings
+        self.analysis = analysis
+        self.objects = [GpuObject(ctx, obj, materials[i], i) for i, obj in enumerate(scene.objects)]
+        self.object_corners = np.array([obj.corners for obj in self.objects]).reshape(len(self.objects), 8, 3)
+        self.object_methods: dict[int, Method] = {}  # the panel's per-object real-time methods
+        self.draw_counts = DrawCounts()
+        self.occlusion = OcclusionTest(ctx, self.programs)
+        self.residency = None
+        self.mirror_passes = None
+        self._vaos: dict = {}
+
+    def material_of(self, index: int):
+        """The scene material of object ``index``."""
+        return self.scene.materials[self.scene.objects[index].material]
+
+    def program(
+        self, method: Method, specular: bool, parallax: bool = False, mirror: bool = False, rational: bool = False
+    ):
+        defines = {**method_defines(method), "SPECULAR": True} if specular else {"METHOD_LOBE": True}
+        defines["HAS_RATIONAL"] = rational  # a Rational BRDF's functions (shaders/rational.glsl)
+        if specular and mirror:
+            # Incident light from the mirror buffer; the cube's importance map does not apply, so
+            # the reference samples the BSDF only (still unbiased for what the buffer holds).
+            defines.update(MIRROR=True, ENV_SAMPLING=False, PLANE_AVERAGE=self.averages_planes(method))
+        elif specular and parallax:
+            # The cube's importance map samples directions seen from its centre, which the proxy
+            # remaps: the reference then samples the BSDF only (still unbiased).
+            defines.update(PARALLAX=True, ENV_SAMPLING=False)
+        return self.programs.program("scene.vert", "scene.frag", defines)
+
+    def object_method(self, index: int, method: Method) -> Method:
+        """The method object ``index`` is shaded with: the panel's per-object override of a
+        real-time method, never of the reference."""
+        return method if method.kind == "reference" else self.object_methods.get(index, method)
+
+    def averages_planes(self, method: Method) -> bool:
+        """Whether a reflector shaded with ``method`` averages its tangent planes (refinement)."""
+        return self.settings.mirror_plane_average and method.kind in ("mc", "reference")
+
+    def opaque_objects(self, occluders_only: bool) -> list:
+        """(GPU object, single-sided) for the objects the camera pass draws opaquely (no alphaMode
+        MASK or BLEND: their discarded or blended pixels hide nothing). ``occluders_only``: also
+        without reflectors and transmissive objects (the reflectors' occlusion test:
+        viewer/occlusion.py says why)."""
+        reflectors = self.analysis.reflectors
+        found = []
+        for obj in self.objects:
+            mat = self.scene.materials[self.scene.objects[obj.index].material]
+            if mat.alpha_mode.upper() != "OPAQUE":
+                continue
+            if occluders_only and (obj.index in reflectors or self.analysis.objects[obj.index].transmission_lobes):
+                continue
+            found.append((obj, not mat.double_sided))
+        return found
+
+    def visible_samples(self, view_proj, size, indices: list) -> dict[int, int]:
+        """Pixels of a frame of ``size`` in which each reflector in ``indices`` is not hidden by an
+        opaque object (viewer/occlusion.py)."""
+        return self.occlusion.visible_samples(
+            view_proj, size, self.opaque_objects(True), {index: self.objects[index] for index in indices}
+        )
+
+    def draw_depth(self, view_proj) -> tuple[int, int]:
+        """The opaque objects' depth (the camera pass's pre-pass): (drawn, culled)."""
+        return self.occlusion.draw_depth(view_proj, self.opaque_objects(False))
+
+    def draw_background(self, cube, view_proj) -> None:
+        """The environment ``cube`` behind everything (viewer/render_base.py draw_environment)."""
+        draw_environment(self.ctx, self.programs, self._vaos, cube, view_proj)
+
+    def _vao(self, program, obj: GpuObject):
+        key = (id(program), obj.index)
+        if key not in self._vaos:
+            self._vaos[key] = self.ctx.vertex_array(
+                program,
+                [
+                    (
+                        obj.vbo,
+                        "3f 3f 4f 2f 2f",
+                        "in_position",
+                        "in_normal",
+                        "in_tangent",
+                        "in_uv0",
+                        "in_uv1",
+                    )
+                ],
+                obj.ibo,
+            )
+        return self._vaos[key]
+
+    def draw(
+        self,
+        view_proj,
+        eye,
+        method: Method,
+        specular: bool,
+        exclude=None,
+        lod_bias=None,
+        sample_offset=0,
+        seed=0,
+        mirrors: dict | None = None,
+        cull: bool = False,
+        pass_kind: str = "camera",
+        cull_view_projection=None,
+    ):
+        """Every object with its material whose bounding box reaches the frustum of
+        ``view_proj`` (``RenderSettings.frustum_culling``; counted in ``draw_counts[pass_kind]``).
+        ``cull``: skip the back faces of single-sided materials (the camera pass only: mirror
+        and cube-map passes flip the winding). ``cull_view_projection``: the frustum to cull against when it is
+        smaller than ``view_proj``'s (a scissored mirror pass)."""
+        self.ctx.enable(moderngl.DEPTH_TEST)
+        cull_view_projection = view_proj if cull_view_projection is None else cull_view_projection
+        culled = None
+        if self.settings.frustum_culling:
+            culled = outside_frustum_many(self.object_corners, cull_view_projection)
+        mirrors = mirrors or {}
+        counts = self.draw_counts.of(pass_kind)
+        view_proj_values = tuple(view_proj.T.astype("f4").ravel())
+        eye_values = tuple(float(x) for x in eye)
+        excluded = exclude if isinstance(exclude, frozenset | set | tuple) else (exclude,)
+        for obj, blended in self.draw_order(eye):
+            if obj.index in excluded or (not specular and self.analysis.objects[obj.index].transmission_lobes):
+                # Thin transmissive panes are see-through in the diffuse pass that fills cube
+                # maps (as in the baker): a black pane would hide what lies behind it.
+                continue
+            if culled is not None and culled[obj.index]:
+                counts.culled += 1
+                continue
+            counts.drawn += 1
+            if blended:  # alphaMode BLEND: composited over what is drawn, depth tested, not written
+                self.ctx.enable(moderngl.BLEND)
+                self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
+                self.ctx.fbo.depth_mask = False
+            single_sided = cull and not self.scene.materials[self.scene.objects[obj.index].material].double_sided
+            if single_sided:
+                self.ctx.enable(moderngl.CULL_FACE)  # glTF doubleSided false: back faces are not drawn
+            else:
+                self.ctx.disable(moderngl.CULL_FACE)
+            # A reflector drawn from its mirror buffer needs no cube map (on demand: it may have none).
+            mirror = mirrors.get(obj.index) if specular else None
+            own_cube = self.objects[obj.probe_owner].cube  # its own, or its group's shared probe
+            use_specular = specular and (own_cube is not None or mirror is not None)
+            if use_specular and own_cube is not None and pass_kind != "cube map":
+                self.residency.touch(obj.probe_owner)
+            # Per-object real-time method (the panel's override); the reference ignores it.
+            obj_method = self.object_method(obj.index, method)
+            proxy = self.scene.objects[obj.index].reflection_proxy if use_specular and mirror is None else None
+            program = self.program(
+                obj_method, use_specular, proxy is not None, mirror is not None, obj.material.has_rational
+            )
+            mat = self.scene.materials[self.scene.objects[obj.index].material]
+            set_uniform(program, "u_view_projection", view_proj_values)
+            set_uniform(program, "u_camera_position", eye_values)
+            self.shading.set_pass_state(program, obj_method, lod_bias, seed)
+            set_uniform(program, "u_sample_offset", int(sample_offset))
+            self.shading.object_state(
+                program, obj, obj_method, mirror is not None, proxy, self.objects[obj.probe_owner].probe_centre
+            )
+            if use_specular:
+                cube = own_cube if own_cube is not None else self.environment  # bound, unread under MIRROR
+                self.shading.bind_cube(program, cube, obj_method, obj.material, per_pixel_lobes(mat))
+                if mirror is not None:
+                    self.mirror_passes.bind(
+                        program, self.analysis.reflectors[obj.index], mirror, eye, self.shading.white,
+                        self.frame.previous_plane_states(),
+                    )  # fmt: skip
+            self._vao(program, obj).render(moderngl.TRIANGLES)
+        self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
+        self.ctx.fbo.depth_mask = True
+
+    def draw_order(self, eye) -> list:
+        """(object, blended): opaque and masked objects first, then the alphaMode BLEND ones
+        from back to front by the distance of their bounding-box centre (glTF 3.9.4)."""
+        opaque, blended = [], []
+        for obj in self.objects:
+            mode = self.scene.materials[self.scene.objects[obj.index].material].alpha_mode
+            (blended if mode == "BLEND" else opaque).append(obj)
+        eye = np.asarray(eye, dtype=np.float64)
+        blended.sort(key=lambda o: -float(np.linalg.norm(o.centre - eye)))
+        return [(o, False) for o in opaque] + [(o, True) for o in blended]
+
+    def release(self) -> None:
+        self.occlusion.release()
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        for obj in self.objects:
+            obj.release()

@@ -1,0 +1,251 @@
+"""The scene renderer's shading binder (issue 38): what an object's draw sets besides the pass
+state - its packed material (viewer/shading.py), lightmap or SH9 irradiance, glTF textures and
+samplers, reflection proxy - recorded once per program, object and method and replayed
+(viewer/interface.py DrawRecorder)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from lobeview.core.cache import BoundedCache
+from lobeview.core.methods import Method
+from lobeview.materials.gltf import specular_f0_unclamped
+from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
+
+from .interface import (
+    ALPHA_MODES,
+    PROXY_KINDS,
+    TEXTURE_UNITS,
+    DrawRecorder,
+    bind_sampler,
+    has_uniform,
+    replay,
+    set_uniform,
+    use_unit,
+    write_uniform,
+)
+from .shaders import ProgramCache
+from .shading import ShadingBinder
+
+MAX_SCENE_TEXTURES = 256  # lightmaps and material textures kept on the GPU
+MAX_DRAW_RECORDS = 16384  # recorded object draw states (programs x objects x methods in use)
+GL_SRGB8_ALPHA8 = 0x8C43  # colour textures: the GPU decodes sRGB before filtering (glTF 3.9.2)
+
+
+def per_pixel_lobes(mat: SceneMaterial) -> bool:
+    """Whether textures make a glTF material's lobes differ from pixel to pixel (shaders/scene.frag),
+    so that maps baked for one set of lobe parameters (prefiltered-rsibr) cannot shade it: every
+    texture but occlusion and emission, and the normal map too where a clearcoat keeps the
+    geometric normal for its own lobe."""
+    if mat.desc["model"] != "gltf":
+        return False
+    lobe_neutral = {"occlusion", "emissive"} | ({"normal"} if not mat.desc.get("clearcoat") else set())
+    return bool(set(mat.textures) - lobe_neutral)
+
+
+class SceneShading(ShadingBinder):
+    """ShadingBinder with the scene's textures: lightmaps and glTF maps (by the image they upload;
+    the image is kept with the texture so that its id() cannot be reused while the entry lives),
+    sampler objects, the DFG table of per-pixel glTF albedo, and the draw records."""
+
+    def __init__(
+        self,
+        ctx: moderngl.Context,
+        programs: ProgramCache,
+        scene: Scene,
+        environment_sh9: np.ndarray,
+        mip_filter: str,
+        cache_dir: Path | None = None,
+    ):
+        # Derived tables are cached beside the cube maps (cache_dir is the cubes' folder).
+        super().__init__(ctx, programs, mip_filter, cache_dir.parent if cache_dir is not None else None)
+        self.scene = scene
+        self.cache_dir = cache_dir
+        # Diffuse light of objects without a lightmap: the environment's irradiance (SH9).
+        self.environment_sh9 = environment_sh9
+        self.textures = BoundedCache(MAX_SCENE_TEXTURES, on_evict=lambda item: item[1].release())
+        # Every sampler uniform gets its own unit and a texture, even when unused: two samplers
+        # of different types on one unit make the draw call fail (GL_INVALID_OPERATION).
+        self.white = ctx.texture((1, 1), 3, np.ones(3, np.float32).tobytes(), dtype="f4")
+        self._samplers: dict = {}  # glTF sampler state -> moderngl.Sampler (a handful per scene)
+        self._dfg = None  # made on first use by a textured glTF lobe under normalised lobe-N
+        self.draw_records = True  # RenderSettings.draw_records
+        self._records = BoundedCache(MAX_DRAW_RECORDS)
+        self.record_generation = 0  # bumped when what a record holds changes
+        self.record_builds = 0  # records made so far (a count for tests and benchmarks)
+
+    def invalidate_records(self) -> None:
+        """Make the draw records again: a material, proxy or probe centre changed."""
+        self.record_generation += 1
+
+    def lightmap_texture(self, image: np.ndarray) -> moderngl.Texture:
+        def upload():
+            img = np.ascontiguousarray(image, dtype=np.float32)
+            tex = self.ctx.texture((img.shape[1], img.shape[0]), 3, img.tobytes(), dtype="f4")
+            tex.build_mipmaps()
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            tex.repeat_x = tex.repeat_y = True
+            return image, tex
+
+        return self.textures.get(id(image), upload)[1]
+
+    def _map_texture(self, slot: TextureSlot) -> moderngl.Texture:
+        """A material texture on the GPU: uint8 RGBA as stored (SRGB8_ALPHA8 for colour slots),
+        float RGBA for generated scenes; full MIP chain (the sampler object picks the filter)."""
+
+        def upload():
+            image = slot.image
+            if image.dtype == np.uint8:
+                if image.shape[-1] == 3:
+                    image = np.concatenate([image, np.full(image.shape[:-1] + (1,), 255, np.uint8)], axis=-1)
+                data = np.ascontiguousarray(image)
+                internal = GL_SRGB8_ALPHA8 if slot.srgb else None
+                tex = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), internal_format=internal)
+            else:
+                data = np.ascontiguousarray(slot.linear(), dtype=np.float32)
+                tex = self.ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), dtype="f4")
+            tex.build_mipmaps()
+            return image, tex
+
+        return self.textures.get(("map", id(slot.image), slot.srgb), upload)[1]
+
+    def _dfg_texture(self) -> moderngl.Texture:
+        """The split-sum DFG table (viewer/prefiltered.py), for per-pixel glTF lobe albedo."""
+        if self._dfg is None:
+            from .prefiltered import dfg_texture
+
+            self._dfg = dfg_texture(self.ctx, self.cache_dir)
+        return self._dfg
+
+    def _map_sampler(self, slot: TextureSlot | None) -> moderngl.Sampler:
+        """Sampler object for a slot's glTF sampler: repeat or clamp-to-edge per axis and the
+        filters (glTF uses the GL enums); mirrored repeat repeats here and is folded in
+        shaders/material_maps.glsl."""
+        key = (slot.wrap_s, slot.wrap_t, slot.min_filter, slot.mag_filter) if slot is not None else ("white",)
+        sampler = self._samplers.get(key)
+        if sampler is None:
+            sampler = self.ctx.sampler()
+            if slot is not None:
+                sampler.repeat_x = slot.wrap_s != CLAMP_TO_EDGE
+                sampler.repeat_y = slot.wrap_t != CLAMP_TO_EDGE
+                sampler.filter = (slot.min_filter, slot.mag_filter)
+            self._samplers[key] = sampler
+        return sampler
+
+    def object_state(self, program, obj, method: Method, planar: bool, proxy, probe_centre=None) -> None:
+        """Everything an object's draw sets that the pass does not: material, textures, lightmap,
+        reflection proxy. Recorded once per program, object and method (``draw_records``,
+        viewer/interface.py DrawRecorder) and replayed, so a draw sends only the uniform bytes the
+        program does not hold yet (issue 18: state uploaded when it changes, not per draw). The
+        records are made again after a material edit or a proxy change (``record_generation``)
+        and after a texture cache released a texture they bind."""
+        if not self.draw_records:
+            self._set_object_state(program, obj, method, planar, proxy, probe_centre)
+            return
+        key = (
+            program,
+            obj.index,
+            method,
+            planar,
+            proxy is not None,
+            self.record_generation,
+            self.textures.evictions,
+            self.material_textures.evictions,
+        )
+
+        def make():
+            recorder = DrawRecorder(program)
+            self._set_object_state(recorder, obj, method, planar, proxy, probe_centre)
+            self.record_builds += 1
+            return recorder.record()
+
+        replay(program, self._records.get(key, make))
+
+    def _set_object_state(self, program, obj, method: Method, planar: bool, proxy, probe_centre=None) -> None:
+        mat = self.scene.materials[self.scene.objects[obj.index].material]
+        self.set_material_state(program, obj.material, method, planar)
+        set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
+        set_uniform(program, "u_object_id", float(obj.index))
+        lightmap = mat.lightmap
+        if lightmap is not None and (lightmap.tex_coord != 1 or self.scene.objects[obj.index].uv1 is not None):
+            bind_sampler(program, "u_lightmap", self.lightmap_texture(lightmap.image))
+            set_uniform(program, "u_lightmap_texcoord", int(lightmap.tex_coord))
+            set_uniform(program, "u_lightmap_intensity", float(lightmap.intensity))
+        else:
+            bind_sampler(program, "u_lightmap", self.white)
+            set_uniform(program, "u_lightmap_texcoord", -1)
+            write_uniform(program, "u_irradiance_sh9", self.environment_sh9)
+        self._bind_material(program, mat)
+        if proxy is not None:
+            self._bind_proxy(program, proxy, probe_centre)
+
+    def _bind_material(self, program, mat: SceneMaterial) -> None:
+        """glTF's per-pixel inputs (shaders/scene.frag): textures, factors, alpha mode."""
+        desc = mat.desc
+        gltf_model = desc["model"] == "gltf"
+        base = desc["base_color"] if gltf_model else [1.0, 1.0, 1.0]
+        set_uniform(program, "u_gltf_model", int(gltf_model))
+        set_uniform(program, "u_base_color_factor", (*(float(c) for c in base), float(mat.base_alpha)))
+        set_uniform(program, "u_metallic_factor", float(desc.get("metallic", 0.0)))
+        set_uniform(program, "u_roughness_factor", float(desc.get("roughness", 1.0)))
+        set_uniform(program, "u_anisotropy", float(desc.get("anisotropy", 0.0)) if gltf_model else 0.0)
+        set_uniform(program, "u_clearcoat_roughness", float(desc.get("clearcoat_roughness", 0.0)))
+        set_uniform(program, "u_clearcoat_normal_scale", float(mat.clearcoat_normal_scale))
+        raw_f0 = (
+            specular_f0_unclamped(desc.get("ior", 1.5), desc.get("specular_color", (1.0, 1.0, 1.0)))
+            if gltf_model
+            else (0.04, 0.04, 0.04)
+        )
+        set_uniform(program, "u_specular_f0_raw", tuple(float(x) for x in raw_f0))
+        set_uniform(program, "u_normal_scale", float(mat.normal_scale))
+        set_uniform(program, "u_occlusion_strength", float(mat.occlusion_strength))
+        set_uniform(program, "u_alpha_mode", ALPHA_MODES[mat.alpha_mode.lower()])
+        set_uniform(program, "u_alpha_cutoff", float(mat.alpha_cutoff))
+        texcoords, transforms, mirrored = [], [], []
+        for i, name in enumerate(TEXTURE_SLOTS):
+            slot = mat.textures.get(name)
+            unit = TEXTURE_UNITS["u_material_maps"][i]
+            use_unit(program, self._map_texture(slot) if slot is not None else self.white, unit)
+            use_unit(program, self._map_sampler(slot), unit)
+            texcoords.append(slot.tex_coord if slot is not None else -1)
+            transform = np.asarray(slot.transform if slot is not None else np.eye(3), dtype=np.float32)
+            transforms.append(transform.T)  # GLSL mat3 is column-major
+            mirrored.append(
+                [int(slot.wrap_s == MIRRORED_REPEAT), int(slot.wrap_t == MIRRORED_REPEAT)] if slot else [0, 0]
+            )
+        set_uniform(program, "u_material_maps", list(TEXTURE_UNITS["u_material_maps"]))
+        write_uniform(program, "u_map_texcoord", np.asarray(texcoords, dtype=np.int32))
+        write_uniform(program, "u_map_transform", np.asarray(transforms, dtype=np.float32))
+        write_uniform(program, "u_map_mirrored", np.asarray(mirrored, dtype=np.int32))
+        if has_uniform(program, "u_albedo_per_pixel"):  # normalised lobe-N (shaders/patterns.glsl lobe_albedo)
+            # Every texture but the normal maps, occlusion and emission changes the lobes' albedo.
+            per_pixel = gltf_model and bool(set(mat.textures) - {"normal", "occlusion", "emissive", "clearcoat_normal"})
+            set_uniform(program, "u_albedo_per_pixel", int(per_pixel))
+
+            # Bound even when unused: a sampler left on unit 0 would meet the radiance cube there
+            # (two sampler types on one unit fail the draw with GL_INVALID_OPERATION).
+            bind_sampler(program, "u_dfg", self._dfg_texture() if per_pixel else self.white)
+
+    def _bind_proxy(self, program, proxy, probe_centre) -> None:
+        """The reflection proxy (scenes/reflection_proxy.py) as shaders/integrate.glsl PARALLAX
+        reads it, with ``probe_centre``: where the cube map was rendered from (a shared probe's:
+        its group's)."""
+        set_uniform(program, "u_cube_centre", tuple(float(x) for x in probe_centre))
+        set_uniform(program, "u_proxy_kind", PROXY_KINDS[proxy.kind])
+        set_uniform(program, "u_proxy_plane_count", len(proxy.planes) if proxy.kind == "planes" else 0)
+        write_uniform(program, "u_proxy_planes", proxy.padded_planes())
+        box = (proxy.box_min, proxy.box_max) if proxy.kind == "box" else (np.zeros(3), np.zeros(3))
+        set_uniform(program, "u_proxy_box_min", tuple(float(x) for x in box[0]))
+        set_uniform(program, "u_proxy_box_max", tuple(float(x) for x in box[1]))
+
+    def release(self) -> None:
+        super().release()
+        self.textures.clear()
+        for sampler in self._samplers.values():
+            sampler.release()
+        if self._dfg is not None:
+            self._dfg.release()
+        self.white.release()
