@@ -112,7 +112,7 @@ def add_scene_arguments(p) -> None:
 
 
 def add_trust_arguments(p) -> None:
-    """The trust boundary's two user controls (README "Security and limits")."""
+    """The trust boundary's two user controls (docs/guide.md "Untrusted files and limits")."""
     p.add_argument(
         "--allow-outside-references",
         action="store_true",

@@ -57,7 +57,7 @@ RING_SUFFIX = "+ring"
 # min(spp, MIN_PIXEL_POSITIONS) passes (smaller batches) to resolve what a pixel covers.
 PIXEL_FILTERS = ("box", "point")
 MIN_PIXEL_POSITIONS = 64
-# A reference reads the renderer's table of 65 536 Sobol points (viewer/render_base.py) once:
+# A reference reads the renderer's table of 65 536 Sobol points (viewer/shading.py) once:
 # more samples per lobe would wrap around it and add the same points again.
 MAX_REFERENCE_SPP = 65536
 

@@ -154,7 +154,7 @@ class FitResult:
     options: FitOptions
 
     def material(self, name: str = "fitted", description: str = "", data: str = "") -> dict:
-        """The fit as a lobeview material description (README "Material JSON") with provenance."""
+        """The fit as a lobeview material description (docs/guide.md "Material JSON") with provenance."""
 
         def value(arr):
             arr = np.clip(np.asarray(arr, dtype=float), 0.0, 1.0)

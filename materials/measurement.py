@@ -9,7 +9,7 @@ transmission measurement.
 
 Three sources:
 
-- :func:`read_csv` / :func:`write_csv`: lobeview's plain goniophotometer format (README
+- :func:`read_csv` / :func:`write_csv`: lobeview's plain goniophotometer format (docs/guide.md
   "Measured materials"): a header line ``theta_i,phi_i,theta_o,phi_o,p`` (or ``p_r,p_g,p_b``,
   optionally ``weight``), angles in degrees, theta_o > 90 for the transmission hemisphere,
   ``#`` comment lines anywhere.
@@ -160,7 +160,7 @@ _REQUIRED = ("theta_i", "phi_i", "theta_o", "phi_o")
 
 
 def read_csv(path, negative: str = "error", limits: Limits | None = None) -> Measurement:
-    """Read a goniophotometer CSV (see the module docstring and README "Measured materials").
+    """Read a goniophotometer CSV (see the module docstring and docs/guide.md "Measured materials").
 
     ``negative``: what to do with negative p (background-subtracted noise): ``"error"``
     (default), ``"clamp"`` to 0 or ``"mask"`` (drop the tuple), both with a warning that counts

@@ -1,6 +1,6 @@
 """Deterministic in-lobe sample patterns and their quadrature (thesis section 4.4.3, 4.5.3).
 
-The method ``lobe-N`` (DESIGN.md) shades each specular lobe with N samples placed regularly in
+The method ``lobe-N`` (docs/methods.md) shades each specular lobe with N samples placed regularly in
 the lobe, each looked up with a MIP level that makes the samples cover the lobe, and combines
 them with the weighting of Eq. 4.25. Everything here is the numpy reference the GLSL version is
 tested against.

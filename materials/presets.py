@@ -4,7 +4,7 @@ Presets are plain JSON-able dicts in the format of :mod:`lobeview.materials.spec
 validated like user materials (a test validates every one).
 
 Fitted (thesis section 3.4.2; numbers copied from the tables, "albedo" is what the table
-reports, see README for how lobeview's own albedo compares):
+reports, see docs/guide.md "Presets" for how lobeview's own albedo compares):
   alanod-2000gs-1lobe / -2lobe  scattergloss aluminium, Table 3.1 (albedo 0.787 / 0.878)
   white-foil                    partly transmissive foil, Table 3.2 (refl. 0.807, trans. 0.093)
   miro5-1lobe / -2lobe          brushed anisotropic aluminium, Table 3.3 (albedo 0.815 / 0.944)

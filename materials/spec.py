@@ -1,6 +1,6 @@
 """Material descriptions as plain JSON-able data, validated, and turned into BSDFs.
 
-Three models share one format (a JSON object with a ``model`` key); see README "Material JSON".
+Three models share one format (a JSON object with a ``model`` key); see docs/guide.md "Material JSON".
 
 thesis      {"model": "thesis", "kd": 0.1 | [r, g, b],
              "lobes": [{"ks", "mx", "my", "r0", "alpha"}, ...],

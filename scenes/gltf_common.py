@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-# The documented fallbacks of recoverable problems (README "Scene format"): problem -> what is done.
+# The documented fallbacks of recoverable problems (docs/guide.md "Scene format"): problem -> what is done.
 FALLBACKS = {
     "missing image": "the texture is ignored (factor only)",
     "missing normal map": "the interpolated vertex normals are used",

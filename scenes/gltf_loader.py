@@ -4,9 +4,9 @@ pygltflib parses the container (JSON, GLB chunks); accessors, transforms and mat
 here with numpy because lobeview needs what general loaders drop: TEXCOORD_1 and the
 ``MOZ_lightmap`` material extension (``index`` = texture with linear irradiance in EXR or
 Radiance .hdr, ``texCoord``, ``intensity``), and a thesis-model material in ``extras.lobeview``
-(a preset name or a material object, see README).
+(a preset name or a material object, docs/guide.md "Material JSON").
 
-Scene files are untrusted (README "Security and limits"): every URI goes through
+Scene files are untrusted (docs/guide.md "Untrusted files and limits"): every URI goes through
 :mod:`lobeview.core.trust` (only regular files inside the scene's folder unless the user opts in),
 every index is range-checked (a negative index would silently wrap in Python), every accessor is
 bounds-checked against its bufferView before a numpy view is made, the node graph must be a

@@ -379,7 +379,7 @@ def _material(reader, index: int | None, scene_warnings: list) -> SceneMaterial:
         _warn(
             scene_warnings,
             f"{path}: material {name!r}: {extension} is not supported yet; the material renders without it"
-            " (README: glTF support)",
+            " (docs/guide.md: glTF support)",
         )
     emissive = np.asarray(mat.emissiveFactor or [0, 0, 0], dtype=np.float64)
     strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)

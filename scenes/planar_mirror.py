@@ -1,5 +1,5 @@
 """Planar reflectors and the mirror pass (thesis 4.5): the numpy reference of what
-viewer/scene_renderer.py and shaders/integrate.glsl (``MIRROR``) do on the GPU.
+viewer/mirror_pass.py and shaders/integrate.glsl (``MIRROR``) do on the GPU.
 
 A large glossy plane (floor, table top, wall) cannot use one cube map: what it reflects changes
 across it (Fig. 4.25). Each frame the scene is rendered from the camera mirrored about the plane

@@ -26,7 +26,7 @@ option (``--shared-probes``, SceneRenderer(shared_probes=True)):
 The renderer offers as candidates only objects that are neither emissive (the others would lose
 the lamp) nor transmissive (a pane transmits what lies right behind it) nor planar reflectors.
 The constants were chosen by the error they cause against per-object cube maps
-(bench/probe_sharing.py, README "Shared probes").
+(bench/probe_sharing.py, docs/guide.md, --shared-probes).
 """
 
 from __future__ import annotations

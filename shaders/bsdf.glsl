@@ -6,57 +6,12 @@
 #include "cube.glsl"
 const float COS_EPS = 1e-7;
 
-// The lobe layout (LOBE_ROWS vec4s per lobe), its type codes (LOBE_*, DIST_*, FRESNEL_*) and
-// the shared constants (MAX_LOBES, XI_BORDER, ...) are #defines injected from
-// viewer/interface.py (SHADER_CONSTANTS, LOBE_LAYOUT): one description for both sides.
-
-struct Lobe {
-    int type;
-    int dist;
-    float ax;
-    float ay;
-    vec3 k;        // ks / kt / scale
-    float alpha;   // thesis shadowing exponent (Eq. 3.4)
-    vec3 r0;       // Schlick r0 (thesis, microfacet) or base colour (glTF)
-    int fresnel;
-    vec3 eta;
-    float metallic;
-    vec3 kappa;
-    // glTF specular (KHR_materials_ior/_specular/_clearcoat; materials/gltf.py): the dielectric
-    // f0 colour, the specular weight and the clearcoat factor over the lobe.
-    vec3 dielectric_f0;
-    float specular_weight;
-    float coat;
-    float coat_cos;  // N_c.V of the clearcoat's own normal (scene.frag); < 0: the lobe frame's N.V
-};
+// The shared constants (MAX_LOBES, LOBE_ROWS, XI_BORDER, ...) and type codes (LOBE_*, DIST_*,
+// FRESNEL_*) are #defines injected from viewer/interface.py (SHADER_CONSTANTS); the Lobe type and
+// get_lobe come from LOBE_LAYOUT there (generated: lobe_layout.glsl), as the Python packing does.
+#include "lobe_layout.glsl"
 
 uniform int u_lobe_count;
-uniform vec4 u_lobes[MAX_LOBES * LOBE_ROWS];
-
-Lobe get_lobe(int i) {
-    vec4 a = u_lobes[LOBE_ROWS * i];
-    vec4 b = u_lobes[LOBE_ROWS * i + 1];
-    vec4 c = u_lobes[LOBE_ROWS * i + 2];
-    vec4 d = u_lobes[LOBE_ROWS * i + 3];
-    vec4 e = u_lobes[LOBE_ROWS * i + 4];
-    Lobe l;
-    l.type = int(a.x + 0.5);
-    l.dist = int(a.y + 0.5);
-    l.ax = a.z;
-    l.ay = a.w;
-    l.k = b.rgb;
-    l.alpha = b.w;
-    l.r0 = c.rgb;
-    l.fresnel = int(c.w + 0.5);
-    l.eta = d.rgb;
-    l.metallic = d.w;
-    l.kappa = e.rgb;
-    l.dielectric_f0 = d.rgb;
-    l.specular_weight = b.w;
-    l.coat = e.w;
-    l.coat_cos = -1.0;
-    return l;
-}
 
 bool lobe_is_transmission(Lobe l) { return l.type == LOBE_KURT_TRANSMISSION || l.type == LOBE_GLTF_TRANSMISSION; }
 

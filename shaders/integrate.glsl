@@ -1,5 +1,5 @@
 // Integration of incident light over the lobes of a material (thesis 4.4), for one shading
-// point: the methods of DESIGN.md chosen by #define.
+// point: the methods of docs/methods.md chosen by #define.
 //   METHOD_LOBE  lobe-N: deterministic pattern, MIP level per sample, Eq. 4.25 (Eq. 4.24 with
 //                LOBE_EQ424)
 //   METHOD_FIS   fis-N: the same N quasi-random importance samples at every pixel, each

@@ -1,6 +1,6 @@
 #version 450 core
 // One MIP level of a 2D radiance buffer (the planar mirror passes) from the level above it with
-// the separable tent [1 3 3 1] / 8 of shaders/cube_mip_tent.comp (viewer/mip_chain.py): four
+// the separable tent [1 3 3 1] / 8 of shaders/mip_tent_cube.comp (viewer/mip_chain.py): four
 // bilinear reads at +-0.75 source texels around each destination texel centre, clamped at the
 // buffer's edges (the sampler clamps; numpy: scenes/env_sampling.py tent_downsample_face).
 layout(local_size_x = 8, local_size_y = 8, local_size_z = 1) in;

@@ -1,5 +1,5 @@
 #version 450 core
-// What the viewer shows while refining (app/refinement.py): per pixel, the refinement's running
+// What the viewer shows while refining (viewer/refinement.py): per pixel, the refinement's running
 // mean and the real-time frame mixed by the weight the last two-half estimate gave the mean,
 // w = bias^2 / (bias^2 + noise^2), the convex combination of least expected squared error.
 in vec2 v_uv;

@@ -225,7 +225,7 @@ def _graph():
 
 
 def test_layers_point_one_way_and_core_imports_nothing_of_lobeview():
-    """DESIGN.md: app -> viewer -> materials/scenes -> core, and the benchmarks beside the app
+    """docs/architecture.md: app -> viewer -> materials/scenes -> core, and the benchmarks beside the app
     (``lobeview bench`` runs them; they never import the app: issue 38). Checked over the AST
     (the package-dir mapping hides lobeview.* imports from ordinary tools), lazy imports included."""
     allowed = {

@@ -1,7 +1,7 @@
 """The Python <-> GLSL contract (viewer/interface.py): shared constants reach every program and
 are defined nowhere else, a misspelt uniform or a layout mismatch fails loudly, every sampler of
-the shading programs has its own texture unit, the packed lobe follows LOBE_LAYOUT, and --cache
-is honoured by every cached artefact."""
+the shading programs has its own texture unit, the packed lobe of every lobe type follows
+LOBE_LAYOUT on both sides (one writer), and --cache is honoured by every cached artefact."""
 
 from __future__ import annotations
 
@@ -22,11 +22,14 @@ from lobeview.viewer.interface import (
     TEXTURE_UNITS,
     UniformError,
     declared_uniforms,
+    lobe_layout_glsl,
     method_defines,
+    pack_lobe,
     set_uniform,
+    unpack_lobe,
     write_uniform,
 )
-from lobeview.viewer.shaders import ProgramCache, ShaderError, assemble
+from lobeview.viewer.shaders import ProgramCache, ShaderError, assemble, define_block
 
 SHADER_FILES = sorted(p.name for p in resources.files("lobeview.shaders").iterdir() if p.name.endswith(
     (".glsl", ".vert", ".frag", ".comp")))  # fmt: skip
@@ -69,7 +72,7 @@ def test_shared_constants_are_defined_only_by_the_interface():
     source = assemble("scene.frag", {"METHOD_LOBE": True})
     for name in SHADER_CONSTANTS:
         assert re.search(rf"^#define {name} ", source, re.MULTILINE), name
-    assert "#define XI_BORDER 0.01" in source and f"#define LOBE_ROWS {len(LOBE_LAYOUT)}" in source
+    assert "#define XI_BORDER 0.01" in source and f"#define LOBE_ROWS {LOBE_ROWS}" in source
 
 
 def test_a_caller_cannot_override_a_shared_constant_or_use_an_unknown_define():
@@ -135,10 +138,136 @@ def test_a_layout_mismatch_between_packer_and_shader_fails_loudly(programs):
     with pytest.raises(UniformError, match="layout disagree"):
         write_uniform(program, "u_lobes", one_row_more)
     # The packed glTF lobe follows LOBE_LAYOUT field by field.
-    row = {field: value for fields, values in zip(LOBE_LAYOUT, packed.lobes[:LOBE_ROWS], strict=True)
-           for field, value in zip(fields, values, strict=True)}  # fmt: skip
+    row = unpack_lobe(packed.lobes[:LOBE_ROWS])
     assert row["type"] == LOBE_TYPES["gltf specular"] and row["metallic"] == pytest.approx(0.75)
-    assert (row["r0.r"], row["r0.g"], row["r0.b"]) == pytest.approx((0.5, 0.25, 0.125))
+    assert row["r0"] == pytest.approx((0.5, 0.25, 0.125))
+
+
+# -- the packed lobe: one writer (interface.LOBE_LAYOUT) for both sides ---------------------------
+def _layout_probe_source(lobes: int) -> str:
+    """A compute shader that reads ``lobes`` lobes with the generated get_lobe and writes every
+    field, in LOBE_LAYOUT order, to a float buffer."""
+    writes = []
+    for field in LOBE_LAYOUT:
+        for name in field.names:
+            for c in range(len(field.columns)):
+                part = f"l.{name}" if len(field.columns) == 1 else f"l.{name}[{c}]"
+                writes.append(f"    values[o++] = float({part});")
+    return "\n".join([
+        "#version 450", define_block({}), lobe_layout_glsl(),
+        "layout(local_size_x = 1) in;", "layout(std430, binding = 0) buffer Out { float values[]; };",
+        "void main() {", "    int i = int(gl_GlobalInvocationID.x);", "    Lobe l = get_lobe(i);",
+        f"    int o = i * {_fields_per_lobe()};", *writes, "}",
+    ])  # fmt: skip
+
+
+def _fields_per_lobe() -> int:
+    return sum(len(f.names) * len(f.columns) for f in LOBE_LAYOUT)
+
+
+def _flat(values: dict) -> np.ndarray:
+    return np.concatenate([np.ravel(np.asarray(values[n], np.float32)) for f in LOBE_LAYOUT for n in f.names])
+
+
+def _rational_desc():
+    import json
+    from pathlib import Path
+
+    return json.loads((Path(__file__).parent / "data" / "gold-ggx-rational.json").read_text())
+
+
+LOBE_TYPE_MATERIALS = {
+    "kurt reflection": lambda: "alanod-2000gs-1lobe",
+    "kurt transmission": lambda: "white-foil",
+    "microfacet": lambda: "gold-ggx",
+    "gltf specular": lambda: {"model": "gltf", "base_color": [0.8, 0.4, 0.2], "metallic": 0.6, "roughness": 0.35,
+                              "ior": 1.7, "specular": 0.8, "specular_color": [1.0, 0.7, 0.5], "clearcoat": 0.4},
+    "gltf clearcoat": lambda: {"model": "gltf", "base_color": [0.3, 0.3, 0.9], "roughness": 0.5, "clearcoat": 0.7,
+                               "clearcoat_roughness": 0.1},
+    "gltf transmission": lambda: {"model": "gltf", "base_color": [0.9, 0.9, 0.9], "roughness": 0.2,
+                                  "transmission": 0.8, "anisotropy": 0.5},
+    "rational": _rational_desc,
+}  # fmt: skip
+
+
+def _expected_fields(comp) -> dict:
+    """What the packed lobe must hold for ``comp``, written from the numpy component (not from
+    the packer): the fields every lobe type defines."""
+    from lobeview.materials.conductor import MicrofacetReflection
+    from lobeview.materials.gltf import COAT_F0, GltfClearcoat, GltfSpecular, GltfTransmission
+    from lobeview.materials.rational_brdf import RationalLobe
+    from lobeview.materials.thesis import KurtLobe
+    from lobeview.viewer.interface import DISTRIBUTIONS, FRESNEL_TYPES
+
+    d = comp.distribution
+    out = {"dist": DISTRIBUTIONS[d.kind], "ax": d.alpha_x, "ay": d.alpha_y}
+    if isinstance(comp, KurtLobe):
+        kind = "kurt transmission" if comp.transmission else "kurt reflection"
+        out.update(k=comp.k, alpha=comp.alpha, r0=comp.r0, fresnel=FRESNEL_TYPES["schlick"])
+    elif isinstance(comp, GltfTransmission | GltfSpecular):
+        kind = "gltf transmission" if isinstance(comp, GltfTransmission) else "gltf specular"
+        scale = comp.amount if isinstance(comp, GltfTransmission) else 1.0
+        out.update(k=[scale] * 3, specular_weight=comp.specular, r0=comp.base_color, dielectric_f0=comp.f0,
+                   metallic=comp.metallic, coat=comp.layers.coat)  # fmt: skip
+    elif isinstance(comp, GltfClearcoat):
+        kind = "gltf clearcoat"
+        out.update(k=comp.scale, r0=[COAT_F0] * 3, fresnel=FRESNEL_TYPES["schlick"])
+    elif isinstance(comp, RationalLobe):
+        kind = "rational"
+        out.update(k=[np.radians(comp.theta_max_deg), 0.0, 0.0])
+    else:
+        assert isinstance(comp, MicrofacetReflection)
+        kind = "microfacet"
+        fr = comp.fresnel
+        out.update(k=comp.scale, r0=fr.r0, fresnel=FRESNEL_TYPES[fr.kind], eta=fr.eta, kappa=fr.k)
+    return {"type": LOBE_TYPES[kind], **out}
+
+
+@pytest.mark.parametrize("lobe_type", list(LOBE_TYPES))
+def test_every_lobe_type_packs_and_unpacks_field_by_field(programs, lobe_type):
+    """Per lobe type: the packed material holds what the numpy component says, field by field
+    (unpack_lobe), and the generated GLSL get_lobe reads exactly what unpack_lobe reads."""
+    from lobeview.materials.spec import build_bsdf, load_material, validate
+    from lobeview.viewer.material_gpu import pack_material
+
+    desc = LOBE_TYPE_MATERIALS[lobe_type]()
+    bsdf = build_bsdf(load_material(desc) if isinstance(desc, str) else validate(desc))
+    packed = pack_material(bsdf)
+    unpacked = [unpack_lobe(packed.lobes[i * LOBE_ROWS : (i + 1) * LOBE_ROWS]) for i in range(packed.lobe_count)]
+    assert lobe_type in {next(k for k, v in LOBE_TYPES.items() if v == lobe["type"]) for lobe in unpacked}
+    for comp, lobe in zip(packed.lobe_components, unpacked, strict=True):
+        for name, value in _expected_fields(comp).items():
+            assert np.asarray(lobe[name]) == pytest.approx(np.asarray(value, np.float32)), (lobe_type, name)
+    # The GPU reads the same values through the generated get_lobe.
+    ctx = programs.ctx
+    shader = ctx.compute_shader(_layout_probe_source(packed.lobe_count))
+    shader["u_lobes"].write(packed.lobes.tobytes())
+    out = ctx.buffer(reserve=packed.lobe_count * _fields_per_lobe() * 4)
+    out.bind_to_storage_buffer(0)
+    shader.run(packed.lobe_count)
+    ctx.finish()
+    gpu = np.frombuffer(out.read(), np.float32).reshape(packed.lobe_count, -1)
+    out.release()
+    for i, lobe in enumerate(unpacked):
+        np.testing.assert_array_equal(gpu[i], _flat(lobe), err_msg=f"{lobe_type}: lobe {i}")
+
+
+def test_the_lobe_layout_has_one_writer():
+    """Every shader reads the lobe through the generated get_lobe: no source declares the Lobe
+    struct or u_lobes itself, bsdf.glsl includes the generated file, and the packer refuses a
+    field the layout lacks, a wrong size, or two names of one slot."""
+    for name in SHADER_FILES:
+        source = resources.files("lobeview.shaders").joinpath(name).read_text()
+        assert not re.search(r"struct\s+Lobe\b|uniform\s+vec4\s+u_lobes\b", source), name
+    assert '#include "lobe_layout.glsl"' in resources.files("lobeview.shaders").joinpath("bsdf.glsl").read_text()
+    assert "lobe_layout.glsl" not in SHADER_FILES  # generated, never a file that could go stale
+    assert {n for f in LOBE_LAYOUT for n in f.names} == set(unpack_lobe(np.zeros((LOBE_ROWS, 4))))
+    with pytest.raises(KeyError, match="no field 'kd'"):
+        pack_lobe("microfacet", kd=(1, 1, 1))
+    with pytest.raises(ValueError, match="takes 3 values"):
+        pack_lobe("microfacet", k=(1, 1))
+    with pytest.raises(ValueError, match="share one slot"):
+        pack_lobe("gltf specular", alpha=2.0, specular_weight=0.5)
 
 
 def test_cache_option_is_honoured_by_every_cached_artefact(tmp_path, monkeypatch, capsys):

@@ -37,7 +37,7 @@ from lobeview.materials.rational import graded_exponents
 from lobeview.materials.rational_brdf import RationalLobe
 from lobeview.materials.thesis import KurtLobe
 
-from .interface import DISTRIBUTIONS, FRESNEL_TYPES, LOBE_ROWS, LOBE_TYPES, RATIONAL_FUNCTIONS, RATIONAL_STRIDE
+from .interface import DISTRIBUTIONS, FRESNEL_TYPES, LOBE_ROWS, RATIONAL_FUNCTIONS, RATIONAL_STRIDE, pack_lobe
 
 ALBEDO_TABLES_KEPT = 256  # albedo tables of distinct lobes kept in memory (slider edits make new ones)
 # Albedo tables cached on disk: bump when a lobe's eval or the table's layout changes.
@@ -94,57 +94,36 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
         if isinstance(comp, CosineSampled):
             continue
         d = comp.distribution
+        shape = {"dist": DISTRIBUTIONS[d.kind], "ax": d.alpha_x, "ay": d.alpha_y}
         if isinstance(comp, KurtLobe):
-            kind = LOBE_TYPES["kurt transmission" if comp.transmission else "kurt reflection"]
-            row = [
-                [kind, DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
-                [*comp.k, comp.alpha],
-                [*comp.r0, FRESNEL_TYPES["schlick"]],
-                [0, 0, 0, 0],
-                [0, 0, 0, 0],
-            ]
+            kind = "kurt transmission" if comp.transmission else "kurt reflection"
+            row = pack_lobe(kind, **shape, k=comp.k, alpha=comp.alpha, r0=comp.r0, fresnel=FRESNEL_TYPES["schlick"])
         elif isinstance(comp, (GltfSpecular, GltfTransmission)):
             # The glTF base lobes: scale 1 (specular) or the transmission factor, the specular
             # weight, base colour, dielectric f0, metallic and the clearcoat over them.
             transmission = isinstance(comp, GltfTransmission)
             scale = comp.amount if transmission else 1.0
-            row = [
-                [LOBE_TYPES["gltf transmission" if transmission else "gltf specular"], DISTRIBUTIONS[d.kind],
-                 d.alpha_x, d.alpha_y],
-                [scale, scale, scale, comp.specular],
-                [*comp.base_color, 0],
-                [*comp.f0, comp.metallic],
-                [0, 0, 0, comp.layers.coat],
-            ]  # fmt: skip
+            row = pack_lobe(
+                "gltf transmission" if transmission else "gltf specular", **shape, k=(scale, scale, scale),
+                specular_weight=comp.specular, r0=comp.base_color, dielectric_f0=comp.f0, metallic=comp.metallic,
+                coat=comp.layers.coat,
+            )  # fmt: skip
         elif isinstance(comp, GltfClearcoat):
-            row = [
-                [LOBE_TYPES["gltf clearcoat"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
-                [*comp.scale, 0],
-                [COAT_F0, COAT_F0, COAT_F0, FRESNEL_TYPES["schlick"]],
-                [0, 0, 0, 0],
-                [0, 0, 0, 0],
-            ]
+            row = pack_lobe(
+                "gltf clearcoat", **shape, k=comp.scale, r0=(COAT_F0,) * 3, fresnel=FRESNEL_TYPES["schlick"]
+            )
         elif isinstance(comp, RationalLobe):
             # The proxy distribution places lobe-N's pattern; the functions go to a storage
             # buffer (one rational lobe per material: its data are per material, not per lobe).
+            # k.r holds the largest theta_l of the fit (radians).
             if any(isinstance(c, RationalLobe) for c in components):
                 raise ValueError("a material has at most one rational lobe")
-            row = [
-                [LOBE_TYPES["rational"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
-                [np.radians(comp.theta_max_deg), 0, 0, 0],
-                [0, 0, 0, 0],
-                [0, 0, 0, 0],
-                [0, 0, 0, 0],
-            ]
+            row = pack_lobe("rational", **shape, k=(np.radians(comp.theta_max_deg), 0.0, 0.0))
         elif isinstance(comp, MicrofacetReflection):
             fr = comp.fresnel
-            row = [
-                [LOBE_TYPES["microfacet"], DISTRIBUTIONS[d.kind], d.alpha_x, d.alpha_y],
-                [*comp.scale, 0],
-                [*fr.r0, FRESNEL_TYPES[fr.kind]],
-                [*fr.eta, 0],
-                [*fr.k, 0],
-            ]
+            row = pack_lobe(
+                "microfacet", **shape, k=comp.scale, r0=fr.r0, fresnel=FRESNEL_TYPES[fr.kind], eta=fr.eta, kappa=fr.k
+            )
         else:
             raise TypeError(f"no GPU version of BSDF component {type(comp).__name__}")
         rows.append(row)
@@ -154,7 +133,7 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
         raise ValueError(f"material has {len(rows)} lobes; the renderer supports {MAX_LOBES}")
     lobes = np.zeros((MAX_LOBES * LOBE_ROWS, 4), dtype=np.float32)
     if rows:
-        lobes[: len(rows) * LOBE_ROWS] = np.asarray(rows, dtype=np.float32).reshape(-1, 4)
+        lobes[: len(rows) * LOBE_ROWS] = np.concatenate(rows)
     diffuse = next((comp for comp in bsdf.components if isinstance(comp, GltfDiffuse)), None)
     extra = {}
     if diffuse is not None:

@@ -1,6 +1,6 @@
 """Object preview renderer: one object lit only by a distant environment, no lightmaps.
 
-The exact-comparison mode of lobeview: every method of DESIGN.md (lobe-N, fis-N, mc-N,
+The exact-comparison mode of lobeview: every method of docs/methods.md (lobe-N, fis-N, mc-N,
 reference) renders the same object, and the G-buffer (world position, shading normal and
 tangent per pixel) is returned so tests can evaluate the numpy reference at the same points.
 """

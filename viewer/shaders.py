@@ -15,7 +15,7 @@ from importlib import resources
 
 import moderngl
 
-from .interface import SHADER_CONSTANTS, declared_uniforms
+from .interface import SHADER_CONSTANTS, declared_uniforms, lobe_layout_glsl
 
 #: the variant switches a caller may set (the shared constants come from interface.py)
 KNOWN_DEFINES = {
@@ -41,7 +41,13 @@ class ShaderError(RuntimeError):
     pass
 
 
+#: sources made from the Python side's single description of a contract (``#include`` them by name)
+GENERATED_SOURCES = {"lobe_layout.glsl": lobe_layout_glsl}
+
+
 def read_source(name: str) -> str:
+    if name in GENERATED_SOURCES:
+        return GENERATED_SOURCES[name]()
     try:
         return resources.files("lobeview.shaders").joinpath(name).read_text()
     except FileNotFoundError:

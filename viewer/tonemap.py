@@ -1,4 +1,4 @@
-"""Tonemapping linear radiance to display sRGB (the only place sRGB appears, DESIGN.md).
+"""Tonemapping linear radiance to display sRGB (the only place sRGB appears: docs/architecture.md, conventions).
 
 operators:
   aces      Narkowicz's fit of the ACES filmic curve (2015): (x (2.51 x + 0.03)) /
