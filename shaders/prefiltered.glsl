@@ -17,7 +17,7 @@ uniform int u_banks_fibre[MAX_LOBES];          // Banks fibre axis: 0 tangent, 1
 // Median angle below which a fitted lobe is read from the radiance cube's MIP chain instead of its
 // map, which cannot resolve it (viewer/prefiltered.py lobe_direct_angle; 0: never).
 uniform float u_lobe_direct_angle[MAX_LOBES];
-// viewer/shading.py lobe_table: row lobe_index * LOBE_TABLE_ROWS + j; texels 0..S-1 the axis of
+// viewer/prefilter_modes.py lobe_table: row lobe_index * LOBE_TABLE_ROWS + j; texels 0..S-1 the axis of
 // fitted lobe j (local, wo at azimuth 0), S..2S-1 its energy (Banks: albedo at azimuth j).
 uniform sampler2D u_lobe_table;
 

@@ -369,3 +369,32 @@ def test_per_material_textures_are_made_once_across_frames(gl):
             renderer.render(CAMERA, bsdf, method, background=False)
     assert len(renderer.shading.material_textures) == textures
     assert len(renderer.cubes.prefiltered_maps()._by_fit) == maps
+
+
+def test_prefiltered_modes_are_one_table():
+    """issue 38: every prefiltered-MODE is a row of viewer/prefilter_modes.py (the names agree
+    with the grammar's), every lobe kind it chooses has a row with a shader lookup, and no other
+    module of the renderer tells the modes apart by name."""
+    import re
+    from pathlib import Path
+
+    from lobeview.core.methods import PREFILTER_MODES as NAMES
+    from lobeview.viewer.interface import LOBE_MAP_MODES
+    from lobeview.viewer.prefilter_modes import LOBE_KINDS, PREFILTER_MODES, prefilter_plan
+
+    assert tuple(PREFILTER_MODES) == NAMES
+    assert {kind.lookup for kind in LOBE_KINDS.values()} <= set(LOBE_MAP_MODES)
+    chosen = set()
+    for preset in ("gold-ggx", "miro5-2lobe", "white-foil", "alanod-2000gs-2lobe", "frosted-glass"):
+        material = pack_material(build_bsdf(load_material(preset)))
+        for mode in NAMES:
+            plan = prefilter_plan(material, mode)
+            assert len(plan) == material.lobe_count and set(plan) <= set(LOBE_KINDS), (preset, mode, plan)
+            chosen |= set(plan)
+    assert chosen == set(LOBE_KINDS)  # every kind is reachable
+    names = "|".join(NAMES)
+    by_name = re.compile(rf"mode\s*(?:==|!=)\s*[\"'](?:{names})[\"']|mode\s+(?:not\s+)?in\s*\(\s*[\"'](?:{names})")
+    viewer = Path(__file__).resolve().parents[1] / "viewer"
+    table = {"prefilter_modes.py", "prefiltered.py"}  # the table, and the map sizes by fit mode it uses
+    dispatch = [p.name for p in viewer.glob("*.py") if p.name not in table and by_name.search(p.read_text())]
+    assert dispatch == [], dispatch

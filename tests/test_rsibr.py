@@ -252,7 +252,7 @@ def test_render_matches_the_numpy_warp_and_blend(gl, preset):
 def test_plan_bakes_reflection_lobes_and_leaves_the_rest_to_auto():
     from lobeview.materials.spec import build_bsdf, load_material
     from lobeview.viewer.material_gpu import pack_material
-    from lobeview.viewer.shading import prefilter_plan
+    from lobeview.viewer.prefilter_modes import prefilter_plan
 
     frosted = pack_material(build_bsdf(load_material("frosted-glass")))
     assert prefilter_plan(frosted, "rsibr") == ["rsibr", "lobe"]  # the thin transmission lobe: a lobe map
@@ -296,7 +296,7 @@ def test_maps_are_cached_on_disk_and_rebuilt_when_damaged(gl, tmp_path):
 
     def bake(texture):
         bakes.append(1)
-        bake_rsibr(renderer, renderer.cubes, material, layout, texture)
+        bake_rsibr(renderer.shading, renderer.cubes, material, layout, texture)
 
     def maps():
         return PrefilteredMaps(renderer.ctx, renderer.cubes, renderer.programs, tmp_path)

@@ -182,7 +182,7 @@ RATIONAL_BINDING = 1  # shader storage binding point (compute shaders use 0)
 #: u_lobe_map_mode codes: how each lobe is looked up by the prefiltered methods
 LOBE_MAP_MODES = {"splitsum": 0, "lobes": 1, "banks": 2}
 # Rows of the lobe table per component: the fitted lobes of a lobe map, or the view azimuths of a
-# Banks map's albedo table (viewer/shading.py lobe_table).
+# Banks map's albedo table (viewer/prefilter_modes.py lobe_table).
 LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)
 CDF_ROW = 1024  # texels per row of the environment CDF texture (viewer/cubemap.py)
 PROXY_KINDS = {"planes": 1, "box": 2}  # u_proxy_kind (scenes/reflection_proxy.py)

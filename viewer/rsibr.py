@@ -8,7 +8,7 @@ the object's radiance cube, which is the part of lobeview that already integrate
 (Kurt, microfacet, glTF lobes with their Fresnel terms); the maps are cached beside the other
 prefiltered maps (viewer/prefiltered.py) and their bytes reported with them.
 
-Which lobes go into the maps (:func:`rsibr_layout`; shading.prefilter_plan): reflection lobes with a microfacet
+Which lobes go into the maps (:func:`rsibr_layout`; prefilter_modes.prefilter_plan): reflection lobes with a microfacet
 distribution, when no texture changes the lobes per pixel. The rest keep the automatic
 prefiltered lookup: thin transmission lobes (the mirror warp cannot follow a lobe centred on -v),
 Rational lobes (no distribution to size the maps by), and every lobe of a textured glTF material

@@ -13,15 +13,11 @@ from scipy.stats import qmc
 
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_REFERENCE_SPP, Method
-from lobeview.materials.banks import BANKS_AZIMUTHS, fit_banks
-from lobeview.materials.conductor import MicrofacetReflection
-from lobeview.materials.lobe_fit import LOBE_SLICES, fit_lobe_maps, is_isotropic
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
 
 from .cubemap import RadianceCube
 from .interface import (
     LOBE_MAP_MODES,
-    LOBE_TABLE_ROWS,
     RATIONAL_BINDING,
     bind_sampler,
     bind_storage,
@@ -33,6 +29,8 @@ from .interface import (
 )
 from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
 from .mip_chain import DEFAULT_MIP_FILTER
+from .prefilter_modes import LOBE_KINDS, PREFILTER_MODES, fit_plan, lobe_table, prefilter_plan, prefiltered_memory
+from .prefiltered import cube_bytes
 from .rsibr import bake_rsibr, rsibr_albedo, rsibr_cache_key, rsibr_layout, view_sphere_uniforms
 from .shaders import ProgramCache
 
@@ -40,68 +38,6 @@ SOBOL_SIDE = 256  # 65536 scrambled 4D Sobol points
 assert SOBOL_SIDE * SOBOL_SIDE == MAX_REFERENCE_SPP  # a reference never wraps around the table
 SOBOL_SEED = 20100501
 MAX_MATERIAL_TEXTURES = 64  # per-material textures kept (live material edits make new ones)
-
-
-def prefilter_plan(material: PackedMaterial, mode: str, per_pixel_lobes: bool = False) -> list[str]:
-    """Per lobe: 'splitsum', 'banks', 'rsibr' or the lobe-map fit mode ('lobe', 'lobe2d',
-    'phong', 'multi'). Split-sum needs a microfacet BRDF (its DFG table), so the thesis' Kurt
-    lobes use lobe maps; a Banks map needs an anisotropic lobe (a fibre direction), so isotropic
-    lobes use lobe maps under 'banks'; under 'rsibr' the lobes viewer/rsibr.py bakes into its maps
-    (none where ``per_pixel_lobes``: textures change them) and the automatic choice for the rest."""
-    if mode == "rsibr":
-        baked = rsibr_layout(material, per_pixel_lobes).lobes
-        return ["rsibr" if baked >> i & 1 else kind for i, kind in enumerate(prefilter_plan(material, "auto"))]
-    plan = []
-    for comp in material.lobe_components:
-        microfacet = isinstance(comp, MicrofacetReflection)  # includes glTF specular
-        if mode in ("auto", "splitsum"):
-            plan.append("splitsum" if microfacet else "lobe")
-        elif mode == "banks":
-            anisotropic = getattr(comp, "distribution", None) is not None and not is_isotropic(comp)
-            plan.append("banks" if anisotropic else "lobe")
-        else:
-            plan.append(mode)
-    return plan
-
-
-def lobe_table(plan: list[str], fitted: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The lobe-map and Banks parameters the shader reads (shaders/integrate.glsl), as
-    (table, counts, fibres). ``fitted``: per lobe, the BanksFit ('banks'), the list of
-    LobeMapFit (lobe-map modes) or None ('splitsum'). table: (MAX_LOBES * LOBE_TABLE_ROWS,
-    2 LOBE_SLICES, 4); component i owns rows i LOBE_TABLE_ROWS + j: for lobe maps, fitted lobe
-    j's axis relative to the slice's mirror direction (LobeMapFit.mirror_relative_axes) and median
-    angle (w) in texels 0..S-1 and its energy in S..2S-1; for a Banks
-    map, the albedo at view azimuth j pi / (2 (BANKS_AZIMUTHS - 1)) from the fibre in texels
-    S..2S-1. counts: fitted lobes per component; fibres: the Banks fibre axis (0 = tangent,
-    1 = bitangent)."""
-    table = np.zeros((MAX_LOBES * LOBE_TABLE_ROWS, 2 * LOBE_SLICES, 4), dtype=np.float32)
-    counts = np.zeros(MAX_LOBES, dtype=np.int32)
-    fibres = np.zeros(MAX_LOBES, dtype=np.int32)
-    for i, (kind, fit) in enumerate(zip(plan, fitted, strict=True)):
-        base = i * LOBE_TABLE_ROWS
-        if kind == "banks":
-            table[base : base + BANKS_AZIMUTHS, LOBE_SLICES:, :3] = fit.energy.transpose(1, 0, 2)
-            counts[i], fibres[i] = 1, fit.axis
-        elif kind not in ("splitsum", "rsibr"):
-            for j, lobe in enumerate(fit):
-                table[base + j, :LOBE_SLICES, :3] = lobe.mirror_relative_axes()
-                # w: the lobe's median angle per slice (the direct read of narrow lobes)
-                table[base + j, :LOBE_SLICES, 3] = [lobe.profile(s).median_angle for s in range(LOBE_SLICES)]
-                table[base + j, LOBE_SLICES:, :3] = lobe.energy
-            counts[i] = len(fit)
-    return table, counts, fibres
-
-
-def fit_plan(plan: list[str], components: list, directory=None) -> list:
-    """Per lobe what its prefiltered map is built from: a BanksFit, a list of LobeMapFit (cached
-    under ``directory``, fit_lobe_maps), or None for split-sum (lobe_table's ``fitted``)."""
-    fits = []
-    for kind, comp in zip(plan, components, strict=True):
-        if kind == "banks":
-            fits.append(fit_banks(comp))
-        else:
-            fits.append(None if kind in ("splitsum", "rsibr") else fit_lobe_maps(comp, kind, directory=directory))
-    return fits
 
 
 def sobol_points(count: int = SOBOL_SIDE * SOBOL_SIDE, seed: int = SOBOL_SEED) -> np.ndarray:
@@ -227,13 +163,11 @@ class ShadingBinder:
     def bind_prefiltered(
         self, program, cube: RadianceCube, material: PackedMaterial, method: Method, per_pixel_lobes: bool = False
     ) -> None:
-        from .prefiltered import lobe_direct_angle, needs_lobe_map
-
         maps = cube.prefiltered_maps(self.programs)
         plan = prefilter_plan(material, method.mode, per_pixel_lobes)
         self._bind_rsibr(program, maps, cube, material, method, per_pixel_lobes)
         for index, kind in enumerate(("beckmann", "ggx")):  # DIST_BECKMANN, DIST_GGX
-            if any(p == "splitsum" and material.lobe_distributions[i].kind == kind for i, p in enumerate(plan)):
+            if any(LOBE_KINDS[p].split_sum and material.lobe_distributions[i].kind == kind for i, p in enumerate(plan)):
                 use_unit(program, maps.split_sum(kind), unit("u_split_sum", index))
             else:
                 use_unit(program, self.dummy_texture("cube"), unit("u_split_sum", index))
@@ -256,16 +190,12 @@ class ShadingBinder:
         depth = np.ones(MAX_LOBES, dtype=np.int32)
         direct = np.zeros(MAX_LOBES, dtype=np.float32)  # 0: never read the cube directly
         for i in range(MAX_LOBES):
-            texture = self.dummy_texture("3d")
-            if i < len(plan) and plan[i] == "banks":
-                texture = maps.banks_map(fitted[i], f"lobe {i}")
-                modes[i], depth[i] = LOBE_MAP_MODES["banks"], len(fitted[i].profiles)
-            elif i < len(plan) and plan[i] not in ("splitsum", "rsibr"):
-                if needs_lobe_map(fitted[i], plan[i]):
-                    texture = maps.lobe_map(fitted[i], f"lobe {i}")
-                modes[i], depth[i] = LOBE_MAP_MODES["lobes"], len(fitted[i][0].profiles)
-                direct[i] = lobe_direct_angle(plan[i])
-            use_unit(program, texture, unit("u_lobe_maps", i))
+            texture = None
+            if i < len(plan):
+                kind = LOBE_KINDS[plan[i]]
+                texture = kind.texture(maps, fitted[i], f"lobe {i}")
+                modes[i], depth[i], direct[i] = LOBE_MAP_MODES[kind.lookup], kind.depth(fitted[i]), kind.direct_angle
+            use_unit(program, texture if texture is not None else self.dummy_texture("3d"), unit("u_lobe_maps", i))
         set_uniform(program, "u_lobe_maps", [unit("u_lobe_maps", i) for i in range(MAX_LOBES)])
         for name, values in (
             ("u_lobe_map_mode", modes),
@@ -279,7 +209,7 @@ class ShadingBinder:
     def _bind_rsibr(self, program, maps, cube, material, method: Method, per_pixel_lobes: bool) -> None:
         """prefiltered-rsibr's maps and view sphere (shaders/rsibr.glsl); u_rsibr_lobes 0 in
         every other mode, and for materials with nothing to bake."""
-        layout = rsibr_layout(material, per_pixel_lobes) if method.mode == "rsibr" else None
+        layout = rsibr_layout(material, per_pixel_lobes) if PREFILTER_MODES[method.mode].rsibr else None
         if layout is None or not layout.lobes:
             set_uniform(program, "u_rsibr_lobes", 0)
             bind_sampler(program, "u_rsibr_maps", self.dummy_texture("array"))
@@ -302,8 +232,6 @@ class ShadingBinder:
         cube (the bench's memory column): the radiance cube with its MIP chain, plus the
         importance tables (reference), the albedo table (normalised lobe-N) or the prefiltered
         maps (prefiltered)."""
-        from .prefiltered import DFG_SIZE, banks_map_shape, cube_bytes, lobe_map_shape, needs_lobe_map
-
         face = cube.face_size
         memory = {"radiance cube": cube_bytes(face, int(np.log2(face)) + 1)}
         if method.kind == "reference":
@@ -311,22 +239,7 @@ class ShadingBinder:
         if method.kind == "lobe" and method.normalize:
             memory["albedo table"] = int(albedo_texture_data(material).size * 4)
         if method.kind == "prefiltered":
-            plan = prefilter_plan(material, method.mode)
-            for i, kind in enumerate(plan):
-                if kind == "splitsum":
-                    distribution = material.lobe_distributions[i].kind
-                    memory[f"split-sum {distribution}"] = cube_bytes(face, SPLIT_SUM_LEVELS)
-                    memory["DFG table"] = DFG_SIZE * DFG_SIZE * 16
-                elif kind == "rsibr":
-                    memory["RSIBR maps"] = rsibr_layout(material).bytes
-                elif kind == "banks":
-                    width, height, depth = banks_map_shape(fit_banks(material.lobe_components[i]))
-                    memory[f"Banks map {i}"] = width * height * depth * 16
-                else:
-                    fits = fit_lobe_maps(material.lobe_components[i], kind, directory=self.table_cache_root)
-                    if needs_lobe_map(fits, kind):
-                        width, height, depth = lobe_map_shape(fits)
-                        memory[f"lobe map {i}"] = width * height * depth * 16
+            memory.update(prefiltered_memory(material, method.mode, face, self.table_cache_root))
         return memory
 
     def dummy_texture(self, kind: str):
