@@ -36,6 +36,9 @@ REALTIME_KINDS = ("lobe", "fis", "mc")
 #: banks = Banks maps for anisotropic lobes, lobe maps for isotropic ones; rsibr = reflection-space
 #: IBR (Cabral et al. 1999) for the microfacet reflection lobes, auto for the rest
 PREFILTER_MODES = ("auto", "splitsum", "lobe", "lobe2d", "phong", "multi", "banks", "rsibr")
+#: the shader lookups of the prefiltered modes' lobes (shaders/prefiltered.glsl LOBE_MAP_*, codes
+#: by position; viewer/prefilter_modes.py says which lobe uses which)
+PREFILTER_LOOKUPS = ("splitsum", "lobes", "banks")
 MAX_LOBES = 8  # specular/transmission lobes per material (spec validation, GPU layout)
 MAX_PATTERN = 32  # lobe-N samples per lobe (the pattern uniform array)
 MAX_SAMPLES = 4096  # fis-N / mc-N samples per lobe and frame

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lobeview.core.methods import MAX_LOBES, MAX_PATTERN, Method
+from lobeview.core.methods import MAX_LOBES, MAX_PATTERN, PREFILTER_LOOKUPS, Method
 from lobeview.materials.banks import BANKS_AZIMUTHS
 from lobeview.materials.gltf import SHEEN_TABLE_SIZE
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
@@ -180,7 +180,7 @@ RATIONAL_BINDING = 1  # shader storage binding point (compute shaders use 0)
 
 # -- prefiltered lookups -------------------------------------------------------------------------
 #: u_lobe_map_mode codes: how each lobe is looked up by the prefiltered methods
-LOBE_MAP_MODES = {"splitsum": 0, "lobes": 1, "banks": 2}
+LOBE_MAP_MODES = {name: code for code, name in enumerate(PREFILTER_LOOKUPS)}
 # Rows of the lobe table per component: the fitted lobes of a lobe map, or the view azimuths of a
 # Banks map's albedo table (viewer/prefilter_modes.py lobe_table).
 LOBE_TABLE_ROWS = max(MAP_LOBES, BANKS_AZIMUTHS)

@@ -5,8 +5,8 @@ the reflection-space maps of ``rsibr``). The shading binder (viewer/shading.py) 
 column of the benchmarks read these tables and nothing else about the modes.
 
 A new mode touches core/methods.py (its name in PREFILTER_MODES) and this file (its row); a new
-kind of map adds its fit (materials/) and its lookup (shaders/prefiltered.glsl with its code in
-viewer/interface.py LOBE_MAP_MODES). docs/architecture.md says how.
+kind of map adds its fit (materials/) and its lookup (shaders/prefiltered.glsl, its name in
+core/methods.py PREFILTER_LOOKUPS): four files at most. docs/architecture.md says how.
 """
 
 from __future__ import annotations
