@@ -54,7 +54,8 @@ Steps, with the thesis equations:
      GGX_TAIL_SAMPLES = 4 more lookups on the tail's median cone (tan theta_h =
      GGX_TAIL_MEDIAN_TAN alpha), each filtered over a quarter of the annulus between the core's
      edge and the tail's third quartile (:func:`ggx_tail_solid_angle`; anisotropic lobes use
-     sqrt(ax ay)). Exact under uniform light like the normalisation itself. Measured (200 px
+     sqrt(ax ay)), each fading out over the last GGX_TAIL_FADE of its z above the horizon
+     (:func:`ggx_tail_radiance`). Exact under uniform light like the normalisation itself. Measured (200 px
      sphere, lobe-7+norm / lobe-19+norm, bench/patterns.py): gold-ggx 23.5 -> 26.3 / 25.4 ->
      28.2 dB on interior.exr, 20.9 -> 21.5 / 22.8 -> 21.7 on courtyard.exr (its sun: a few
      coarse lookups misplace its glow), gltf-red-plastic 29.2 -> 29.9 / 29.8 -> 30.8 and 31.2 ->
@@ -110,6 +111,12 @@ GGX_TAIL_MEDIAN_TAN = float(np.sqrt((1.0 - GGX_TAIL_FRACTION / 2.0) / (GGX_TAIL_
 # ... and its third quartile (CDF 1 - GGX_TAIL_FRACTION / 4): the outer edge of the footprints.
 GGX_TAIL_OUTER_TAN = float(np.sqrt((1.0 - GGX_TAIL_FRACTION / 4.0) / (GGX_TAIL_FRACTION / 4.0)))
 GGX_TAIL_SAMPLES = 4  # tail lookups on the median cone (one centre lookup: see step 7)
+# A tail lookup fades in from the horizon over this much of its direction's z (smoothstep), and
+# the tail is the weighted mean of its lookups (the core's radiance fills in below a total weight
+# of one lookup). Dropping a lookup at the horizon and averaging the others made the tail jump as
+# wo crossed the angle where a lookup left the hemisphere (sharp arcs on a sphere of GGX alpha
+# >= 0.3, issue 45).
+GGX_TAIL_FADE = 0.1
 # 1 / golden ratio: the rank-1 lattice of lattice_xi (a Fibonacci lattice for any n)
 GOLDEN_LATTICE_STEP = (np.sqrt(5.0) - 1.0) / 2.0
 # Second coordinate of the lattice's first point: 0.25 is the middle of the first half of [0, 1),
@@ -412,8 +419,7 @@ def integrate_lobe(
             core = np.where(num_1 > 0.0, num / np.where(num_1 > 0.0, num_1, 1.0), 0.0)
             if not has_ggx_tail(lobe):
                 return core * target
-            tail = ggx_tail_radiance(lobe, wo, radiance, face_size, frame)
-            tail = core if tail is None else tail
+            tail = ggx_tail_radiance(lobe, wo, radiance, face_size, frame, core)
             return target * ((1.0 - GGX_TAIL_FRACTION) * core + GGX_TAIL_FRACTION * tail)
     elif weighting == "eq4.24":
         num = np.sum(li * (cos_i**2)[:, None] * f, axis=0)
@@ -432,10 +438,13 @@ def has_ggx_tail(lobe) -> bool:
 def ggx_tail_solid_angle(distribution: MicrofacetDistribution) -> float:
     """Step 7: the footprint of one tail lookup, 1 / GGX_TAIL_SAMPLES of the annulus between the
     reflected cones of the core's edge and of GGX_TAIL_OUTER_TAN (at normal incidence the
-    reflection of a half vector at theta_h is 2 theta_h away), alpha = sqrt(alpha_x alpha_y)."""
+    reflection of a half vector at theta_h is 2 theta_h away), alpha = sqrt(alpha_x alpha_y).
+    The cones are not clamped: for alpha > 0.3 they open past 80 deg (to 156 deg at alpha 1), and
+    clamping both at the core's 80 deg (MAX_ELLIPSE_ANGLE) collapsed the footprint to 0 from
+    alpha 0.35 on, so the tail read the cube's finest level: sharp copies of the sun (issue 45)."""
     alpha = np.sqrt(distribution.alpha_x * distribution.alpha_y)
-    inner = min(2.0 * np.arctan(np.sqrt(-np.log(XI_BORDER)) * alpha), MAX_ELLIPSE_ANGLE)
-    outer = min(2.0 * np.arctan(GGX_TAIL_OUTER_TAN * alpha), MAX_ELLIPSE_ANGLE)
+    inner = 2.0 * np.arctan(np.sqrt(-np.log(XI_BORDER)) * alpha)
+    outer = 2.0 * np.arctan(GGX_TAIL_OUTER_TAN * alpha)
     return float(2.0 * np.pi * (np.cos(inner) - np.cos(outer)) / GGX_TAIL_SAMPLES)
 
 
@@ -447,15 +456,30 @@ def ggx_tail_half_vectors(distribution: MicrofacetDistribution) -> np.ndarray:
     return spherical_direction(np.full(GGX_TAIL_SAMPLES, np.arctan(GGX_TAIL_MEDIAN_TAN * alpha)), phi)
 
 
-def ggx_tail_radiance(lobe, wo: np.ndarray, radiance: RadianceFn, face_size: int, frame) -> np.ndarray | None:
-    """Step 7: the mean of the tail lookups above the horizon (None if all are below it)."""
+def ggx_tail_weights(reflected_z: np.ndarray) -> np.ndarray:
+    """How much of its slot a tail lookup fills: smoothstep(0, GGX_TAIL_FADE, z) of its reflected
+    direction's z (0 below the horizon, 1 from GGX_TAIL_FADE up)."""
+    t = np.clip(np.asarray(reflected_z, dtype=np.float64) / GGX_TAIL_FADE, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def ggx_tail_radiance(lobe, wo: np.ndarray, radiance: RadianceFn, face_size: int, frame, core) -> np.ndarray:
+    """Step 7: the tail lookups' mean weighted by ggx_tail_weights (lookups near the horizon
+    fade out), with ``core`` (the core's radiance) filling in below a total weight of 1: the
+    plain mean of the lookups above the horizon wherever one of them is well above it, ``core``
+    where all are below it, and continuous in ``wo`` in between."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
-    wi, valid = lobe_directions(lobe, wo, ggx_tail_half_vectors(lobe.distribution))
-    if not np.any(valid):
-        return None
-    world = to_world(wi[valid], frame)
-    lod = cube_map_lod(world, ggx_tail_solid_angle(lobe.distribution), face_size) + LOBE_LOD_BIAS
-    return np.mean(np.asarray(radiance(world, lod), dtype=np.float64), axis=0)
+    half_vectors = ggx_tail_half_vectors(lobe.distribution)
+    wi, valid = lobe_directions(lobe, wo, half_vectors)
+    weight = ggx_tail_weights(reflect(np.broadcast_to(wo, half_vectors.shape), half_vectors)[:, 2])
+    core = np.asarray(core, dtype=np.float64)
+    total = np.zeros(3)
+    if np.any(valid):
+        world = to_world(wi[valid], frame)
+        lod = cube_map_lod(world, ggx_tail_solid_angle(lobe.distribution), face_size) + LOBE_LOD_BIAS
+        total = np.sum(weight[valid][:, None] * np.asarray(radiance(world, lod), dtype=np.float64), axis=0)
+    weights = float(np.sum(weight[valid]))
+    return (total + max(0.0, 1.0 - weights) * core) / max(1.0, weights)
 
 
 SPREAD_VIEW_ANGLES = np.radians(np.linspace(0.0, 89.0, 12))

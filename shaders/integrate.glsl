@@ -157,22 +157,26 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
                      num_unit.b > 0.0 ? num.b / num_unit.b : 0.0);
     if (l.dist != DIST_GGX) return core * target;
     // GGX's tail beyond the pattern's core (patterns.py step 7): its share of the albedo read by
-    // GGX_TAIL_SAMPLES lookups on the tail's median cone, each over a quarter of its annulus.
+    // GGX_TAIL_SAMPLES lookups on the tail's median cone, each over a quarter of its annulus
+    // (not clamped at 80 deg: ggx_tail_solid_angle); their mean weighted by a fade near the
+    // horizon, the core's radiance filling in below a total weight of 1 (ggx_tail_radiance:
+    // continuous in wo).
     float a = sqrt(l.ax * l.ay);
-    float inner = min(2.0 * atan(sqrt(-log(XI_BORDER)) * a), MAX_ELLIPSE_ANGLE);
-    float outer = min(2.0 * atan(GGX_TAIL_OUTER_TAN * a), MAX_ELLIPSE_ANGLE);
+    float inner = 2.0 * atan(sqrt(-log(XI_BORDER)) * a);
+    float outer = 2.0 * atan(GGX_TAIL_OUTER_TAN * a);
     float tail_area = 2.0 * PI * (cos(inner) - cos(outer)) / float(GGX_TAIL_SAMPLES);
     float tail_theta = atan(GGX_TAIL_MEDIAN_TAN * a);
     vec3 tail = vec3(0.0);
-    int tail_count = 0;
+    float weights = 0.0;
     for (int k = 0; k < GGX_TAIL_SAMPLES; ++k) {
         vec3 h = spherical_dir(tail_theta, 2.0 * PI * (float(k) + 0.5) / float(GGX_TAIL_SAMPLES));
         vec3 wr = 2.0 * dot(wo, h) * h - wo;
         if (wr.z <= 0.0) continue;
-        tail += incident(tbn * reflected_wi(l, wr), tail_area);
-        ++tail_count;
+        float s = smoothstep(0.0, GGX_TAIL_FADE, wr.z);
+        tail += s * incident(tbn * reflected_wi(l, wr), tail_area);
+        weights += s;
     }
-    tail = tail_count > 0 ? tail / float(tail_count) : core;
+    tail = (tail + max(0.0, 1.0 - weights) * core) / max(1.0, weights);
     return target * ((1.0 - GGX_TAIL_FRACTION) * core + GGX_TAIL_FRACTION * tail);
 #else
     return vec3(den.r > 0.0 ? num.r / den.r : 0.0, den.g > 0.0 ? num.g / den.g : 0.0,

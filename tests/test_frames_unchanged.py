@@ -1,13 +1,16 @@
-"""Frames of the renderer's redesign (issue 38): the demo in every method, the apartment's
-geometry with its mirror passes and two textured glTF models render the same radiance as the
-commit before the redesign, kept in tests/data/frames-before-redesign.npz.
+"""The renderer's frames do not change unless a change means them to: the demo in every method,
+the apartment's geometry with its mirror passes and two textured glTF models render the radiance
+stored in tests/data/stored-frames.npz.
 
-The stored frames were rendered on llvmpipe; on the same GL renderer the frames must be equal
-bit for bit. A different renderer (another llvmpipe build or CPU vector width, a GPU) rounds
-differently, so there the bound is a relative RMSE of 1e-3 per frame (a changed formula or a
-lost texture moves a frame by more than 1e-2). The data is written again with
-``LOBEVIEW_WRITE_FRAMES=1 pytest tests/test_frames_unchanged.py`` - only on the commit before a
-change that is meant to alter frames, saying so in its message.
+The frames were first stored on 06d6647, before the renderer's redesign (issue 38), which left
+them bit-identical; they were written again with the GGX tail fix of lobe-N+norm (issue 45),
+which changed the frames of wide GGX lobes. The stored frames were rendered on llvmpipe; on the
+same GL renderer the frames must be equal bit for bit. A different renderer (another llvmpipe
+build or CPU vector width, a GPU) rounds differently, so there the bound is a relative RMSE of
+1e-3 per frame (a changed formula or a lost texture moves a frame by more than 1e-2). A change
+meant to alter frames writes them again in the same commit, with
+``LOBEVIEW_WRITE_FRAMES=1 pytest tests/test_frames_unchanged.py``, and says in its message
+which frames changed and why.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from test_textures import _smooth_env, _textured_quad_scene
 
 from lobeview.viewer.camera import Camera
 
-DATA = Path(__file__).parent / "data" / "frames-before-redesign.npz"
+DATA = Path(__file__).parent / "data" / "stored-frames.npz"
 WRITE = os.environ.get("LOBEVIEW_WRITE_FRAMES") == "1"
 SIZE = (80, 50)
 OTHER_RENDERER_RELATIVE_RMSE = 1e-3

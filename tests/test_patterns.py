@@ -393,7 +393,7 @@ def test_ggx_tail_lookups_sit_on_the_tail_cone_around_the_mirror_direction():
     lobe = next(c for c in build_bsdf(PRESETS["gold-ggx"]).components if has_ggx_tail(c))
     alpha = lobe.distribution.alpha_x
     wo = direction_from_angles_deg(0)  # normal incidence: reflection doubles theta_h
-    ggx_tail_radiance(lobe, wo, radiance, 256, None)
+    ggx_tail_radiance(lobe, wo, radiance, 256, None, np.zeros(3))
     ((dirs, lod),) = seen
     assert len(dirs) == GGX_TAIL_SAMPLES
     np.testing.assert_allclose(dirs[:, 2], np.cos(2 * np.arctan(GGX_TAIL_MEDIAN_TAN * alpha)))
@@ -407,6 +407,48 @@ def test_ggx_tail_lookups_sit_on_the_tail_cone_around_the_mirror_direction():
     assert np.all(lod > cube_map_lod(dirs, core_sample, 256))  # wider than a lobe-7 core sample
     assert not has_ggx_tail(KurtLobe(1.0, 0.2, 0.2, 1.0, 0.0))
     # Grazing: tail lookups below the horizon are dropped (the mean is of those left).
-    assert ggx_tail_radiance(lobe, direction_from_angles_deg(89.0), radiance, 256, None) is not None
+    np.testing.assert_allclose(ggx_tail_radiance(lobe, direction_from_angles_deg(89.0), radiance, 256, None,
+                                                 np.zeros(3)), 1.0)  # fmt: skip
     grazing_dirs = seen[-1][0]
     assert 0 < len(grazing_dirs) < GGX_TAIL_SAMPLES and np.all(grazing_dirs[:, 2] > 0)
+
+
+@pytest.mark.parametrize("alpha", [0.05, 0.15, 0.3, 0.4, 0.5, 0.7, 1.0])
+def test_ggx_tail_footprint_is_the_reflected_annulus_at_every_roughness(alpha):
+    """issue 45: clamped at 80 degrees, the footprint of a tail lookup was 0 from alpha 0.35 on
+    (the tail read the cube's finest level: sharp copies of the sun). It is a quarter of the
+    solid angle that the tail's half vectors (tan theta_h between the core's edge and the
+    third quartile) reflect into at normal incidence, here by quadrature over theta_h with the
+    reflection's Jacobian d omega_o = 4 cos(theta_h) d omega_h."""
+    from lobeview.materials.microfacet import MicrofacetDistribution
+    from lobeview.materials.patterns import GGX_TAIL_SAMPLES, ggx_tail_solid_angle
+
+    lo, hi = np.arctan(np.sqrt(-np.log(XI_BORDER)) * alpha), np.arctan(GGX_TAIL_OUTER_TAN * alpha)
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    theta = 0.5 * (hi - lo) * nodes + 0.5 * (hi + lo)
+    annulus = 2 * np.pi * 0.5 * (hi - lo) * np.sum(weights * 4 * np.cos(theta) * np.sin(theta))
+    footprint = ggx_tail_solid_angle(MicrofacetDistribution("ggx", alpha, alpha))
+    assert footprint > 0.0
+    assert GGX_TAIL_SAMPLES * footprint == pytest.approx(annulus, rel=1e-9)
+
+
+@pytest.mark.parametrize("alpha", [0.15, 0.5])
+def test_ggx_tail_is_continuous_as_its_lookups_cross_the_horizon(alpha):
+    """issue 45: dropping a tail lookup at the horizon and averaging the others made the tail
+    jump where wo crossed that angle (sharp arcs on a sphere). Under light that varies smoothly
+    with direction, neighbouring views 0.05 degrees apart now differ by little."""
+    from lobeview.materials.conductor import MicrofacetReflection
+    from lobeview.materials.fresnel import Fresnel
+    from lobeview.materials.microfacet import MicrofacetDistribution
+    from lobeview.materials.patterns import ggx_tail_radiance
+
+    lobe = MicrofacetReflection(MicrofacetDistribution("ggx", alpha, alpha), Fresnel("none"))
+
+    def radiance(dirs, lod):  # a smooth sky: 1 + 4 (x + 1) on the hemisphere and below
+        return np.repeat((1.0 + 4.0 * (dirs[:, 0:1] + 1.0)), 3, axis=1)
+
+    core = np.full(3, 3.0)
+    thetas = np.arange(0.0, 89.95, 0.05)
+    tails = np.array([ggx_tail_radiance(lobe, direction_from_angles_deg(t, 0.0), radiance, 256, None, core)[0]
+                      for t in thetas])  # fmt: skip
+    assert np.max(np.abs(np.diff(tails))) < 0.15, thetas[np.argmax(np.abs(np.diff(tails)))]

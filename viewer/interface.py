@@ -33,6 +33,7 @@ from lobeview.materials.patterns import (
     ALBEDO_MU,
     ALBEDO_PHI,
     ANISOTROPY_LINE_RATIO,
+    GGX_TAIL_FADE,
     GGX_TAIL_FRACTION,
     GGX_TAIL_MEDIAN_TAN,
     GGX_TAIL_OUTER_TAN,
@@ -237,6 +238,7 @@ SHADER_CONSTANTS: dict = {
     "GGX_TAIL_MEDIAN_TAN": float(GGX_TAIL_MEDIAN_TAN),
     "GGX_TAIL_OUTER_TAN": float(GGX_TAIL_OUTER_TAN),
     "GGX_TAIL_SAMPLES": GGX_TAIL_SAMPLES,
+    "GGX_TAIL_FADE": float(GGX_TAIL_FADE),
     "ANISOTROPY_LINE_RATIO": float(ANISOTROPY_LINE_RATIO),  # materials/patterns.py choose_pattern
     "CDF_ROW": CDF_ROW,
     "MAX_PROXY_PLANES": MAX_PROXY_PLANES,
