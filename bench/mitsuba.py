@@ -1,0 +1,204 @@
+"""lobeview's preview sphere against Mitsuba 3 (issue 45: an independent renderer's table, rerun
+after every change to a method).
+
+The scene: a unit sphere at the origin, camera at (0, 0, 4) looking at it (up +y, vertical field
+of view 40 degrees), a square frame with a box pixel filter; light from an analytic environment:
+a smooth sky, a 3-degree sun of radiance 50 and six saturated rectangles of radiance 3-5 around
+the horizon (:func:`environment`). The material is a perfect microfacet reflector (no Fresnel:
+lobeview's ``"fresnel": {"type": "none"}``, Mitsuba's roughconductor with ``material: none``),
+GGX or Beckmann, isotropic or anisotropic. Both renderers sample the same function at the texel
+centres of their own equirectangular convention: lobeview's u = 0.5 faces -z
+(core/cube_layout.py), Mitsuba's envmap has u = atan2(x, -z) / 2 pi, i.e. u = 0 faces -z; the
+first column of the table (lobeview's converged ``reference`` against Mitsuba) verifies the
+conventions: a mirrored or turned environment shows as tens of percent there.
+
+Error: relative RMSE over the sphere's pixels against Mitsuba (its own noise at the default 2048
+samples per pixel is about 2 %: the reference column's floor).
+
+    pip install mitsuba==3.9.1   # not a lobeview dependency; the scalar_rgb variant is used
+    .venv/bin/python -m lobeview.bench.mitsuba [--size 192] [--spp 2048] [--cases ggx:0.5 ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+CASES = ("ggx:0.05", "ggx:0.15", "ggx:0.3", "ggx:0.5", "beckmann:0.15", "beckmann:0.5", "ggx:0.05x0.3")
+METHODS = ("lobe-7+norm", "lobe-15+norm", "fis-40", "prefiltered", "prefiltered-rsibr")
+ENV_HEIGHT = 512
+CAMERA = ((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0)
+SUN_DIRECTION = np.array([0.4, 0.6, 0.69]) / np.linalg.norm([0.4, 0.6, 0.69])
+SUN_RADIANCE = 50.0
+RECTANGLES = ((4, 0.3, 0.3), (0.3, 4, 0.3), (0.3, 0.3, 5), (3, 3, 0.3), (0.3, 3, 3), (3, 0.3, 3))
+
+
+def environment(d: np.ndarray) -> np.ndarray:
+    """Radiance (..., 3) of the test environment in directions ``d`` (..., 3), +y up."""
+    up = d[..., 1:2]
+    sky = np.where(up > 0, np.array([0.35, 0.5, 0.8]) * (0.5 + 0.5 * up), np.array([0.3, 0.25, 0.2]) * (0.6 + 0.4 * up))
+    sun = (np.sum(d * SUN_DIRECTION, -1) > np.cos(np.radians(1.5)))[..., None] * SUN_RADIANCE
+    out = sky + sun
+    azimuth, elevation = np.arctan2(d[..., 0], d[..., 2]), np.arcsin(np.clip(d[..., 1], -1.0, 1.0))
+    for k, colour in enumerate(RECTANGLES):
+        start = -np.pi + k * np.pi / 3 + 0.3
+        inside = (azimuth > start) & (azimuth < start + 0.45) & (elevation > 0.05) & (elevation < 0.45)
+        out = np.where(inside[..., None], np.array(colour, dtype=np.float64), out)
+    return out
+
+
+def mitsuba_equirect(height: int) -> np.ndarray:
+    """The environment as Mitsuba's envmap reads it: (height, 2 height, 3), texel centres, u = 0
+    facing -z (lobeview's map rolled by half its width)."""
+    v, u = np.meshgrid((np.arange(height) + 0.5) / height, (np.arange(2 * height) + 0.5) / (2 * height), indexing="ij")
+    theta, phi = np.pi * v, 2.0 * np.pi * u
+    d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], axis=-1)
+    return environment(d).astype(np.float32)
+
+
+def parse_case(text: str) -> tuple[str, float, float]:
+    """'ggx:0.3' or 'ggx:0.05x0.3' -> (distribution, alpha_u, alpha_v)."""
+    distribution, _, alphas = text.partition(":")
+    if distribution not in ("ggx", "beckmann") or not alphas:
+        raise ValueError(f"case {text!r}: expected ggx:ALPHA, beckmann:ALPHA or DIST:AUxAV")
+    au, _, av = alphas.partition("x")
+    return distribution, float(au), float(av or au)
+
+
+def material(case: str) -> dict:
+    distribution, au, av = parse_case(case)
+    return {"model": "microfacet", "distribution": distribution, "alpha_u": au, "alpha_v": av,
+            "fresnel": {"type": "none"}, "scale": 1.0}  # fmt: skip
+
+
+def render_mitsuba(case: str, size: int, spp: int, envmap_file: Path) -> np.ndarray:
+    try:
+        import mitsuba as mi
+    except ImportError:
+        raise SystemExit("bench.mitsuba needs Mitsuba 3: pip install mitsuba==3.9.1") from None
+    mi.set_variant("scalar_rgb")  # llvm_ad_rgb's JIT fails on Debian 12's LLVM 15 (fminimum)
+    distribution, au, av = parse_case(case)
+    position, target, up, fov = CAMERA
+    bsdf = {"type": "roughconductor", "distribution": distribution, "material": "none"}
+    bsdf.update({"alpha": au} if au == av else {"alpha_u": au, "alpha_v": av})
+    scene = mi.load_dict({
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": 2},  # the sphere is convex: one bounce
+        "sensor": {
+            "type": "perspective", "fov": fov, "fov_axis": "y",
+            "to_world": mi.ScalarTransform4f().look_at(origin=list(position), target=list(target), up=list(up)),
+            "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
+                     "pixel_format": "rgb"},
+            "sampler": {"type": "independent", "sample_count": spp},
+        },
+        "env": {"type": "envmap", "filename": str(envmap_file)},
+        # Pole along +y, as lobeview's uv_sphere: the tangent (anisotropy) frames then agree.
+        "sphere": {"type": "sphere", "radius": 1.0, "bsdf": bsdf,
+                   "to_world": mi.ScalarTransform4f().rotate(axis=[1, 0, 0], angle=-90)},
+    })  # fmt: skip
+    return np.array(mi.render(scene), dtype=np.float32)
+
+
+def relative_rmse(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> float:
+    d = image[mask] - reference[mask]
+    return float(np.sqrt(np.mean(d**2)) / max(np.sqrt(np.mean(reference[mask] ** 2)), 1e-12))
+
+
+def run(cases, methods, size: int, spp: int, work: Path, progress=print) -> dict:
+    from lobeview.materials.spec import build_bsdf, validate
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.preview import PreviewRenderer
+
+    try:
+        import mitsuba as mi
+
+        mi.set_variant("scalar_rgb")
+        mi.Bitmap(mitsuba_equirect(ENV_HEIGHT)).write(str(work / "environment.exr"))
+        mitsuba_version = mi.__version__
+    except ImportError:
+        raise SystemExit("bench.mitsuba needs Mitsuba 3: pip install mitsuba==3.9.1") from None
+    ctx = create_headless_context()
+    env = EnvironmentMap.from_function(environment, height=ENV_HEIGHT, name="issue 45 sky")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        renderer = PreviewRenderer(ctx, env, uv_sphere(1.0), size=(size, size), face_size=256)
+    camera = Camera(*CAMERA)
+    rows = []
+    for case in cases:
+        t0 = time.perf_counter()
+        truth = render_mitsuba(case, size, spp, work / "environment.exr")
+        mitsuba_seconds = time.perf_counter() - t0
+        bsdf = build_bsdf(validate(material(case)))
+        reference = renderer.render(camera, bsdf, "reference", spp=spp)
+        row = {"case": case, "mitsuba seconds": round(mitsuba_seconds, 1),
+               "reference": relative_rmse(reference.radiance, truth, reference.mask)}  # fmt: skip
+        for method in methods:
+            frame = renderer.render(camera, bsdf, method, spp=1).radiance
+            row[method] = relative_rmse(frame, truth, reference.mask)
+        rows.append(row)
+        progress(f"[mitsuba] {case}: " + ", ".join(f"{k} {100 * v:.1f} %" for k, v in row.items() if k != "case"
+                                                  and k != "mitsuba seconds"))  # fmt: skip
+    renderer.release()
+    ctx.release()
+    return {"rows": rows, "methods": list(methods), "size": size, "spp": spp, "mitsuba": mitsuba_version,
+            "device": "Mesa llvmpipe (lobeview), Mitsuba scalar_rgb on the CPU"}  # fmt: skip
+
+
+def markdown(results: dict, stamp: str, command: str) -> str:
+    methods = results["methods"]
+    lines = [
+        f"# lobeview against Mitsuba {results['mitsuba']} ({stamp})",
+        "",
+        f"`{command}`",
+        "",
+        f"Preview sphere, {results['size']}x{results['size']} px, box filter; Mitsuba path tracer at "
+        f"{results['spp']} spp (scalar_rgb), lobeview's reference at {results['spp']} samples per lobe; "
+        f"{results['device']}. Relative RMSE (%) over the sphere's pixels against Mitsuba; the reference "
+        "column is the floor (both renderers' noise and model differences). Scene and conventions: "
+        "bench/mitsuba.py.",
+        "",
+        "| case | reference | " + " | ".join(methods) + " |",
+        "|---|---|" + "---|" * len(methods),
+    ]
+    for row in results["rows"]:
+        cells = [f"{100 * row[m]:.1f}" for m in ("reference", *methods)]
+        lines.append(f"| {row['case']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", nargs="+", default=list(CASES), help="DIST:ALPHA or DIST:AUxAV (default: all)")
+    parser.add_argument("--methods", nargs="+", default=list(METHODS))
+    parser.add_argument("--size", type=int, default=192, help="frame width and height in pixels (default 192)")
+    parser.add_argument("--spp", type=int, default=2048, help="samples per pixel of both references (default 2048)")
+    parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
+    args = parser.parse_args(argv)
+    import tempfile
+
+    for case in args.cases:
+        parse_case(case)
+    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+    with tempfile.TemporaryDirectory(prefix="lobeview-mitsuba-") as work:
+        results = run(args.cases, args.methods, args.size, args.spp, Path(work))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    command = "python -m lobeview.bench.mitsuba " + " ".join(argv if argv is not None else __import__("sys").argv[1:])
+    (out / f"mitsuba-{stamp}.json").write_text(json.dumps(results, indent=1))
+    path = out / f"mitsuba-{stamp}.md"
+    path.write_text(markdown(results, stamp, command.strip()))
+    print(f"[mitsuba] wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
