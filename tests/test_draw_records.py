@@ -15,7 +15,7 @@ from lobeview.viewer.camera import Camera
 from lobeview.viewer.interface import UNIFORM_WRITES, DrawRecorder, replay, set_uniform
 
 
-def _demo(ctx, **options):
+def _demo(ctx, **settings):
     from lobeview.scenes.demo import build_demo_scene
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.gltf_loader import load_gltf
@@ -27,7 +27,7 @@ def _demo(ctx, **options):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         renderer = SceneRenderer(
-            ctx, scene, env, size=(96, 60), progress=False, **options, settings=RenderSettings(cube_face_size=32)
+            ctx, scene, env, size=(96, 60), progress=False, settings=RenderSettings(cube_face_size=32, **settings)
         )
     cam = next(c for c in scene.cameras if c.name == "overview")
     return renderer, Camera(tuple(cam.position), tuple(cam.target), tuple(cam.up), cam.fov_y)
@@ -55,6 +55,20 @@ def test_recorded_draw_state_renders_the_frames_bit_for_bit(ctx, method):
     np.testing.assert_array_equal(again, plain)
     assert renderer.shading.record_builds == builds
     assert UNIFORM_WRITES.skipped > 2 * UNIFORM_WRITES.written > 0
+    renderer.release()
+
+
+def test_records_off_from_the_start_records_nothing(ctx):
+    """RenderSettings(draw_records=False) given to the constructor holds from the first frame
+    (the binder kept its own default until the first configure call)."""
+    renderer, camera = _demo(ctx, draw_records=False)
+    renderer.invalidate_mirrors()
+    renderer.render(camera, "lobe-5", spp=1)
+    assert renderer.shading.record_builds == 0
+    renderer.configure(draw_records=True)
+    renderer.invalidate_mirrors()
+    renderer.render(camera, "lobe-5", spp=1)
+    assert renderer.shading.record_builds > 0
     renderer.release()
 
 

@@ -154,7 +154,7 @@ class ObjectDrawer:
         reflectors = self.analysis.reflectors
         found = []
         for obj in self.objects:
-            mat = self.scene.materials[self.scene.objects[obj.index].material]
+            mat = self.material_of(obj.index)
             if mat.alpha_mode.upper() != "OPAQUE":
                 continue
             if occluders_only and (obj.index in reflectors or self.analysis.objects[obj.index].transmission_lobes):
@@ -236,11 +236,12 @@ class ObjectDrawer:
                 counts.culled += 1
                 continue
             counts.drawn += 1
+            mat = self.material_of(obj.index)
             if blended:  # alphaMode BLEND: composited over what is drawn, depth tested, not written
                 self.ctx.enable(moderngl.BLEND)
                 self.ctx.blend_func = moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA
                 self.ctx.fbo.depth_mask = False
-            single_sided = cull and not self.scene.materials[self.scene.objects[obj.index].material].double_sided
+            single_sided = cull and not mat.double_sided
             if single_sided:
                 self.ctx.enable(moderngl.CULL_FACE)  # glTF doubleSided false: back faces are not drawn
             else:
@@ -257,7 +258,6 @@ class ObjectDrawer:
             program = self.program(
                 obj_method, use_specular, proxy is not None, mirror is not None, obj.material.has_rational
             )
-            mat = self.scene.materials[self.scene.objects[obj.index].material]
             set_uniform(program, "u_view_projection", view_proj_values)
             set_uniform(program, "u_camera_position", eye_values)
             self.shading.set_pass_state(program, obj_method, lod_bias, seed)
@@ -282,7 +282,7 @@ class ObjectDrawer:
         from back to front by the distance of their bounding-box centre (glTF 3.9.4)."""
         opaque, blended = [], []
         for obj in self.objects:
-            mode = self.scene.materials[self.scene.objects[obj.index].material].alpha_mode
+            mode = self.material_of(obj.index).alpha_mode
             (blended if mode == "BLEND" else opaque).append(obj)
         eye = np.asarray(eye, dtype=np.float64)
         blended.sort(key=lambda o: -float(np.linalg.norm(o.centre - eye)))

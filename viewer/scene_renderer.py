@@ -71,11 +71,12 @@ class SceneRenderer(RendererBase):
         self.environment = RadianceCube(ctx, equirect_to_cube_faces(environment, 256), mip_filter=settings.mip_filter)
         self.environment_name = environment.name
         self.environment_sh9 = sh9  # diffuse light of objects without a lightmap
-        self.analysis = analyse(
+        analysis = analyse(
             scene, settings.cube_face_size, settings.lobe_width_cubes, settings.reflector_cubes_on_demand
         )
         packed = [pack_material(build_bsdf(scene.materials[obj.material].desc)) for obj in scene.objects]
-        self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, self.analysis)
+        self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, analysis)
+        shading.draw_records = settings.draw_records
         self.objects = self.drawer.objects
         self.draw_counts = self.drawer.draw_counts  # objects drawn and culled per kind of pass
         for needs in self.analysis.objects:
@@ -111,6 +112,12 @@ class SceneRenderer(RendererBase):
         self.drawer.settings = self.probes.settings = new
         self.shading.draw_records = new.draw_records
         return new
+
+    @property
+    def analysis(self):
+        """What each object needs (scenes/analysis.py), made again after a material edit; the
+        drawer's, which the cube-map owner reads too."""
+        return self.drawer.analysis
 
     @property
     def cube_face_size(self) -> int:
@@ -269,10 +276,9 @@ class SceneRenderer(RendererBase):
             if self.scene.objects[gpu_obj.index].material == material_index:
                 gpu_obj.material = packed
         settings = self._settings
-        self.analysis = analyse(
+        self.drawer.analysis = analyse(
             self.scene, self.cube_face_size, settings.lobe_width_cubes, settings.reflector_cubes_on_demand
         )
-        self.drawer.analysis = self.analysis
         self.probes.material_edited(material_index)
 
     def request_full_faces(self, camera: Camera) -> int:

@@ -135,7 +135,7 @@ class SceneShading(ShadingBinder):
             self._samplers[key] = sampler
         return sampler
 
-    def object_state(self, program, obj, method: Method, planar: bool, proxy, probe_centre=None) -> None:
+    def object_state(self, program, obj, method: Method, planar: bool, proxy, probe_centre) -> None:
         """Everything an object's draw sets that the pass does not: material, textures, lightmap,
         reflection proxy. Recorded once per program, object and method (``draw_records``,
         viewer/interface.py DrawRecorder) and replayed, so a draw sends only the uniform bytes the
@@ -164,7 +164,7 @@ class SceneShading(ShadingBinder):
 
         replay(program, self._records.get(key, make))
 
-    def _set_object_state(self, program, obj, method: Method, planar: bool, proxy, probe_centre=None) -> None:
+    def _set_object_state(self, program, obj, method: Method, planar: bool, proxy, probe_centre) -> None:
         mat = self.scene.materials[self.scene.objects[obj.index].material]
         self.set_material_state(program, obj.material, method, planar)
         set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
