@@ -1,15 +1,13 @@
 // Prefiltering with a radially symmetric kernel (numpy reference: materials/prefilter.py):
-// M(d) = integral p(angle(d, l)) L(l) dl, by stratified importance quadrature. Ring k lies at
-// the kernel's mass quantile (k + 1/2) / rings, its u_azimuths samples rotated by a golden-ratio
-// offset per ring; each sample stands for 1 / (rings azimuths) of the mass and is a filtered
-// lookup covering its solid angle omega_k = 1 / (rings azimuths p(psi_k)) (Colbert & Krivanek).
+// M(d) = integral p(angle(d, l)) L(l) dl, as a sum over cells around d (RadialProfile.cells):
+// each cell is a filtered lookup at angle psi from d and azimuth beta, covering its solid angle
+// omega, weighted by the kernel's mass over the cell.
 #include "cube.glsl"
 
 uniform samplerCube u_source;      // radiance with a full MIP chain
 uniform float u_source_face;       // size of its MIP level 0
-uniform sampler2D u_nodes;         // (psi_k, omega_k) per ring (x) and kernel row (y)
-uniform int u_rings;
-uniform int u_azimuths;
+uniform sampler2D u_cells;         // (psi, beta, omega, weight) per cell (x) and kernel row (y)
+uniform int u_cell_count;          // cells per row; a row ends early at a weight of 0
 uniform float u_lod_bias;
 
 vec3 prefilter(vec3 d, int row) {
@@ -17,17 +15,13 @@ vec3 prefilter(vec3 d, int row) {
     vec3 t = normalize(cross(helper, d));
     vec3 b = cross(d, t);
     vec3 sum = vec3(0.0);
-    for (int k = 0; k < u_rings; ++k) {
-        vec2 node = texelFetch(u_nodes, ivec2(k, row), 0).rg;
-        float s = sin(node.x);
-        float c = cos(node.x);
-        float offset = fract(float(k) * 0.6180339887);
-        for (int m = 0; m < u_azimuths; ++m) {
-            float beta = 2.0 * PI * (float(m) + offset) / float(u_azimuths);
-            vec3 l = c * d + s * (cos(beta) * t + sin(beta) * b);
-            float lod = cube_lod(l, node.y, u_source_face) + u_lod_bias;
-            sum += textureLod(u_source, l, max(lod, 0.0)).rgb;
-        }
+    for (int k = 0; k < u_cell_count; ++k) {
+        vec4 cell = texelFetch(u_cells, ivec2(k, row), 0);
+        if (cell.w <= 0.0) break;
+        float s = sin(cell.x);
+        vec3 l = cos(cell.x) * d + s * (cos(cell.y) * t + sin(cell.y) * b);
+        float lod = cube_lod(l, cell.z, u_source_face) + u_lod_bias;
+        sum += cell.w * textureLod(u_source, l, max(lod, 0.0)).rgb;
     }
-    return sum / float(u_rings * u_azimuths);
+    return sum;
 }

@@ -46,6 +46,17 @@ vec3 banks_lookup(int lobe_index, vec3 wo, mat3 tbn) {
     return radiance * energy;
 }
 
+// materials/prefilter.py split_sum_lod: between levels 1 .. max the blend whose peak is alpha's.
+float split_sum_lod(float alpha, float max_level) {
+    float lod = sqrt(alpha) * max_level;
+    if (lod <= 1.0 || lod >= max_level) return clamp(lod, 0.0, max_level);
+    float lower = clamp(floor(lod), 1.0, max_level - 1.0);
+    float inv_lower = pow(max_level / lower, 4.0);
+    float inv_upper = pow(max_level / (lower + 1.0), 4.0);
+    float inv = 1.0 / (alpha * alpha);
+    return lower + (inv_lower - inv) / (inv_lower - inv_upper);
+}
+
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     if (wo.z <= 0.0) return vec3(0.0);
     if (u_lobe_map_mode[lobe_index] == LOBE_MAP_SPLITSUM) {
@@ -55,8 +66,9 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         float unused_offset;
         r = proxy_direction(r, unused_offset);
 #endif
-        float roughness = sqrt(sqrt(l.ax * l.ay));
-        vec3 radiance = textureLod(u_split_sum[l.dist], r, roughness * u_split_sum_max_level).rgb;
+        float alpha = sqrt(l.ax * l.ay);
+        float roughness = sqrt(alpha);
+        vec3 radiance = textureLod(u_split_sum[l.dist], r, split_sum_lod(alpha, u_split_sum_max_level)).rgb;
         vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
         return radiance * lobe_dfg_albedo(l, ab, wo.z);

@@ -56,6 +56,63 @@ def test_split_sum_kernel_is_the_reflected_direction_density(kind, alpha):
         assert np.sum(weight * (psi < psi_q)) / np.sum(weight) == pytest.approx(q, abs=0.01)
 
 
+@pytest.mark.parametrize(
+    ("kind", "alpha"), [("ggx", 0.0016), ("ggx", 0.04), ("ggx", 0.36), ("ggx", 1.0), ("beckmann", 0.16)]
+)
+def test_prefilter_cells_tile_the_kernel(kind, alpha):
+    """RadialProfile.cells: the weights are the kernel's mass (sum 1, each ring's share of the
+    radial mass), the cells tile the cap they cover (solid angles summing to its area), no cell
+    is much longer than wide (ring width against the arc length of one cell: the equal-mass rings
+    had wedges of ratio > 10 at the axis), and the sum of weight x a smooth function equals the
+    kernel's integral of it by the trapezoid rule on the profile's own grid."""
+    profile = pf.split_sum_profile(kind, alpha)
+    cells = profile.cells()
+    assert len(cells.psi) <= pf.MAX_CELLS
+    assert np.sum(cells.weight) == pytest.approx(1.0, abs=1e-9) and np.all(cells.weight > 0.0)
+    assert cells.psi[0] == 0.0  # one lookup on the axis
+    rings = np.unique(cells.psi)
+    end = profile.quantile(pf.CELL_MASS_END)
+    assert np.sum(cells.omega) == pytest.approx(2.0 * np.pi * (1.0 - np.cos(end)), rel=1e-6)
+    # Cell shape: omega = width x arc, so arc / width = omega / width^2 per ring.
+    for psi in rings[1:]:
+        ring = cells.psi == psi
+        arc = 2.0 * np.pi * np.sin(psi) / np.sum(ring)
+        width = cells.omega[ring][0] / arc
+        assert 0.3 < arc / width < 3.0, (np.degrees(psi), arc / width)
+    for smooth in (np.cos, lambda x: np.exp(-x), lambda x: x**2):
+        exact = np.trapezoid(smooth(profile.psi) * profile.density * 2.0 * np.pi * np.sin(profile.psi), profile.psi)
+        assert np.sum(cells.weight * smooth(cells.psi)) == pytest.approx(exact, rel=0.02, abs=1e-4)
+
+
+@pytest.mark.parametrize("kind", ["ggx", "beckmann"])
+def test_split_sum_lod_blends_levels_to_the_kernels_peak(kind):
+    """split_sum_lod: the trilinear blend of the two levels around a roughness has the peak of
+    that roughness' own kernel (the plain sqrt(alpha) level overshot it by up to 2.8x between
+    levels 1 and 2), is the level itself at every level's alpha, and rises with alpha."""
+    alphas = np.linspace(0.05, 1.0, 40)
+    lods = pf.split_sum_lod(alphas)
+    assert np.all(np.diff(lods) > 0.0)
+    for level in range(pf.SPLIT_SUM_LEVELS):
+        assert float(pf.split_sum_lod(pf.split_sum_alpha(level))) == pytest.approx(level, abs=1e-9)
+    for alpha, lod in zip(alphas, lods, strict=True):
+        if lod <= 1.0:
+            continue
+        lower = min(int(np.floor(lod)), pf.SPLIT_SUM_LEVELS - 2)
+        w = lod - lower
+        peaks = [pf.split_sum_profile(kind, pf.split_sum_alpha(level))(0.0) for level in (lower, lower + 1)]
+        blend = (1.0 - w) * peaks[0] + w * peaks[1]
+        assert blend == pytest.approx(pf.split_sum_profile(kind, alpha)(0.0), rel=0.03), alpha
+
+
+def test_prefilter_cell_directions_are_at_their_angles():
+    cells = pf.split_sum_profile("ggx", 0.2).cells()
+    axis = np.array([0.3, -0.5, 0.81])
+    axis /= np.linalg.norm(axis)
+    dirs = cells.directions(axis)
+    assert np.allclose(np.linalg.norm(dirs, axis=1), 1.0)
+    assert np.allclose(np.arccos(np.clip(dirs @ axis, -1, 1)), cells.psi, atol=1e-6)
+
+
 def test_quadrature_nodes_split_the_mass_evenly():
     profile = pf.split_sum_profile("ggx", 0.3)
     psi, omega = profile.quadrature(8, 4)

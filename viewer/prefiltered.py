@@ -9,8 +9,9 @@
 * Banks maps (materials/banks.py, seed 001 section 5.3): a 3D texture indexed by the fibre
   direction (equirectangular) and asin(v.t), prefiltered with Banks' ring kernel around t.
 
-Both are brute force on the GPU (shaders/prefilter*.comp): every target texel integrates its
-kernel with stratified importance samples that are filtered lookups into the source MIP chain.
+Both are made on the GPU (shaders/prefilter*.comp): every target texel integrates its kernel
+over cells that tile the sphere around it (materials/prefilter.py RadialProfile.cells), each a
+filtered lookup into the source MIP chain weighted by the kernel's mass over the cell.
 Results are cached in memory and, with a cache directory, on disk keyed by the source radiance
 and the kernel. ``memory`` reports the bytes of every map (the user's accuracy/memory trade).
 """
@@ -41,8 +42,16 @@ from lobeview.materials.prefilter import (
 from .mip_chain import GL_RGBA32F, read_cube_level
 from .shaders import ProgramCache
 
-# MIP bias of the prefilters' (and the RSIBR bake's) cube lookups, for the tent chain (see _bind_source).
+# MIP bias of the RSIBR bake's fis-N lookups on the tent chain (viewer/rsibr.py). For fis-style
+# samples against brute force, +1 (Colbert & Krivanek) blurred light out of bright regions (mean
+# error 5.7 % vs 0.5 % at 0, GGX alpha 0.16, box chain); on the tent chain -0.5 was closer than 0.
 PREFILTER_LOD_BIAS = -0.5
+# ... and of the prefilter cells' lookups (materials/prefilter.py RadialProfile.cells), each
+# over its cell's solid angle. Measured against brute force on the issue-45 sky (a 3-degree sun
+# of 50, 256^2 faces, split-sum levels 1-5, GGX and Beckmann): at -1 the map within 5 % of brute
+# force at and around the sun (the equal-mass rings: 23 % dark at its centre on level 2) and a
+# mean error of 0.07-1.0 % over random directions; -0.5 gave 0.1-1.3 %, 0 up to 3.4 %.
+PREFILTER_CELL_LOD_BIAS = -1.0
 
 SPLIT_SUM_KINDS = ("beckmann", "ggx")  # index = DIST_* in shaders/bsdf.glsl
 LOBE_MAP_MAX_HEIGHT = 256
@@ -176,17 +185,13 @@ class PrefilteredMaps:
         cube,
         programs: ProgramCache | None = None,
         cache_dir: Path | None = None,
-        rings: int = 24,
-        azimuths: int = 16,
     ):
         self.ctx = ctx
         self.cube = cube
         self.programs = programs or ProgramCache(ctx)
         self.cache_dir = Path(cache_dir) if cache_dir else None
-        self.rings = rings
-        self.azimuths = azimuths
         # level 0, how the levels the prefilters read between were made, and their bias
-        source = np.ascontiguousarray(cube.faces).tobytes() + f"{cube.mip_filter} {PREFILTER_LOD_BIAS}".encode()
+        source = np.ascontiguousarray(cube.faces).tobytes() + f"{cube.mip_filter} {PREFILTER_CELL_LOD_BIAS}".encode()
         self._source_key = hashlib.sha1(source).hexdigest()[:16]
         self._split_sum: dict = {}
         self._lobe_maps: dict = {}
@@ -198,35 +203,34 @@ class PrefilteredMaps:
 
     # -- kernels as quadrature nodes -------------------------------------------------------------
     def _nodes(self, profiles, rings: int | None = None, azimuths: int | None = None) -> np.ndarray:
-        """(psi_k, omega_k) per kernel row and ring: what the prefilter shaders read, and the
-        key of a map in the caches."""
-        rings, azimuths = rings or self.rings, azimuths or self.azimuths
-        nodes = np.zeros((len(profiles), rings, 2), dtype=np.float32)
-        for row, profile in enumerate(profiles):
+        """The quadrature cells (psi, beta, omega, weight) per kernel row, padded with weight 0:
+        what the prefilter shaders read, and the key of a map in the caches. Centred kernels
+        take RadialProfile.cells; with ``rings`` and ``azimuths`` (Banks' thin ring kernels)
+        the equal-mass rings of RadialProfile.ring_cells."""
+        cells = []
+        for profile in profiles:
             if profile is None:  # the mirror level: one lookup at the centre, finest level
-                nodes[row, 0] = (0.0, 1e-12)
+                cells.append(np.array([[0.0, 0.0, 1e-12, 1.0]]))
                 continue
-            psi, omega = profile.quadrature(rings, azimuths)
-            nodes[row, :, 0] = psi
-            nodes[row, :, 1] = omega
+            found = profile.ring_cells(rings, azimuths) if rings and azimuths else profile.cells()
+            cells.append(np.stack([found.psi, found.beta, found.omega, found.weight], axis=-1))
+        nodes = np.zeros((len(profiles), max(len(c) for c in cells), 4), dtype=np.float32)
+        for row, found in enumerate(cells):
+            nodes[row, : len(found)] = found
         return nodes
 
-    def _bind_source(self, shader, nodes: np.ndarray, azimuths: int | None = None):
-        """Bind the source cube and upload the nodes; returns the nodes texture to release."""
-        nodes_texture = self.ctx.texture((nodes.shape[1], nodes.shape[0]), 2, nodes.tobytes(), dtype="f4")
-        nodes_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
+    def _bind_source(self, shader, nodes: np.ndarray):
+        """Bind the source cube and upload the cells; returns the cells texture to release."""
+        cells_texture = self.ctx.texture((nodes.shape[1], nodes.shape[0]), 4, nodes.tobytes(), dtype="f4")
+        cells_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.cube.radiance.use(0)
-        nodes_texture.use(1)
+        cells_texture.use(1)
         shader["u_source"] = 0
-        shader["u_nodes"] = 1
+        shader["u_cells"] = 1
         shader["u_source_face"] = float(self.cube.face_size)
-        shader["u_azimuths"] = azimuths or self.azimuths
-        # Against brute force, +1 (Colbert & Krivanek) blurred light out of bright regions (mean
-        # error 5.7 % vs 0.5 % at 0, GGX alpha 0.16, box chain, tests/test_prefiltered_gpu.py).
-        # On the tent chain (viewer/mip_chain.py) -0.5 is closer than 0 on 7 of 9 checked levels
-        # and slices (split-sum level 2 GGX: mean 0.7 % -> 0.14 %; level 4: 1.6 % -> 1.1 %).
-        shader["u_lod_bias"] = PREFILTER_LOD_BIAS
-        return nodes_texture
+        shader["u_cell_count"] = nodes.shape[1]
+        shader["u_lod_bias"] = PREFILTER_CELL_LOD_BIAS
+        return cells_texture
 
     def _cache_file(self, kind: str, nodes: np.ndarray, extra: str) -> Path | None:
         if self.cache_dir is None:
@@ -269,7 +273,6 @@ class PrefilteredMaps:
                     cube.bind_to_image(0, read=False, write=True, level=level, format=GL_RGBA32F)
                     shader["u_size"] = face
                     shader["u_row"] = level
-                    shader["u_rings"] = 1 if level == 0 else self.rings
                     shader.run((face + 7) // 8, (face + 7) // 8, 6)
                 self.ctx.finish()
             nodes_texture.release()
@@ -341,7 +344,6 @@ class PrefilteredMaps:
 
     def _latlong_map(self, kind, profiles, shape, label, rings=None, azimuths=None) -> moderngl.Texture3D:
         width, height, depth = shape
-        rings = rings or self.rings
         nodes = self._nodes(profiles, rings, azimuths)
         key = (nodes.tobytes(), width, azimuths)
         if key in self._lobe_maps:
@@ -355,8 +357,7 @@ class PrefilteredMaps:
         else:
             tex = self.ctx.texture3d((width, height, depth), 4, dtype="f4")
             shader = self.programs.compute("prefilter_latlong.comp")
-            nodes_texture = self._bind_source(shader, nodes, azimuths)
-            shader["u_rings"] = rings
+            nodes_texture = self._bind_source(shader, nodes)
             shader["u_size"] = (width, height)
             tex.bind_to_image(0, read=False, write=True, level=0, format=GL_RGBA32F)
             what = f"{label}) map, {width}x{height}x{depth} (GPU, cached afterwards)"
