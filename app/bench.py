@@ -12,11 +12,11 @@ from lobeview.bench.matrix_config import FULL_VIEWS, MATERIAL_CLASSES, SWEEP_BIA
 from lobeview.core.paths import bench_results_dir
 
 __all__ = ["BenchError", "add_arguments", "run"]
-MODES = ("matrix", "stress", "mirrors", "walkthrough", "report")
+MODES = ("matrix", "stress", "mirrors", "walkthrough", "light", "report")
 
 
 def add_arguments(p) -> None:
-    p.usage = "lobeview bench [matrix|stress|mirrors|walkthrough|report JSON] [options]  (the mode first)"
+    p.usage = "lobeview bench [matrix|stress|mirrors|walkthrough|light|report JSON] [options]  (the mode first)"
     a = p.add_argument
     a(
         "mode",
@@ -25,7 +25,8 @@ def add_arguments(p) -> None:
         default="matrix",
         help="matrix (default): time against error for every method; stress: the numerical stress grid;"
         " mirrors: planar mirror passes (0/1/2 reflectors x --resolutions); walkthrough: the demo and the"
-        " apartment along their recorded paths, and cost against object count; report JSON: rewrite a run's"
+        " apartment along their recorded paths, and cost against object count; light: preview spheres under"
+        " the HDR captures with and without bright-source separation; report JSON: rewrite a run's"
         " Markdown and plots",
     )
     a("source", nargs="?", metavar="JSON", help="report: the run's JSON")
@@ -100,6 +101,10 @@ def run(args) -> int:
         from lobeview.bench.mirrors import run_mirrors_command
 
         return run_mirrors_command(args, out_dir, stamp)
+    if mode == "light":
+        from lobeview.bench.light import run_light_command
+
+        return run_light_command(args, out_dir, stamp)
     if mode == "walkthrough":
         from lobeview.bench.walkthrough import run_walkthrough_command
 

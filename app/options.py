@@ -82,6 +82,15 @@ def add_scene_arguments(p) -> None:
         "read by lobe-N at its best bias there, -0.5 (both measured; shot's --lod-bias overrides either)",
     )
     a(
+        "--bright-sources",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="take the bright sources out of every radiance cube (suns, windows, softboxes, lamps: regions at least "
+        "50x the cube's median and 100x their surroundings, at most 10 degrees wide) and integrate them as cap "
+        "lights per pixel in every method but the reference (default: on; --no-bright-sources reads them from "
+        "the cube as before)",
+    )
+    a(
         "--reflection-proxy",
         choices=("scene", "none", "floor", "room"),
         default="scene",
@@ -263,6 +272,7 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method 
             shared_probes=bool(getattr(args, "shared_probes", False)) and lobe_width_cubes(args, method),
             cube_budget_mb=getattr(args, "cube_budget", None),
             mip_filter=getattr(args, "mip_filter", DEFAULT_MIP_FILTER),
+            bright_sources=bool(getattr(args, "bright_sources", True)),
             mirrors=bool(args.mirrors),
         ),
     )
@@ -307,6 +317,8 @@ def shot_command(
             parts.append("--shared-probes")
         if getattr(args, "mip_filter", DEFAULT_MIP_FILTER) != DEFAULT_MIP_FILTER:
             parts.append(f"--mip-filter={args.mip_filter}")
+        if not getattr(args, "bright_sources", True):
+            parts.append("--no-bright-sources")
         if args.reflection_proxy != "scene":
             parts.append(f"--reflection-proxy={args.reflection_proxy}")
         if not args.mirrors:

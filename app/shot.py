@@ -197,7 +197,15 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
     t0 = time.perf_counter()
     ctx = create_context()
     args.gpu_timer = gpu_timer_meaningful(describe(ctx))
-    renderer = PreviewRenderer(ctx, env, mesh, size=size, face_size=args.face_size, mip_filter=args.mip_filter)
+    renderer = PreviewRenderer(
+        ctx,
+        env,
+        mesh,
+        size=size,
+        face_size=args.face_size,
+        mip_filter=args.mip_filter,
+        bright_sources=bool(getattr(args, "bright_sources", True)),
+    )
     stages["cube maps"] = time.perf_counter() - t0
     result = renderer.render(
         camera,

@@ -1,6 +1,6 @@
 #version 450 core
 in vec2 v_ndc;
-uniform samplerCube u_radiance;
+uniform samplerCube u_background;
 uniform mat4 u_inverse_view_projection;
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_position;
@@ -10,7 +10,7 @@ void main() {
     vec4 far_point = u_inverse_view_projection * vec4(v_ndc, 1.0, 1.0);
     vec4 near_point = u_inverse_view_projection * vec4(v_ndc, -1.0, 1.0);
     vec3 dir = normalize(far_point.xyz / far_point.w - near_point.xyz / near_point.w);
-    out_radiance = vec4(textureLod(u_radiance, dir, 0.0).rgb, 1.0);
+    out_radiance = vec4(textureLod(u_background, dir, 0.0).rgb, 1.0);
     out_position = vec4(0.0);
     out_normal = vec4(0.0);
     out_tangent = vec4(0.0);

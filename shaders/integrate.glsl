@@ -11,6 +11,7 @@
 //                sampling with the power heuristic (Veach 1997), so suns converge.
 #include "bsdf.glsl"
 #include "patterns.glsl"
+#include "cap_lights.glsl"
 
 uniform samplerCube u_radiance;     // incident radiance, full MIP chain
 uniform float u_face_size;          // size of MIP level 0 of u_radiance
@@ -296,5 +297,8 @@ vec3 shade(vec3 wo, mat3 tbn) {
 #endif
         result += integrate_lobe(get_lobe(i), i, wo, tbn);
     }
+    // The bright sources the cube no longer holds, for every lobe (RSIBR's included: its maps
+    // are baked from the same cube).
+    for (int i = 0; i < u_lobe_count && u_cap_light_count > 0; ++i) result += cap_lights_radiance(get_lobe(i), wo, tbn);
     return result;
 }

@@ -46,11 +46,12 @@ vec3 banks_lookup(int lobe_index, vec3 wo, mat3 tbn) {
     return radiance * energy;
 }
 
-// materials/prefilter.py split_sum_lod: between levels 1 .. max the blend whose peak is alpha's.
+// materials/prefilter.py split_sum_lod: from level PEAK_MATCHED_FROM on, the blend whose peak is alpha's.
+#define PEAK_MATCHED_FROM 2.0
 float split_sum_lod(float alpha, float max_level) {
     float lod = sqrt(alpha) * max_level;
-    if (lod <= 1.0 || lod >= max_level) return clamp(lod, 0.0, max_level);
-    float lower = clamp(floor(lod), 1.0, max_level - 1.0);
+    if (lod <= PEAK_MATCHED_FROM || lod >= max_level) return clamp(lod, 0.0, max_level);
+    float lower = clamp(floor(lod), PEAK_MATCHED_FROM, max_level - 1.0);
     float inv_lower = pow(max_level / lower, 4.0);
     float inv_upper = pow(max_level / (lower + 1.0), 4.0);
     float inv = 1.0 / (alpha * alpha);

@@ -54,3 +54,70 @@ def test_lobeview_reference_agrees_with_mitsuba(tmp_path):
     results = bench.run(["ggx:0.3", "ggx:0.05x0.3"], [], 48, 256, tmp_path, progress=lambda _: None)
     for row in results["rows"]:
         assert row["reference"] < 0.2, row  # 256 spp under a sun of 50: ~10 % is noise
+
+
+def test_sun_pixel_is_where_the_sphere_mirrors_the_sun():
+    """The pixel the sun columns read: the brightest pixel of a near-mirror sphere (GGX alpha
+    0.02, one lookup per sample) lies within a pixel of it."""
+    import warnings
+
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.preview import PreviewRenderer
+
+    size = 96
+    ctx = create_headless_context()
+    env = EnvironmentMap.from_function(bench.environment, height=128, name="issue 45 sky")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        renderer = PreviewRenderer(ctx, env, uv_sphere(1.0), size=(size, size), face_size=128)
+    try:
+        frame = renderer.render(Camera(*bench.CAMERA), build_bsdf(validate(bench.material("ggx:0.02"))), "lobe-7+norm")
+        brightest = np.unravel_index(np.argmax(np.where(frame.mask, frame.radiance.mean(-1), 0.0)), (size, size))
+        assert np.abs(np.array(brightest) - np.array(bench.sun_pixel(size))).max() <= 1, (
+            brightest,
+            bench.sun_pixel(size),
+        )
+    finally:
+        renderer.release()
+        ctx.release()
+
+
+def test_sun_ratios_and_their_table():
+    truth = np.ones((32, 32, 3))
+    image = truth.copy()
+    row, column = bench.sun_pixel(32)
+    image[row, column] = 0.5
+    centre, window = bench.sun_ratios(image, truth, 32)
+    assert centre == pytest.approx(0.5) and window == pytest.approx(1.0 - 0.5 / 81)
+    results = {"rows": [{"case": "ggx:0.5", "reference": 0.021, "lobe-7+norm": 0.147,
+                         "sun": {"reference": (1.0, 0.99), "lobe-7+norm": (0.5, 0.9)}}],
+               "methods": ["lobe-7+norm"], "size": 32, "spp": 16, "mitsuba": "3.9.1", "device": "test"}  # fmt: skip
+    assert "| ggx:0.5 | 1.000 / 0.990 | 0.500 / 0.900 |" in bench.markdown(results, "stamp", "command")
+
+
+def test_mitsuba_renders_are_cached(tmp_path, monkeypatch):
+    """A second run of the same case reads Mitsuba's image from the cache; another scene (here
+    another sun radiance) does not."""
+    calls = []
+
+    def fake_render(case, size, spp, envmap_file):
+        calls.append(case)
+        return np.full((size, size, 3), 0.25, dtype=np.float32)
+
+    monkeypatch.setattr(bench, "render_mitsuba", fake_render)
+    first = bench.cached_mitsuba("ggx:0.3", 8, 4, tmp_path, tmp_path / "cache", "3.9.1")
+    second = bench.cached_mitsuba("ggx:0.3", 8, 4, tmp_path, tmp_path / "cache", "3.9.1")
+    assert calls == ["ggx:0.3"] and np.array_equal(first[0], second[0])
+    monkeypatch.setattr(bench, "SUN_RADIANCE", 80.0)
+    bench.cached_mitsuba("ggx:0.3", 8, 4, tmp_path, tmp_path / "cache", "3.9.1")
+    assert calls == ["ggx:0.3", "ggx:0.3"]
+    damaged = tmp_path / "cache" / f"mitsuba-{bench.mitsuba_key('ggx:0.3', 8, 4, '3.9.1')}.npz"
+    assert damaged.exists()
+    damaged.write_bytes(b"not an npz")
+    with pytest.warns(UserWarning, match="unusable cached Mitsuba render"):
+        bench.cached_mitsuba("ggx:0.3", 8, 4, tmp_path, tmp_path / "cache", "3.9.1")
+    assert len(calls) == 3  # rendered again, and written whole again
+    bench.cached_mitsuba("ggx:0.3", 8, 4, tmp_path, tmp_path / "cache", "3.9.1")
+    assert len(calls) == 3

@@ -86,16 +86,17 @@ def test_prefilter_cells_tile_the_kernel(kind, alpha):
 
 @pytest.mark.parametrize("kind", ["ggx", "beckmann"])
 def test_split_sum_lod_blends_levels_to_the_kernels_peak(kind):
-    """split_sum_lod: the trilinear blend of the two levels around a roughness has the peak of
-    that roughness' own kernel (the plain sqrt(alpha) level overshot it by up to 2.8x between
-    levels 1 and 2), is the level itself at every level's alpha, and rises with alpha."""
+    """split_sum_lod: from level 2 on the trilinear blend of the two levels around a roughness
+    has the peak of that roughness' own kernel (the plain sqrt(alpha) level overshot it by up to
+    1.3x), below it the plain level; the level itself at every level's alpha; rising with alpha."""
     alphas = np.linspace(0.05, 1.0, 40)
     lods = pf.split_sum_lod(alphas)
     assert np.all(np.diff(lods) > 0.0)
     for level in range(pf.SPLIT_SUM_LEVELS):
         assert float(pf.split_sum_lod(pf.split_sum_alpha(level))) == pytest.approx(level, abs=1e-9)
     for alpha, lod in zip(alphas, lods, strict=True):
-        if lod <= 1.0:
+        if lod <= pf.PEAK_MATCHED_FROM:
+            assert lod == pytest.approx(np.sqrt(alpha) * (pf.SPLIT_SUM_LEVELS - 1))
             continue
         lower = min(int(np.floor(lod)), pf.SPLIT_SUM_LEVELS - 2)
         w = lod - lower

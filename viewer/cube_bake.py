@@ -28,7 +28,9 @@ from .cubemap import RadianceCube
 from .frame import begin_pass, new_framebuffer
 from .mip_chain import DEFAULT_MIP_FILTER, check_mip_filter, downsample_cube_faces
 
-CUBE_CACHE_VERSION = 5  # 5: per-object face sizes (supersampled); 4: glTF textures, alpha modes, culling
+# 6: the second bounce shades with bright-source lights and residual cubes (issue 39);
+# 5: per-object face sizes (supersampled); 4: glTF textures, alpha modes, culling
+CUBE_CACHE_VERSION = 6
 CUBE_SUPERSAMPLE = 2
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
 
@@ -53,12 +55,16 @@ def scene_content_key(
     bounces: int,
     sizes: dict | None = None,
     mip_filter: str = DEFAULT_MIP_FILTER,
+    bright_sources: bool = False,
 ) -> str:
     """What the cube maps depend on: geometry, lightmap coordinates, materials, emission,
     lightmaps and base-colour textures, the environment, face size (and each object's, ``sizes``),
-    bounces and the MIP chains (second-bounce lookups read them; sized faces are reduced by them)."""
+    bounces, the MIP chains (second-bounce lookups read them; sized faces are reduced by them) and
+    whether bright sources are separated (the second bounce then shades them as lights)."""
     h = hashlib.sha256()
     h.update(f"v{CUBE_CACHE_VERSION} face{face_size} b{bounces} env{environment_key} mip-{mip_filter}".encode())
+    if bright_sources:
+        h.update(b" bright-sources")
     if sizes:
         h.update(f"ss{CUBE_SUPERSAMPLE}".encode() + repr(sorted(sizes.items())).encode())
     for obj in scene.objects:
@@ -94,9 +100,11 @@ class CubeBake:
         progress: bool = True,
         cache_dir: Path | None = None,
         mip_filter: str = DEFAULT_MIP_FILTER,
+        bright_sources: bool = False,
     ):
         self.ctx = ctx
         self.mip_filter = check_mip_filter(mip_filter)  # of every cube map made here
+        self.bright_sources = bool(bright_sources)  # separate each cube's bright sources (viewer/cubemap.py)
         # Where the cube maps are cached; every cube made here carries it, for the prefiltered
         # maps cached beside it. The scene key is set by build().
         self.cache_dir = Path(cache_dir) if cache_dir else None
@@ -159,7 +167,12 @@ class CubeBake:
         """Make ``faces`` the object's cube map (releasing the one it had)."""
         if obj.cube is not None:
             obj.cube.release()
-        obj.cube = RadianceCube(self.ctx, np.asarray(faces, dtype=np.float32), mip_filter=self.mip_filter)
+        obj.cube = RadianceCube(
+            self.ctx,
+            np.asarray(faces, dtype=np.float32),
+            mip_filter=self.mip_filter,
+            bright_sources=self.bright_sources,
+        )
         obj.cube.cache_dir = self.cache_dir
 
     @staticmethod

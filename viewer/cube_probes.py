@@ -42,6 +42,7 @@ class CubeProbes:
             progress,
             cache_dir,
             settings.mip_filter,
+            settings.bright_sources,
         )
         budget = settings.cube_budget_mb
         self.residency = CubeResidency(None if budget is None else int(float(budget) * 2**20))
@@ -53,7 +54,13 @@ class CubeProbes:
         analysis = drawer.analysis
         sizes = {i: self.cube_size(i) for i in analysis.cube_mapped}
         key = scene_content_key(
-            drawer.scene, environment_key, self.bake.face_size, self.bake.bounces, sizes, settings.mip_filter
+            drawer.scene,
+            environment_key,
+            self.bake.face_size,
+            self.bake.bounces,
+            sizes,
+            settings.mip_filter,
+            settings.bright_sources,
         )
         if settings.reflector_cubes_on_demand:  # the second bounce then sees reflectors without lobes
             key += "-r"

@@ -36,12 +36,29 @@ class RadianceCube:
     256^2 cube, 0.6 GB for the 18-room apartment): ``faces`` reads them back from the GPU."""
 
     def __init__(
-        self, ctx: moderngl.Context, faces: np.ndarray, importance_size: int = 64, mip_filter: str = DEFAULT_MIP_FILTER
+        self,
+        ctx: moderngl.Context,
+        faces: np.ndarray,
+        importance_size: int = 64,
+        mip_filter: str = DEFAULT_MIP_FILTER,
+        bright_sources: bool = False,
     ):
         faces = np.asarray(faces, dtype=np.float32)
         self.face_size = faces.shape[1]
         self.mip_filter = check_mip_filter(mip_filter)
         self.radiance = upload_cube(ctx, faces, mip_filter=mip_filter)
+        # Bright-source separation (issue 39): the lights taken out, and the cube without them,
+        # which every method but the reference reads (the reference keeps the whole radiance:
+        # its environment sampler already converges on suns). No lights: the same texture.
+        self.lights: list = []
+        self.residual = self.radiance
+        if bright_sources:
+            from lobeview.scenes.bright_sources import separate_cube
+
+            separation = separate_cube(faces)
+            if separation.lights:
+                self.lights = separation.lights
+                self.residual = upload_cube(ctx, separation.residual, mip_filter=mip_filter)
         self.importance_size = min(int(importance_size), self.face_size)
         self._importance: tuple | None = None  # (CubeImportance, env_cdf, env_pdf) once built
         self._prefiltered = None
@@ -50,12 +67,20 @@ class RadianceCube:
     @property
     def faces(self) -> np.ndarray:
         """(6, S, S, 3) float32: level 0 as stored on the GPU (float32 texels, so exactly what
-        was uploaded), read back on each call; the importance tables and the prefiltered maps'
-        cache key are its only users, once per cube."""
+        was uploaded), read back on each call; the importance tables are its only user."""
+        return self._read_faces(self.radiance)
+
+    @property
+    def residual_faces(self) -> np.ndarray:
+        """The faces of ``residual`` (those of ``radiance`` without bright sources): what the
+        prefiltered maps are made from and keyed by."""
+        return self._read_faces(self.residual)
+
+    def _read_faces(self, texture) -> np.ndarray:
         size = self.face_size
         return np.stack(
             [
-                np.frombuffer(self.radiance.read(face, alignment=1), np.float32).reshape(size, size, 4)[..., :3]
+                np.frombuffer(texture.read(face, alignment=1), np.float32).reshape(size, size, 4)[..., :3]
                 for face in range(6)
             ]
         )
@@ -119,6 +144,8 @@ class RadianceCube:
     def release(self):
         if self._prefiltered is not None:
             self._prefiltered.release()
+        if self.residual is not self.radiance:
+            self.residual.release()
         self.radiance.release()
         if self._importance is not None:
             self._importance[1].release()
@@ -137,9 +164,10 @@ class EnvironmentCubes(RadianceCube):
         irradiance_size: int = 16,
         importance_size: int = 64,
         mip_filter: str = DEFAULT_MIP_FILTER,
+        bright_sources: bool = False,
     ):
         self.env = env
-        super().__init__(ctx, equirect_to_cube_faces(env, face_size), importance_size, mip_filter)
+        super().__init__(ctx, equirect_to_cube_faces(env, face_size), importance_size, mip_filter, bright_sources)
         irradiance_faces = np.stack([env.irradiance(face_directions(f, irradiance_size)) for f in range(6)]).astype(
             np.float32
         )

@@ -273,6 +273,9 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     "u_plane_point_state": (30, 31),  # previous pass: mirror, see-through
     "u_plane_normal_state": (32, 33),
     "u_rsibr_maps": 40,  # prefiltered-rsibr: the reflection-space maps (viewer/rsibr.py)
+    # the background's cube: its own unit, since an object's u_radiance may be another texture of
+    # the same cube (viewer/cubemap.py residual, without the bright sources the background shows)
+    "u_background": 41,
 }
 
 

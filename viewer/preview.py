@@ -39,12 +39,14 @@ class PreviewRenderer(RendererBase):
         size=(512, 512),
         face_size: int = 256,
         mip_filter: str = DEFAULT_MIP_FILTER,
+        bright_sources: bool = False,
     ):
         # mip_filter: how the environment cube's MIP levels are made (viewer/mip_chain.py
-        # MIP_FILTERS); lobe-N's default LOD bias follows it (Method.default_lod_bias)
+        # MIP_FILTERS); lobe-N's default LOD bias follows it (Method.default_lod_bias).
+        # bright_sources: separate the cube's bright sources as lights (viewer/cubemap.py).
         super().__init__(ctx, size, mip_filter=mip_filter)
         t0 = time.perf_counter()
-        self.cubes = EnvironmentCubes(ctx, env, face_size, mip_filter=mip_filter)
+        self.cubes = EnvironmentCubes(ctx, env, face_size, mip_filter=mip_filter, bright_sources=bright_sources)
         self.setup_seconds = time.perf_counter() - t0
         self.mesh = mesh
         self.vbo = ctx.buffer(mesh.interleaved().tobytes())

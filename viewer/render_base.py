@@ -128,6 +128,6 @@ def draw_environment(ctx, programs: ProgramCache, vaos: dict, cube: RadianceCube
     if key not in vaos:
         vaos[key] = ctx.vertex_array(program, [])
     set_uniform(program, "u_inverse_view_projection", tuple(np.linalg.inv(view_proj).T.astype("f4").ravel()))
-    bind_sampler(program, "u_radiance", cube.radiance)
+    bind_sampler(program, "u_background", cube.radiance)
     ctx.disable(moderngl.DEPTH_TEST)
     vaos[key].render(moderngl.TRIANGLES, vertices=3)

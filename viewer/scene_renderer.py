@@ -68,7 +68,12 @@ class SceneRenderer(RendererBase):
         sh9 = environment.irradiance_sh9().astype(np.float32)
         shading = SceneShading(ctx, ProgramCache(ctx), scene, sh9, settings.mip_filter, self.cache_dir)
         super().__init__(ctx, size, shading)
-        self.environment = RadianceCube(ctx, equirect_to_cube_faces(environment, 256), mip_filter=settings.mip_filter)
+        self.environment = RadianceCube(
+            ctx,
+            equirect_to_cube_faces(environment, 256),
+            mip_filter=settings.mip_filter,
+            bright_sources=settings.bright_sources,
+        )
         self.environment_name = environment.name
         self.environment_sh9 = sh9  # diffuse light of objects without a lightmap
         analysis = analyse(

@@ -32,6 +32,9 @@ class RenderSettings:
     # Nearby small objects with wide lobes share one cube map (scenes/probe_groups.py).
     shared_probes: bool = False
     probe_link: float = SHARED_PROBE_LINK  # group_probes' link (bench/probe_sharing.py sweeps it)
+    # Bright sources (suns, windows, lamps seen in a cube) become cap lights integrated exactly,
+    # the cube keeps their surroundings (scenes/bright_sources.py, issue 39); not for the reference.
+    bright_sources: bool = True
     # -- per frame ---------------------------------------------------------------------------
     mirrors: bool = True  # planar mirror passes (thesis 4.5)
     mirror_scale: float = 1.0  # mirror buffers at this times the frame's resolution
@@ -73,5 +76,5 @@ class RenderSettings:
 #: the options that decide what the cube maps hold: a renderer keeps them for its life
 CUBE_MAP_FIELDS = (
     "cube_face_size", "cube_bounces", "lobe_width_cubes", "reflector_cubes_on_demand", "cube_budget_mb",
-    "mip_filter", "shared_probes", "probe_link",
+    "mip_filter", "shared_probes", "probe_link", "bright_sources",
 )  # fmt: skip

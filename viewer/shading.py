@@ -14,6 +14,7 @@ from scipy.stats import qmc
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_REFERENCE_SPP, Method
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
+from lobeview.scenes.bright_sources import MAX_LIGHTS as MAX_CAP_LIGHTS
 
 from .cubemap import RadianceCube
 from .interface import (
@@ -151,7 +152,19 @@ class ShadingBinder:
         maps). Units: viewer/interface.py TEXTURE_UNITS."""
         if method.kind == "prefiltered":
             self.bind_prefiltered(program, cube, material, method, per_pixel_lobes)
-        bind_sampler(program, "u_radiance", cube.radiance)
+        # Bright sources (viewer/cubemap.py): the reference integrates the whole radiance, every
+        # other method the cube without them plus the lights (shaders/cap_lights.glsl).
+        lights = [] if method.kind == "reference" else cube.lights
+        bind_sampler(program, "u_radiance", cube.radiance if method.kind == "reference" else cube.residual)
+        set_uniform(program, "u_cap_light_count", len(lights))
+        if lights:
+            axes = np.zeros((MAX_CAP_LIGHTS, 4), dtype=np.float32)
+            radiance = np.zeros((MAX_CAP_LIGHTS, 3), dtype=np.float32)
+            for k, light in enumerate(lights[:MAX_CAP_LIGHTS]):
+                axes[k] = (*light.direction, light.cos_radius)
+                radiance[k] = light.radiance
+            write_uniform(program, "u_cap_light_axis", axes)
+            write_uniform(program, "u_cap_light_radiance", radiance)
         bind_sampler(program, "u_sobol", self.sobol)
         set_uniform(program, "u_face_size", float(cube.face_size))
         if method.kind == "reference":

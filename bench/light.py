@@ -1,0 +1,188 @@
+"""Real light (issue 39): every method on the preview sphere under real HDR captures, with and
+without bright-source separation (scenes/bright_sources.py), against ``reference --pixel-filter
+box`` (which reads the whole cube either way), with time.
+
+    lobeview bench light [--quick] [--materials gold-ggx ggx:0.05 ...] [--views studio ...]
+                         [--methods lobe-7+norm ...] [--reference-spp 2048] [--out DIR]
+
+Materials: presets by name, or DIST:ALPHA (a microfacet reflector without Fresnel, as in
+bench/mitsuba.py). Views: files of ../shared/assets/env by stem (studio, chinese_garden_1k, ...)
+or paths. For every (view, material): the reference once, then each method on a renderer whose
+cube keeps its bright sources ("before") and on one that separates them ("after"): relative RMSE
+and PSNR over the sphere, and the median shading time of --repeats frames. A figure per view of
+the first material: reference | before | after | |after - reference| x4 for lobe-7+norm.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+MATERIALS = (
+    "gold-ggx", "beckmann:0.3", "ggx:0.05", "alanod-2000gs-1lobe", "miro5-2lobe", "frosted-glass",
+    "gltf-red-plastic",
+)  # fmt: skip
+QUICK_MATERIALS = ("gold-ggx", "ggx:0.05", "frosted-glass")
+METHODS = ("lobe-3+norm", "lobe-7+norm", "lobe-11+norm", "lobe-15+norm", "lobe-19+norm", "fis-16", "prefiltered",
+           "prefiltered-rsibr")  # fmt: skip
+QUICK_METHODS = ("lobe-7+norm", "lobe-15+norm", "fis-16", "prefiltered")
+SIZE = 160
+CAMERA = ((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0)
+
+
+def environment_files(views=None) -> list[Path]:
+    """The HDR captures of ../shared/assets/env (all, or those named by stem or path)."""
+    from lobeview.core.paths import shared_assets_dir
+
+    root = shared_assets_dir()
+    found = sorted(p for p in (root / "env").rglob("*") if p.suffix in (".exr", ".hdr")) if root else []
+    if not views:
+        if not found:
+            raise SystemExit("bench light: no HDR captures in ../shared/assets/env; name files with --views")
+        return found
+    chosen = []
+    for view in views:
+        path = Path(view)
+        if not path.exists():
+            matches = [p for p in found if p.stem == view]
+            if not matches:
+                raise SystemExit(f"bench light: no environment {view!r} (stems: {', '.join(p.stem for p in found)})")
+            path = matches[0]
+        chosen.append(path)
+    return chosen
+
+
+def build_material(name: str):
+    from lobeview.materials.spec import build_bsdf, load_material, validate
+
+    if ":" in name:
+        from lobeview.bench.mitsuba import material
+
+        return build_bsdf(validate(material(name)))
+    return build_bsdf(load_material(name))
+
+
+def psnr(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> float:
+    peak = float(np.max(reference[mask]))
+    mse = float(np.mean((image[mask] - reference[mask]) ** 2))
+    return 10.0 * np.log10(peak * peak / max(mse, 1e-30))
+
+
+def run(views, materials, methods, reference_spp: int, repeats: int, out: Path, stamp: str, progress=print) -> dict:
+    from lobeview.bench.mitsuba import relative_rmse
+    from lobeview.scenes.builtin_env import load_environment
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.preview import PreviewRenderer
+
+    ctx = create_headless_context()
+    camera = Camera(*CAMERA)
+    rows, figures = [], []
+    for path in environment_files(views):
+        env = load_environment(str(path))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            renderers = {
+                separate: PreviewRenderer(ctx, env, uv_sphere(1.0), size=(SIZE, SIZE), bright_sources=separate)
+                for separate in (False, True)
+            }
+        lights = renderers[True].cubes.lights
+        progress(f"[light] {path.stem}: {len(lights)} light(s), radii "
+                 + ", ".join(f"{np.degrees(light.radius):.2f}" for light in lights) + " deg")  # fmt: skip
+        for m, name in enumerate(materials):
+            bsdf = build_material(name)
+            reference = renderers[False].render(camera, bsdf, "reference", spp=reference_spp, background=False)
+            for method in methods:
+                row = {"view": path.stem, "material": name, "method": method, "lights": len(lights)}
+                for separate, label in ((False, "before"), (True, "after")):
+                    renderer = renderers[separate]
+                    frame = renderer.render(camera, bsdf, method, background=False)  # warm-up (maps, programs)
+                    seconds = []
+                    for _ in range(repeats):
+                        t0 = time.perf_counter()
+                        frame = renderer.render(camera, bsdf, method, background=False)
+                        seconds.append(time.perf_counter() - t0)
+                    row[label] = {
+                        "rel_rmse": relative_rmse(frame.radiance, reference.radiance, reference.mask),
+                        "psnr": psnr(frame.radiance, reference.radiance, reference.mask),
+                        "ms": 1000.0 * float(np.median(seconds)),
+                    }
+                    if m == 0 and method == "lobe-7+norm":
+                        figures.append((path.stem, name, label, frame.radiance, reference.radiance))
+                rows.append(row)
+                b, a = row["before"], row["after"]
+                errors = f"{100 * b['rel_rmse']:.1f} -> {100 * a['rel_rmse']:.1f} %"
+                progress(f"[light] {path.stem} {name} {method}: {errors}, {b['ms']:.0f} -> {a['ms']:.0f} ms")
+        for renderer in renderers.values():
+            renderer.release()
+    ctx.release()
+    results = {"rows": rows, "size": SIZE, "reference_spp": reference_spp, "repeats": repeats,
+               "device": "Mesa llvmpipe (CPU)", "stamp": stamp}  # fmt: skip
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"light-{stamp}.json").write_text(json.dumps(results, indent=1))
+    if figures:
+        write_figure(figures, out / f"light-{stamp}.png")
+    (out / f"light-{stamp}.md").write_text(markdown(results))
+    progress(f"[light] wrote {out / f'light-{stamp}.md'}")
+    return results
+
+
+def write_figure(figures: list, path: Path) -> None:
+    """One row per view: reference | before | after | |after - reference| x4 (relative)."""
+    from PIL import Image, ImageDraw
+
+    def tonemap(x):
+        return (np.clip(x / (1.0 + x), 0.0, 1.0) ** (1 / 2.2) * 255).astype(np.uint8)
+
+    by_view: dict = {}
+    for view, _name, label, frame, reference in figures:
+        by_view.setdefault(view, {"reference": reference})[label] = frame
+    rows = []
+    for view, frames in by_view.items():
+        after, reference = frames["after"], frames["reference"]
+        error = np.abs(after - reference).mean(-1) / np.maximum(reference.mean(-1), 1e-3)
+        error = (np.clip(4.0 * error, 0.0, 1.0)[..., None] * 255).repeat(3, -1).astype(np.uint8)
+        row = np.concatenate([tonemap(reference), tonemap(frames["before"]), tonemap(after), error], axis=1)
+        image = Image.fromarray(row)
+        ImageDraw.Draw(image).text((4, 4), view, fill=(255, 255, 0))
+        rows.append(np.asarray(image))
+    Image.fromarray(np.concatenate(rows, axis=0)).save(path)
+
+
+def markdown(results: dict) -> str:
+    lines = [
+        f"# Bright-source separation: before / after ({results['stamp']})",
+        "",
+        f"`lobeview bench light`: preview sphere {results['size']}x{results['size']} px, camera 4 units, fov 40; "
+        f"against `reference` at {results['reference_spp']} samples per lobe, box pixel filter (reading the whole "
+        f"cube); before = bright sources left in the cube, after = separated into cap lights. Relative RMSE (%) "
+        f"over the sphere and median frame time (ms, {results['repeats']} frames) on {results['device']}.",
+        "",
+        "| view | lights | material | method | rel. RMSE before | after | PSNR before | after | ms before | after |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for row in results["rows"]:
+        b, a = row["before"], row["after"]
+        lines.append(
+            f"| {row['view']} | {row['lights']} | {row['material']} | {row['method']} | {100 * b['rel_rmse']:.1f} | "
+            f"{100 * a['rel_rmse']:.1f} | {b['psnr']:.1f} | {a['psnr']:.1f} | {b['ms']:.0f} | {a['ms']:.0f} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def run_light_command(args, out_dir: Path, stamp: str) -> int:
+    quick = bool(args.quick)
+    materials = args.materials or (QUICK_MATERIALS if quick else MATERIALS)
+    methods = args.methods or (QUICK_METHODS if quick else METHODS)
+    views = args.views or (["chinese_garden_1k", "studio", "interior"] if quick else None)
+    spp = args.reference_spp or (512 if quick else 2048)
+    repeats = 1 if quick else max(1, int(args.repeats))
+    for name in materials:
+        build_material(name)  # fail early on a misspelt material
+    run(views, materials, methods, spp, repeats, out_dir, stamp)
+    return 0

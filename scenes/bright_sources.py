@@ -1,0 +1,185 @@
+"""Bright-source separation (issue 39, step 1; numpy reference): the few regions of a radiance
+map that carry most of its energy far above their surroundings become cap lights
+(materials/cap_lights.py), and the map keeps their surroundings' level in their place.
+
+Method, on any set of texels (directions, solid angles, RGB radiance: a cube map's faces or an
+equirectangular environment map):
+  1. threshold: luminance above BRIGHT_FACTOR times the map's median luminance (median by solid
+     angle: robust to the sources themselves, which cover a tiny part of the sphere);
+  2. regions: connected sets of such texels (neighbours within NEIGHBOUR_TEXELS texel widths of
+     each other, found with a k-d tree on the directions, so regions run across cube faces and
+     the equirectangular seam);
+  3. per region, the surroundings' level B: the per-channel median radiance of the texels that
+     are below the threshold and within SURROUND_TEXELS texel widths of the region's cap;
+  4. the light is what lies above B: per texel and channel max(L - B, 0), the texel keeps
+     min(L, B). So the map after separation plus the lights' power is the map before, exactly
+     (nothing twice, nothing lost: tests/test_cap_lights.py checks it to 1e-4);
+  5. the region becomes a cap around its energy-weighted mean direction, as wide as the removed
+     energy spreads (its energy-weighted second moment: a sun in its glow gets the sun's size),
+     with the uniform radiance that carries the removed power; regions holding less than
+     MIN_LIGHT_SHARE of the map's energy, regions whose peak is less than MIN_CONTRAST times
+     their surroundings, and regions whose cap would be wider than
+     MAX_LIGHT_SOLID_ANGLE (their structure matters), stay in the map; at most
+     MAX_LIGHTS of the strongest are taken.
+Debevec's median-cut (2005) places lights where the energy is but does not remove them; the
+threshold-and-region scheme is the "light extraction" of production engines, with the removal
+made conservative.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lobeview.core.cube_layout import equirect_direction, face_directions, texel_solid_angles
+from lobeview.materials.cap_lights import CapLight
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+BRIGHT_FACTOR = 50.0  # a source is at least this many times the map's median luminance
+MIN_LIGHT_SHARE = 0.005  # ... and holds at least this share of the map's energy
+MAX_LIGHTS = 8
+NEIGHBOUR_TEXELS = 1.5  # texels of a region lie within this many texel widths of each other
+SURROUND_TEXELS = 4.0  # the surroundings: this many texel widths around the region's cap
+# ... and its brightest texel at least this many times its surroundings' level (the sources that
+# patterns and tail lookups miss are 1e2-1e5 times brighter than what is around them; a sunlit
+# wall 20 times brighter than the sky beside it is structure that a sharp reflection shows).
+MIN_CONTRAST = 100.0
+# A light is a uniform cap: a bright region wider than this (10 degrees of radius) would lose the
+# structure a sharp reflection shows (a sky or a sunlit wall), so it stays in the map.
+MAX_LIGHT_SOLID_ANGLE = 2.0 * np.pi * (1.0 - np.cos(np.radians(10.0)))
+
+
+@dataclass
+class Separation:
+    """Lights taken out of a map, and the map without them (same layout as the input)."""
+
+    lights: list[CapLight]
+    residual: np.ndarray
+    threshold: float  # luminance above which texels were candidates
+    regions: list[np.ndarray] = field(default_factory=list)  # texel indices of each light (flattened)
+
+    @property
+    def light_power(self) -> np.ndarray:
+        """The lights' total power (RGB), what left the map."""
+        return np.sum([light.power for light in self.lights], axis=0) if self.lights else np.zeros(3)
+
+
+def cube_texels(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Directions (6, S, S, 3) and solid angles (6, S, S) of a cube map's texels
+    (core/cube_layout.py: rows are t, columns s)."""
+    size = faces.shape[1]
+    directions = np.stack([face_directions(face, size) for face in range(6)])
+    solid = texel_solid_angles(size).T  # [row t, column s]; symmetric anyway
+    return directions, np.broadcast_to(solid, (6, size, size))
+
+
+def equirect_texels(height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Directions (H, 2H, 3) and exact solid angles (H, 2H) of an equirectangular map's texels."""
+    width = 2 * height
+    v = (np.arange(height) + 0.5) / height
+    u = (np.arange(width) + 0.5) / width
+    uu, vv = np.meshgrid(u, v)
+    directions = equirect_direction(uu, vv)
+    band = (
+        2.0
+        * np.pi
+        / width
+        * (np.cos(np.pi * np.arange(height) / height) - np.cos(np.pi * (np.arange(height) + 1) / height))
+    )
+    return directions, np.broadcast_to(band[:, None], (height, width))
+
+
+def separate_cube(faces: np.ndarray, **options) -> Separation:
+    """:func:`separate` on the six faces (6, S, S, 3) of a radiance cube."""
+    faces = np.asarray(faces)
+    if faces.ndim != 4 or faces.shape[0] != 6 or faces.shape[1] != faces.shape[2] or faces.shape[3] < 3:
+        raise ValueError(f"a cube map's faces have shape (6, S, S, 3), got {faces.shape}")
+    directions, solid = cube_texels(faces)
+    # A cube texel at a face's centre spans 2 / S radians: the widest on the cube.
+    return separate(directions, solid, faces[..., :3], 2.0 / faces.shape[1], **options)
+
+
+def separate_equirect(image: np.ndarray, **options) -> Separation:
+    """:func:`separate` on an equirectangular map (H, 2H, 3)."""
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[1] != 2 * image.shape[0] or image.shape[2] < 3:
+        raise ValueError(f"an equirectangular map has shape (H, 2H, 3), got {image.shape}")
+    directions, solid = equirect_texels(image.shape[0])
+    return separate(directions, solid, image[..., :3], np.pi / image.shape[0], **options)
+
+
+def separate(
+    directions: np.ndarray,
+    solid_angles: np.ndarray,
+    radiance: np.ndarray,
+    texel_angle: float,
+    bright_factor: float = BRIGHT_FACTOR,
+    min_share: float = MIN_LIGHT_SHARE,
+    max_lights: int = MAX_LIGHTS,
+) -> Separation:
+    """Steps 1-5 of the module docstring on texels of any layout: ``directions`` (..., 3) unit
+    vectors, ``solid_angles`` (...), ``radiance`` (..., 3) finite and >= 0 (scenes/hdrio.py
+    sanitises what it reads), ``texel_angle`` the widest texel's angular size in radians."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    shape = radiance.shape
+    dirs = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    omega = np.asarray(solid_angles, dtype=np.float64).reshape(-1)
+    light_in = np.asarray(radiance, dtype=np.float64).reshape(-1, 3)
+    if not np.all(np.isfinite(light_in)) or np.any(light_in < 0.0):
+        raise ValueError("bright-source separation needs finite radiance >= 0 (sanitise the map first)")
+    residual = light_in.copy()
+    luminance = light_in @ LUMINANCE
+    order = np.argsort(luminance)
+    cumulative = np.cumsum(omega[order])
+    median = float(luminance[order][np.searchsorted(cumulative, 0.5 * cumulative[-1])])
+    total_energy = float(np.sum(luminance * omega))
+    threshold = bright_factor * max(median, 1e-6 * float(luminance.max(initial=0.0)), 1e-12)
+    hot = np.flatnonzero(luminance > threshold)
+    if len(hot) == 0 or total_energy <= 0.0:
+        return Separation([], residual.reshape(shape).astype(radiance.dtype), threshold)
+
+    # 2. regions: hot texels within NEIGHBOUR_TEXELS texel widths (chord ~ angle) are joined
+    tree = cKDTree(dirs[hot])
+    pairs = tree.query_pairs(NEIGHBOUR_TEXELS * texel_angle, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(hot), len(hot)))
+    count, labels = connected_components(graph, directed=False)
+    regions = [hot[labels == k] for k in range(count)]
+    regions.sort(key=lambda idx: -float(np.sum(luminance[idx] * omega[idx])))
+
+    all_tree = cKDTree(dirs)
+    lights, kept = [], []
+    for region in regions:
+        if len(lights) == max_lights:
+            break
+        weights = luminance[region] * omega[region]
+        centre = np.sum(dirs[region] * weights[:, None], axis=0)
+        centre /= max(np.linalg.norm(centre), 1e-300)
+        # 3. the surroundings: non-hot texels within SURROUND_TEXELS of the region's extent
+        extent = float(np.max(np.linalg.norm(dirs[region] - centre, axis=1)))
+        near = np.asarray(all_tree.query_ball_point(centre, extent + SURROUND_TEXELS * texel_angle), dtype=int)
+        near = near[luminance[near] <= threshold]
+        background = np.median(light_in[near], axis=0) if len(near) else np.zeros(3)
+        if float(luminance[region].max()) < MIN_CONTRAST * float(background @ LUMINANCE):
+            continue  # bright, but not far above its surroundings: structure, not a source
+        # 4. what lies above the surroundings leaves the map
+        excess = np.maximum(light_in[region] - background, 0.0)
+        power = np.sum(excess * omega[region, None], axis=0)
+        if float(power @ LUMINANCE) < min_share * total_energy:
+            continue
+        # 5. a cap carrying that power, as wide as the removed energy is spread: for a uniform
+        # cap the energy-weighted mean of 1 - cos(angle to the axis) is (1 - cos r) / 2, so a
+        # sun inside its glow becomes a cap of the sun's size, not of the glow's
+        removed = excess @ LUMINANCE * omega[region]
+        spread = float(np.sum(removed * (1.0 - dirs[region] @ centre)) / max(float(np.sum(removed)), 1e-300))
+        region_omega = float(np.sum(omega[region]))
+        cap_omega = min(max(4.0 * np.pi * spread, float(np.min(omega[region]))), region_omega)
+        if cap_omega > MAX_LIGHT_SOLID_ANGLE:
+            continue  # a wide bright region keeps its structure in the map
+        residual[region] = light_in[region] - excess
+        lights.append(CapLight(centre, 1.0 - cap_omega / (2.0 * np.pi), power / cap_omega))
+        kept.append(region)
+    return Separation(lights, residual.reshape(shape).astype(radiance.dtype), threshold, kept)

@@ -1,0 +1,73 @@
+// Bright sources taken out of the radiance cube (scenes/bright_sources.py), integrated per lobe
+// by deterministic two-strategy MIS (numpy reference: materials/cap_lights.py
+// integrate_cap_light): CAP_POINTS points uniform over the cap and CAP_LOBE_POINTS points from
+// the lobe's sampler, both on the golden-ratio lattice, balance heuristic.
+#define MAX_CAP_LIGHTS 8
+#define CAP_POINTS 8
+#define CAP_LOBE_POINTS 8
+
+uniform int u_cap_light_count;                      // 0: none (and always 0 for the reference)
+uniform vec4 u_cap_light_axis[MAX_CAP_LIGHTS];      // xyz: direction (world), w: cos(radius)
+uniform vec3 u_cap_light_radiance[MAX_CAP_LIGHTS];
+
+// materials/patterns.py lattice_xi: ((i + 1/2) / n, frac(1/4 + i / golden ratio))
+vec2 cap_lattice_point(int i, int n) {
+    return vec2((float(i) + 0.5) / float(n), fract(0.25 + float(i) * 0.6180339887498949));
+}
+
+// One strategy's term: f cos / (M / Omega + K p).
+vec3 cap_light_term(Lobe l, vec3 wi, vec3 wo, float cap_density, int lobe_points) {
+    vec3 f = lobe_eval(l, wi, wo);
+    if (!any(greaterThan(f, vec3(0.0)))) return vec3(0.0);
+    float denominator = cap_density + (lobe_points > 0 ? float(lobe_points) * lobe_sample_pdf(l, wi, wo) : 0.0);
+    return f * (abs(wi.z) / denominator);
+}
+
+// materials/cap_lights.py cap_point_counts: fewer points where the cap is small against the lobe.
+#define LOBE_POINTS_FROM 0.25
+#define CAP_SPREAD 16.0
+#define MIN_VIEW_COSINE 0.1
+ivec2 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o) {
+#if defined(HAS_RATIONAL)
+    if (l.type == LOBE_RATIONAL) return ivec2(CAP_POINTS, CAP_LOBE_POINTS);
+#endif
+    float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
+    float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
+    int cap_points = int(min(float(CAP_POINTS), max(1.0, ceil(CAP_SPREAD * ratio))));
+    return ivec2(cap_points, ratio >= LOBE_POINTS_FROM ? CAP_LOBE_POINTS : 0);
+}
+
+vec3 cap_light_radiance(Lobe l, vec3 wo, mat3 tbn, int k) {
+    vec3 axis = u_cap_light_axis[k].xyz;
+    float cos_radius = u_cap_light_axis[k].w;
+    ivec2 counts = cap_point_counts(l, cos_radius, wo.z);
+    float cap_density = float(counts.x) / (2.0 * PI * (1.0 - cos_radius));
+    vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
+    vec3 t = normalize(cross(helper, axis));
+    vec3 b = cross(axis, t);
+    mat3 to_local = transpose(tbn);
+    vec3 sum = vec3(0.0);
+    for (int i = 0; i < counts.x; ++i) {
+        vec2 u = cap_lattice_point(i, counts.x);
+        if (counts.x == 1) u.x = 0.0;  // a single point on the axis
+        float cos_t = 1.0 - u.x * (1.0 - cos_radius);
+        float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
+        float phi = 2.0 * PI * u.y;
+        vec3 world = sin_t * (cos(phi) * t + sin(phi) * b) + cos_t * axis;
+        sum += cap_light_term(l, to_local * world, wo, cap_density, counts.y);
+    }
+    for (int j = 0; j < counts.y; ++j) {
+        float p;
+        vec3 wi = lobe_sample_and_pdf(l, cap_lattice_point(j, CAP_LOBE_POINTS), wo, p);
+        if (p <= 0.0 || dot(tbn * wi, axis) < cos_radius) continue;
+        sum += cap_light_term(l, wi, wo, cap_density, counts.y);
+    }
+    return sum * u_cap_light_radiance[k];
+}
+
+vec3 cap_lights_radiance(Lobe l, vec3 wo, mat3 tbn) {
+    vec3 sum = vec3(0.0);
+    if (wo.z <= 0.0) return sum;
+    for (int k = 0; k < u_cap_light_count; ++k) sum += cap_light_radiance(l, wo, tbn, k);
+    return sum;
+}
