@@ -238,24 +238,24 @@ def markdown(results: dict, stamp: str, command: str) -> str:
             else "left in the cube."
         ),
         "",
-        "| case | reference | " + " | ".join(methods) + " |",
-        "|---|---|" + "---|" * len(methods),
+        *_table(results["rows"], methods, lambda row, m: f"{100 * row[m]:.1f}"),
     ]
-    for row in results["rows"]:
-        cells = [f"{100 * row[m]:.1f}" for m in ("reference", *methods)]
-        lines.append(f"| {row['case']} | " + " | ".join(cells) + " |")
     if all("sun" in row for row in results["rows"]):
         lines += [
             "",
             "The sun's mirror pixel / the 9 x 9 pixels around it against Mitsuba (1 = equal; a hole is below 1):",
             "",
-            "| case | reference | " + " | ".join(methods) + " |",
-            "|---|---|" + "---|" * len(methods),
+            *_table(results["rows"], methods, lambda row, m: f"{row['sun'][m][0]:.3f} / {row['sun'][m][1]:.3f}"),
         ]
-        for row in results["rows"]:
-            cells = [f"{row['sun'][m][0]:.3f} / {row['sun'][m][1]:.3f}" for m in ("reference", *methods)]
-            lines.append(f"| {row['case']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
+
+
+def _table(rows, methods, cell) -> list[str]:
+    """A Markdown table: one row per case, the reference and each method as ``cell(row, method)``."""
+    lines = ["| case | reference | " + " | ".join(methods) + " |", "|---|---|" + "---|" * len(methods)]
+    for row in rows:
+        lines.append(f"| {row['case']} | " + " | ".join(cell(row, m) for m in ("reference", *methods)) + " |")
+    return lines
 
 
 def main(argv=None) -> int:
