@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 import numpy as np
@@ -156,6 +157,11 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as exc:  # bad option values (method, environment name, ...)
         print(f"lobeview: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:
+        # The reader of our output went away (`lobeview material list | head`): not an error.
+        # Point stdout at devnull so the interpreter's final flush does not raise again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     except OSError as exc:
         print(f"lobeview: error: {exc}", file=sys.stderr)
         return 2

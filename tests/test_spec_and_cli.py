@@ -169,3 +169,16 @@ def test_panel_offers_the_gltf_extension_factors_and_writes_only_moved_ones():
     assert set(edited) - set(desc) == {"clearcoat"}
     assert [name.replace("_", " ") for name, _ in GLTF_EXTENSION_SLIDERS] == labels[2:]
     assert validate(edited)["clearcoat"] == 0.7
+
+
+def test_cli_output_into_a_closed_pipe_is_not_an_error():
+    """`lobeview material list | head`: the reader leaves before lobeview writes (here `true`,
+    gone before the interpreter has started); no error message, status 0 (it said "lobeview:
+    error: [Errno 32] Broken pipe", status 2)."""
+    import subprocess
+    import sys
+
+    command = f"{sys.executable} -m lobeview material list | true; exit ${{PIPESTATUS[0]}}"
+    done = subprocess.run(["bash", "-c", command], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, (done.returncode, done.stderr)
+    assert "Broken pipe" not in done.stderr and "error" not in done.stderr, done.stderr
