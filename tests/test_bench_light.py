@@ -20,7 +20,13 @@ def test_table_and_figure(tmp_path):
     results = {"rows": [_row("lobe-7+norm", 0.223, 0.068)], "size": 8, "reference_spp": 16, "repeats": 1,
                "device": "test", "stamp": "stamp"}  # fmt: skip
     text = light.markdown(results)
-    assert "| studio | 4 | gold-ggx | lobe-7+norm | 22.3 | 6.8 | 20.0 | 30.0 | 100 | 150 |" in text
+    assert "| studio | 4 | gold-ggx | lobe-7+norm | 22.3 | 6.8 | - | - | 20.0 | 30.0 | 100 | 150 |" in text
+    results["rows"][0]["before"]["rel_rmse_interior"] = 0.2
+    results["rows"][0]["after"]["rel_rmse_interior"] = 0.05
+    assert "| 22.3 | 6.8 | 20.0 | 5.0 | 20.0 |" in light.markdown(results)
+    mask = np.zeros((9, 9), bool)
+    mask[1:8, 1:8] = True
+    assert light.interior(mask).sum() == 9  # 7 x 7 less two rings
     frame = np.full((8, 8, 3), 0.5, dtype=np.float32)
     figures = [("studio", "gold-ggx", "before", frame, frame), ("studio", "gold-ggx", "after", frame * 1.1, frame)]
     light.write_figure(figures, tmp_path / "figure.png")
