@@ -208,7 +208,7 @@ def sun_renderer():
 
 
 @pytest.mark.parametrize("method", ["lobe-7+norm", "fis-8", "prefiltered"])
-@pytest.mark.parametrize("material", ["gold-ggx", "frosted-glass"])
+@pytest.mark.parametrize("material", ["gold-ggx", "frosted-glass", "miro5-2lobe"])
 def test_light_term_matches_numpy_twin(sun_renderer, method, material):
     """The frame with the lights minus the frame without them (same residual cube) is, per pixel,
     integrate_cap_light summed over the material's lobes and the cube's lights."""
