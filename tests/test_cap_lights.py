@@ -246,20 +246,3 @@ def test_reference_reads_the_whole_cube(sun_renderer):
         plain.release()
     separated = sun_renderer.render(CAMERA, bsdf, "reference", spp=64, background=False).radiance
     assert np.array_equal(separated, expected)
-
-
-def test_a_separated_cube_counts_both_of_its_textures(sun_renderer):
-    """The cube budget (viewer/cube_bake.py cube_gpu_bytes) sees the residual cube too."""
-    from lobeview.viewer.cube_bake import cube_gpu_bytes
-    from lobeview.viewer.cubemap import RadianceCube
-
-    faces = _cube_faces(_sky_with_sun, size=32)
-    plain = RadianceCube(sun_renderer.ctx, faces)
-    separated = RadianceCube(sun_renderer.ctx, faces, bright_sources=True)
-    try:
-        assert separated.lights and separated.residual is not separated.radiance
-        assert not plain.lights and plain.residual is plain.radiance
-        assert cube_gpu_bytes(separated) == 2 * cube_gpu_bytes(plain)
-    finally:
-        plain.release()
-        separated.release()
