@@ -29,6 +29,7 @@ from lobeview.core.cube_layout import face_directions, face_point_directions, te
 from .conductor import MicrofacetReflection
 from .fresnel import Fresnel
 from .microfacet import ALPHA_MIN, MicrofacetDistribution
+from .patterns import GOLDEN_LATTICE_STEP  # rotation of successive rings, in turns
 
 # The prefilter quadrature's cells (RadialProfile.cells): the centre cap's diameter is the
 # kernel's spread / CELL_CORE_DIVISIONS, rings beyond it grow by CELL_GROWTH of their angle, and
@@ -38,7 +39,6 @@ CELL_GROWTH = 0.3
 CELL_MASS_END = 1.0 - 1e-5
 CELL_DENSITY_DROP = 0.3
 MAX_CELLS = 1024
-GOLDEN_TURNS = (np.sqrt(5.0) - 1.0) / 2.0  # rotation of successive rings, in turns
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ class RadialProfile:
         rotated by a golden-ratio offset per ring."""
         psi_k, omega_k = self.quadrature(rings, azimuths)
         ring = np.repeat(np.arange(rings), azimuths)
-        offset = (ring * GOLDEN_TURNS) % 1.0
+        offset = (ring * GOLDEN_LATTICE_STEP) % 1.0
         beta = 2.0 * np.pi * (np.tile(np.arange(azimuths), rings) + offset) / azimuths
         weight = np.full(rings * azimuths, 1.0 / (rings * azimuths))
         return KernelCells(psi_k[ring], beta, omega_k[ring], weight)
@@ -171,7 +171,7 @@ class RadialProfile:
         mass = np.diff(mass_edges)
         ring = np.repeat(np.arange(len(counts)), counts)
         index = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-        beta = 2.0 * np.pi * (index + (ring * GOLDEN_TURNS) % 1.0) / counts[ring]
+        beta = 2.0 * np.pi * (index + (ring * GOLDEN_LATTICE_STEP) % 1.0) / counts[ring]
         omega = 2.0 * np.pi * (np.cos(inner) - np.cos(outer)) / counts
         weight = mass / counts
         keep = weight[ring] > 0.0

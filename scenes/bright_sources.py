@@ -34,8 +34,8 @@ import numpy as np
 
 from lobeview.core.cube_layout import equirect_direction, face_directions, texel_solid_angles
 from lobeview.materials.cap_lights import CapLight
+from lobeview.materials.lobe_fit import LUMINANCE
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 BRIGHT_FACTOR = 50.0  # a source is at least this many times the map's median luminance
 MIN_LIGHT_SHARE = 0.005  # ... and holds at least this share of the map's energy
 MAX_LIGHTS = 8
