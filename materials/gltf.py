@@ -61,6 +61,20 @@ from .vec import broadcast_rgb, dot, mirror_z, normalize
 
 DIELECTRIC_F0 = 0.04
 
+# E[(1 - V.H)^5] over incident directions distributed as cos(theta_i) / pi, at N.V = mu: the
+# Schlick factor that a diffuse lit from every direction at once sees (the lightmap, the
+# environment's irradiance), with H = (wi + wo) / |wi + wo|, V.H = sqrt((1 + wi.wo) / 2). A
+# degree-4 least-squares fit (in mu) to that integral by quadrature; largest error 6e-6
+# (tests/test_gltf_grazing.py). It runs from 8e-5 facing to 0.028 at grazing, where the
+# view-direction value (1 - N.V)^5 reaches 1 and would darken the diffuse to 0 (issue 40).
+SCHLICK_COSINE_AVERAGE_FIT = (0.0281612, -0.0798007, 0.0862515, -0.0433788, 0.0088488)
+
+
+def schlick_cosine_average(cos_o) -> np.ndarray:
+    """E[(1 - V.H)^5] over cosine-distributed incident directions (bsdf.glsl schlick_cosine_average)."""
+    mu = np.clip(np.asarray(cos_o, dtype=np.float64), 0.0, 1.0)
+    return np.polynomial.polynomial.polyval(mu, SCHLICK_COSINE_AVERAGE_FIT)
+
 
 def roughness_to_alpha(roughness: float) -> float:
     """glTF perceptual roughness -> GGX alpha (spec Appendix B: alpha = roughness^2)."""
@@ -188,6 +202,14 @@ class _GltfDielectric:
         bsdf.glsl dielectric_kept)."""
         return 1.0 - self.specular * schlick(cos_h, self.f0).max(axis=-1)
 
+    def kept_irradiance(self, cos_o) -> np.ndarray:
+        """``kept`` averaged over incident directions distributed as cos(theta_i) / pi: what the
+        dielectric leaves of a diffuse lit from every direction at once (bsdf.glsl
+        dielectric_kept_irradiance). Schlick is increasing in f0, so max over RGB is the largest
+        f0's: 1 - specular (f0_max + (1 - f0_max) E[(1 - V.H)^5])."""
+        f0_max = float(self.f0.max())
+        return 1.0 - self.specular * (f0_max + (1.0 - f0_max) * schlick_cosine_average(cos_o))
+
 
 class GltfSheen(CosineSampled):
     """KHR_materials_sheen, approximated: sheenColor E_s(N.V) / pi, lit like the diffuse (the
@@ -236,10 +258,12 @@ class GltfDiffuse(_GltfDielectric, CosineSampled):
         return float(np.mean(self.diffuse_albedo))
 
     def view_weight(self, cos_o) -> np.ndarray:
-        """The weight of the lightmapped (or environment-irradiance) diffuse in the shaders:
-        eval's weight with V.H taken as N.V, the view-direction approximation (bsdf.glsl
-        diffuse_weight), since the light arrives from every direction at once."""
-        return self.kept(cos_o) * self.layers.attenuation(cos_o)
+        """The weight of the lightmapped (or environment-irradiance) diffuse in the shaders
+        (bsdf.glsl irradiance_diffuse_weight): eval's weight averaged over incident directions
+        distributed as cos(theta_i) / pi, exact under uniform light, since the irradiance
+        does not say where its light came from. Taking V.H as N.V instead (the view-direction
+        approximation) darkened a white rough sphere to 0.6 at its rim (issue 40)."""
+        return self.kept_irradiance(cos_o) * self.layers.attenuation(cos_o)
 
     def eval(self, wi, wo):
         valid = _valid_pair(wi, wo, False)

@@ -293,8 +293,7 @@ uniform float u_transmission;  // KHR_materials_transmission: the diffuse keeps 
 
 // The weight of the diffuse term: glTF's 1 - specular max(F_d(V.H)) (Appendix B fresnel_mix, with
 // the KHR_materials_ior/_specular f0 and weight) times the clearcoat's 1 - clearcoat F_c(N.V);
-// 1 for every other model. The estimators that do not sample wi pass V.N as V.H (the
-// view-direction approximation). gltf_diffuse_weight takes the layers explicitly (scene.frag's
+// 1 for every other model. gltf_diffuse_weight takes the layers explicitly (scene.frag's
 // per-pixel values, coat_cos < 0: the coat shares the normal).
 float gltf_diffuse_weight(vec3 f0, float specular, float clearcoat, float coat_cos, float v_dot_h, float n_dot_v) {
     return dielectric_kept(f0, specular, v_dot_h) * base_attenuation(clearcoat, coat_cos, n_dot_v);
@@ -303,4 +302,31 @@ float gltf_diffuse_weight(vec3 f0, float specular, float clearcoat, float coat_c
 vec3 diffuse_weight(float v_dot_h, float n_dot_v) {
     if (u_gltf_diffuse <= 0.5) return vec3(1.0);
     return vec3(gltf_diffuse_weight(u_dielectric_f0, u_specular_weight, u_clearcoat, -1.0, v_dot_h, n_dot_v));
+}
+
+// E[(1 - V.H)^5] over incident directions distributed as cos / pi at N.V (gltf.py
+// schlick_cosine_average: a degree-4 fit to the integral, error <= 6e-6).
+float schlick_cosine_average(float n_dot_v) {
+    float mu = clamp(n_dot_v, 0.0, 1.0);
+    return 0.0281612 + mu * (-0.0798007 + mu * (0.0862515 + mu * (-0.0433788 + mu * 0.0088488)));
+}
+
+// dielectric_kept averaged over cosine-distributed incident directions (gltf.py kept_irradiance):
+// what a diffuse lit from every direction at once (lightmap, irradiance map, SH) keeps. Schlick
+// grows with f0, so the max over RGB is the largest f0's.
+float dielectric_kept_irradiance(vec3 f0, float specular, float n_dot_v) {
+    float f0_max = max(f0.r, max(f0.g, f0.b));
+    return 1.0 - specular * (f0_max + (1.0 - f0_max) * schlick_cosine_average(n_dot_v));
+}
+
+// The diffuse weight for a diffuse lit by an irradiance (gltf.py GltfDiffuse.view_weight): the
+// V.H weight averaged over the hemisphere, exact under uniform light. The view-direction value
+// F(N.V) darkened a white rough sphere to 0.6 of Cycles at its rim (issue 40).
+float gltf_irradiance_diffuse_weight(vec3 f0, float specular, float clearcoat, float coat_cos, float n_dot_v) {
+    return dielectric_kept_irradiance(f0, specular, n_dot_v) * base_attenuation(clearcoat, coat_cos, n_dot_v);
+}
+
+vec3 irradiance_diffuse_weight(float n_dot_v) {
+    if (u_gltf_diffuse <= 0.5) return vec3(1.0);
+    return vec3(gltf_irradiance_diffuse_weight(u_dielectric_f0, u_specular_weight, u_clearcoat, -1.0, n_dot_v));
 }

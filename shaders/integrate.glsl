@@ -274,10 +274,10 @@ vec3 integrate_diffuse(vec3 wo, mat3 tbn) {
     }
     return sum / float(u_samples);
 #else
-    // kd E / pi (Eq. 4.1) with E from the irradiance map; glTF's (1 - F(V.H)) factor is
-    // approximated at the view direction.
+    // kd E / pi (Eq. 4.1) with E from the irradiance map; glTF's (1 - F(V.H)) factor averaged
+    // over the hemisphere (exact under uniform light).
     vec3 e = textureLod(u_irradiance, tbn[2], 0.0).rgb;
-    return (u_kd * diffuse_weight(wo.z, wo.z) + sheen_term(wo.z)) / PI * e;
+    return (u_kd * irradiance_diffuse_weight(wo.z) + sheen_term(wo.z)) / PI * e;
 #endif
 }
 

@@ -27,6 +27,20 @@ vec4 sample_map(int slot, vec2 uv0, vec2 uv1, vec4 absent) {
     return textureGrad(u_material_maps[slot], uv, gx, gy);
 }
 
+// The slot's texture averaged over a square ``widen`` (>= 1) times the pixel's footprint across
+// (the occlusion texture over one lightmap texel, scene.frag): an explicit, isotropic MIP level
+// from the longer footprint axis. textureGrad with the widened gradients would do the same, but
+// llvmpipe ignores explicit gradients once a sampler filters anisotropically.
+vec4 sample_map_widened(int slot, vec2 uv0, vec2 uv1, vec4 absent, float widen) {
+    if (u_map_texcoord[slot] < 0) return absent;
+    vec2 uv = (u_map_transform[slot] * vec3(u_map_texcoord[slot] == 1 ? uv1 : uv0, 1.0)).xy;
+    vec2 texels = vec2(textureSize(u_material_maps[slot], 0));
+    float footprint = max(length(dFdx(uv) * texels), length(dFdy(uv) * texels)) * widen;
+    if (u_map_mirrored[slot].x == 1) uv.x = mirrored_repeat(uv.x);
+    if (u_map_mirrored[slot].y == 1) uv.y = mirrored_repeat(uv.y);
+    return textureLod(u_material_maps[slot], uv, log2(max(footprint, 1e-8)));
+}
+
 // Tangent-space normal map (spec 3.9.3): n = normalize((2 t - 1) (scale, scale, 1)), expressed
 // in the interpolated frame (columns tangent, bitangent with handedness, normal).
 vec3 mapped_normal(mat3 vertex_frame, vec3 texel, float scale) {

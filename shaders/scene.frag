@@ -27,6 +27,12 @@ uniform float u_anisotropy;           // KHR_materials_anisotropy strength (0: i
 uniform float u_roughness_factor;
 uniform float u_normal_scale;
 uniform float u_occlusion_strength;
+// The occlusion texture on a lightmapped surface: ao / (ao averaged over one lightmap texel), the
+// mean floored (an all-black region would divide by 0) and the ratio capped (its detail can
+// brighten a pixel, but not arbitrarily); a lightmap texel is averaged over at most 4096 pixels.
+const float MIN_OCCLUSION_MEAN = 1.0 / 255.0;
+const float MAX_OCCLUSION_DETAIL = 4.0;
+const float MAX_LIGHTMAP_TEXEL_PIXELS = 4096.0;
 // KHR material extensions per pixel (their textures x these factors; u_clearcoat, u_specular_weight,
 // u_transmission and u_sheen_color are bsdf.glsl's): materials/gltf.py and scenes/texturing.py.
 uniform float u_clearcoat_roughness;
@@ -58,6 +64,19 @@ vec3 sh9_irradiance(vec3 n) {
     return max(e, vec3(0.0));
 }
 
+// The bright sources the object's cube no longer holds (viewer/cubemap.py: its residual is
+// bound, u_cap_light_count > 0 only for the real-time methods), for one lobe as this pixel has it.
+// A reflector shaded from its mirror buffer reads the whole scene and sky there: no lights.
+#if defined(SPECULAR)
+vec3 scene_cap_lights(Lobe l, vec3 wo, mat3 tbn) {
+#if defined(MIRROR)
+    return vec3(0.0);
+#else
+    return u_cap_light_count > 0 ? cap_lights_radiance(l, wo, tbn) : vec3(0.0);
+#endif
+}
+#endif
+
 void main() {
 #if defined(PARALLAX) || defined(MIRROR)
     g_shading_position = v_position;
@@ -71,6 +90,15 @@ void main() {
     vec4 mr_texel = sample_map(MAP_METALLIC_ROUGHNESS, v_uv0, v_uv1, vec4(1.0));
     vec4 normal_texel = sample_map(MAP_NORMAL, v_uv0, v_uv1, vec4(0.5, 0.5, 1.0, 1.0));
     vec4 occlusion_texel = sample_map(MAP_OCCLUSION, v_uv0, v_uv1, vec4(1.0));
+    // The occlusion texture averaged over one lightmap texel: how many pixels a lightmap texel
+    // spans here (>= 1; the lightmap's coordinates are uniform-selected, so derivatives are fine).
+    float lightmap_texel_pixels = 1.0;
+    if (u_lightmap_texcoord >= 0) {
+        vec2 lightmap_texels = (u_lightmap_texcoord == 1 ? v_uv1 : v_uv0) * vec2(textureSize(u_lightmap, 0));
+        float texels_per_pixel = max(length(dFdx(lightmap_texels)), length(dFdy(lightmap_texels)));
+        lightmap_texel_pixels = clamp(1.0 / max(texels_per_pixel, 1e-6), 1.0, MAX_LIGHTMAP_TEXEL_PIXELS);
+    }
+    vec4 occlusion_mean = sample_map_widened(MAP_OCCLUSION, v_uv0, v_uv1, vec4(1.0), lightmap_texel_pixels);
     vec4 emissive_texel = sample_map(MAP_EMISSIVE, v_uv0, v_uv1, vec4(1.0));
     // Absent textures read as the texel that leaves the factor as it is (direction +x, strength 1).
     vec4 anisotropy_texel = sample_map(MAP_ANISOTROPY, v_uv0, v_uv1, vec4(1.0, 0.5, 1.0, 1.0));
@@ -113,8 +141,16 @@ void main() {
         vec2 uv = u_lightmap_texcoord == 1 ? v_uv1 : v_uv0;
         irradiance = texture(u_lightmap, uv).rgb * u_lightmap_intensity;
     }
-    // Occlusion darkens the indirect (lightmap) diffuse only: mix(1, ao, strength) (spec 3.9.3).
-    irradiance *= 1.0 + u_occlusion_strength * (occlusion_texel.r - 1.0);
+    // Occlusion darkens the indirect diffuse only: mix(1, ao, strength) (spec 3.9.3). A baked
+    // lightmap already holds the occlusion of the geometry at its texel size (the bake traced
+    // it; Cycles, path tracing the same geometry, ignores the texture), so on a lightmapped
+    // surface only the texture's detail within a lightmap texel applies: ao over its mean across
+    // the texel keeps the crevices and the bake's mean; multiplying both made a baked
+    // FlightHelmet 21 % darker than Cycles (issue 40).
+    float occlusion = occlusion_texel.r;
+    if (u_lightmap_texcoord >= 0)
+        occlusion = min(occlusion / max(occlusion_mean.r, MIN_OCCLUSION_MEAN), MAX_OCCLUSION_DETAIL);
+    irradiance *= 1.0 + u_occlusion_strength * (occlusion - 1.0);
     vec3 base_color = u_base_color_factor.rgb * base_texel.rgb;
     float metallic = clamp(u_metallic_factor * mr_texel.b, 0.0, 1.0);
     float roughness = clamp(u_roughness_factor * mr_texel.g, 0.0, 1.0);
@@ -130,8 +166,8 @@ void main() {
     vec3 albedo = u_gltf_model == 1 ? (1.0 - metallic) * (1.0 - transmission) * base_color : u_kd * base_texel.rgb;
     vec3 diffuse = albedo / PI * irradiance;
     diffuse *= u_gltf_model == 1
-                   ? vec3(gltf_diffuse_weight(dielectric_f0, specular_weight, clearcoat, coat_wo.z, wo.z, wo.z))
-                   : diffuse_weight(wo.z, wo.z);
+                   ? vec3(gltf_irradiance_diffuse_weight(dielectric_f0, specular_weight, clearcoat, coat_wo.z, wo.z))
+                   : irradiance_diffuse_weight(wo.z);
     diffuse += sheen_term(wo.z) / PI * irradiance;  // KHR_materials_sheen, lit like the diffuse
     vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)
@@ -141,7 +177,10 @@ void main() {
 #endif
     for (int i = 0; i < u_lobe_count; ++i) {
 #if defined(METHOD_PREFILTERED)
-        if (rsibr_lobe(i)) continue;
+        if (rsibr_lobe(i)) {
+            radiance += scene_cap_lights(get_lobe(i), wo, tbn);  // RSIBR's maps are baked from the residual
+            continue;
+        }
 #endif
         Lobe l = get_lobe(i);
         if (u_gltf_model == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
@@ -162,10 +201,10 @@ void main() {
             l.k = vec3(clearcoat);
             l.ax = coat_alpha;
             l.ay = coat_alpha;
-            radiance += integrate_lobe(l, i, coat_wo, coat_tbn);
+            radiance += integrate_lobe(l, i, coat_wo, coat_tbn) + scene_cap_lights(l, coat_wo, coat_tbn);
             continue;
         }
-        radiance += integrate_lobe(l, i, wo, tbn);
+        radiance += integrate_lobe(l, i, wo, tbn) + scene_cap_lights(l, wo, tbn);
     }
 #endif
     bool bad = any(isnan(radiance)) || any(isinf(radiance));

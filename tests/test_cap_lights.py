@@ -118,6 +118,7 @@ def test_cap_light_validates_its_parameters():
 
 # -- separation -------------------------------------------------------------------------------------
 SUN = np.array([1.0, 1.0, 1.0]) / np.sqrt(3.0)  # a cube corner: the sun falls on three faces
+SUN_VIEW = (SUN + np.array([0.0, -0.3, 1.0])) / np.linalg.norm(SUN + np.array([0.0, -0.3, 1.0]))  # sees its glint
 
 
 def _sky_with_sun(d, sun_radius=1.0, sun_radiance=5e3):
@@ -246,3 +247,62 @@ def test_reference_reads_the_whole_cube(sun_renderer):
         plain.release()
     separated = sun_renderer.render(CAMERA, bsdf, "reference", spp=64, background=False).radiance
     assert np.array_equal(separated, expected)
+
+
+def test_a_separated_cube_counts_both_of_its_textures(sun_renderer):
+    """The cube budget (viewer/cube_bake.py cube_gpu_bytes) sees the residual cube too."""
+    from lobeview.viewer.cube_bake import cube_gpu_bytes
+    from lobeview.viewer.cubemap import RadianceCube
+
+    faces = _cube_faces(_sky_with_sun, size=32)
+    plain = RadianceCube(sun_renderer.ctx, faces)
+    separated = RadianceCube(sun_renderer.ctx, faces, bright_sources=True)
+    try:
+        assert separated.lights and separated.residual is not separated.radiance
+        assert not plain.lights and plain.residual is plain.radiance
+        assert cube_gpu_bytes(separated) == 2 * cube_gpu_bytes(plain)
+    finally:
+        plain.release()
+        separated.release()
+
+
+@pytest.mark.parametrize(
+    "desc",
+    [
+        {"model": "gltf", "base_color": [1.0, 0.78, 0.34], "metallic": 1.0, "roughness": 0.4},
+        "gold-ggx",  # a material whose lobes no texture changes: prefiltered-rsibr bakes it
+    ],
+    ids=["gltf-gold", "gold-ggx"],
+)
+def test_scene_objects_get_the_lights_too(desc):
+    """A scene's objects (shaders/scene.frag, its own lobe loop) add the cube's lights like the
+    preview does: a gold sphere under a sky with a 5e3 sun keeps the reference's brightness in
+    every real-time method (Blender Cycles found them at 0.05-0.37 of it, the sun missing)."""
+    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    material = validate(desc) if isinstance(desc, dict) else load_material(desc)
+    scene = Scene([SceneObject("sphere", uv_sphere(rings=64, segments=128), 0)], [SceneMaterial("gold", material)])
+    scene.objects[0].planar_reflector = False
+    ctx = create_headless_context()
+    env = EnvironmentMap.from_function(_sky_with_sun, height=256, name="sky-with-sun")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        renderer = SceneRenderer(ctx, scene, env, size=(64, 64), progress=False,
+                                 settings=RenderSettings(cube_face_size=64))  # fmt: skip
+    try:
+        assert renderer.objects[0].cube.lights, "the sun is separated from the sphere's cube"
+        camera = Camera(position=tuple(3.2 * SUN_VIEW), target=(0.0, 0.0, 0.0), fov_y=40.0)
+        reference = renderer.render(camera, "reference", spp=256)
+        mask = reference.object_id == 0
+        truth = reference.radiance[mask].mean()
+        methods = ["lobe-7+norm", "fis-16", "prefiltered"] + (["prefiltered-rsibr"] if isinstance(desc, str) else [])
+        for method in methods:
+            got = renderer.render(camera, method).radiance[mask].mean()
+            assert abs(got / truth - 1.0) < 0.1, (method, got, truth)
+    finally:
+        renderer.release()
+        ctx.release()

@@ -162,8 +162,8 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
         if np.any(kd > 0):
             irradiance = lookup(renderer.cubes.irradiance, frame[:, 2][None], 0.0)[0]
             factor = 1.0
-            if any(type(c).__name__ == "GltfDiffuse" for c in bsdf.components):
-                factor = 1.0 - (0.04 + 0.96 * (1.0 - wo[2]) ** 5)
+            for diffuse in (c for c in bsdf.components if type(c).__name__ == "GltfDiffuse"):
+                factor = float(diffuse.view_weight(np.array(wo[2])))  # 1 - F(V.H) over the hemisphere
             expected += kd / np.pi * irradiance * factor
         # Same lookups, same formulas: float32 shader arithmetic against float64.
         np.testing.assert_allclose(result.radiance[y, x], expected, rtol=2e-3, atol=2e-4)

@@ -13,7 +13,16 @@ import numpy as np
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import Method
 from lobeview.materials.gltf import specular_f0_unclamped
-from lobeview.scenes.scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, TEXTURE_SLOTS, Scene, SceneMaterial, TextureSlot
+from lobeview.scenes.scene import (
+    CLAMP_TO_EDGE,
+    LINEAR_MIPMAP_LINEAR,
+    LINEAR_MIPMAP_NEAREST,
+    MIRRORED_REPEAT,
+    TEXTURE_SLOTS,
+    Scene,
+    SceneMaterial,
+    TextureSlot,
+)
 
 from .interface import (
     ALPHA_MODES,
@@ -31,6 +40,26 @@ from .shaders import ProgramCache
 from .shading import ShadingBinder
 
 MAX_SCENE_TEXTURES = 256  # lightmaps and material textures kept on the GPU
+# Material textures whose sampler filters linearly between texels and MIP levels get 16x
+# anisotropic filtering (the most common hardware limit); nearest-texel samplers stay as the file
+# asked (pixel-art textures), without MIP levels there is nothing to choose between.
+TEXTURE_ANISOTROPY = 16.0
+MIPMAP_MIN_FILTERS = (LINEAR_MIPMAP_NEAREST, LINEAR_MIPMAP_LINEAR)
+# Drivers whose anisotropic filter is worse than none: Mesa 22.3's llvmpipe garbles a textured
+# quad seen head-on when the shader passes explicit gradients (textureGrad: columns of wrong
+# texels over half the frame) and blurs it with implicit ones (0.05 mean error on a 0.5/1
+# checker where trilinear filtering is exact), measured with tests/test_texture_filtering.py.
+ANISOTROPY_DEFECTIVE_RENDERERS = ("llvmpipe",)
+
+
+def texture_anisotropy(renderer: str, max_anisotropy: float) -> float:
+    """The anisotropy of material samplers on this driver: TEXTURE_ANISOTROPY within what it
+    offers (1: none), 1 on the drivers whose anisotropic filter is defective."""
+    if any(renderer.lower().startswith(name) for name in ANISOTROPY_DEFECTIVE_RENDERERS):
+        return 1.0
+    return min(TEXTURE_ANISOTROPY, max(float(max_anisotropy), 1.0))
+
+
 MAX_DRAW_RECORDS = 16384  # recorded object draw states (programs x objects x methods in use)
 GL_SRGB8_ALPHA8 = 0x8C43  # colour textures: the GPU decodes sRGB before filtering (glTF 3.9.2)
 
@@ -132,6 +161,12 @@ class SceneShading(ShadingBinder):
                 sampler.repeat_x = slot.wrap_s != CLAMP_TO_EDGE
                 sampler.repeat_y = slot.wrap_t != CLAMP_TO_EDGE
                 sampler.filter = (slot.min_filter, slot.mag_filter)
+                if slot.min_filter in MIPMAP_MIN_FILTERS:
+                    # Anisotropic filtering (GL 4.6 / EXT_texture_filter_anisotropic): without it
+                    # a texture seen at a grazing angle takes the MIP level of its longest
+                    # footprint axis and blurs across the other one too (the WaterBottle's
+                    # label, issue 40).
+                    sampler.anisotropy = texture_anisotropy(self.ctx.info["GL_RENDERER"], self.ctx.max_anisotropy)
             self._samplers[key] = sampler
         return sampler
 
