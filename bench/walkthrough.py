@@ -184,6 +184,8 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         renderer, warm = start_renderer(ctx, scene, env, size, face_size, cube_dir)
         warm_stages = dict(renderer.timings)
         cubes, memory = cube_memory(renderer)
+        # cubes whose bright sources were separated hold a second MIP chain (the residual)
+        cubes_with_lights = sum(1 for obj in renderer.objects if obj.cube is not None and obj.cube.lights)
         reflectors = len(renderer.reflectors())
         probe_groups = [len(g.members) for g in renderer.probes.groups]  # shared probes (scenes/probe_groups.py)
         reflectors_deferred = len(renderer.analysis.cube_mapped) - len(renderer.analysis.cubes_at_start)
@@ -200,6 +202,7 @@ def measure_scene(ctx, label, scene, env, path, method, size, frames: int, face_
         "objects": len(scene.objects),
         "reflectors": reflectors,
         "cube_maps": cubes,
+        "cube_maps_with_bright_sources": cubes_with_lights,
         "cube_memory_mb": memory / 2**20,
         "cube_memory_full_mb": memory_full / 2**20,
         "reflector_cubes_deferred": reflectors_deferred,

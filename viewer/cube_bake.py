@@ -351,8 +351,10 @@ class CubeResidency:
 
 
 def cube_gpu_bytes(cube: RadianceCube) -> int:
-    """GPU bytes of a radiance cube with its MIP chain and the prefiltered maps built from it."""
+    """GPU bytes of a radiance cube with its MIP chain (twice where bright sources were separated:
+    the residual is a second cube), and the prefiltered maps built from it."""
     from .prefiltered import cube_bytes
 
     maps = cube.built_prefiltered_maps
-    return cube_bytes(cube.face_size, int(np.log2(cube.face_size)) + 1) + (maps.total_memory() if maps else 0)
+    chains = 2 if cube.residual is not cube.radiance else 1
+    return chains * cube_bytes(cube.face_size, int(np.log2(cube.face_size)) + 1) + (maps.total_memory() if maps else 0)
