@@ -15,7 +15,6 @@ uniform vec3 u_camera_position;
 uniform sampler2D u_lightmap;
 uniform int u_lightmap_texcoord;      // 0 or 1; -1: no lightmap, the environment's irradiance
 uniform float u_lightmap_intensity;
-uniform vec3 u_irradiance_sh9[9];     // E(n) of the environment (scenes/envmap.py irradiance_sh9)
 uniform vec3 u_emission;              // emissive factor x KHR_materials_emissive_strength
 // glTF metallic-roughness per pixel (Appendix B): with u_gltf_model the textures' base colour,
 // metallic and roughness replace the material's in the diffuse term and in its glTF lobe;
@@ -53,16 +52,6 @@ layout(location = 3) out vec4 out_tangent;
 // attachments at these locations and drop them.
 layout(location = 4) out vec4 out_plane_point[2];
 layout(location = 6) out vec4 out_plane_normal[2];
-
-// Twin of scenes/envmap.py sh9_basis / eval_sh9: order-2 real SH, clamped at zero.
-vec3 sh9_irradiance(vec3 n) {
-    float basis[9] = float[9](0.282095, 0.488603 * n.y, 0.488603 * n.z, 0.488603 * n.x,
-                              1.092548 * n.x * n.y, 1.092548 * n.y * n.z, 0.315392 * (3.0 * n.z * n.z - 1.0),
-                              1.092548 * n.x * n.z, 0.546274 * (n.x * n.x - n.y * n.y));
-    vec3 e = vec3(0.0);
-    for (int k = 0; k < 9; ++k) e += basis[k] * u_irradiance_sh9[k];
-    return max(e, vec3(0.0));
-}
 
 // The bright sources the object's cube no longer holds (viewer/cubemap.py: its residual is
 // bound, u_cap_light_count > 0 only for the real-time methods), for one lobe as this pixel has it.
@@ -135,8 +124,9 @@ void main() {
     }
     vec3 coat_wo = view_in_frame(coat_tbn, view);
 
-    // Without a lightmap: the environment's irradiance at the shading normal (no occlusion).
-    vec3 irradiance = sh9_irradiance(tbn[2]);
+    // Without a lightmap: the environment's irradiance at the shading normal (viewer/cubemap.py
+    // irradiance_cube: exact per texel, bilinear between; nothing occludes it).
+    vec3 irradiance = textureLod(u_irradiance, tbn[2], 0.0).rgb;
     if (u_lightmap_texcoord >= 0) {
         vec2 uv = u_lightmap_texcoord == 1 ? v_uv1 : v_uv0;
         irradiance = texture(u_lightmap, uv).rgb * u_lightmap_intensity;

@@ -1,5 +1,5 @@
 """The glTF diffuse at grazing views (issue 40): a diffuse lit by an irradiance (lightmap,
-irradiance map, SH9) is weighted by glTF's 1 - F(V.H) averaged over the hemisphere, not by
+irradiance cube) is weighted by glTF's 1 - F(V.H) averaged over the hemisphere, not by
 1 - F(N.V). Blender Cycles renders a white roughness-1 glTF sphere under a white sky at 1.00
 everywhere; lobeview gave 0.60 at its rim before."""
 
@@ -122,7 +122,7 @@ def test_white_rough_sphere_is_not_darker_at_its_rim_in_the_preview():
 
 
 def test_white_rough_sphere_is_not_darker_at_its_rim_in_a_scene():
-    """Through the scene's shaders (scene.frag: the unbaked scene's SH9 irradiance, exact for a
+    """Through the scene's shaders (scene.frag: the unbaked scene's irradiance cube, exact for a
     white sky), per-pixel glTF path: the darkest 5 % keep >= 0.95 of Cycles' 1.00."""
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.meshes import uv_sphere

@@ -235,7 +235,8 @@ def rendered():
     with pytest.warns(UserWarning, match="no usable lightmap"):
         renderer = SceneRenderer(ctx, scene, env, size=SIZE, progress=False, settings=RenderSettings(cube_face_size=32))
     lookup = CubeLookup(ctx, renderer.programs)
-    yield renderer, lookup, scene, renderer.environment_sh9
+    # the unbaked quad's diffuse light: the environment's irradiance cube, read like the shader does
+    yield renderer, lookup, scene, lambda n: lookup(renderer.environment_irradiance, n[None], 0.0)[0]
     renderer.release()
     ctx.release()
 
@@ -271,10 +272,9 @@ def test_normal_map_matches_numpy_per_pixel(rendered):
 def test_textured_glTF_material_matches_numpy_per_pixel(rendered, method, normalize):
     from lobeview.materials.gltf import GltfSpecular, schlick_cosine_average
     from lobeview.materials.prefilter import dfg_lookup
-    from lobeview.scenes.envmap import eval_sh9
     from lobeview.viewer.prefiltered import dfg_texture_data
 
-    renderer, lookup, scene, sh9 = rendered
+    renderer, lookup, scene, irradiance_at = rendered
     result = renderer.render(CAMERA, method)
     assert not result.invalid.any()
     material = scene.materials[0]
@@ -303,7 +303,7 @@ def test_textured_glTF_material_matches_numpy_per_pixel(rendered, method, normal
                 lobe, wo, lambda d, lod: lookup(cube.radiance, d, lod), 7, cube.face_size, frame, albedo_table=table
             )
         albedo = (1 - params["metallic"][0]) * params["base_color"][0]
-        irradiance = eval_sh9(sh9, n / np.linalg.norm(n))  # unbaked: the environment's irradiance
+        irradiance = irradiance_at(n / np.linalg.norm(n))  # unbaked: the environment's irradiance
         # glTF's 1 - F(V.H) averaged over the hemisphere (materials/gltf.py kept_irradiance)
         expected += albedo / np.pi * irradiance * (1 - (0.04 + 0.96 * schlick_cosine_average(wo[2])))
         # Same texel, same formulas; the GPU's SRGB8 decode and the normal map's 8-bit frame
@@ -475,9 +475,8 @@ def _rendered_quad(scene):
 def test_khr_material_extensions_match_numpy_per_pixel(extensions):
     """KHR_materials_ior/_specular/_clearcoat through the real pipeline (lobe-7, per-pixel glTF
     path with a base-colour texture) against the numpy twin: every lobe by the same pattern
-    quadrature, the diffuse by SH9 irradiance times GltfDiffuse.view_weight."""
+    quadrature, the diffuse by the irradiance cube times GltfDiffuse.view_weight."""
     from lobeview.materials.gltf import GltfDiffuse, GltfSheen
-    from lobeview.scenes.envmap import eval_sh9
 
     scene = _textured_quad_scene()
     material = scene.materials[0]
@@ -499,7 +498,7 @@ def test_khr_material_extensions_match_numpy_per_pixel(extensions):
                     lobe, wo, lambda d, lod: lookup(cube.radiance, d, lod), 7, cube.face_size, frame
                 )
             diffuse = next(c for c in bsdf.components if isinstance(c, GltfDiffuse))
-            irradiance = eval_sh9(renderer.environment_sh9, frame[:, 2])
+            irradiance = lookup(renderer.environment_irradiance, frame[:, 2][None], 0.0)[0]
             expected += diffuse.diffuse_albedo / np.pi * irradiance * diffuse.view_weight(np.array(wo[2]))
             for sheen in (c for c in bsdf.components if isinstance(c, GltfSheen)):
                 lobes_seen.add("GltfSheen")

@@ -152,6 +152,17 @@ class RadianceCube:
             self._importance[2].release()
 
 
+IRRADIANCE_FACE = 16  # E(n) is a cosine convolution: smooth enough for 16^2 texels a face, bilinear
+
+
+def irradiance_cube(ctx: moderngl.Context, env: EnvironmentMap, face_size: int = IRRADIANCE_FACE):
+    """The environment's irradiance E(n) (exact summation over its texels, EnvironmentMap.irradiance)
+    at the texel centres of a cube map, without MIP levels: the diffuse light of the preview and of
+    unbaked scene objects (shaders/scene.frag), read bilinearly."""
+    faces = np.stack([env.irradiance(face_directions(f, face_size)) for f in range(6)]).astype(np.float32)
+    return upload_cube(ctx, faces, mipmaps=False)
+
+
 class EnvironmentCubes(RadianceCube):
     """A distant environment: radiance cube resampled from the equirectangular map, and an
     irradiance cube for diffuse shading without lightmaps (object preview)."""
@@ -161,17 +172,14 @@ class EnvironmentCubes(RadianceCube):
         ctx: moderngl.Context,
         env: EnvironmentMap,
         face_size: int = 256,
-        irradiance_size: int = 16,
+        irradiance_size: int = IRRADIANCE_FACE,
         importance_size: int = 64,
         mip_filter: str = DEFAULT_MIP_FILTER,
         bright_sources: bool = False,
     ):
         self.env = env
         super().__init__(ctx, equirect_to_cube_faces(env, face_size), importance_size, mip_filter, bright_sources)
-        irradiance_faces = np.stack([env.irradiance(face_directions(f, irradiance_size)) for f in range(6)]).astype(
-            np.float32
-        )
-        self.irradiance = upload_cube(ctx, irradiance_faces, mipmaps=False)
+        self.irradiance = irradiance_cube(ctx, env, irradiance_size)
 
     def release(self):
         super().release()

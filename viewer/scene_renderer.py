@@ -33,7 +33,7 @@ from lobeview.scenes.scene import Scene
 
 from .camera import Camera, jittered
 from .cube_probes import CubeProbes
-from .cubemap import RadianceCube, equirect_to_cube_faces
+from .cubemap import RadianceCube, equirect_to_cube_faces, irradiance_cube
 from .material_gpu import pack_material
 from .mirror_pass import MirrorPasses
 from .object_drawer import ObjectDrawer
@@ -65,8 +65,10 @@ class SceneRenderer(RendererBase):
         self.timings: dict = {}
         t0 = time.perf_counter()
         self.cache_dir = Path(cache_dir) if cache_dir else None
-        sh9 = environment.irradiance_sh9().astype(np.float32)
-        shading = SceneShading(ctx, ProgramCache(ctx), scene, sh9, settings.mip_filter, self.cache_dir)
+        # diffuse light of objects without a lightmap: the environment's exact irradiance per normal
+        self.environment_irradiance = irradiance_cube(ctx, environment)
+        shading = SceneShading(ctx, ProgramCache(ctx), scene, self.environment_irradiance, settings.mip_filter,
+                               self.cache_dir)  # fmt: skip
         super().__init__(ctx, size, shading)
         self.environment = RadianceCube(
             ctx,
@@ -75,7 +77,6 @@ class SceneRenderer(RendererBase):
             bright_sources=settings.bright_sources,
         )
         self.environment_name = environment.name
-        self.environment_sh9 = sh9  # diffuse light of objects without a lightmap
         analysis = analyse(
             scene, settings.cube_face_size, settings.lobe_width_cubes, settings.reflector_cubes_on_demand
         )
@@ -88,7 +89,7 @@ class SceneRenderer(RendererBase):
             if not needs.has_lightmap:
                 warnings.warn(
                     f"object {needs.name!r} has no usable lightmap: its diffuse light is the environment's "
-                    "irradiance at each normal (SH9, nothing occludes it: bake the scene for shadows)",
+                    "irradiance at each normal (nothing occludes it: bake the scene for shadows)",
                     stacklevel=2,
                 )
         self.timings["upload"] = time.perf_counter() - t0
@@ -355,3 +356,4 @@ class SceneRenderer(RendererBase):
         self.mirror_passes.release()
         self.drawer.release()
         self.environment.release()
+        self.environment_irradiance.release()

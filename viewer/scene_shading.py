@@ -1,5 +1,5 @@
 """The scene renderer's shading binder (issue 38): what an object's draw sets besides the pass
-state - its packed material (viewer/shading.py), lightmap or SH9 irradiance, glTF textures and
+state - its packed material (viewer/shading.py), lightmap or the environment's irradiance cube, glTF textures and
 samplers, reflection proxy - recorded once per program, object and method and replayed
 (viewer/interface.py DrawRecorder)."""
 
@@ -85,7 +85,7 @@ class SceneShading(ShadingBinder):
         ctx: moderngl.Context,
         programs: ProgramCache,
         scene: Scene,
-        environment_sh9: np.ndarray,
+        environment_irradiance: moderngl.TextureCube,
         mip_filter: str,
         cache_dir: Path | None = None,
     ):
@@ -93,8 +93,9 @@ class SceneShading(ShadingBinder):
         super().__init__(ctx, programs, mip_filter, cache_dir.parent if cache_dir is not None else None)
         self.scene = scene
         self.cache_dir = cache_dir
-        # Diffuse light of objects without a lightmap: the environment's irradiance (SH9).
-        self.environment_sh9 = environment_sh9
+        # Diffuse light of objects without a lightmap: the environment's irradiance cube (bound
+        # for every object: a sampler the program has must always see a cube texture).
+        self.environment_irradiance = environment_irradiance
         self.textures = BoundedCache(MAX_SCENE_TEXTURES, on_evict=lambda item: item[1].release())
         # Every sampler uniform gets its own unit and a texture, even when unused: two samplers
         # of different types on one unit make the draw call fail (GL_INVALID_OPERATION).
@@ -212,7 +213,7 @@ class SceneShading(ShadingBinder):
         else:
             bind_sampler(program, "u_lightmap", self.white)
             set_uniform(program, "u_lightmap_texcoord", -1)
-            write_uniform(program, "u_irradiance_sh9", self.environment_sh9)
+        bind_sampler(program, "u_irradiance", self.environment_irradiance)
         self._bind_material(program, mat)
         if proxy is not None:
             self._bind_proxy(program, proxy, probe_centre)
