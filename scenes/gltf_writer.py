@@ -11,6 +11,21 @@ from .hdrio import write_hdr_image
 from .scene import Scene
 
 
+def _core_material(desc: dict):
+    """glTF's core metallic-roughness values: the material's own for the ``gltf`` model (so other
+    readers, Blender's importer among them, see what lobeview renders), a neutral grey for the
+    thesis models, which only lobeview's ``extras.lobeview`` describes."""
+    import pygltflib
+
+    if desc.get("model") == "gltf":
+        return pygltflib.PbrMetallicRoughness(
+            baseColorFactor=[*(float(c) for c in desc.get("base_color", (1.0, 1.0, 1.0))), 1.0],
+            metallicFactor=float(desc.get("metallic", 1.0)),
+            roughnessFactor=float(desc.get("roughness", 1.0)),
+        )
+    return pygltflib.PbrMetallicRoughness(baseColorFactor=[0.8, 0.8, 0.8, 1.0], metallicFactor=0.0, roughnessFactor=0.5)
+
+
 def write_glb(
     scene: Scene,
     path: str | Path,
@@ -94,9 +109,7 @@ def write_glb(
                 emissiveFactor=(emission / strength).tolist(),
                 extras={"lobeview": mat.desc},
                 extensions=extensions,
-                pbrMetallicRoughness=pygltflib.PbrMetallicRoughness(
-                    baseColorFactor=[0.8, 0.8, 0.8, 1.0], metallicFactor=0.0, roughnessFactor=0.5
-                ),
+                pbrMetallicRoughness=_core_material(mat.desc),
             )
         )
 

@@ -1,0 +1,442 @@
+"""lobeview against Blender Cycles on glTF models (issue 40: an independent reference for the glTF
+shading, with its differences found and fixed).
+
+Each case is a glTF file, an environment and a camera. Cycles renders it through Blender's own glTF
+importer (``bpy`` from PyPI, in its own process: :mod:`lobeview.bench.cycles_worker`, whose
+docstring states the conventions), lobeview through ``lobeview shot`` (``reference`` and the
+chosen real-time methods). Errors are over the object's pixels (Cycles' alpha = 1, one pixel in
+from the silhouette): the ratio of mean brightness, relative RMSE, and the ratio at the darkest
+5 % of pixels. Figures: Cycles | lobeview reference | each method | |error| x4 per case.
+
+Cases: a generated unit sphere of a white roughness-1 glTF dielectric (Cycles renders it at 1.00
+everywhere under a white sky: the grazing test), a chrome sphere (verifies the environment's
+orientation: a turned or mirrored map shows as tens of percent), and every model in
+../shared/assets/gltf; environments: a white sky (constant radiance 1) and the HDR captures named
+by ``--envs``. Cycles' images are cached in the lobeview cache folder (keyed by the glTF and
+environment files' bytes, the camera, size, samples and Blender's version).
+
+    python3.11 -m venv ~/bpy-env && ~/bpy-env/bin/pip install bpy==4.3.0 numpy==1.26.4
+    .venv/bin/python -m lobeview.bench.cycles --bpy-python ~/bpy-env/bin/python [--size 240x180] [--spp 512]
+        [--cases sphere-white ... | a glTF file] [--envs white garden studio] [--lobeview "COMMAND"]
+
+bpy is not a lobeview dependency and cannot be an optional one: bpy 4.3 (the last for Python
+3.11) is built against numpy 1.x and its Cycles add-on fails to register under lobeview's numpy
+2.4, so it lives in an environment of its own and the bench calls that interpreter.
+
+Where Cycles and the glTF specification disagree, the specification wins and the table says so:
+Cycles' Principled BSDF adds multiple scattering to GGX (about +5 % on rough metals) and maps
+KHR_materials_anisotropy differently.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import hashlib
+import json
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+ASSETS = Path(__file__).resolve().parents[1].parent / "shared" / "assets"
+WORKER = Path(__file__).resolve().parent / "cycles_worker.py"
+BLENDER_VERSION_PIN = "4.3.0"
+ENVIRONMENTS = {
+    "white": None,  # constant radiance 1, written by the bench
+    "garden": "env/polyhaven_1k/chinese_garden_1k.hdr",
+    "studio": "env/blender_studiolights_1k/studio.exr",
+}
+DEFAULT_ENVS = ("white", "garden", "studio")
+DEFAULT_METHODS = ("lobe-7", "prefiltered")
+SPHERE_MATERIALS = {
+    "sphere-white": {"model": "gltf", "base_color": [1.0, 1.0, 1.0], "metallic": 0.0, "roughness": 1.0},
+    "sphere-chrome": {"model": "gltf", "base_color": [1.0, 1.0, 1.0], "metallic": 1.0, "roughness": 0.0},
+    "sphere-gold": {"model": "gltf", "base_color": [1.0, 0.78, 0.34], "metallic": 1.0, "roughness": 0.4},
+}
+MODELS = {
+    "WaterBottle": "gltf/WaterBottle/WaterBottle.glb",
+    "Suzanne": "gltf/Suzanne/Suzanne.gltf",
+    "CornellBox": "gltf/CornellBox/CornellBox.glb",
+}
+DEFAULT_CASES = (*SPHERE_MATERIALS, *MODELS)
+FOV_Y = 40.0
+# Where the camera sits relative to a model's bounding sphere: up and to the side a little, so
+# that the silhouette shows grazing angles and the top shows the sky's reflection.
+VIEW_DIRECTION = np.array([0.35, 0.3, 1.0]) / np.linalg.norm([0.35, 0.3, 1.0])
+DARKEST_SHARE = 0.05
+
+
+@dataclass
+class Case:
+    name: str
+    gltf: Path
+    environment: str  # a key of ENVIRONMENTS
+    camera: tuple
+    target: tuple
+
+
+def white_environment(path: Path) -> Path:
+    """A constant radiance-1 equirectangular EXR (64 x 32), the white sky of both renderers."""
+    from lobeview.scenes.hdrio import write_hdr_image
+
+    if not path.exists():
+        write_hdr_image(path, np.ones((32, 64, 3), np.float32))
+    return path
+
+
+def environment_file(name: str, work: Path) -> Path:
+    if ENVIRONMENTS[name] is None:
+        return white_environment(work / "white.exr")
+    return ASSETS / ENVIRONMENTS[name]
+
+
+def sphere_gltf(name: str, work: Path) -> Path:
+    """A unit sphere at the origin with the named glTF material, written as .glb (core
+    metallic-roughness values, which Blender's importer reads too)."""
+    from lobeview.materials.spec import validate
+    from lobeview.scenes.gltf_writer import write_glb
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
+
+    path = work / f"{name}.glb"
+    if not path.exists():
+        scene = Scene([SceneObject("sphere", uv_sphere(rings=96, segments=192), 0)],
+                      [SceneMaterial(name, validate(SPHERE_MATERIALS[name]))])  # fmt: skip
+        scene.objects[0].planar_reflector = False
+        write_glb(scene, path)
+    return path
+
+
+def framing(gltf: Path) -> tuple[tuple, tuple]:
+    """(camera, target) that fit the model's bounding sphere in a vertical field of view of
+    FOV_Y, seen along VIEW_DIRECTION."""
+    from lobeview.scenes.gltf_loader import load_gltf
+
+    with _quiet():
+        scene = load_gltf(gltf)
+    low, high = scene.bounds
+    centre = (np.asarray(low) + np.asarray(high)) / 2
+    radius = float(np.linalg.norm(np.asarray(high) - np.asarray(low)) / 2)
+    distance = radius / np.sin(np.radians(FOV_Y / 2)) * 1.05
+    camera = centre + VIEW_DIRECTION * distance
+    return tuple(float(v) for v in camera), tuple(float(v) for v in centre)
+
+
+def _quiet():
+    import warnings
+
+    context = warnings.catch_warnings()
+    context.__enter__()
+    warnings.simplefilter("ignore")
+
+    class _Exit:
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            context.__exit__(*exc)
+
+    return _Exit()
+
+
+def make_cases(names, envs, work: Path) -> list[Case]:
+    cases = []
+    for name in names:
+        if name in SPHERE_MATERIALS:
+            gltf = sphere_gltf(name, work)
+            camera, target = (0.0, 0.35, 3.2), (0.0, 0.0, 0.0)
+        elif name in MODELS:
+            gltf = ASSETS / MODELS[name]
+            camera, target = framing(gltf)
+        else:
+            path = Path(name)
+            if not path.is_file():
+                raise SystemExit(f"unknown case {name!r}: one of {', '.join(DEFAULT_CASES)} or a glTF file")
+            gltf, (camera, target) = path, framing(path)
+            name = path.stem
+        cases.extend(Case(name, gltf, env, camera, target) for env in envs)
+    return cases
+
+
+def _vec(v) -> str:
+    return ",".join(f"{x:.6g}" for x in v)
+
+
+def shot_arguments(case: Case, env_path: Path, size, method: str, out: Path, spp: int) -> list[str]:
+    """``lobeview shot`` arguments that render the case's view (vertical fov, linear .npy)."""
+    args = [str(case.gltf), f"--env={env_path}", f"--camera={_vec(case.camera)}", f"--target={_vec(case.target)}",
+            f"--fov={FOV_Y}", f"--size={size[0]}x{size[1]}", f"--method={method}", f"--out={out}"]  # fmt: skip
+    if method == "reference":
+        args.append(f"--spp={spp}")
+    return args
+
+
+def render_lobeview(case: Case, env_path: Path, size, method: str, work: Path, spp: int,
+                    lobeview=None) -> tuple[np.ndarray, str]:  # fmt: skip
+    """lobeview's linear image of the case through ``lobeview shot`` in a process of its own (as
+    a user runs it), and the command, pasteable. ``lobeview``: the command that runs lobeview
+    (a list; default this interpreter's ``-m lobeview``), e.g. another checkout's for a
+    before/after table."""
+    out = work / f"{case.name}-{case.environment}-{method}.npy"
+    args = shot_arguments(case, env_path, size, method, out, spp)
+    command = [*(lobeview or [sys.executable, "-m", "lobeview"]), "shot", *args]
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"lobeview shot failed ({done.returncode}): {done.stderr[-2000:]}")
+    return np.load(out).astype(np.float64), shlex.join(["lobeview", "shot", *args])
+
+
+def cycles_job(case: Case, env_path: Path, size, spp: int, out: Path) -> dict:
+    return {"gltf": str(case.gltf), "environment": str(env_path), "camera": list(case.camera),
+            "target": list(case.target), "up": [0.0, 1.0, 0.0], "fov_y": FOV_Y, "size": list(size), "spp": spp,
+            "out": str(out), "env_rotation_deg": -90.0}  # fmt: skip
+
+
+def cycles_key(job: dict, version: str) -> str:
+    """What a Cycles render depends on: the job (without its output path), the glTF and
+    environment files' bytes (and a .gltf's folder: its buffers and images), the worker's
+    conventions and Blender's version."""
+    # paths by name only: the generated spheres and the white sky are written to a new temporary
+    # folder every run, and their bytes are hashed below anyway
+    named = {k: Path(v).name if k in ("gltf", "environment") else v for k, v in job.items() if k != "out"}
+    digest = hashlib.sha1(repr((named, version)).encode())
+    gltf = Path(job["gltf"])
+    files = sorted(p for p in gltf.parent.iterdir() if p.is_file()) if gltf.suffix == ".gltf" else [gltf]
+    for path in [*files, Path(job["environment"]), WORKER]:
+        digest.update(path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def _bpy_probe(python: str) -> subprocess.CompletedProcess:
+    # isolated (-I), as the worker runs: this folder's cycles.py must not shadow Blender's add-on
+    return subprocess.run([python, "-I", "-c", "import bpy; print(bpy.app.version_string)"],
+                          capture_output=True, text=True)  # fmt: skip
+
+
+def bpy_importable(python: str) -> bool:
+    """Whether ``python`` can import Blender's module."""
+    return _bpy_probe(python).returncode == 0
+
+
+def bpy_version(python: str) -> str:
+    """Blender's version as ``python`` imports it, or SystemExit saying how to install it."""
+    done = _bpy_probe(python)
+    if done.returncode != 0:
+        raise SystemExit(
+            f"Blender's Python module is not importable by {python}: pip install bpy=={BLENDER_VERSION_PIN} "
+            "numpy==1.26.4 in a separate environment (bpy 4.3 is built against numpy 1.x; lobeview pins 2.x) "
+            "and give its interpreter as --bpy-python PATH"
+        )
+    return done.stdout.strip().splitlines()[-1]
+
+
+def render_cycles(job: dict, python: str, cache: Path | None, version: str, work: Path) -> tuple:
+    """Cycles' RGBA image (linear), the seconds it took (0: from the cache) and the command. The
+    worker runs isolated (``-I``: neither its own folder nor the working folder on sys.path),
+    since this module's name would otherwise shadow Blender's ``cycles`` add-on."""
+    from lobeview.core.cache import read_cache_file, write_cache_file
+
+    size = tuple(job["size"])
+    path = cache / f"cycles-{cycles_key(job, version)}.npz" if cache else None
+
+    def read(file: Path):
+        with np.load(file) as data:
+            image, seconds = data["image"], float(data["seconds"])
+        if image.shape != (size[1], size[0], 4) or not np.all(np.isfinite(image)):
+            raise ValueError(f"image of shape {image.shape}, expected {(size[1], size[0], 4)}")
+        return image, seconds
+
+    job_file = Path(job["out"]).with_suffix(".json")
+    job_file.write_text(json.dumps(job, indent=1))
+    command = shlex.join([python, "-I", str(WORKER), str(job_file)])
+    found = read_cache_file(path, read, "Cycles render")
+    if found is not None:
+        return found[0], 0.0, command
+    t0 = time.perf_counter()
+    done = subprocess.run([python, "-I", str(WORKER), str(job_file)], capture_output=True, text=True)
+    if done.returncode != 0 or not Path(job["out"]).exists():
+        raise RuntimeError(f"Cycles failed ({done.returncode}): {(done.stderr or done.stdout)[-2000:]}")
+    seconds = time.perf_counter() - t0
+    image = read_rgba_exr(Path(job["out"]))
+    if path is not None:
+        write_cache_file(path, lambda handle: np.savez(handle, image=image, seconds=seconds))
+    return image, seconds, command
+
+
+def read_rgba_exr(path: Path) -> np.ndarray:
+    """Cycles' output (our own worker's file): RGBA float32, top row first."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path)) as exr:
+        channels = exr.channels()
+        if "RGBA" in channels:
+            return np.asarray(channels["RGBA"].pixels, dtype=np.float32)
+        return np.stack([np.asarray(channels[c].pixels, np.float32) for c in "RGBA"], axis=-1)
+
+
+def object_mask(alpha: np.ndarray) -> np.ndarray:
+    """The object's pixels: fully covered in Cycles (alpha = 1), one pixel in from the silhouette
+    (the box filter mixes the silhouette's pixels with the background in both renderers)."""
+    from scipy.ndimage import binary_erosion
+
+    return binary_erosion(alpha > 0.999, iterations=1)
+
+
+def compare(image: np.ndarray, truth: np.ndarray, mask: np.ndarray) -> dict:
+    """Mean-brightness ratio, relative RMSE and the ratio at the darkest 5 % of pixels (the
+    per-pixel ratio image / truth of the grey value, mean of its lowest 5 %) over ``mask``."""
+    a, b = image[mask], truth[mask]
+    grey_a, grey_b = a.mean(axis=-1), b.mean(axis=-1)
+    ratio = grey_a / np.maximum(grey_b, 1e-6)
+    lowest = np.sort(ratio)[: max(1, int(DARKEST_SHARE * ratio.size))]
+    return {
+        "mean_ratio": float(grey_a.mean() / max(grey_b.mean(), 1e-12)),
+        "rel_rmse": float(np.sqrt(np.mean((a - b) ** 2)) / max(float(np.mean(b)), 1e-12)),
+        "darkest_ratio": float(lowest.mean()),
+    }
+
+
+def _display(image: np.ndarray, exposure: float) -> np.ndarray:
+    """Linear -> [0, 1] sRGB after scaling by ``exposure`` (clipped), for the figures."""
+    x = np.clip(image[..., :3] * exposure, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def figure_row(truth: np.ndarray, images: list[np.ndarray], mask: np.ndarray) -> np.ndarray:
+    """Cycles | lobeview images... | |last - Cycles| x4, one exposure per row (the object's 95th
+    percentile of Cycles maps to 0.9)."""
+    scale = 0.9 / max(float(np.percentile(truth[..., :3][mask], 95)), 1e-6) if mask.any() else 1.0
+    panels = [_display(truth, scale)] + [_display(image, scale) for image in images]
+    error = np.abs(images[-1][..., :3] - truth[..., :3]) * 4.0 * mask[..., None]
+    panels.append(_display(error, scale))
+    return np.concatenate(panels, axis=1)
+
+
+def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, python: str, cache: Path | None,
+        progress=print, lobeview=None) -> dict:  # fmt: skip
+    version = bpy_version(python)
+    rows, figures, commands = [], [], []
+    for i, case in enumerate(cases):
+        env_path = environment_file(case.environment, work)
+        job = cycles_job(case, env_path, size, spp, work / f"{case.name}-{case.environment}-cycles.exr")
+        progress(f"[cycles] {i + 1}/{len(cases)} {case.name} under {case.environment}: Cycles ...")
+        truth, seconds, cycles_command = render_cycles(job, python, cache, version, work)
+        mask = object_mask(truth[..., 3])
+        if not mask.any():
+            raise RuntimeError(f"Cycles rendered no object pixels for {case.name} (see {cycles_command})")
+        row = {"case": case.name, "env": case.environment, "cycles_seconds": seconds, "pixels": int(mask.sum())}
+        images = []
+        for method in ("reference", *methods):
+            progress(f"[cycles] {i + 1}/{len(cases)} {case.name} under {case.environment}: lobeview {method} ...")
+            image, command = render_lobeview(case, env_path, size, method, work, ref_spp, lobeview)
+            images.append(image)
+            row[method] = compare(image, truth[..., :3], mask)
+            if method == "reference":
+                commands.append((f"{case.name} / {case.environment}", cycles_command, command))
+        rows.append(row)
+        figures.append(figure_row(truth[..., :3], images, mask))
+    return {"rows": rows, "figures": figures, "commands": commands, "blender": version, "methods": list(methods),
+            "size": list(size), "spp": spp, "ref_spp": ref_spp}  # fmt: skip
+
+
+def markdown(results: dict, stamp: str, command: str, figure: str) -> str:
+    methods = ["reference", *results["methods"]]
+    lines = [
+        f"# lobeview against Blender Cycles {results['blender']} ({stamp})",
+        "",
+        f"`{command}`",
+        "",
+        f"lobeview: {results.get('lobeview', 'this checkout')}",
+        "",
+        f"{results['size'][0]}x{results['size'][1]} px, box filter; Cycles path tracer at {results['spp']} spp "
+        f"(CPU, no denoiser, view transform Standard), lobeview's reference at {results['ref_spp']} spp; glTF "
+        "files through Blender's own importer. Over the object's pixels (Cycles' alpha = 1, one pixel in): mean "
+        "brightness ratio lobeview / Cycles, relative RMSE (%) and the ratio at the darkest 5 % of pixels.",
+        "",
+        "| case | env | " + " | ".join(f"{m} mean / rmse % / darkest" for m in methods) + " |",
+        "|---|---|" + "---|" * len(methods),
+    ]
+    for row in results["rows"]:
+        cells = [f"{row[m]['mean_ratio']:.3f} / {100 * row[m]['rel_rmse']:.1f} / {row[m]['darkest_ratio']:.3f}"
+                 for m in methods]  # fmt: skip
+        lines.append(f"| {row['case']} | {row['env']} | " + " | ".join(cells) + " |")
+    lines += ["", f"Figure: `{figure}` (rows in the table's order; Cycles | reference | "
+              + " | ".join(results["methods"]) + f" | |{results['methods'][-1]} - Cycles| x4).", "",
+              "Commands (Cycles worker, lobeview reference):", ""]  # fmt: skip
+    for label, cycles_command, lobeview_command in results["commands"]:
+        lines += [f"- {label}: `{cycles_command}`; `{lobeview_command}`"]
+    return "\n".join(lines) + "\n"
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the repository when it lies inside it (the committed figures)."""
+    try:
+        return str(path.resolve().relative_to(Path(__file__).resolve().parents[1]))
+    except ValueError:
+        return str(path)
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    width, _, height = text.partition("x")
+    return int(width), int(height)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m lobeview.bench.cycles", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", nargs="+", default=list(DEFAULT_CASES),
+                        help=f"cases: {', '.join(DEFAULT_CASES)} or glTF files (default: all named)")  # fmt: skip
+    parser.add_argument("--envs", nargs="+", default=list(DEFAULT_ENVS), choices=sorted(ENVIRONMENTS))
+    parser.add_argument("--methods", nargs="+", default=list(DEFAULT_METHODS))
+    parser.add_argument("--size", type=parse_size, default=(240, 180), help="WxH (default 240x180)")
+    parser.add_argument("--spp", type=int, default=512, help="Cycles samples per pixel (default 512)")
+    parser.add_argument("--ref-spp", type=int, default=256, help="lobeview reference spp (default 256)")
+    parser.add_argument("--bpy-python", default=sys.executable,
+                        help="the Python that imports bpy (default: this one)")  # fmt: skip
+    parser.add_argument("--no-cache", action="store_true", help="render Cycles' images again")
+    parser.add_argument("--lobeview", default=None,
+                        help="the command that runs lobeview, e.g. another checkout's for a before/after table "
+                             "(default: this interpreter's -m lobeview)")  # fmt: skip
+    parser.add_argument(
+        "--out",
+        default=str(Path(__file__).resolve().parent / "results"),
+        help="folder of the table and JSON (default bench/results; made if its parent exists)",
+    )
+    parser.add_argument(
+        "--figures",
+        default=str(Path(__file__).resolve().parent / "figures"),
+        help="folder of the figure (default bench/figures; made if its parent exists)",
+    )
+    args = parser.parse_args(argv)
+
+    import tempfile
+
+    from lobeview.bench.report import write_image_rows
+    from lobeview.core.paths import cache_dir
+
+    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+    with tempfile.TemporaryDirectory(prefix="lobeview-cycles-") as work:
+        cases = make_cases(args.cases, args.envs, Path(work))
+        cache = None if args.no_cache else cache_dir() / "cycles"
+        lobeview = shlex.split(args.lobeview) if args.lobeview else None
+        results = run(cases, args.methods, args.size, args.spp, args.ref_spp, Path(work), args.bpy_python, cache,
+                      lobeview=lobeview)  # fmt: skip
+    results["lobeview"] = args.lobeview or "this checkout"
+    out, figures = Path(args.out), Path(args.figures)
+    out.mkdir(exist_ok=True)
+    figures.mkdir(exist_ok=True)
+    figure = write_image_rows(figures, f"cycles-{stamp}.png", results.pop("figures"))
+    command = "python -m lobeview.bench.cycles " + shlex.join(argv if argv is not None else sys.argv[1:])
+    (out / f"cycles-{stamp}.json").write_text(json.dumps(results, indent=1))
+    path = out / f"cycles-{stamp}.md"
+    path.write_text(markdown(results, stamp, command.strip(), _shown(figure)))
+    print(path.read_text())
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

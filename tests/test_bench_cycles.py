@@ -1,0 +1,87 @@
+"""The Blender Cycles comparison (bench/cycles.py) without Blender: its cache key, metrics, case
+list, lobeview command and the message when bpy is missing. The Cycles side itself runs in the
+bench (bpy is not a lobeview dependency); its conventions are verified there against lobeview's
+reference (the chrome sphere: median pixel ratio 1.000 with the environment turned by -90
+degrees, 1.16 and worse for 0, 90 and 180 degrees)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lobeview.bench import cycles
+
+
+def _job(tmp_path: Path, folder: str, env_bytes: bytes = b"env", gltf_bytes: bytes = b"glb") -> dict:
+    base = tmp_path / folder
+    base.mkdir()
+    (base / "white.exr").write_bytes(env_bytes)
+    (base / "sphere.glb").write_bytes(gltf_bytes)
+    case = cycles.Case("sphere", base / "sphere.glb", "white", (0.0, 0.35, 3.2), (0.0, 0.0, 0.0))
+    return cycles.cycles_job(case, base / "white.exr", (24, 18), 16, base / "out.exr")
+
+
+def test_cache_key_follows_content_not_the_temporary_folder(tmp_path):
+    first = cycles.cycles_key(_job(tmp_path, "a"), "4.3.0")
+    assert first == cycles.cycles_key(_job(tmp_path, "b"), "4.3.0")  # same bytes, another folder
+    assert first != cycles.cycles_key(_job(tmp_path, "c", env_bytes=b"other"), "4.3.0")
+    assert first != cycles.cycles_key(_job(tmp_path, "d", gltf_bytes=b"other"), "4.3.0")
+    assert first != cycles.cycles_key(_job(tmp_path, "e"), "4.4.0")
+    job = _job(tmp_path, "f")
+    job["spp"] = 32
+    assert first != cycles.cycles_key(job, "4.3.0")
+
+
+def test_metrics_on_known_images():
+    truth = np.ones((10, 10, 3))
+    mask = np.zeros((10, 10), bool)
+    mask[2:8, 2:8] = True
+    same = cycles.compare(truth.copy(), truth, mask)
+    assert same == {"mean_ratio": 1.0, "rel_rmse": 0.0, "darkest_ratio": 1.0}
+    image = truth.copy()
+    image[2, 2:8] = 0.5  # 6 of 36 pixels at half: the darkest 5 % (one pixel) is 0.5
+    got = cycles.compare(image, truth, mask)
+    assert got["darkest_ratio"] == pytest.approx(0.5)
+    assert got["mean_ratio"] == pytest.approx(1 - 6 * 0.5 / 36)
+    assert got["rel_rmse"] == pytest.approx(np.sqrt(6 * 0.25 / 36))
+
+
+def test_object_mask_drops_the_silhouette():
+    alpha = np.zeros((9, 9))
+    alpha[2:7, 2:7] = 1.0
+    alpha[2, 2] = 0.5  # a partly covered pixel
+    mask = cycles.object_mask(alpha)
+    assert mask.sum() == 9 and mask[3:6, 3:6].all()
+
+
+def test_shot_arguments_are_what_the_cli_accepts(tmp_path):
+    from lobeview.app.cli import build_parser
+
+    case = cycles.Case("x", tmp_path / "x.glb", "white", (1.0, -2.0, 3.0), (0.0, 0.5, 0.0))
+    args = cycles.shot_arguments(case, tmp_path / "w.exr", (24, 18), "reference", tmp_path / "o.npy", 64)
+    parsed = build_parser().parse_args(["shot", *args])
+    assert parsed.camera == "1,-2,3" and parsed.fov == cycles.FOV_Y and parsed.spp == 64
+    assert parsed.method == "reference" and parsed.size == "24x18"
+
+
+def test_unknown_case_and_missing_bpy_say_what_to_do(tmp_path):
+    with pytest.raises(SystemExit, match="unknown case 'nothing'"):
+        cycles.make_cases(["nothing"], ["white"], tmp_path)
+    if cycles.bpy_importable(sys.executable):
+        pytest.skip("bpy is installed here")
+    with pytest.raises(SystemExit, match="pip install bpy==4.3.0"):
+        cycles.bpy_version(sys.executable)
+
+
+def test_markdown_lists_every_case_and_command():
+    row = {"case": "sphere-white", "env": "white", "cycles_seconds": 1.0, "pixels": 100}
+    for method in ("reference", "lobe-7"):
+        row[method] = {"mean_ratio": 0.975, "rel_rmse": 0.025, "darkest_ratio": 0.97}
+    results = {"rows": [row], "commands": [("sphere-white / white", "python -I worker.py job.json", "lobeview shot")],
+               "blender": "4.3.0", "methods": ["lobe-7"], "size": [24, 18], "spp": 16, "ref_spp": 8}  # fmt: skip
+    text = cycles.markdown(results, "20261126", "python -m lobeview.bench.cycles", "bench/figures/c.png")
+    assert "| sphere-white | white | 0.975 / 2.5 / 0.970 | 0.975 / 2.5 / 0.970 |" in text
+    assert "python -I worker.py job.json" in text and "bench/figures/c.png" in text
