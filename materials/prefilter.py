@@ -266,6 +266,79 @@ def dfg_table(kind: str, size: int = DFG_SIZE, order: int = 48) -> np.ndarray:
     return table
 
 
+# Per-pixel albedo of anisotropic glTF GGX lobes (KHR_materials_anisotropy with a texture: every
+# pixel has its own strength and roughness). The isotropic DFG at the geometric-mean alpha was 45 %
+# too bright at strength 1, roughness 0.4 (0.78 against 0.53 by quadrature), the root-mean-square
+# alpha still 49 % off at grazing views: the (A, B) are tabulated over the view (sqrt(cos theta_o)
+# at texel centres, dense at grazing where B changes fastest; the azimuth from the anisotropy
+# direction at nodes over [0, pi/2], the lobe being symmetric about both tangent axes), the
+# roughness and the strength (nodes over [0, 1]), with alpha_x = mix(alpha, 1, strength^2),
+# alpha_y = alpha = roughness^2 (materials/gltf.py).
+ANISO_DFG_COS = 16
+ANISO_DFG_PHI = 16
+ANISO_DFG_ROUGHNESS = 12
+ANISO_DFG_STRENGTH = 8
+
+
+def anisotropic_dfg_table(order: int = 48) -> np.ndarray:
+    """(roughness, strength, azimuth, cos, 2) table of (A, B) with integral f cos = F0 A + B for
+    the anisotropic GGX of glTF, Schlick Fresnel, integrated like :func:`dfg_table`."""
+    cos_nodes = ((np.arange(ANISO_DFG_COS) + 0.5) / ANISO_DFG_COS) ** 2  # uniform in sqrt(cos): dense at grazing
+    phi_nodes = np.linspace(0.0, np.pi / 2, ANISO_DFG_PHI)
+    sin_t = np.sqrt(1.0 - cos_nodes**2)
+    phi, cos_t = np.meshgrid(phi_nodes, cos_nodes, indexing="ij")
+    _, sin_b = np.meshgrid(phi_nodes, sin_t, indexing="ij")
+    wo = np.stack([sin_b * np.cos(phi), sin_b * np.sin(phi), cos_t], axis=-1).reshape(-1, 3)
+    nodes, weights = np.polynomial.legendre.leggauss(order)
+    x = 0.5 * (nodes + 1.0)
+    u1, u2 = np.meshgrid(x, x, indexing="ij")
+    quad_w = np.outer(0.5 * weights, 0.5 * weights)
+    wo_b = np.broadcast_to(wo[:, None, None, :], (len(wo), order, order, 3))
+    table = np.zeros((ANISO_DFG_ROUGHNESS, ANISO_DFG_STRENGTH, len(wo), 2))
+    for i, roughness in enumerate(np.linspace(0.0, 1.0, ANISO_DFG_ROUGHNESS)):
+        alpha = max(roughness * roughness, ALPHA_MIN)
+        for j, strength in enumerate(np.linspace(0.0, 1.0, ANISO_DFG_STRENGTH)):
+            distribution = MicrofacetDistribution("ggx", alpha + (1.0 - alpha) * strength**2, alpha)
+            total = MicrofacetReflection(distribution, Fresnel("none"))
+            grazing = _SchlickWeight(distribution, Fresnel("none"))
+            wi = total.sample_wi(u1[None], u2[None], wo_b)
+            pdf = total.pdf(wi, wo_b)
+            ok = pdf > 0.0
+            safe_pdf = np.where(ok, pdf, 1.0)
+            for column, comp in ((0, total), (1, grazing)):
+                integrand = np.where(ok, comp.eval(wi, wo_b)[..., 0] * np.abs(wi[..., 2]) / safe_pdf, 0.0)
+                table[i, j, :, column] = np.einsum("ij,mij->m", quad_w, integrand)
+    table[..., 0] -= table[..., 1]  # A = (A + B) - B
+    return table.reshape(ANISO_DFG_ROUGHNESS, ANISO_DFG_STRENGTH, ANISO_DFG_PHI, ANISO_DFG_COS, 2)
+
+
+def anisotropic_dfg_lookup(table: np.ndarray, cos_theta_o: float, azimuth: float, roughness: float,
+                           strength: float) -> np.ndarray:  # fmt: skip
+    """(A, B) of :func:`anisotropic_dfg_table` as shaders/patterns.glsl reads its 3D texture:
+    linear in sqrt(cos) between texel centres (clamped), linear between the azimuth, roughness and
+    strength nodes; the azimuth folded into [0, pi/2]."""
+
+    def position(value, count):
+        t = float(np.clip(value, 0.0, 1.0)) * (count - 1)
+        low = min(int(np.floor(t)), count - 2)
+        return low, t - low
+
+    folded = np.arctan2(abs(np.sin(azimuth)), abs(np.cos(azimuth))) / (np.pi / 2)
+    x = float(np.clip(np.sqrt(max(cos_theta_o, 0.0)) * ANISO_DFG_COS - 0.5, 0.0, ANISO_DFG_COS - 1.0))
+    x0 = min(int(np.floor(x)), ANISO_DFG_COS - 2)
+    fx = x - x0
+    out = np.zeros(2)
+    r0, fr = position(roughness, ANISO_DFG_ROUGHNESS)
+    s0, fs = position(strength, ANISO_DFG_STRENGTH)
+    p0, fp = position(folded, ANISO_DFG_PHI)
+    for dr, wr in ((0, 1 - fr), (1, fr)):
+        for ds, ws in ((0, 1 - fs), (1, fs)):
+            for dp, wp in ((0, 1 - fp), (1, fp)):
+                row = table[r0 + dr, s0 + ds, p0 + dp]
+                out += wr * ws * wp * (row[x0] * (1 - fx) + row[x0 + 1] * fx)
+    return out
+
+
 def dfg_lookup(table: np.ndarray, cos_theta_o, roughness) -> np.ndarray:
     """Bilinear lookup between texel centres, clamped at the edges (GL_LINEAR + CLAMP_TO_EDGE)."""
     size = table.shape[0]

@@ -37,12 +37,35 @@ uniform sampler2D u_albedo;
 // A glTF lobe whose base colour, metallic or roughness come from textures has its own albedo
 // at every pixel: integral of f cos = F0 A + F90 B with (A, B) from the GGX DFG table
 // (materials/prefilter.py dfg_table; Schlick Fresnel is linear in F0), bsdf.glsl lobe_dfg_albedo;
-// an anisotropic lobe is read at the roughness of its geometric-mean alpha.
+// an anisotropic one (KHR_materials_anisotropy: alpha_x = mix(alpha, 1, strength^2) along local x)
+// from the anisotropic table over the view, roughness and strength (anisotropic_dfg_table): the
+// isotropic table at the geometric-mean alpha was 45 % too bright at strength 1.
 uniform int u_albedo_per_pixel;
 uniform sampler2D u_dfg;                // rg: Beckmann (A, B), ba: GGX; x = cos, y = roughness
+uniform sampler3D u_dfg_anisotropic;    // rg: GGX (A, B); x = cos, y = azimuth, z = roughness, strength
+
+// Twin of materials/prefilter.py anisotropic_dfg_lookup: hardware-linear in sqrt(cos) (texel centres),
+// azimuth and strength (nodes, the strength inside one roughness block), by hand in roughness.
+vec2 anisotropic_dfg(float cos_o, vec2 azimuth, float roughness, float strength) {
+    float folded = atan(abs(azimuth.y), abs(azimuth.x)) / (0.5 * PI);
+    float y = (folded * float(ANISO_DFG_PHI - 1) + 0.5) / float(ANISO_DFG_PHI);
+    float r = clamp(roughness, 0.0, 1.0) * float(ANISO_DFG_ROUGHNESS - 1);
+    float r0 = min(floor(r), float(ANISO_DFG_ROUGHNESS - 2));
+    float s = clamp(strength, 0.0, 1.0) * float(ANISO_DFG_STRENGTH - 1) + 0.5;
+    float depth = float(ANISO_DFG_ROUGHNESS * ANISO_DFG_STRENGTH);
+    float x = sqrt(max(cos_o, 0.0));  // the table is uniform in sqrt(cos theta_o)
+    vec2 low = texture(u_dfg_anisotropic, vec3(x, y, (r0 * float(ANISO_DFG_STRENGTH) + s) / depth)).rg;
+    vec2 high = texture(u_dfg_anisotropic, vec3(x, y, ((r0 + 1.0) * float(ANISO_DFG_STRENGTH) + s) / depth)).rg;
+    return mix(low, high, r - r0);
+}
 
 vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
     if (u_albedo_per_pixel == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
+        if (l.dist == DIST_GGX && l.ax != l.ay) {
+            // scene.frag's glTF lobe: alpha_y = roughness^2, alpha_x = mix(alpha_y, 1, strength^2)
+            float strength = sqrt(max(l.ax - l.ay, 0.0) / max(1.0 - l.ay, 1e-6));
+            return lobe_dfg_albedo(l, anisotropic_dfg(wo.z, wo.xy, sqrt(l.ay), strength), wo.z);
+        }
         vec4 dfg = texture(u_dfg, vec2(wo.z, sqrt(sqrt(l.ax * l.ay))));  // roughness = sqrt(alpha)
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
         return lobe_dfg_albedo(l, ab, wo.z);

@@ -41,6 +41,7 @@ from lobeview.materials.patterns import (
     MAX_ELLIPSE_ANGLE,
     XI_BORDER,
 )
+from lobeview.materials.prefilter import ANISO_DFG_COS, ANISO_DFG_PHI, ANISO_DFG_ROUGHNESS, ANISO_DFG_STRENGTH
 from lobeview.materials.rational import MAX_TERMS as RATIONAL_MAX_TERMS
 from lobeview.materials.rational import graded_exponents
 from lobeview.materials.rsibr import (
@@ -231,6 +232,11 @@ SHADER_CONSTANTS: dict = {
     "RSIBR_ALBEDO_SIZE": RSIBR_ALBEDO_SIZE,
     "RSIBR_MAX_ALBEDO_RATIO": float(RSIBR_MAX_ALBEDO_RATIO),
     "ALBEDO_PHI": ALBEDO_PHI,
+    # normalised lobe-N, textured anisotropic glTF lobes: the anisotropic DFG table's nodes
+    "ANISO_DFG_COS": ANISO_DFG_COS,
+    "ANISO_DFG_PHI": ANISO_DFG_PHI,
+    "ANISO_DFG_ROUGHNESS": ANISO_DFG_ROUGHNESS,
+    "ANISO_DFG_STRENGTH": ANISO_DFG_STRENGTH,
     "ALBEDO_MU": ALBEDO_MU,
     "XI_BORDER": float(XI_BORDER),  # Eq. 4.10
     "MAX_ELLIPSE_ANGLE": float(MAX_ELLIPSE_ANGLE),  # Eq. 4.15 clamp
@@ -276,6 +282,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     # the background's cube: its own unit, since an object's u_radiance may be another texture of
     # the same cube (viewer/cubemap.py residual, without the bright sources the background shows)
     "u_background": 41,
+    "u_dfg_anisotropic": 42,  # normalised lobe-N: (A, B) of anisotropic glTF lobes per pixel
 }
 
 

@@ -32,8 +32,13 @@ from lobeview.core.progress import timed_step
 from lobeview.materials.banks import BanksFit
 from lobeview.materials.lobe_fit import LUMINANCE, LobeMapFit
 from lobeview.materials.prefilter import (
+    ANISO_DFG_COS,
+    ANISO_DFG_PHI,
+    ANISO_DFG_ROUGHNESS,
+    ANISO_DFG_STRENGTH,
     DFG_SIZE,
     SPLIT_SUM_LEVELS,
+    anisotropic_dfg_table,
     dfg_table,
     split_sum_alpha,
     split_sum_profile,
@@ -96,6 +101,44 @@ def dfg_texture(ctx: moderngl.Context, directory: Path | None = None) -> moderng
     tex = ctx.texture((data.shape[1], data.shape[0]), 4, data.tobytes(), dtype="f4")
     tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
     tex.repeat_x = tex.repeat_y = False
+    return tex
+
+
+ANISO_DFG_SHAPE = (ANISO_DFG_ROUGHNESS, ANISO_DFG_STRENGTH, ANISO_DFG_PHI, ANISO_DFG_COS, 2)
+_ANISO_DFG_CACHE: list = []
+
+
+def anisotropic_dfg_texture_data(directory: Path | None = None) -> np.ndarray:
+    """materials/prefilter.py anisotropic_dfg_table, computed once (~20 s here) and kept in
+    ``directory`` like the DFG table."""
+    if not _ANISO_DFG_CACHE:
+        path = Path(directory or cache_dir()) / "dfg-anisotropic-v3.npy"
+
+        def read(file: Path) -> np.ndarray:
+            table = np.load(file, allow_pickle=False)
+            if table.shape != ANISO_DFG_SHAPE or not np.all(np.isfinite(table)):
+                raise ValueError(f"not a finite table of shape {ANISO_DFG_SHAPE}")
+            return table
+
+        table = read_cache_file(path, read, "anisotropic DFG table")
+        if table is None:
+            with timed_step("dfg", "anisotropic DFG table of textured anisotropic glTF lobes (cached afterwards)"):
+                table = anisotropic_dfg_table()
+            write_cache_file(path, lambda handle: np.save(handle, table))
+        _ANISO_DFG_CACHE.append(table)
+    return _ANISO_DFG_CACHE[0]
+
+
+def anisotropic_dfg_texture(ctx: moderngl.Context, directory: Path | None = None) -> moderngl.Texture3D:
+    """The anisotropic DFG table as a 3D texture (x: sqrt(cos), y: azimuth, z: roughness node x
+    ANISO_DFG_STRENGTH + strength node; RG = A, B), linear and edge-clamped: shaders/patterns.glsl
+    anisotropic_dfg interpolates the strength within a roughness block and the roughness by hand."""
+    data = anisotropic_dfg_texture_data(directory).astype(np.float32)
+    depth = ANISO_DFG_ROUGHNESS * ANISO_DFG_STRENGTH
+    texels = np.ascontiguousarray(data.reshape(depth, ANISO_DFG_PHI, ANISO_DFG_COS, 2))
+    tex = ctx.texture3d((ANISO_DFG_COS, ANISO_DFG_PHI, depth), 2, texels.tobytes(), dtype="f4")
+    tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    tex.repeat_x = tex.repeat_y = tex.repeat_z = False
     return tex
 
 

@@ -102,6 +102,7 @@ class SceneShading(ShadingBinder):
         self.white = ctx.texture((1, 1), 3, np.ones(3, np.float32).tobytes(), dtype="f4")
         self._samplers: dict = {}  # glTF sampler state -> moderngl.Sampler (a handful per scene)
         self._dfg = None  # made on first use by a textured glTF lobe under normalised lobe-N
+        self._anisotropic_dfg = None  # ... and by a textured anisotropic one
         self.draw_records = True  # RenderSettings.draw_records
         self._records = BoundedCache(MAX_DRAW_RECORDS)
         self.record_generation = 0  # bumped when what a record holds changes
@@ -149,6 +150,15 @@ class SceneShading(ShadingBinder):
 
             self._dfg = dfg_texture(self.ctx, self.cache_dir)
         return self._dfg
+
+    def _anisotropic_dfg_texture(self) -> moderngl.Texture3D:
+        """The anisotropic DFG table (viewer/prefiltered.py), for textured anisotropic glTF lobes
+        under normalised lobe-N; made on first use (about 20 s, then from the cache)."""
+        if self._anisotropic_dfg is None:
+            from .prefiltered import anisotropic_dfg_texture
+
+            self._anisotropic_dfg = anisotropic_dfg_texture(self.ctx, self.cache_dir)
+        return self._anisotropic_dfg
 
     def _map_sampler(self, slot: TextureSlot | None) -> moderngl.Sampler:
         """Sampler object for a slot's glTF sampler: repeat or clamp-to-edge per axis and the
@@ -264,6 +274,12 @@ class SceneShading(ShadingBinder):
             # Bound even when unused: a sampler left on unit 0 would meet the radiance cube there
             # (two sampler types on one unit fail the draw with GL_INVALID_OPERATION).
             bind_sampler(program, "u_dfg", self._dfg_texture() if per_pixel else self.white)
+            anisotropic = per_pixel and (float(desc.get("anisotropy", 0.0)) > 0.0 or "anisotropy" in mat.textures)
+            bind_sampler(
+                program,
+                "u_dfg_anisotropic",
+                self._anisotropic_dfg_texture() if anisotropic else self.dummy_texture("3d"),
+            )
 
     def _bind_proxy(self, program, proxy, probe_centre) -> None:
         """The reflection proxy (scenes/reflection_proxy.py) as shaders/integrate.glsl PARALLAX
@@ -284,4 +300,6 @@ class SceneShading(ShadingBinder):
             sampler.release()
         if self._dfg is not None:
             self._dfg.release()
+        if self._anisotropic_dfg is not None:
+            self._anisotropic_dfg.release()
         self.white.release()

@@ -120,6 +120,7 @@ class ShadingBinder:
             # its table sampler still needs a 2D texture on its own unit, not unit 0's cube.
             set_uniform(program, "u_albedo_per_pixel", 0)
             bind_sampler(program, "u_dfg", self.dummy_texture("2d"))
+            bind_sampler(program, "u_dfg_anisotropic", self.dummy_texture("3d"))
 
     def _bind_rational(self, program, material: PackedMaterial) -> None:
         """The Rational BRDF's storage buffer (shaders/rational.glsl); only HAS_RATIONAL programs
