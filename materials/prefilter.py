@@ -237,31 +237,37 @@ class _SchlickWeight(MicrofacetReflection):
 DFG_SIZE = 32
 
 
-def dfg_table(kind: str, size: int = DFG_SIZE, order: int = 48) -> np.ndarray:
-    """(size, size, 2) table of (A, B) with  integral f cos dwi = F0 A + B  for a microfacet BRDF
-    with Schlick Fresnel F0 + (1 - F0)(1 - wo.h)^5, rows = perceptual roughness r, columns =
-    cos(theta_o), both sampled at texel centres (i + 1/2) / size (for linear filtering).
-    Integrated like BSDF.albedo: Gauss-Legendre in the sampler's primary space, all view
-    angles of a row at once."""
-    centres = (np.arange(size) + 0.5) / size
+def _dfg_rows(distribution: MicrofacetDistribution, wo: np.ndarray, order: int) -> np.ndarray:
+    """(len(wo), 2): (A + B, B) of one distribution for the views ``wo`` (n, 3), integrated like
+    BSDF.albedo: Gauss-Legendre in the sampler's primary space, every view at once."""
     nodes, weights = np.polynomial.legendre.leggauss(order)
     x = 0.5 * (nodes + 1.0)
     u1, u2 = np.meshgrid(x, x, indexing="ij")
     quad_w = np.outer(0.5 * weights, 0.5 * weights)
+    wo_b = np.broadcast_to(wo[:, None, None, :], (len(wo), order, order, 3))
+    total = MicrofacetReflection(distribution, Fresnel("none"))
+    grazing = _SchlickWeight(distribution, Fresnel("none"))
+    wi = total.sample_wi(u1[None], u2[None], wo_b)
+    pdf = total.pdf(wi, wo_b)
+    ok = pdf > 0.0
+    safe_pdf = np.where(ok, pdf, 1.0)
+    out = np.zeros((len(wo), 2))
+    for column, comp in ((0, total), (1, grazing)):
+        integrand = np.where(ok, comp.eval(wi, wo_b)[..., 0] * np.abs(wi[..., 2]) / safe_pdf, 0.0)
+        out[:, column] = np.einsum("ij,mij->m", quad_w, integrand)
+    return out
+
+
+def dfg_table(kind: str, size: int = DFG_SIZE, order: int = 48) -> np.ndarray:
+    """(size, size, 2) table of (A, B) with  integral f cos dwi = F0 A + B  for a microfacet BRDF
+    with Schlick Fresnel F0 + (1 - F0)(1 - wo.h)^5, rows = perceptual roughness r, columns =
+    cos(theta_o), both sampled at texel centres (i + 1/2) / size (for linear filtering)."""
+    centres = (np.arange(size) + 0.5) / size
     wo = np.stack([np.sqrt(1.0 - centres**2), np.zeros(size), centres], axis=-1)
-    wo_b = np.broadcast_to(wo[:, None, None, :], (size, order, order, 3))
     table = np.zeros((size, size, 2))
     for row, r in enumerate(centres):
-        distribution = MicrofacetDistribution(kind, max(r * r, ALPHA_MIN), max(r * r, ALPHA_MIN))
-        total = MicrofacetReflection(distribution, Fresnel("none"))
-        grazing = _SchlickWeight(distribution, Fresnel("none"))
-        wi = total.sample_wi(u1[None], u2[None], wo_b)
-        pdf = total.pdf(wi, wo_b)
-        ok = pdf > 0.0
-        safe_pdf = np.where(ok, pdf, 1.0)
-        for column, comp in ((0, total), (1, grazing)):
-            integrand = np.where(ok, comp.eval(wi, wo_b)[..., 0] * np.abs(wi[..., 2]) / safe_pdf, 0.0)
-            table[row, :, column] = np.einsum("ij,mij->m", quad_w, integrand)
+        alpha = max(r * r, ALPHA_MIN)
+        table[row] = _dfg_rows(MicrofacetDistribution(kind, alpha, alpha), wo, order)
     table[..., 0] -= table[..., 1]  # A = (A + B) - B
     return table
 
@@ -289,25 +295,12 @@ def anisotropic_dfg_table(order: int = 48) -> np.ndarray:
     phi, cos_t = np.meshgrid(phi_nodes, cos_nodes, indexing="ij")
     _, sin_b = np.meshgrid(phi_nodes, sin_t, indexing="ij")
     wo = np.stack([sin_b * np.cos(phi), sin_b * np.sin(phi), cos_t], axis=-1).reshape(-1, 3)
-    nodes, weights = np.polynomial.legendre.leggauss(order)
-    x = 0.5 * (nodes + 1.0)
-    u1, u2 = np.meshgrid(x, x, indexing="ij")
-    quad_w = np.outer(0.5 * weights, 0.5 * weights)
-    wo_b = np.broadcast_to(wo[:, None, None, :], (len(wo), order, order, 3))
     table = np.zeros((ANISO_DFG_ROUGHNESS, ANISO_DFG_STRENGTH, len(wo), 2))
     for i, roughness in enumerate(np.linspace(0.0, 1.0, ANISO_DFG_ROUGHNESS)):
         alpha = max(roughness * roughness, ALPHA_MIN)
         for j, strength in enumerate(np.linspace(0.0, 1.0, ANISO_DFG_STRENGTH)):
             distribution = MicrofacetDistribution("ggx", alpha + (1.0 - alpha) * strength**2, alpha)
-            total = MicrofacetReflection(distribution, Fresnel("none"))
-            grazing = _SchlickWeight(distribution, Fresnel("none"))
-            wi = total.sample_wi(u1[None], u2[None], wo_b)
-            pdf = total.pdf(wi, wo_b)
-            ok = pdf > 0.0
-            safe_pdf = np.where(ok, pdf, 1.0)
-            for column, comp in ((0, total), (1, grazing)):
-                integrand = np.where(ok, comp.eval(wi, wo_b)[..., 0] * np.abs(wi[..., 2]) / safe_pdf, 0.0)
-                table[i, j, :, column] = np.einsum("ij,mij->m", quad_w, integrand)
+            table[i, j] = _dfg_rows(distribution, wo, order)
     table[..., 0] -= table[..., 1]  # A = (A + B) - B
     return table.reshape(ANISO_DFG_ROUGHNESS, ANISO_DFG_STRENGTH, ANISO_DFG_PHI, ANISO_DFG_COS, 2)
 
