@@ -106,8 +106,9 @@ def _check_writable(out: Path) -> None:
     if out.suffix.lower() != ".glb":
         raise ValueError(f"--out {out}: the baked scene is a .glb file")
     folder = out.parent if str(out.parent) else Path(".")
+    if not folder.is_dir():  # no folders made where a mistyped path points (issue 41)
+        raise ValueError(f"--out {out}: the folder {folder} does not exist (create it first)")
     try:
-        folder.mkdir(parents=True, exist_ok=True)
         probe = folder / f".{out.name}.lobeview-write-test"
         probe.write_bytes(b"")
         probe.unlink()

@@ -110,7 +110,6 @@ def add_arguments(p) -> None:
 
 
 def _write(out: Path, radiance: np.ndarray, args) -> None:
-    out.parent.mkdir(parents=True, exist_ok=True)
     if out.suffix.lower() == ".png":
         from PIL import Image
 
@@ -127,6 +126,11 @@ def run(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise ShotError(f"--out: unsupported output type {out.suffix!r}; use {', '.join(OUTPUT_SUFFIXES)}")
+    folder = out.parent if str(out.parent) else Path(".")
+    if not folder.is_dir():
+        # checked before rendering, and no folder is made: a mistyped path must not create
+        # directories wherever it points (issue 41: /nonexistent/dir appeared at the root)
+        raise ShotError(f"--out {out}: the folder {folder} does not exist (create it first)")
     if args.object is not None and args.scene is not None:
         raise ShotError("give either a SCENE or --object, not both")
     method = resolve_cli_method(args.method, args.lobe_normalize)

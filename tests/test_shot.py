@@ -91,6 +91,21 @@ def test_shot_bad_input_gives_a_clear_error(tmp_path, capsys, extra, message):
     assert message in err and "Traceback" not in err
 
 
+def test_shot_into_a_missing_folder_is_an_error_and_creates_nothing(tmp_path, capsys):
+    """Issue 41: `--out /nonexistent/dir/a.png` returned 0 and made /nonexistent/dir; bake made
+    its folders too."""
+    out = tmp_path / "missing" / "deeper" / "a.png"
+    assert main(["shot", "--object", "sphere", "--size", "16x16", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "does not exist" in err and "Traceback" not in err
+    assert not (tmp_path / "missing").exists()
+    scene = tmp_path / "scene.glb"
+    scene.write_bytes(b"")  # refused before the scene is read
+    assert main(["bake", str(scene), "--out", str(out.with_suffix(".glb"))]) != 0
+    assert "does not exist" in capsys.readouterr().err
+    assert not (tmp_path / "missing").exists()
+
+
 def test_shot_with_nan_and_negative_environment_texels_warns_and_renders(tmp_path, capsys):
     env = np.full((16, 32, 3), 0.5, dtype=np.float32)
     env[3, 4] = np.nan
