@@ -107,7 +107,8 @@ def _check_writable(out: Path) -> None:
         raise ValueError(f"--out {out}: the baked scene is a .glb file")
     folder = out.parent if str(out.parent) else Path(".")
     if not folder.is_dir():  # no folders made where a mistyped path points (issue 41)
-        raise ValueError(f"--out {out}: the folder {folder} does not exist (create it first)")
+        what = "is not a folder" if folder.exists() else "does not exist (create it first)"
+        raise ValueError(f"cannot write --out {out}: {folder} {what}")
     try:
         probe = folder / f".{out.name}.lobeview-write-test"
         probe.write_bytes(b"")

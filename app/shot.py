@@ -130,7 +130,8 @@ def run(args) -> int:
     if not folder.is_dir():
         # checked before rendering, and no folder is made: a mistyped path must not create
         # directories wherever it points (issue 41: /nonexistent/dir appeared at the root)
-        raise ShotError(f"--out {out}: the folder {folder} does not exist (create it first)")
+        what = "is not a folder" if folder.exists() else "does not exist (create it first)"
+        raise ShotError(f"cannot write --out {out}: {folder} {what}")
     if args.object is not None and args.scene is not None:
         raise ShotError("give either a SCENE or --object, not both")
     method = resolve_cli_method(args.method, args.lobe_normalize)
