@@ -1,0 +1,84 @@
+"""glTF numbers the loader used unchecked (issue 43): an emissiveFactor of 2 or 5 numbers reached
+the uniform packing as a struct.error, a MOZ_lightmap intensity of -1 rendered negative radiance
+with no warning. Each is now a warned, documented fallback, and the scene renders."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from test_textures import _textured_gltf
+
+from lobeview.scenes.gltf_loader import load_gltf
+
+GREY = np.full((4, 4, 4), 200, np.uint8)
+
+
+def _load(tmp_path, material: dict, images=()) -> tuple:
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        scene = load_gltf(_textured_gltf(tmp_path, material, list(images)))
+    return scene, "\n".join(str(w.message) for w in caught)
+
+
+@pytest.mark.parametrize(
+    "factor, expected, message",
+    [
+        ([1.0, 0.5], [0.0, 0.0, 0.0], "is not 3 finite numbers"),
+        ([1.0, 0.5, 0.2, 0.1, 0.0], [0.0, 0.0, 0.0], "is not 3 finite numbers"),
+        ([2.0, -1.0, 0.5], [1.0, 0.0, 0.5], "clamped to [0, 1]"),
+    ],
+)
+def test_emissive_factor_is_validated(tmp_path, factor, expected, message):
+    scene, text = _load(tmp_path, {"emissiveFactor": factor})
+    np.testing.assert_array_equal(scene.materials[0].emission, expected)
+    assert message in text
+
+
+def test_emissive_factor_of_the_wrong_type_is_a_clear_error(tmp_path):
+    from lobeview.scenes.gltf_common import GltfError
+
+    with pytest.raises(GltfError, match="cannot parse glTF"):  # pygltflib's own type check
+        _load(tmp_path, {"emissiveFactor": "bright"})
+
+
+def test_emissive_strength_is_validated(tmp_path):
+    material = {
+        "emissiveFactor": [1.0, 1.0, 1.0],
+        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": -3}},
+    }
+    scene, text = _load(tmp_path, material)
+    np.testing.assert_array_equal(scene.materials[0].emission, [1.0, 1.0, 1.0])
+    assert "emissiveStrength -3 is not a finite number >= 0; 1 used" in text
+
+
+def test_bad_lightmap_numbers_are_warned_and_render_no_negative_light(tmp_path):
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    material = {"pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 1.0},
+                "extensions": {"MOZ_lightmap": {"index": 0, "texCoord": 0, "intensity": -1}}}  # fmt: skip
+    scene, text = _load(tmp_path, material, [GREY])
+    assert "MOZ_lightmap intensity -1 is not a finite number >= 0; 1 used" in text
+    assert scene.materials[0].lightmap.intensity == 1.0
+    ctx = create_headless_context()
+    env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=16, name="white")
+    renderer = SceneRenderer(ctx, scene, env, size=(32, 32), progress=False, settings=RenderSettings(cube_face_size=16))
+    try:
+        result = renderer.render(Camera(position=(0.5, 0.5, 1.5), target=(0.5, 0.5, 0.0), fov_y=40.0), "lobe-7")
+        assert result.mask.any() and result.radiance[result.mask].min() > 0.0
+    finally:
+        renderer.release()
+        ctx.release()
+    material["extensions"]["MOZ_lightmap"] = {"index": 0, "texCoord": 7}
+    (tmp_path / "again").mkdir()
+    scene, text = _load(tmp_path / "again", material, [GREY])
+    assert "texCoord 7 is not 0 or 1; TEXCOORD_1 used" in text and scene.materials[0].lightmap.tex_coord == 1
+    material["extensions"]["MOZ_lightmap"] = [0]
+    (tmp_path / "list").mkdir()
+    scene, text = _load(tmp_path / "list", material, [GREY])
+    assert "is no object; ignored" in text and scene.materials[0].lightmap is None
