@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -280,6 +281,26 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method 
 
 
 # -- the reproducing command line ------------------------------------------------------------------
+def lobeview_program() -> list[str]:
+    """How to run this lobeview from any folder: the ``lobeview`` entry point that is running, by
+    its absolute path, else this interpreter with ``-m lobeview``. A printed ``lobeview shot``
+    failed when pasted in a shell without the virtual environment (issue 41)."""
+    script = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
+    if script is not None and script.name == "lobeview" and script.is_file():
+        return [str(script.absolute())]
+    return [sys.executable, "-m", "lobeview"]
+
+
+def default_screenshot_dir() -> Path:
+    """Where F12 writes when --screenshot-dir is not given: a lobeview folder in the user's
+    Pictures folder when there is one, else in the cache folder (not the working folder, which
+    may be a git clone)."""
+    from lobeview.core.paths import cache_dir
+
+    pictures = Path.home() / "Pictures"
+    return pictures / "lobeview" if pictures.is_dir() else cache_dir() / "screenshots"
+
+
 def shot_command(
     camera: Camera,
     size: tuple[int, int],
@@ -296,7 +317,7 @@ def shot_command(
     ``--flag=value`` (a vector starting with '-' is otherwise taken for an option), paths
     quoted for the shell, and the scene options of ``args`` (view's) where they differ from the
     defaults."""
-    parts = ["lobeview", "shot"]
+    parts = [*(shlex.quote(part) for part in lobeview_program()), "shot"]
     if scene is not None:
         parts.append(shlex.quote(str(scene)))
     parts.append(camera.describe())

@@ -46,7 +46,9 @@ def add_arguments(p) -> None:
     p.add_argument("--view", help="start at this scene camera (name or index)")
     p.add_argument("--no-vsync", action="store_true", help="disable vsync")
     add_scene_arguments(p)
-    p.add_argument("--screenshot-dir", default=".", help="where F12 writes screenshots (default .)")
+    p.add_argument("--screenshot-dir", default=None,
+                   help="where F12 writes screenshots (default: ~/Pictures/lobeview, or the cache folder's "
+                        "screenshots/ without a Pictures folder)")  # fmt: skip
     p.add_argument(
         "--path",
         metavar="FILE|builtin",

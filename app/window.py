@@ -23,7 +23,7 @@ from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
 
 from lobeview.app.editor import MaterialEditor
 from lobeview.app.fit_job import FitJob, lockable_parameters
-from lobeview.app.options import scene_renderer_from_args, shot_command
+from lobeview.app.options import default_screenshot_dir, scene_renderer_from_args, shot_command
 from lobeview.app.panel import draw_panel
 from lobeview.app.script import run_due_steps
 from lobeview.app.walk import WalkCamera, walk_speed_for
@@ -261,7 +261,7 @@ class LobeviewWindow(mglw.WindowConfig):
     def _write_screenshot(self, stem: str) -> Path:
         from PIL import Image
 
-        directory = Path(self.args.screenshot_dir)
+        directory = Path(self.args.screenshot_dir) if self.args.screenshot_dir else default_screenshot_dir()
         directory.mkdir(parents=True, exist_ok=True)
         radiance = self.displayed().radiance()
         write_hdr_image(directory / f"{stem}.exr", radiance)

@@ -135,7 +135,7 @@ def test_shot_command_pastes_back_to_the_same_view(tmp_path):
     import argparse
 
     from lobeview.app.cli import build_parser
-    from lobeview.app.options import camera_from_args, shot_command
+    from lobeview.app.options import camera_from_args, lobeview_program, shot_command
     from lobeview.core.errors import parse_size
     from lobeview.viewer.camera import Camera
 
@@ -148,8 +148,9 @@ def test_shot_command_pastes_back_to_the_same_view(tmp_path):
         line = shot_command(camera, (320, 200), method, tmp_path / "out dir" / "s.png", scene="my scene.glb",
                             spp=spp, args=options, materials=tmp_path / "m.json", exposure=-1.5)  # fmt: skip
         argv = shlex.split(line)
-        assert argv[:2] == ["lobeview", "shot"]
-        args = build_parser().parse_args(argv[1:])
+        start = argv.index("shot")
+        assert argv[:start] == lobeview_program()  # pastes anywhere: no reliance on PATH (issue 41)
+        args = build_parser().parse_args(argv[start:])
         assert args.scene == "my scene.glb" and args.out == str(tmp_path / "out dir" / "s.png")
         assert resolve_cli_method(args.method, args.lobe_normalize) == method
         assert parse_size(args.size) == (320, 200) and (args.spp == spp if spp else True)

@@ -200,3 +200,26 @@ def test_object_mesh_files_keep_their_surface(tmp_path, capsys):
         command = shlex.split(printed.split("`")[1])
         assert command[0] == "lobeview" and main(command[1:]) == 0
         assert (tmp_path / "s_own_materials.png").is_file()
+
+
+def test_printed_commands_run_this_lobeview_from_anywhere(tmp_path, monkeypatch):
+    """Issue 41: a printed `lobeview shot ...` failed when pasted without the venv on PATH. The
+    program is the running entry point's absolute path, or this interpreter's -m lobeview."""
+    import sys
+
+    from lobeview.app.options import default_screenshot_dir, lobeview_program
+
+    monkeypatch.setattr(sys, "argv", ["/not/a/file/lobeview"])
+    assert lobeview_program() == [sys.executable, "-m", "lobeview"]
+    script = tmp_path / "bin" / "lobeview"
+    script.parent.mkdir()
+    script.write_text("#!/bin/sh\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "argv", ["bin/lobeview", "view"])
+    assert lobeview_program() == [str(script)]
+    # F12's default folder: the user's Pictures, else the cache; never the working folder
+    monkeypatch.setenv("HOME", str(tmp_path / "home"))
+    monkeypatch.setenv("LOBEVIEW_CACHE", str(tmp_path / "cache"))
+    assert default_screenshot_dir() == tmp_path / "cache" / "screenshots"
+    (tmp_path / "home" / "Pictures").mkdir(parents=True)
+    assert default_screenshot_dir() == tmp_path / "home" / "Pictures" / "lobeview"

@@ -190,7 +190,8 @@ def test_the_command_f12_prints_renders_the_screenshot_again(xvfb, tmp_path, cap
 
     commands = {}
     for line in result.stdout.splitlines():
-        printed = re.match(r"screenshot (.+)\.exr/\.png[^:]*: (lobeview shot .*)$", line)
+        # the printed program is this interpreter's "-m lobeview" here (app/options.py lobeview_program)
+        printed = re.match(r"screenshot (.+)\.exr/\.png[^:]*: .*?(lobeview shot .*)$", line)
         if printed:
             commands[Path(printed.group(1)).name] = printed.group(2)
     assert set(commands) == {"loaded", "edited"}, result.stdout
@@ -232,7 +233,7 @@ def test_view_flies_the_recorded_path_and_walking_takes_over(xvfb, tmp_path):
     assert f"path frame=2 t=7.5000 position={expected}" in result.stdout, result.stdout
     cameras = {}
     for line in result.stdout.splitlines():
-        printed = re.match(r"screenshot .*?(onpath|walked)\.exr/\.png[^:]*: lobeview shot .*--camera=(\S+)", line)
+        printed = re.match(r"screenshot .*?(onpath|walked)\.exr/\.png[^:]*: .*?lobeview shot .*--camera=(\S+)", line)
         if printed:
             cameras[printed.group(1)] = np.array([float(x) for x in printed.group(2).split(",")])
     assert set(cameras) == {"onpath", "walked"}, result.stdout
