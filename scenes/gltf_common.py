@@ -3,6 +3,7 @@ error and warning types and the checks of values read from an untrusted file."""
 
 from __future__ import annotations
 
+import unicodedata
 import warnings
 from pathlib import Path
 
@@ -56,3 +57,33 @@ def _finite(value, default: float) -> float:
     except (TypeError, ValueError):
         return default
     return value if np.isfinite(value) else default
+
+
+# Names from the file are printed (warnings, the scene analysis, the panel): control and format
+# characters are escaped (an ANSI sequence in a node name recoloured the terminal, issue 43) and a
+# name is cut to this many characters.
+NAME_LIMIT = 200
+_UNPRINTABLE = ("Cc", "Cf", "Cs")  # controls (ESC, CR), formats (bidirectional overrides), surrogates
+
+
+def printable_name(value) -> str | None:
+    """A name read from the file as lobeview keeps and prints it (None stays None)."""
+    if value is None:
+        return None
+    text = value if isinstance(value, str) else repr(value)
+    text = "".join(ascii(ch)[1:-1] if unicodedata.category(ch) in _UNPRINTABLE else ch for ch in text)
+    return text if len(text) <= NAME_LIMIT else text[: NAME_LIMIT - 3] + "..."
+
+
+def make_names_printable(gltf) -> None:
+    """Every ``name`` of the parsed file's objects (and of its KHR_lights_punctual lamps) through
+    :func:`printable_name`, once, before anything reads them."""
+    for field in ("nodes", "meshes", "materials", "cameras", "images", "textures", "samplers", "scenes",
+                  "accessors", "bufferViews", "buffers", "skins", "animations"):  # fmt: skip
+        for item in getattr(gltf, field, None) or []:
+            if getattr(item, "name", None) is not None:
+                item.name = printable_name(item.name)
+    lamps = ((gltf.extensions or {}).get("KHR_lights_punctual") or {}) if isinstance(gltf.extensions, dict) else {}
+    for lamp in (lamps.get("lights") or []) if isinstance(lamps, dict) else []:
+        if isinstance(lamp, dict) and lamp.get("name") is not None:
+            lamp["name"] = printable_name(lamp["name"])

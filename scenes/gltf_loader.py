@@ -41,7 +41,7 @@ from lobeview.core.trust import (
 )
 from lobeview.materials.spec import MaterialError
 
-from .gltf_common import FALLBACKS, GltfError, _count, _index, _warn
+from .gltf_common import FALLBACKS, GltfError, _count, _index, _warn, make_names_printable, printable_name
 from .gltf_materials import GLTF_MODEL_EXTENSIONS, _material
 from .hdrio import read_hdr_image
 from .meshes import Mesh, vertex_normals, vertex_tangents
@@ -101,7 +101,8 @@ def _parse(path: Path, limits: Limits):
     if gltf is None or gltf.asset is None:
         raise GltfError(f"{path}: cannot parse glTF (no asset description)")
     if not str(gltf.asset.version).startswith("2"):
-        raise GltfError(f"{path}: glTF version {gltf.asset.version}; only 2.0 is supported")
+        raise GltfError(f"{path}: glTF version {printable_name(gltf.asset.version)}; only 2.0 is supported")
+    make_names_printable(gltf)
     return gltf
 
 

@@ -82,3 +82,23 @@ def test_bad_lightmap_numbers_are_warned_and_render_no_negative_light(tmp_path):
     (tmp_path / "list").mkdir()
     scene, text = _load(tmp_path / "list", material, [GREY])
     assert "is no object; ignored" in text and scene.materials[0].lightmap is None
+
+
+def test_names_with_control_characters_are_escaped(tmp_path):
+    """Issue 43: node names with ANSI escape sequences were written raw to the terminal. Names are
+    escaped (and cut to NAME_LIMIT) once, when the file is parsed."""
+    import json
+
+    from lobeview.scenes.gltf_common import NAME_LIMIT, printable_name
+
+    path = _textured_gltf(tmp_path, {"name": "red\r\u202emat"}, [])
+    doc = json.loads(open(path).read())
+    doc["nodes"][0]["name"] = "\u001b[31mred\u001b[0m node"
+    doc["meshes"][0]["name"] = "m" * 5000
+    open(path, "w").write(json.dumps(doc))
+    scene = load_gltf(path)
+    assert scene.objects[0].name == "\\x1b[31mred\\x1b[0m node"
+    assert scene.materials[0].name == "red\\r\\u202emat"
+    assert printable_name("m" * 5000) == "m" * (NAME_LIMIT - 3) + "..."
+    assert printable_name("Wohnzimmer Süd") == "Wohnzimmer Süd"  # printable text stays as it is
+    assert printable_name(None) is None and printable_name(12) == "12"
