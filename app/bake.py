@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 from lobeview.app.options import add_trust_arguments, check_environment_option, trust_limits
+from lobeview.core.errors import check_output_folder
 
 
 def add_arguments(p) -> None:
@@ -105,10 +106,8 @@ def _check_writable(out: Path) -> None:
     """Refuse an output that cannot be written before an hour of baking, not after it."""
     if out.suffix.lower() != ".glb":
         raise ValueError(f"--out {out}: the baked scene is a .glb file")
+    check_output_folder(out)
     folder = out.parent if str(out.parent) else Path(".")
-    if not folder.is_dir():  # no folders made where a mistyped path points (issue 41)
-        what = "is not a folder" if folder.exists() else "does not exist (create it first)"
-        raise ValueError(f"cannot write --out {out}: {folder} {what}")
     try:
         probe = folder / f".{out.name}.lobeview-write-test"
         probe.write_bytes(b"")

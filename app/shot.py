@@ -25,7 +25,7 @@ from lobeview.app.options import (
     read_material_edits,
     scene_renderer_from_args,
 )
-from lobeview.core.errors import OptionError, parse_size
+from lobeview.core.errors import OptionError, check_output_folder, parse_size
 from lobeview.core.methods import MAX_REFERENCE_SPP, PIXEL_FILTERS, Method, resolve_cli_method
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.builtin_env import load_environment
@@ -126,12 +126,7 @@ def run(args) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in OUTPUT_SUFFIXES:
         raise ShotError(f"--out: unsupported output type {out.suffix!r}; use {', '.join(OUTPUT_SUFFIXES)}")
-    folder = out.parent if str(out.parent) else Path(".")
-    if not folder.is_dir():
-        # checked before rendering, and no folder is made: a mistyped path must not create
-        # directories wherever it points (issue 41: /nonexistent/dir appeared at the root)
-        what = "is not a folder" if folder.exists() else "does not exist (create it first)"
-        raise ShotError(f"cannot write --out {out}: {folder} {what}")
+    check_output_folder(out)
     if args.object is not None and args.scene is not None:
         raise ShotError("give either a SCENE or --object, not both")
     method = resolve_cli_method(args.method, args.lobe_normalize)

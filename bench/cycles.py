@@ -38,10 +38,13 @@ import shlex
 import subprocess
 import sys
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from lobeview.core.errors import parse_size
 
 ASSETS = Path(__file__).resolve().parents[1].parent / "shared" / "assets"
 WORKER = Path(__file__).resolve().parent / "cycles_worker.py"
@@ -117,7 +120,8 @@ def framing(gltf: Path) -> tuple[tuple, tuple]:
     FOV_Y, seen along VIEW_DIRECTION."""
     from lobeview.scenes.gltf_loader import load_gltf
 
-    with _quiet():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the loader's notes about the model are not the bench's business
         scene = load_gltf(gltf)
     low, high = scene.bounds
     centre = (np.asarray(low) + np.asarray(high)) / 2
@@ -125,23 +129,6 @@ def framing(gltf: Path) -> tuple[tuple, tuple]:
     distance = radius / np.sin(np.radians(FOV_Y / 2)) * 1.05
     camera = centre + VIEW_DIRECTION * distance
     return tuple(float(v) for v in camera), tuple(float(v) for v in centre)
-
-
-def _quiet():
-    import warnings
-
-    context = warnings.catch_warnings()
-    context.__enter__()
-    warnings.simplefilter("ignore")
-
-    class _Exit:
-        def __enter__(self):
-            return self
-
-        def __exit__(self, *exc):
-            context.__exit__(*exc)
-
-    return _Exit()
 
 
 def make_cases(names, envs, work: Path) -> list[Case]:
@@ -379,11 +366,6 @@ def _shown(path: Path) -> str:
         return str(path.resolve().relative_to(Path(__file__).resolve().parents[1]))
     except ValueError:
         return str(path)
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    width, _, height = text.partition("x")
-    return int(width), int(height)
 
 
 def main(argv=None) -> int:

@@ -17,3 +17,15 @@ def parse_size(text: str) -> tuple[int, int]:
     if not (1 <= w <= 8192 and 1 <= h <= 8192):
         raise OptionError(f"--size: width and height must be in [1, 8192], got {text!r}")
     return w, h
+
+
+def check_output_folder(out) -> None:
+    """An output file's folder must exist: nothing is created where a mistyped path points
+    (issue 41: ``--out /nonexistent/dir/a.png`` made /nonexistent/dir). Checked before any work."""
+    from pathlib import Path
+
+    out = Path(out)
+    folder = out.parent if str(out.parent) else Path(".")
+    if not folder.is_dir():
+        what = "is not a folder" if folder.exists() else "does not exist (create it first)"
+        raise OptionError(f"cannot write --out {out}: {folder} {what}")

@@ -80,9 +80,10 @@ void main() {
     vec4 normal_texel = sample_map(MAP_NORMAL, v_uv0, v_uv1, vec4(0.5, 0.5, 1.0, 1.0));
     vec4 occlusion_texel = sample_map(MAP_OCCLUSION, v_uv0, v_uv1, vec4(1.0));
     // The occlusion texture averaged over one lightmap texel: how many pixels a lightmap texel
-    // spans here (>= 1; the lightmap's coordinates are uniform-selected, so derivatives are fine).
+    // spans here (>= 1; the condition is uniform, so the derivatives are fine). Without an
+    // occlusion texture the mean is the absent texel's 1 and none of this is needed.
     float lightmap_texel_pixels = 1.0;
-    if (u_lightmap_texcoord >= 0) {
+    if (u_lightmap_texcoord >= 0 && u_map_texcoord[MAP_OCCLUSION] >= 0) {
         vec2 lightmap_texels = (u_lightmap_texcoord == 1 ? v_uv1 : v_uv0) * vec2(textureSize(u_lightmap, 0));
         float texels_per_pixel = max(length(dFdx(lightmap_texels)), length(dFdy(lightmap_texels)));
         lightmap_texel_pixels = clamp(1.0 / max(texels_per_pixel, 1e-6), 1.0, MAX_LIGHTMAP_TEXEL_PIXELS);
