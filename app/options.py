@@ -8,13 +8,13 @@ from __future__ import annotations
 import argparse
 import json
 import shlex
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from lobeview.core.errors import OptionError
 from lobeview.core.methods import GRAMMAR_HELP, Method, method_cli_flags
+from lobeview.core.paths import lobeview_program
 from lobeview.scenes.setup import (
     BUILTIN_SCENES,
     builtin_apartment_rooms,
@@ -281,16 +281,6 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method 
 
 
 # -- the reproducing command line ------------------------------------------------------------------
-def lobeview_program() -> list[str]:
-    """How to run this lobeview from any folder: the ``lobeview`` entry point that is running, by
-    its absolute path, else this interpreter with ``-m lobeview``. A printed ``lobeview shot``
-    failed when pasted in a shell without the virtual environment (issue 41)."""
-    script = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
-    if script is not None and script.name == "lobeview" and script.is_file():
-        return [str(script.absolute())]
-    return [sys.executable, "-m", "lobeview"]
-
-
 def default_screenshot_dir() -> Path:
     """Where F12 writes when --screenshot-dir is not given: a lobeview folder in the user's
     Pictures folder when there is one, else in the cache folder (not the working folder, which

@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.core.errors import parse_size
+from lobeview.core.paths import cache_dir, lobeview_program
 
 ASSETS = Path(__file__).resolve().parents[1].parent / "shared" / "assets"
 WORKER = Path(__file__).resolve().parent / "cycles_worker.py"
@@ -107,11 +108,11 @@ def sphere_gltf(name: str, work: Path) -> Path:
     from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
 
     path = work / f"{name}.glb"
-    if not path.exists():
-        scene = Scene([SceneObject("sphere", uv_sphere(rings=96, segments=192), 0)],
-                      [SceneMaterial(name, validate(SPHERE_MATERIALS[name]))])  # fmt: skip
-        scene.objects[0].planar_reflector = False
-        write_glb(scene, path)
+    # written every run (the work folder persists: an older file could hold another material)
+    scene = Scene([SceneObject("sphere", uv_sphere(rings=96, segments=192), 0)],
+                  [SceneMaterial(name, validate(SPHERE_MATERIALS[name]))])  # fmt: skip
+    scene.objects[0].planar_reflector = False
+    write_glb(scene, path)
     return path
 
 
@@ -171,11 +172,11 @@ def render_lobeview(case: Case, env_path: Path, size, method: str, work: Path, s
     before/after table."""
     out = work / f"{case.name}-{case.environment}-{method}.npy"
     args = shot_arguments(case, env_path, size, method, out, spp)
-    command = [*(lobeview or [sys.executable, "-m", "lobeview"]), "shot", *args]
+    command = [*(lobeview or lobeview_program()), "shot", *args]
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"lobeview shot failed ({done.returncode}): {done.stderr[-2000:]}")
-    return np.load(out).astype(np.float64), shlex.join(["lobeview", "shot", *args])
+    return np.load(out).astype(np.float64), shlex.join(command)
 
 
 def cycles_job(case: Case, env_path: Path, size, spp: int, out: Path) -> dict:
@@ -395,18 +396,18 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
 
-    import tempfile
-
     from lobeview.bench.report import write_image_rows
-    from lobeview.core.paths import cache_dir
 
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
-    with tempfile.TemporaryDirectory(prefix="lobeview-cycles-") as work:
-        cases = make_cases(args.cases, args.envs, Path(work))
-        cache = None if args.no_cache else cache_dir() / "cycles"
-        lobeview = shlex.split(args.lobeview) if args.lobeview else None
-        results = run(cases, args.methods, args.size, args.spp, args.ref_spp, Path(work), args.bpy_python, cache,
-                      lobeview=lobeview)  # fmt: skip
+    # Not a temporary folder: the generated spheres, the white sky, the job files and the images
+    # stay there, so the commands the table prints run when pasted.
+    work = cache_dir() / "cycles-work"
+    work.mkdir(parents=True, exist_ok=True)
+    cases = make_cases(args.cases, args.envs, work)
+    cache = None if args.no_cache else cache_dir() / "cycles"
+    lobeview = shlex.split(args.lobeview) if args.lobeview else None
+    results = run(cases, args.methods, args.size, args.spp, args.ref_spp, work, args.bpy_python, cache,
+                  lobeview=lobeview)  # fmt: skip
     results["lobeview"] = args.lobeview or "this checkout"
     out, figures = Path(args.out), Path(args.figures)
     out.mkdir(exist_ok=True)

@@ -9,6 +9,7 @@ ground floor: imports nothing of lobeview.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 
 #: the checkout's root (the folder holding app/, viewer/, ...): lobeview is installed in editable
@@ -38,3 +39,13 @@ def shared_assets_dir() -> Path | None:
 def bench_results_dir() -> Path:
     """Default output folder of the benchmarks (bench/results in the checkout)."""
     return REPO_ROOT / "bench" / "results"
+
+
+def lobeview_program() -> list[str]:
+    """How to run this lobeview from any folder: the ``lobeview`` entry point that is running, by
+    its absolute path, else this interpreter with ``-m lobeview``. A printed ``lobeview shot``
+    failed when pasted in a shell without the virtual environment (issue 41)."""
+    script = Path(sys.argv[0]) if sys.argv and sys.argv[0] else None
+    if script is not None and script.name == "lobeview" and script.is_file():
+        return [str(script.absolute())]
+    return [sys.executable, "-m", "lobeview"]
