@@ -12,6 +12,7 @@ from imgui_bundle import imgui, implot
 
 from lobeview.app.editor import lobe_plot_values, material_widgets
 from lobeview.app.fit_job import FIT_MODELS, lockable_parameters
+from lobeview.app.frame_pacing import scaled_size
 from lobeview.app.walk import WalkCamera
 from lobeview.core.methods import MAX_PATTERN, method_choice, method_from_choice, realtime_choices
 from lobeview.viewer.camera import Camera
@@ -23,9 +24,12 @@ PANEL_MAX_SAMPLES = 256
 
 def draw_panel(window) -> None:
     imgui.new_frame()
+    window.panel_area.begin_frame()
+    window.widget_rects = {}
     imgui.set_next_window_pos((10, 10), imgui.Cond_.first_use_ever.value)
     imgui.set_next_window_size((360, 620), imgui.Cond_.first_use_ever.value)
     imgui.begin("lobeview")
+    window.panel_area.add_current_window()
     _status(window)
     if imgui.collapsing_header("Rendering", imgui.TreeNodeFlags_.default_open.value):
         _rendering(window)
@@ -38,6 +42,7 @@ def draw_panel(window) -> None:
     if window.message:
         imgui.text_wrapped(window.message)
     imgui.end()
+    window.panel_area.end_frame()
     imgui.render()
     window.ctx.screen.use()
     window.imgui.render(imgui.get_draw_data())
@@ -48,7 +53,20 @@ def _status(window) -> None:
     # fps from the measured interval between frames (ImGui's own estimate assumes 60 Hz at first)
     fps = 1000.0 / window.frame_ms if window.frame_ms > 0 else 0.0
     imgui.text(f"{fps:.1f} fps, frame {window.frame_ms:.1f} ms")
-    imgui.text(f"shading + accumulation {window.pass_ms:.1f} ms, last cube map {window.cube_ms:.1f} ms")
+    if imgui.is_item_hovered():
+        imgui.set_tooltip(
+            "frame: the smoothed interval between the starts of two frames (everything: events, scene, panel)\n"
+            "pass: the last scene pass (real-time frame or refinement batch) with glFinish\n"
+            "cube map: the last cube-map refresh after a material edit"
+        )
+    imgui.text(f"pass {window.pass_ms:.1f} ms, last cube map {window.cube_ms:.1f} ms")
+    scale, (width, height) = window.render_scale.scale, window.wnd.buffer_size
+    target = window.render_scale.target_s
+    if target is None:
+        imgui.text("moving: full resolution (--target-fps 0)")
+    else:
+        w, h = scaled_size((width, height), scale)
+        imgui.text(f"moving: {w}x{h} ({scale:.2f}x) for {1.0 / target:.0f} fps")
     imgui.text_wrapped(window.renderer.probes.residency.report(window.renderer.objects))
     refinement = window.refinement
     if refinement.samples:
@@ -73,10 +91,33 @@ def _report_lines(summary: str, lines: list[str], fold_above: int = 6) -> None:
         imgui.tree_pop()
 
 
+def _method_combo(window, kinds: list[str]) -> tuple[bool, int]:
+    """imgui.combo for the method, with its box and (while open) its items' rectangles recorded
+    in ``window.widget_rects`` (the frame log's: tests click them) and its popup in the panel's
+    area."""
+    current = kinds.index(method_choice(window.method))
+    x, y = imgui.get_cursor_screen_pos()
+    width, height = imgui.calc_item_width(), imgui.get_frame_height()
+    window.widget_rects["method"] = (float(x), float(y), float(width), float(height))
+    chosen = current
+    if imgui.begin_combo("method", kinds[current]):
+        window.panel_area.add_current_window()
+        # A popup's first frame lays it out hidden, at a provisional place: not where it shows.
+        shown = not imgui.is_window_appearing()
+        for k, kind in enumerate(kinds):
+            if imgui.selectable(kind, k == current)[0]:
+                chosen = k
+            (x0, y0), (x1, y1) = imgui.get_item_rect_min(), imgui.get_item_rect_max()
+            if shown:
+                window.widget_rects[f"method: {kind}"] = (float(x0), float(y0), float(x1 - x0), float(y1 - y0))
+        imgui.end_combo()
+    return chosen != current, chosen
+
+
 def _rendering(window) -> None:
     renderer = window.renderer
     kinds = list(realtime_choices())
-    c, k = imgui.combo("method", kinds.index(method_choice(window.method)), kinds)
+    c, k = _method_combo(window, kinds)
     c2, n = _sample_slider("samples N", window.method.kind, window.method.samples)
     c3, window.lobe_normalize = imgui.checkbox("lobe-N energy normalisation", window.lobe_normalize)
     # lobe-N+ring: the thesis' ring at every N instead of the spiral from N = 15 (for comparison)

@@ -23,6 +23,7 @@ import os
 import sys
 from pathlib import Path
 
+from lobeview.app.frame_pacing import DEFAULT_TARGET_FPS, target_frame_seconds
 from lobeview.app.options import (
     add_method_arguments,
     add_scene_arguments,
@@ -45,6 +46,20 @@ def add_arguments(p) -> None:
     add_method_arguments(p, what="real-time method while moving: ")
     p.add_argument("--view", help="start at this scene camera (name or index)")
     p.add_argument("--no-vsync", action="store_true", help="disable vsync")
+    p.add_argument(
+        "--target-fps",
+        type=float,
+        default=DEFAULT_TARGET_FPS,
+        help="while the view changes, render at the resolution that holds this frame rate, upsampled to the window "
+        "(full resolution, then refinement, once it rests); 0: always full resolution "
+        f"(default {DEFAULT_TARGET_FPS:g})",
+    )
+    p.add_argument(
+        "--stats",
+        metavar="FILE",
+        help="frame log: one JSON line per frame (interval, state, render scale and size, pass time, method, "
+        "samples, camera position) written to FILE",
+    )
     add_scene_arguments(p)
     p.add_argument("--screenshot-dir", default=None,
                    help="where F12 writes screenshots (default: ~/Pictures/lobeview, or the cache folder's "
@@ -96,6 +111,14 @@ def run(args) -> int:
         )
         return 2
     width, height = parse_size(args.size)
+    try:
+        target_frame_seconds(args.target_fps)
+    except ValueError as exc:
+        raise OptionError(str(exc)) from None
+    if args.stats:
+        from lobeview.core.errors import check_output_folder
+
+        check_output_folder(args.stats, "--stats")
     method = resolve_cli_method(args.method, args.lobe_normalize)
     check_scene_options(args)
     if method.kind == "reference":

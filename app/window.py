@@ -2,16 +2,20 @@
 progressive refinement policy and screenshots. The panel is app/panel.py, material editing
 app/editor.py, the camera app/walk.py, scripted sessions app/script.py.
 
-While the camera moves, every frame is rendered with the chosen real-time method; as soon as
-the camera, the materials and the method stay still, each frame adds a batch of unbiased
-quasi-random MIS samples at another sub-pixel position to a float accumulation buffer, and the
-display shows the running mean (thesis 4.4.2) once its estimated error is below the real-time
-frame's; refinement stops when converged (viewer/refinement.py). A frame in which nothing changed
-and nothing is refined is not rendered again: the last image is shown.
+While the camera moves, every frame is rendered with the chosen real-time method, at the
+resolution that holds the target frame rate (app/frame_pacing.py, ``--target-fps``), upsampled
+to the window; once the camera, the materials and the method have stayed still for a moment the
+frame is rendered at full resolution, then each frame adds a batch of unbiased quasi-random MIS
+samples at another sub-pixel position to a float accumulation buffer, and the display shows the
+running mean (thesis 4.4.2) once its estimated error is below the real-time frame's; refinement
+stops when converged (viewer/refinement.py). A frame in which nothing changed and nothing is
+refined is not rendered again: the last image is shown. Motion (keys, ``--path``) follows
+wall-clock time, whatever the frame rate.
 """
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,10 +23,18 @@ from pathlib import Path
 import moderngl_window as mglw
 import numpy as np
 from imgui_bundle import imgui, implot
-from moderngl_window.integrations.imgui_bundle import ModernglWindowRenderer
 
 from lobeview.app.editor import MaterialEditor
 from lobeview.app.fit_job import FitJob, lockable_parameters
+from lobeview.app.frame_pacing import (
+    MOTION_STALL_CAP_S,
+    REST_DELAY_S,
+    HeldKeys,
+    RenderScale,
+    scaled_size,
+    target_frame_seconds,
+)
+from lobeview.app.imgui_input import PanelArea, QueuedInputRenderer
 from lobeview.app.options import default_screenshot_dir, scene_renderer_from_args, shot_command
 from lobeview.app.panel import draw_panel
 from lobeview.app.script import run_due_steps
@@ -71,7 +83,9 @@ class LobeviewWindow(mglw.WindowConfig):
         # itself out each start.
         imgui.get_io().set_ini_filename("")
         implot.create_context()
-        self.imgui = ModernglWindowRenderer(self.wnd)
+        self.imgui = QueuedInputRenderer(self.wnd)
+        self.panel_area = PanelArea()  # where the panel was last drawn: clicks there are its
+        self.widget_rects: dict = {}  # a few widgets' rectangles (the frame log's, for tests)
         size = self.wnd.buffer_size
         self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
                                                  self.args)  # fmt: skip
@@ -91,7 +105,13 @@ class LobeviewWindow(mglw.WindowConfig):
         self.exposure = 0.0
         self.tonemap = "aces"
         self.progressive = True
-        self.keys: set = set()
+        self.held_keys = HeldKeys()
+        self.render_scale = RenderScale(target_frame_seconds(self.args.target_fps))
+        self.realtime_scale = 1.0  # the scale the shown real-time frame was rendered at
+        self.last_change = time.perf_counter()  # when the view last changed (the rest delay)
+        self._moving_pass = None  # (scale, seconds) of the last frame rendered while the view changed
+        self.panel_drag = False  # a left or right drag that began on the panel stays the panel's
+        self._pointer = (0.0, 0.0)  # the last pointer position (scroll events carry none)
         self.selected: int | None = next(
             (i for i, o in enumerate(self.renderer.analysis.objects) if o.needs_cube_map), None
         )
@@ -101,6 +121,9 @@ class LobeviewWindow(mglw.WindowConfig):
         self.frame_ms = 0.0  # smoothed interval between frames (what the fps shows)
         self.pass_ms = 0.0
         self.cube_ms = 0.0
+        self.started = time.perf_counter()
+        self.frame_state = "start"
+        self.stats_file = open(self.args.stats, "w", encoding="utf-8") if self.args.stats else None  # noqa: SIM115
         self._last_frame_start = None
         self.camera_index = None
         self.plot_cache = (None, None)
@@ -169,11 +192,15 @@ class LobeviewWindow(mglw.WindowConfig):
     # -- events ----------------------------------------------------------------------------------
     def on_key_event(self, key, action, modifiers):
         self.imgui.key_event(key, action, modifiers)
+        keys = self.wnd.keys
+        if action == keys.ACTION_RELEASE:
+            # Always: a key pressed for the scene and released over a text field must stop.
+            self.held_keys.release(key, time.perf_counter())
+            return
         if imgui.get_io().want_capture_keyboard:
             return
-        keys = self.wnd.keys
         if action == keys.ACTION_PRESS:
-            self.keys.add(key)
+            self.held_keys.press(key, time.perf_counter())
             if key == keys.F12:
                 self.save_screenshot()
             elif key == keys.O:
@@ -186,15 +213,14 @@ class LobeviewWindow(mglw.WindowConfig):
             elif key == keys.Z and modifiers.ctrl:
                 if self.editor.undo_last():
                     self.dirty = True
-        elif action == keys.ACTION_RELEASE:
-            self.keys.discard(key)
 
     def on_mouse_position_event(self, x, y, dx, dy):
         self.imgui.mouse_position_event(x, y, dx, dy)
+        self._pointer = (x, y)
 
     def on_mouse_drag_event(self, x, y, dx, dy):
         self.imgui.mouse_drag_event(x, y, dx, dy)
-        if imgui.get_io().want_capture_mouse:
+        if self.panel_drag:  # a drag that began on the panel (a slider) stays the panel's
             return
         buttons = self.wnd.mouse_states
         if buttons.right or (self.walk.orbit and buttons.left):
@@ -204,13 +230,19 @@ class LobeviewWindow(mglw.WindowConfig):
 
     def on_mouse_scroll_event(self, x_offset, y_offset):
         self.imgui.mouse_scroll_event(x_offset, y_offset)
-        if not imgui.get_io().want_capture_mouse:
+        x, y = self._pointer
+        if not self.panel_area.captures(x, y):
             base = self.default_walk_speed  # the wheel spans 1/30 to 30 times the scene's own speed
             self.walk.speed = float(np.clip(self.walk.speed * (1.2**y_offset), base / 30.0, base * 30.0))
 
     def on_mouse_press_event(self, x, y, button):
         self.imgui.mouse_press_event(x, y, button)
-        if button == 1 and not imgui.get_io().want_capture_mouse:
+        self._pointer = (x, y)
+        self.panel_drag = self.panel_area.captures(x, y)
+        if button == 1 and not self.panel_drag:
+            if self.realtime_scale < 1.0:
+                # The G-buffer is the moving frame's, smaller than the window: pick exactly.
+                self._draw_realtime(self.walk.camera(), 1.0)
             scale = self.wnd.pixel_ratio
             picked = self.renderer.pick(int(x * scale), int(y * scale))
             if picked is not None and not 0 <= picked < len(self.scene.objects):
@@ -224,6 +256,7 @@ class LobeviewWindow(mglw.WindowConfig):
 
     def on_mouse_release_event(self, x, y, button):
         self.imgui.mouse_release_event(x, y, button)
+        self.panel_drag = False
 
     def on_unicode_char_entered(self, char):
         self.imgui.unicode_char_entered(char)
@@ -231,7 +264,7 @@ class LobeviewWindow(mglw.WindowConfig):
     def on_resize(self, width, height):
         self.imgui.resize(width, height)
         size = self.wnd.buffer_size
-        self.renderer.resize(size)
+        self.renderer.resize(scaled_size(size, self.realtime_scale))
         self._release_accumulators()
         self._make_accumulators(size)
         self.dirty = True
@@ -279,7 +312,7 @@ class LobeviewWindow(mglw.WindowConfig):
             self.editor.save(materials)
         command = shot_command(
             self.walk.camera(),
-            self.renderer.size,
+            self.wnd.buffer_size,
             method,
             out=directory / f"{stem}-shot.png",
             scene=self.args.scene,
@@ -319,8 +352,8 @@ class LobeviewWindow(mglw.WindowConfig):
         self.walk = WalkCamera.from_camera(Camera.from_scene_camera(self.camera_path.camera_at(self.path_time)))
         self.walk.speed = speed
         self.dirty = True
-        # Real time between frames (capped so a slow frame does not jump), looping at the end.
-        self.path_time = (self.path_time + min(frame_time, 0.1)) % self.camera_path.duration
+        # Wall-clock time between frames (only a stall is cut: frame_pacing.py), looping at the end.
+        self.path_time = (self.path_time + min(frame_time, MOTION_STALL_CAP_S)) % self.camera_path.duration
 
     def stop_path(self, verb: str = "stopped") -> None:
         """Walking or looking takes the camera over from the path (P pauses it the same way)."""
@@ -328,9 +361,11 @@ class LobeviewWindow(mglw.WindowConfig):
             self.path_paused_at, self.path_time = self.path_time, None
             self.message = f"camera path {verb} at t = {self.path_paused_at:.1f} s (P resumes)"
 
-    def _walk_keys(self, frame_time: float) -> None:
+    def _walk_keys(self, now: float) -> None:
+        """Move by how long each motion key was held since the last frame (wall-clock)."""
         keys = self.wnd.keys
-        direction = np.zeros(3)
+        held = self.held_keys.take(now)
+        displacement = np.zeros(3)  # in direction units x seconds
         for key, vec in (
             (keys.W, (0, 0, 1)),
             (keys.S, (0, 0, -1)),
@@ -339,59 +374,74 @@ class LobeviewWindow(mglw.WindowConfig):
             (keys.E, (0, 1, 0)),
             (keys.Q, (0, -1, 0)),
         ):
-            if key in self.keys:
-                direction += vec
-        if np.any(direction):
+            displacement += np.asarray(vec, float) * held.get(key, 0.0)
+        if np.any(displacement):
             self.stop_path()
             fast = 4.0 if self.wnd.modifiers.shift else 1.0
-            self.walk.move(direction * fast, min(frame_time, 0.1))
+            self.walk.move(displacement * fast, 1.0)
             self.dirty = True
 
     def on_render(self, time_s, frame_time):
         if self.closed:
             return
         t_frame = time.perf_counter()
+        interval = None
         if self._last_frame_start is not None:
-            interval = (t_frame - self._last_frame_start) * 1000.0
-            self.frame_ms += FRAME_TIME_SMOOTHING * (interval - self.frame_ms) if self.frame_ms else interval
+            interval = t_frame - self._last_frame_start
+            interval_ms = 1000.0 * interval
+            self.frame_ms += FRAME_TIME_SMOOTHING * (interval_ms - self.frame_ms) if self.frame_ms else interval_ms
+            if self._moving_pass is not None:  # the last frame was the view changing: fit the next one's size
+                self.render_scale.observe(*self._moving_pass, interval)
+        self._moving_pass = None
         self._last_frame_start = t_frame
         run_due_steps(self, self.script)
-        self._walk_keys(frame_time)
+        self._walk_keys(t_frame)
         self._fly_path(frame_time)
         self.poll_fit()
 
         camera = self.walk.camera()
         refinement = self.refinement
-        t0 = time.perf_counter()
-        if self.dirty:
+        changed = self.dirty
+        if changed:
             for acc in (self.accumulator, *self.halves):
                 acc.reset()
             refinement.reset()
             self.dirty = False
-        refining = refinement.still_frames > 0 and self.progressive and not refinement.finished
-        if refinement.still_frames == 0:
-            self.scene_passes += 1
-            self.renderer.draw_frame(camera, self.method)
-            self.realtime.reset()
-            self.realtime.add(self.renderer.radiance_target, 1.0)
-        elif refining:
+            self.last_change = t_frame
+        t0 = time.perf_counter()
+        if changed:
+            self.frame_state = "moving"
+            scale = self.render_scale.scale
+            self.pass_ms = self._draw_realtime(camera, scale)
+            self._moving_pass = (scale, self.pass_ms / 1000.0)
+        elif self.realtime_scale < 1.0:
+            # At rest (or a screenshot is due): the full-resolution frame once the view has
+            # stayed still for REST_DELAY_S, so that pausing between two key presses costs no
+            # full-size frame; until then the last moving frame is shown.
+            if self.pending_screenshots or t_frame - self.last_change >= REST_DELAY_S:
+                self.frame_state = "rest"
+                self.pass_ms = self._draw_realtime(camera, 1.0)
+            else:
+                self.frame_state = "waiting"
+        elif refinement.still_frames > 0 and self.progressive and not refinement.finished:
+            self.frame_state = "refining"
             # Refinement reads level 0: faces sized for lobe-N are re-rendered at full size, one
             # per frame below, each restarting the accumulation (converges as shot's reference).
             self.renderer.request_full_faces(camera)
             self._refine(camera)
-        # else: nothing changed and nothing is left to refine; the last image is shown again
-        if refinement.still_frames == 0 or refining:
             self.ctx.finish()
             self.pass_ms = (time.perf_counter() - t0) * 1000.0
+            refinement.adapt(self.pass_ms)
+        else:
+            self.frame_state = "idle"  # nothing changed and nothing is left to refine: shown again
         t0 = time.perf_counter()
         refreshed = self.renderer.refresh_one_stale_cube()
         if refreshed is not None:
             self.cube_ms = (time.perf_counter() - t0) * 1000.0
             self.message = f"updated the cube map of {refreshed} ({self.renderer.stale_cube_count} to go)"
             self.dirty = True
-        if refining:
-            refinement.adapt(self.pass_ms)
-        refinement.still_frames += 1
+        if self.realtime_scale == 1.0:
+            refinement.still_frames += 1  # frames since the full-resolution real-time frame
 
         self.ctx.screen.use()
         self.ctx.screen.clear(0.0, 0.0, 0.0)
@@ -399,9 +449,47 @@ class LobeviewWindow(mglw.WindowConfig):
         draw_panel(self)
         while self.pending_screenshots:
             self._write_screenshot(self.pending_screenshots.pop(0))
+        self._log_frame(t_frame, interval)
         self.frame += 1
         if self.quit_requested or (self.args.exit_after and self.frame >= self.args.exit_after):
             self.wnd.close()  # releases GPU objects (on_close): the frame is finished
+
+    def _draw_realtime(self, camera, scale: float) -> float:
+        """The real-time frame at ``scale`` times the window's size, upsampled (bilinear) into the
+        shown real-time image; returns its milliseconds (with glFinish)."""
+        t0 = time.perf_counter()
+        size = scaled_size(self.wnd.buffer_size, scale)
+        if self.renderer.size != size:
+            self.renderer.resize(size)
+        self.scene_passes += 1
+        self.renderer.draw_frame(camera, self.method)
+        self.realtime.reset()
+        self.realtime.add(self.renderer.radiance_target, 1.0)
+        self.ctx.finish()
+        self.realtime_scale = scale
+        return (time.perf_counter() - t0) * 1000.0
+
+    def _log_frame(self, t_frame: float, interval: float | None) -> None:
+        """One JSON line per frame into ``--stats FILE`` (the frame log: docs/guide.md)."""
+        if self.stats_file is None:
+            return
+        record = {
+            "frame": self.frame,
+            "t": round(t_frame - self.started, 4),
+            "interval_ms": None if interval is None else round(1000.0 * interval, 2),
+            "state": self.frame_state,
+            "pass_ms": round(self.pass_ms, 2),
+            "render_scale": self.realtime_scale,
+            "render_size": list(self.renderer.size),
+            "method": str(self.method),
+            "spp": self.refinement.samples,
+            "camera": [round(float(v), 5) for v in self.walk.position],
+            "walk_speed": self.walk.speed,
+            "path_time": self.path_time,
+            "widgets": {name: [round(v, 1) for v in rect] for name, rect in self.widget_rects.items()},
+        }
+        self.stats_file.write(json.dumps(record) + "\n")
+        self.stats_file.flush()
 
     def _refine(self, camera) -> None:
         """One refinement pass: a batch of reference samples at the next sub-pixel position into
@@ -429,6 +517,8 @@ class LobeviewWindow(mglw.WindowConfig):
 
     def on_close(self):
         self.closed = True
+        if self.stats_file is not None:
+            self.stats_file.close()
         if self.fit_job is not None:
             self.fit_job.cancel()
         self._release_accumulators()

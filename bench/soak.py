@@ -103,8 +103,8 @@ def soak_script(
 XVFB_ATTEMPTS = 20  # displays tried from the preferred one on (a stale server may hold one)
 
 
-def start_xvfb(display_number: int) -> tuple[subprocess.Popen, str]:
-    """A virtual X server (1024x768x24, no TCP) for the window tests, on ``:display_number`` or
+def start_xvfb(display_number: int, screen: str = "1024x768x24") -> tuple[subprocess.Popen, str]:
+    """A virtual X server (``screen``, no TCP) for the window tests, on ``:display_number`` or
     the next free display: one left behind by a killed run keeps its lock file and makes a new
     server on the same number exit at once."""
     proc = None
@@ -113,7 +113,7 @@ def start_xvfb(display_number: int) -> tuple[subprocess.Popen, str]:
             continue
         display = f":{number}"
         proc = subprocess.Popen(
-            ["Xvfb", display, "-screen", "0", "1024x768x24", "-nolisten", "tcp"],
+            ["Xvfb", display, "-screen", "0", screen, "-nolisten", "tcp"],
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
         )

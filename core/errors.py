@@ -19,7 +19,7 @@ def parse_size(text: str) -> tuple[int, int]:
     return w, h
 
 
-def check_output_folder(out) -> None:
+def check_output_folder(out, option: str = "--out") -> None:
     """An output file's folder must exist: nothing is created where a mistyped path points
     (issue 41: ``--out /nonexistent/dir/a.png`` made /nonexistent/dir). Checked before any work."""
     from pathlib import Path
@@ -28,4 +28,4 @@ def check_output_folder(out) -> None:
     folder = out.parent if str(out.parent) else Path(".")
     if not folder.is_dir():
         what = "is not a folder" if folder.exists() else "does not exist (create it first)"
-        raise OptionError(f"cannot write --out {out}: {folder} {what}")
+        raise OptionError(f"cannot write {option} {out}: {folder} {what}")

@@ -52,10 +52,13 @@ def xvfb():
 def run_scripted_view(display: str, folder: Path, script: list, args: list, exit_after: int, timeout: int = 600):
     """``lobeview view ARGS`` on the X display ``display`` driven by ``script`` (written to
     ``folder``/script.json; screenshots go to ``folder``), stopped after ``exit_after`` frames;
-    asserts it exits cleanly and returns the completed process (stdout and stderr as text)."""
+    asserts it exits cleanly and returns the completed process (stdout and stderr as text).
+    ``--target-fps=0`` (ARGS may override it): scripts count frames, so every frame is rendered
+    at full resolution, as on a machine fast enough for the target; tests/test_window_input.py
+    covers the frame-rate target."""
     (folder / "script.json").write_text(json.dumps(script))
     result = subprocess.run(
-        [sys.executable, "-m", "lobeview", "view", *args, f"--script={folder / 'script.json'}",
+        [sys.executable, "-m", "lobeview", "view", "--target-fps=0", *args, f"--script={folder / 'script.json'}",
          f"--screenshot-dir={folder}", f"--exit-after={exit_after}"],
         env={**os.environ, "DISPLAY": display}, capture_output=True, text=True, timeout=timeout,
     )  # fmt: skip

@@ -10,20 +10,14 @@ refinement framebuffer, or indexes past the object list, fails here."""
 
 from __future__ import annotations
 
-import os
-import queue
-import re
-import subprocess
-import sys
-import threading
 import time
 
 import numpy as np
 import pytest
+from xviewer import XViewer
 
 SIZE = (900, 500)
 PANEL_RIGHT = 390  # the ImGui panel covers x < 370 (app/panel.py: pos 10, width 360)
-PICKED = re.compile(r"^picked (None|'(.*)') at \(([-\d.]+), ([-\d.]+)\)$")
 
 xlib = pytest.importorskip("Xlib", reason="python-xlib (dev dependency) drives the pointer")
 
@@ -72,129 +66,12 @@ def _click_targets():
     return targets
 
 
-class _Viewer:
-    """The viewer process, its stdout as a queue of lines, and an X connection to drive it."""
-
-    def __init__(self, display: str, extra: list[str]):
-        import tempfile
-
-        from Xlib import display as xdisplay
-
-        # stderr into a file: a pipe nobody reads fills up with progress lines and blocks the viewer.
-        self.stderr = tempfile.TemporaryFile("w+")
-        self.proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "lobeview",
-                "view",
-                "--view",
-                "overview",
-                "--size",
-                f"{SIZE[0]}x{SIZE[1]}",
-                "--face-size",
-                "16",
-                "--no-vsync",
-                *extra,
-            ],
-            env={**os.environ, "DISPLAY": display},
-            stdout=subprocess.PIPE,
-            stderr=self.stderr,
-            text=True,
-        )
-        self.lines: queue.Queue = queue.Queue()
-        threading.Thread(target=self._pump, daemon=True).start()
-        self.x = xdisplay.Display(display)
-        self.window = self._find_window(timeout=600)
-
-    def stderr_tail(self) -> str:
-        self.stderr.seek(0)
-        return self.stderr.read()[-3000:]
-
-    def _pump(self):
-        for line in self.proc.stdout:
-            self.lines.put(line.rstrip("\n"))
-
-    def _find_window(self, timeout: float):
-        root = self.x.screen().root
-        deadline = time.time() + timeout
-        while time.time() < deadline:
-            if self.proc.poll() is not None:
-                raise AssertionError(f"viewer exited early: {self.stderr_tail()}")
-            for child in root.query_tree().children:
-                name = child.get_wm_name()
-                if isinstance(name, str) and name.startswith("lobeview") and child.get_attributes().map_state:
-                    return child
-            time.sleep(0.5)
-        raise AssertionError("no viewer window appeared")
-
-    def wait_for(self, pattern: str, timeout: float = 300.0) -> re.Match:
-        deadline = time.time() + timeout
-        while time.time() < deadline:
-            try:
-                line = self.lines.get(timeout=1.0)
-            except queue.Empty:
-                if self.proc.poll() is not None:
-                    raise AssertionError(f"viewer died: {self.stderr_tail()}") from None
-                continue
-            match = re.search(pattern, line)
-            if match:
-                return match
-        raise AssertionError(f"no line matching {pattern!r} within {timeout} s")
-
-    def _pointer_to(self, x: int, y: int):
-        from Xlib import X
-        from Xlib.ext import xtest
-
-        origin = self.window.translate_coords(self.x.screen().root, 0, 0)
-        # translate_coords(root -> window) gives minus the window's origin on the screen.
-        xtest.fake_input(self.x, X.MotionNotify, x=x - origin.x, y=y - origin.y)
-        self.x.sync()
-
-    def click(self, x: int, y: int) -> str | None:
-        from Xlib import X
-        from Xlib.ext import xtest
-
-        self._pointer_to(x, y)
-        time.sleep(0.05)
-        xtest.fake_input(self.x, X.ButtonPress, 1)
-        self.x.sync()
-        time.sleep(0.05)
-        xtest.fake_input(self.x, X.ButtonRelease, 1)
-        self.x.sync()
-        match = PICKED.match(self.wait_for(r"^picked ").string)
-        assert match and abs(float(match.group(3)) - x) <= 1 and abs(float(match.group(4)) - y) <= 1, match
-        return match.group(2)
-
-    def key(self, keysym_name: str, press: bool = True, release: bool = True):
-        from Xlib import XK, X
-        from Xlib.ext import xtest
-
-        code = self.x.keysym_to_keycode(XK.string_to_keysym(keysym_name))
-        if press:
-            xtest.fake_input(self.x, X.KeyPress, code)
-        if release:
-            xtest.fake_input(self.x, X.KeyRelease, code)
-        self.x.sync()
-
-    def close(self) -> int:
-        if self.proc.poll() is None:
-            self._pointer_to(SIZE[0] - 20, SIZE[1] - 20)  # keyboard focus follows the pointer
-            self.key("Escape")
-            try:
-                self.proc.wait(timeout=120)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-        self.x.close()
-        return self.proc.wait()
-
-
 @pytest.fixture(scope="module")
 def targets():
     return _click_targets()
 
 
-def _click_all(viewer: _Viewer, targets, state: str) -> list[str]:
+def _click_all(viewer: XViewer, targets, state: str) -> list[str]:
     wrong = []
     for name, x, y in targets:
         picked = viewer.click(x, y)
@@ -211,7 +88,7 @@ def test_every_object_is_picked_by_a_real_click_in_every_state(xvfb, targets, tm
     script.write_text('[{"frame": 12, "action": "stats"}]')
     wrong = []
     for mirrors in ("--mirrors", "--no-mirrors"):
-        viewer = _Viewer(xvfb, [mirrors, "--script", str(script)])
+        viewer = XViewer(xvfb, [mirrors, "--script", str(script)], SIZE)
         try:
             viewer.wait_for(r"^stats frame=12 ")
             time.sleep(2.0)  # still camera: the refined image is on screen
