@@ -22,25 +22,43 @@ SAMPLE_SLIDER_MAX = {"lobe": MAX_PATTERN}  # fis-N / mc-N: PANEL_MAX_SAMPLES
 PANEL_MAX_SAMPLES = 256
 
 
+PANEL_WIDTH = 430  # wide enough for every label beside its widget (LABEL_WIDTH)
+LABEL_WIDTH = 170  # pixels right of each slider, combo and input for its label
+
+
 def draw_panel(window) -> None:
+    """The panel: status lines on top, then tabs (Rendering, Objects, Material), so that each
+    section shows without scrolling whatever the scene's size; a click that selects an object in
+    the scene brings the Material tab forward."""
     imgui.new_frame()
     window.panel_area.begin_frame()
     window.widget_rects = {}
     imgui.set_next_window_pos((10, 10), imgui.Cond_.first_use_ever.value)
-    imgui.set_next_window_size((360, 620), imgui.Cond_.first_use_ever.value)
+    height = max(min(window.wnd.size[1] - 20, 900), 200)
+    imgui.set_next_window_size((PANEL_WIDTH, height), imgui.Cond_.first_use_ever.value)
     imgui.begin("lobeview")
     window.panel_area.add_current_window()
+    imgui.push_item_width(-LABEL_WIDTH)
     _status(window)
-    if imgui.collapsing_header("Rendering", imgui.TreeNodeFlags_.default_open.value):
-        _rendering(window)
-    if imgui.collapsing_header("Objects", imgui.TreeNodeFlags_.default_open.value):
-        for i, needs in enumerate(window.renderer.analysis.objects):
-            if imgui.selectable(f"{needs.name}  [{needs.kind}]##{i}", window.selected == i)[0]:
-                window.select(i)
-    if window.selected is not None and imgui.collapsing_header("Material", imgui.TreeNodeFlags_.default_open.value):
-        _material(window)
     if window.message:
         imgui.text_wrapped(window.message)
+    if imgui.begin_tab_bar("sections"):
+        if imgui.begin_tab_item("Rendering")[0]:
+            _rendering(window)
+            imgui.end_tab_item()
+        if imgui.begin_tab_item("Objects")[0]:
+            for i, needs in enumerate(window.renderer.analysis.objects):
+                if imgui.selectable(f"{needs.name}  [{needs.kind}]##{i}", window.selected == i)[0]:
+                    window.select(i)
+            imgui.end_tab_item()
+        if window.selected is not None:
+            flags = imgui.TabItemFlags_.set_selected.value if window.show_material_tab else 0
+            window.show_material_tab = False
+            if imgui.begin_tab_item("Material", None, flags)[0]:
+                _material(window)
+                imgui.end_tab_item()
+        imgui.end_tab_bar()
+    imgui.pop_item_width()
     imgui.end()
     window.panel_area.end_frame()
     imgui.render()
@@ -83,11 +101,11 @@ def _report_lines(summary: str, lines: list[str], fold_above: int = 6) -> None:
     """A report, folded under a one-line summary when it is long (the apartment's 19 reflectors)."""
     if len(lines) <= fold_above:
         for line in lines:
-            imgui.text(line)
+            imgui.text_wrapped(line)
         return
     if imgui.tree_node(summary):
         for line in lines:
-            imgui.text(line)
+            imgui.text_wrapped(line)
         imgui.tree_pop()
 
 
@@ -137,15 +155,22 @@ def _rendering(window) -> None:
         renderer.configure(frustum_culling=culling)
         window.dirty = True  # the image is the same; the counts below are the next frame's
     for line in renderer.draw_report:
-        imgui.text(line)
+        imgui.text_wrapped(line)
     if window.camera_path is not None:
         state = f"t = {window.path_time:.1f}" if window.path_time is not None else "paused"
-        imgui.text(f"camera path: {state} of {window.camera_path.duration:.1f} s (P: pause / resume)")
+        imgui.text_wrapped(f"camera path: {state} of {window.camera_path.duration:.1f} s (P: pause / resume)")
     scene = window.scene
     if scene.cameras:
-        names = [c.name for c in scene.cameras]
-        c, pick = imgui.combo("scene camera", -1 if window.camera_index is None else window.camera_index, names)
-        if c:
+        names = [c.name or f"camera {i}" for i, c in enumerate(scene.cameras)]
+        preview = "(walking: choose one)" if window.camera_index is None else names[window.camera_index]
+        pick = None
+        if imgui.begin_combo("scene camera", preview):
+            window.panel_area.add_current_window()
+            for i, name in enumerate(names):
+                if imgui.selectable(f"{name}##{i}", i == window.camera_index)[0]:
+                    pick = i
+            imgui.end_combo()
+        if pick is not None:
             window.camera_index = pick
             cam = scene.cameras[pick]
             camera = Camera.from_scene_camera(cam)

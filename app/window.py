@@ -39,6 +39,7 @@ from lobeview.app.options import default_screenshot_dir, scene_renderer_from_arg
 from lobeview.app.panel import draw_panel
 from lobeview.app.script import run_due_steps
 from lobeview.app.walk import WalkCamera, walk_speed_for
+from lobeview.core import progress
 from lobeview.core.methods import Method
 from lobeview.scenes.hdrio import write_hdr_image
 from lobeview.scenes.setup import scene_view
@@ -87,6 +88,14 @@ class LobeviewWindow(mglw.WindowConfig):
         self.panel_area = PanelArea()  # where the panel was last drawn: clicks there are its
         self.widget_rects: dict = {}  # a few widgets' rectangles (the frame log's, for tests)
         size = self.wnd.buffer_size
+        self.started = time.perf_counter()
+        self.realtime = None  # no image yet: the loading overlay draws on a plain background
+        self._overlay_shown_at = 0.0
+        # Every long step (scene set-up, cube maps, prefiltered maps built on first use) draws the
+        # loading overlay from the first frame on (core/progress.py report); removed on close.
+        self._listening = progress.listening(self.show_progress)
+        self._listening.__enter__()
+        self.show_progress("scene renderer", None)
         self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
                                                  self.args)  # fmt: skip
         self._make_accumulators(size)
@@ -110,6 +119,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.realtime_scale = 1.0  # the scale the shown real-time frame was rendered at
         self.last_change = time.perf_counter()  # when the view last changed (the rest delay)
         self._moving_pass = None  # (scale, seconds) of the last frame rendered while the view changed
+        self.show_material_tab = False
         self.panel_drag = False  # a left or right drag that began on the panel stays the panel's
         self._pointer = (0.0, 0.0)  # the last pointer position (scroll events carry none)
         self.selected: int | None = next(
@@ -121,7 +131,6 @@ class LobeviewWindow(mglw.WindowConfig):
         self.frame_ms = 0.0  # smoothed interval between frames (what the fps shows)
         self.pass_ms = 0.0
         self.cube_ms = 0.0
-        self.started = time.perf_counter()
         self.frame_state = "start"
         self.stats_file = open(self.args.stats, "w", encoding="utf-8") if self.args.stats else None  # noqa: SIM115
         self._last_frame_start = None
@@ -249,6 +258,7 @@ class LobeviewWindow(mglw.WindowConfig):
                 picked = None  # a stale or foreign id buffer value: select nothing rather than crash
             if picked is not None:
                 self.select(picked)
+                self.show_material_tab = True  # the panel brings its editor forward
             # One line per click: what was picked (users see what a click did; the click test
             # under Xvfb reads it).
             name = self.scene.objects[picked].name if picked is not None else None
@@ -377,6 +387,7 @@ class LobeviewWindow(mglw.WindowConfig):
             displacement += np.asarray(vec, float) * held.get(key, 0.0)
         if np.any(displacement):
             self.stop_path()
+            self.camera_index = None  # no longer at the scene camera the panel names
             fast = 4.0 if self.wnd.modifiers.shift else 1.0
             self.walk.move(displacement * fast, 1.0)
             self.dirty = True
@@ -515,8 +526,41 @@ class LobeviewWindow(mglw.WindowConfig):
         if refinement.estimate is not None:
             self.blend.blend(self.accumulator, self.realtime, self.shown)
 
+    def show_progress(self, what: str, fraction: float | None) -> None:
+        """The loading overlay: what lobeview is doing (and how far) over the last image, drawn
+        and shown at once from inside the long step (at most 10 times a second). Events wait
+        until the step ends (the handlers need the state the step builds)."""
+        now = time.perf_counter()
+        window = getattr(self.wnd, "_window", None)  # pyglet's: flip without dispatching events
+        if getattr(self, "closed", False) or window is None or now - self._overlay_shown_at < 0.1:
+            return
+        self._overlay_shown_at = now
+        ctx = self.ctx
+        ctx.screen.use()  # report() comes between passes: each pass binds its own target first
+        ctx.viewport = (0, 0, *self.wnd.buffer_size)
+        ctx.screen.clear(0.12, 0.12, 0.14)
+        if self.realtime is not None:
+            self.displayed().show(ctx.screen, (0, 0, *self.wnd.buffer_size), self.exposure, self.tonemap)
+        imgui.new_frame()
+        width, height = self.wnd.size
+        imgui.set_next_window_pos((width / 2, height / 2), imgui.Cond_.always.value, (0.5, 0.5))
+        imgui.set_next_window_size((min(560, width - 20), 0))
+        flags = imgui.WindowFlags_.no_decoration.value | imgui.WindowFlags_.no_inputs.value
+        imgui.begin("loading", None, flags)
+        imgui.text(f"lobeview: {self.session.scene_path.name} ({now - self.started:.0f} s)")
+        imgui.text_wrapped(what)
+        if fraction is None:
+            imgui.progress_bar(-1.0 * imgui.get_time(), (-1, 0), "working ...")  # indeterminate
+        else:
+            imgui.progress_bar(float(min(max(fraction, 0.0), 1.0)), (-1, 0))
+        imgui.end()
+        imgui.render()
+        self.imgui.render(imgui.get_draw_data())
+        window.flip()
+
     def on_close(self):
         self.closed = True
+        self._listening.__exit__(None, None, None)
         if self.stats_file is not None:
             self.stats_file.close()
         if self.fit_job is not None:

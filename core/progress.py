@@ -20,10 +20,34 @@ def quiet() -> bool:
     return os.environ.get("LOBEVIEW_QUIET", "") not in ("", "0")
 
 
+_listeners: list = []
+
+
+@contextlib.contextmanager
+def listening(listener):
+    """While inside, ``listener(what, fraction)`` hears every :func:`report` (the window's loading
+    overlay draws it: issue 41). ``fraction``: 0..1 done, or None when unknown."""
+    _listeners.append(listener)
+    try:
+        yield
+    finally:
+        _listeners.remove(listener)
+
+
+def report(what: str, fraction: float | None = None) -> None:
+    """Tell the listeners (if any) that a long step is under way, and how far. Call it between
+    GPU passes, never inside one: the window's listener draws to the screen."""
+    for listener in list(_listeners):
+        listener(what, fraction)
+
+
 @contextlib.contextmanager
 def timed_step(tag: str, what: str, announce: bool = False):
     """Time a step; print ``[tag] what: done in X s`` when it took longer than SLOW_STEP_SECONDS,
-    and ``[tag] what ...`` first when ``announce`` (the caller knows it is long)."""
+    and ``[tag] what ...`` first when ``announce`` (the caller knows it is long; the listeners
+    hear of it too)."""
+    if announce:
+        report(what)
     if announce and not quiet():
         print(f"[{tag}] {what} ...", file=sys.stderr, flush=True)
     t0 = time.perf_counter()

@@ -22,6 +22,7 @@ import numpy as np
 from lobeview.core.cache import read_cache_file, write_cache_file
 from lobeview.core.cube_layout import face_point_directions
 from lobeview.core.methods import Method
+from lobeview.core.progress import report
 
 from .camera import outside_frustum_many, perspective
 from .cubemap import RadianceCube
@@ -218,8 +219,12 @@ class CubeBake:
         faces = {}
         for bounce in range(self.bounces):
             t0 = time.perf_counter()
-            for i in wanted:
+            for k, i in enumerate(wanted):
                 obj = objects[i]
+                report(
+                    f"cube maps, bounce {bounce + 1} of {self.bounces}: {obj.name} ({k + 1} of {len(wanted)})",
+                    (bounce * len(wanted) + k) / (self.bounces * len(wanted)),
+                )
                 faces[i] = self.render_faces(obj.probe_centre, obj.probe_exclude, specular=bounce > 0, size=sizes[i])
             for i in wanted:
                 self._install(objects[i], faces[i])

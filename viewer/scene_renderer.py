@@ -26,6 +26,7 @@ import moderngl
 import numpy as np
 
 from lobeview.core.methods import Method
+from lobeview.core.progress import report
 from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
@@ -65,6 +66,7 @@ class SceneRenderer(RendererBase):
         self.timings: dict = {}
         t0 = time.perf_counter()
         self.cache_dir = Path(cache_dir) if cache_dir else None
+        report(f"environment {environment.name}: irradiance, radiance cube, bright sources")
         # diffuse light of objects without a lightmap: the environment's exact irradiance per normal
         self.environment_irradiance = irradiance_cube(ctx, environment)
         shading = SceneShading(ctx, ProgramCache(ctx), scene, self.environment_irradiance, settings.mip_filter,
@@ -80,6 +82,7 @@ class SceneRenderer(RendererBase):
         analysis = analyse(
             scene, settings.cube_face_size, settings.lobe_width_cubes, settings.reflector_cubes_on_demand
         )
+        report(f"materials and geometry of {len(scene.objects)} objects")
         packed = [pack_material(build_bsdf(scene.materials[obj.material].desc)) for obj in scene.objects]
         self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, analysis)
         shading.draw_records = settings.draw_records
@@ -96,6 +99,7 @@ class SceneRenderer(RendererBase):
         t0 = time.perf_counter()
         self.bounds = scene.bounds  # static scene: near/far planes are fitted to it every frame
         env_hash = hashlib.sha256(environment.image.tobytes()).hexdigest()[:16]
+        report("cube maps", 0.0)
         self.probes = CubeProbes(ctx, self.drawer, settings, env_hash, progress, self.cache_dir)
         self.mirror_passes = MirrorPasses(ctx, self.drawer, self.probes, settings.mip_filter)
         self.drawer.mirror_passes = self.mirror_passes
