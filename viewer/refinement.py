@@ -19,11 +19,20 @@ the real-time frame and w the halves' sample counts. For independent halves with
 variance s^2, Var(A - B) = s^2 (1/w_A + 1/w_B) and Var(M) = s^2 / (w_A + w_B), hence the
 factor; E|R - M|^2 = bias(R)^2 + Var(M), hence the subtraction. The same two sums taken over a
 LOCAL_WINDOW x LOCAL_WINDOW neighbourhood of each pixel give local noise^2 n and bias^2 b, and
-the window shows per pixel mix(R, M, b / (b + n)): the convex combination of least expected
-squared error. Where the real-time method is exact (lightmapped diffuse) the mean is taken
-(n = b = 0: weight 1); where 8 samples are grainier than lobe-11's smooth bias (a glossy gold
-torus) the real-time frame stays until the mean is the better one, so standing still never
-makes the image worse. Refinement stops when the noise falls below CONVERGED_NOISE (a quarter
+the window shows per pixel mix(R, M, b / (b + k n)), k = noise_caution(spp) = 1 + 64 / spp.
+With exact n and b, k = 1 would be the convex combination of least expected squared error; but
+n is estimated from the samples themselves, and where they are heavy-tailed (a few bright paths
+on a glossy gold torus or a frosted pane) most neighbourhoods have not met a bright path yet, so
+n is typically underestimated, the more so the fewer the samples, and the mean is chosen too
+early: with k = 1 the first estimate (32 spp) showed the demo's torus and pane 17 % worse than
+the real-time frame (display RMS x 255: 15.3 against 13.0 with batches of 4 samples, 14.8 with
+batches of 1; tests/test_refinement_improves.py). Measured there for k = 1, 1.5, 2, 3 at 32, 64
+and 128 spp and batches of 1, 2, 4 and 8: large k is best at 32 spp, 1.5-2 at 64, 1-1.5 at 128,
+which 1 + 64 / spp follows (torus and pane with batches of 4: 12.4, 11.3, 9.9 against the plain
+rule's 15.3, 11.5, 9.7; the whole image 3.3, 2.2, 1.8, as with k = 1). For any true n, b a blend
+with weight b / (b + k n), k >= 1, is still better than either image alone (its error
+bn(b + k^2 n) / (b + k n)^2 is below both). Where the real-time method is exact (lightmapped
+diffuse) the mean is taken (n = b = 0: weight 1). Refinement stops when the noise falls below CONVERGED_NOISE (a quarter
 of an 8-bit step) or each half has read the whole Sobol table (HALF_SAMPLE_BUDGET: beyond it a
 half would repeat its points). The estimates are taken when the sample count has doubled since
 the last one (a read back of three frames).
@@ -47,9 +56,15 @@ MAX_BATCH = 64
 # tails make the estimate optimistic (measured on the demo: 6.7 estimated vs 9.2 true at 8 spp)
 FIRST_ESTIMATE_AT = 32
 LOCAL_WINDOW = 9  # pixels: the neighbourhood of the per-pixel noise and bias estimates
+CAUTION_SAMPLES = 64.0  # noise_caution: the blend counts the estimated noise 1 + this / spp times
 CONVERGED_NOISE = 0.25 / 255.0  # display RMS noise at which refinement stops
 ERROR_FLOOR = 1e-6  # display RMS error below which a pixel's errors count as zero
 HALF_SAMPLE_BUDGET = SOBOL_SIDE * SOBOL_SIDE  # the Sobol table: a half never wraps around it
+
+
+def noise_caution(samples: float) -> float:
+    """How many times the blend weight counts the estimated noise at ``samples`` spp (module doc)."""
+    return 1.0 + CAUTION_SAMPLES / max(float(samples), 1.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,9 +90,12 @@ def two_half_estimate(
     operator: str = "aces",
     exposure: float = 0.0,
     window: int = LOCAL_WINDOW,
+    caution: float | None = None,
 ) -> RefinementEstimate:
     """The module doc's estimates from the two half means (H, W, 3 linear radiance) with their
-    sample counts, and the real-time frame: image-wide RMS errors and the per-pixel weight."""
+    sample counts, and the real-time frame: image-wide RMS errors and the per-pixel weight
+    (``caution``: how many times the weight counts the noise; None: noise_caution(spp), 1 is the
+    plain rule)."""
     if weight_a <= 0 or weight_b <= 0:
         raise ValueError("both halves need samples for a two-half estimate")
     total = weight_a + weight_b
@@ -90,7 +108,8 @@ def two_half_estimate(
     # and errors far below an 8-bit step (ERROR_FLOOR) count as none (weight 1: the mean).
     local_noise2 = np.maximum(uniform_filter(noise2, window, mode="nearest"), 0.0)
     local_bias2 = np.maximum(uniform_filter(difference2, window, mode="nearest") - local_noise2, 0.0)
-    total2 = local_noise2 + local_bias2
+    caution = noise_caution(total) if caution is None else float(caution)
+    total2 = local_bias2 + caution * local_noise2
     some = total2 > ERROR_FLOOR**2
     weight = np.where(some, np.clip(local_bias2 / np.where(some, total2, 1.0), 0.0, 1.0), 1.0)
     shown2 = weight**2 * local_noise2 + (1.0 - weight) ** 2 * local_bias2
