@@ -142,17 +142,22 @@ def run(args) -> int:
 
     from lobeview.app.window import LobeviewWindow, Session
 
-    scene_path, scene, environment, cache = load_scene_and_environment(args.scene, args.env, args.cache, args.limits)
-    apply_reflection_proxy(scene, args.reflection_proxy)
-    original, loaded = None, None
-    if edits is not None:
-        original = {m.name: m.desc for m in scene.materials}
-        loaded = apply_material_edits(scene, edits)
-    if args.path == "builtin":
-        camera_path = builtin_camera_path(args.scene, scene_path)
-    LobeviewWindow.session = Session(
-        scene, scene_path, environment, args, method, cache, script, original, loaded, camera_path
-    )
+    def load_session() -> Session:
+        """Build (first use) and load the scene: inside the window, whose loading overlay shows
+        each step (app/window.py show_progress)."""
+        scene_path, scene, environment, cache = load_scene_and_environment(
+            args.scene, args.env, args.cache, args.limits
+        )
+        apply_reflection_proxy(scene, args.reflection_proxy)
+        original, loaded = None, None
+        if edits is not None:
+            original = {m.name: m.desc for m in scene.materials}
+            loaded = apply_material_edits(scene, edits)
+        path = builtin_camera_path(args.scene, scene_path) if args.path == "builtin" else camera_path
+        return Session(scene, scene_path, environment, args, method, cache, script, original, loaded, path)
+
+    LobeviewWindow.load_session = staticmethod(load_session)
+    LobeviewWindow.loading_title = args.scene or "builtin:demo"
     LobeviewWindow.window_size = (width, height)
     LobeviewWindow.vsync = not args.no_vsync
     mglw.run_window_config(LobeviewWindow, args=["--window", "pyglet"])

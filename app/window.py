@@ -72,29 +72,38 @@ class LobeviewWindow(mglw.WindowConfig):
     title = "lobeview"
     resizable = True
     aspect_ratio = None
-    session: Session | None = None  # set by app/view.py before the window opens
+    # Set by app/view.py before the window opens: what builds and loads the scene (called inside
+    # the window, under its loading overlay) and what the overlay calls it until then.
+    load_session = None
+    loading_title = "scene"
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        session = self.session
-        self.scene, self.args = session.scene, session.args
-        self.wnd.title = f"lobeview - {session.scene_path.name}"
         imgui.create_context()
         # No imgui.ini in whatever folder the viewer was started from: the panel lays
         # itself out each start.
         imgui.get_io().set_ini_filename("")
         implot.create_context()
         self.imgui = QueuedInputRenderer(self.wnd)
-        self.panel_area = PanelArea()  # where the panel was last drawn: clicks there are its
-        self.widget_rects: dict = {}  # a few widgets' rectangles (the frame log's, for tests)
-        size = self.wnd.buffer_size
         self.started = time.perf_counter()
         self.realtime = None  # no image yet: the loading overlay draws on a plain background
         self._overlay_shown_at = 0.0
-        # Every long step (scene set-up, cube maps, prefiltered maps built on first use) draws the
-        # loading overlay from the first frame on (core/progress.py report); removed on close.
+        # Every long step (scene build and bake on first use, the scene renderer's cube maps,
+        # prefiltered maps built on first use) draws the loading overlay from the first frame on
+        # (core/progress.py report); removed on close.
         self._listening = progress.listening(self.show_progress)
         self._listening.__enter__()
+        try:
+            self.show_progress(f"loading {self.loading_title}", None)
+            self.session = session = self.load_session()
+        except BaseException:
+            self._listening.__exit__(None, None, None)
+            raise
+        self.scene, self.args = session.scene, session.args
+        self.wnd.title = f"lobeview - {session.scene_path.name}"
+        self.panel_area = PanelArea()  # where the panel was last drawn: clicks there are its
+        self.widget_rects: dict = {}  # a few widgets' rectangles (the frame log's, for tests)
+        size = self.wnd.buffer_size
         self.show_progress("scene renderer", None)
         self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
                                                  self.args)  # fmt: skip
@@ -547,7 +556,8 @@ class LobeviewWindow(mglw.WindowConfig):
         imgui.set_next_window_size((min(560, width - 20), 0))
         flags = imgui.WindowFlags_.no_decoration.value | imgui.WindowFlags_.no_inputs.value
         imgui.begin("loading", None, flags)
-        imgui.text(f"lobeview: {self.session.scene_path.name} ({now - self.started:.0f} s)")
+        name = self.session.scene_path.name if getattr(self, "session", None) else self.loading_title
+        imgui.text(f"lobeview: {name} ({now - self.started:.0f} s)")
         imgui.text_wrapped(what)
         if fraction is None:
             imgui.progress_bar(-1.0 * imgui.get_time(), (-1, 0), "working ...")  # indeterminate

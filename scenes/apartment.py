@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.core.paths import cache_dir
+from lobeview.core.progress import report
 
 from .camera_path import CameraPath
 from .demo import (
@@ -381,6 +382,7 @@ def build_apartment_scene(
         file=sys.stderr,
         flush=True,
     )
+    report(f"building a {rooms}-room apartment ({len(scene.objects)} objects; first use, cached afterwards)")
     directory.mkdir(parents=True, exist_ok=True)
     apartment_path(rooms).save(path_file)  # before the .glb: a built scene always has its path
     bake_and_write(scene, path, APARTMENT_ENVIRONMENT, resolution, rays, bounces, light_samples=LIGHT_SAMPLES)

@@ -32,6 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import qmc
 
+from lobeview.core.progress import report
+
 from .env_sampling import EquirectImportance
 from .envmap import EnvironmentMap
 from .scene import Scene
@@ -240,6 +242,7 @@ def bake_lightmap(
         # rays' escapes by the balance heuristic: escapes below weigh n_cos p_cos / (n_cos p_cos
         # + n_env p_env), these samples the complement.
         t_env = time.perf_counter()
+        report(f"lightmap bake: environment light, {env_samples} importance samples per texel")
         importance = EquirectImportance.from_environment(environment)
         direct = direct + _environment_light(
             environment, importance, intersector, origin, normal, rays, env_samples, seed
@@ -269,6 +272,8 @@ def bake_lightmap(
         t0 = time.perf_counter()
         total = np.zeros((len(pixel), 3)) if bounce == 0 else escape_total.copy()
         for r in range(rays):
+            report(f"lightmap bake: bounce {bounce + 1} of {bounces}, ray {r + 1} of {rays}",
+                   (bounce * rays + r) / (bounces * rays))  # fmt: skip
             u = (sobol[r][None, :] + rotation) % 1.0
             # cosine-weighted hemisphere (Malley)
             radius = np.sqrt(u[:, 0])

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.core.paths import cache_dir
+from lobeview.core.progress import report
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import validate
 
@@ -348,5 +349,6 @@ def build_demo_scene(
     if path.exists() and not force:
         return path
     print(f"[demo] building the demo scene into {path}", file=sys.stderr, flush=True)
+    report("building the demo scene (first use; cached afterwards)")
     bake_and_write(demo_geometry(), path, DEMO_ENVIRONMENT, resolution, rays, bounces)
     return path

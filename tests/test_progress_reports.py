@@ -47,3 +47,21 @@ def test_scene_renderer_reports_its_stages_and_each_cube_map(tmp_path):
     fractions = [fraction for _, fraction in cube_reports]
     assert fractions == sorted(fractions) and 0.0 <= fractions[0] and fractions[-1] < 1.0
     assert cube_reports[-1][0].endswith(f"({cubes} of {cubes})"), cube_reports[-1]
+
+
+def test_the_lightmap_bake_reports_each_ray_of_each_bounce():
+    from lobeview.scenes.baker import bake_lightmap
+    from lobeview.scenes.builtin_env import load_environment
+    from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene
+    from lobeview.scenes.gltf_loader import load_gltf
+
+    scene = load_gltf(build_demo_scene())  # has its lightmap UVs
+    heard = []
+    with progress.listening(lambda what, fraction: heard.append((what, fraction))):
+        bake_lightmap(scene, load_environment(DEMO_ENVIRONMENT), 32, rays=4, bounces=2, progress=False,
+                      light_samples=1, env_samples=1)  # fmt: skip
+    rays = [(what, fraction) for what, fraction in heard if what.startswith("lightmap bake: bounce")]
+    assert [what for what, _ in rays][-1] == "lightmap bake: bounce 2 of 2, ray 4 of 4" and len(rays) == 8
+    fractions = [fraction for _, fraction in rays]
+    assert fractions == sorted(fractions) and fractions[0] == 0.0 and fractions[-1] < 1.0
+    assert any(what.startswith("lightmap bake: environment light") for what, _ in heard)

@@ -27,21 +27,10 @@ class XViewer:
 
         # stderr into a file: a pipe nobody reads fills up with progress lines and blocks the viewer.
         self.stderr = tempfile.TemporaryFile("w+")
+        size = f"{self.size[0]}x{self.size[1]}"
+        command = [sys.executable, "-m", "lobeview", "view", "--view", "overview", "--size", size, "--face-size", "16"]
         self.proc = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "lobeview",
-                "view",
-                "--view",
-                "overview",
-                "--size",
-                f"{self.size[0]}x{self.size[1]}",
-                "--face-size",
-                "16",
-                "--no-vsync",
-                *extra,
-            ],
+            [*command, "--no-vsync", *extra],
             env={**os.environ, "DISPLAY": display},
             stdout=subprocess.PIPE,
             stderr=self.stderr,
