@@ -49,6 +49,7 @@ from lobeview.viewer.refinement import Refinement, two_half_estimate
 from lobeview.viewer.tonemap import to_uint8, tonemap
 
 FRAME_TIME_SMOOTHING = 0.2  # exponential smoothing of the shown frame interval
+CUBE_REFRESH_MAX_DEFERRED = 8  # moving frames a stale cube map waits at most for room in the budget
 
 
 @dataclass
@@ -129,6 +130,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.last_change = time.perf_counter()  # when the view last changed (the rest delay)
         self._moving_pass = None  # (scale, seconds) of the last frame rendered while the view changed
         self.show_material_tab = False
+        self.cube_refresh_deferred = 0  # moving frames since a stale cube map was due (_cube_refresh_fits)
         self.panel_drag = False  # a left or right drag that began on the panel stays the panel's
         self._pointer = (0.0, 0.0)  # the last pointer position (scroll events carry none)
         self.selected: int | None = next(
@@ -455,9 +457,10 @@ class LobeviewWindow(mglw.WindowConfig):
         else:
             self.frame_state = "idle"  # nothing changed and nothing is left to refine: shown again
         t0 = time.perf_counter()
-        refreshed = self.renderer.refresh_one_stale_cube()
+        refreshed = self.renderer.refresh_one_stale_cube() if self._cube_refresh_fits(changed, t0 - t_frame) else None
         if refreshed is not None:
             self.cube_ms = (time.perf_counter() - t0) * 1000.0
+            self.cube_refresh_deferred = 0
             self.message = f"updated the cube map of {refreshed} ({self.renderer.stale_cube_count} to go)"
             self.dirty = True
         if self.realtime_scale == 1.0:
@@ -473,6 +476,19 @@ class LobeviewWindow(mglw.WindowConfig):
         self.frame += 1
         if self.quit_requested or (self.args.exit_after and self.frame >= self.args.exit_after):
             self.wnd.close()  # releases GPU objects (on_close): the frame is finished
+
+    def _cube_refresh_fits(self, moving: bool, elapsed_s: float) -> bool:
+        """Whether this frame re-renders a stale cube map (after a material edit): always while
+        the view rests; while it changes, only where the last refresh's time fits in what is
+        left of the frame-rate target, or after CUBE_REFRESH_MAX_DEFERRED frames without one (the
+        edit must show up eventually)."""
+        if self.renderer.stale_cube_count == 0:
+            return False
+        target = self.render_scale.target_s
+        if not moving or target is None or elapsed_s + self.cube_ms / 1000.0 <= target:
+            return True
+        self.cube_refresh_deferred += 1
+        return self.cube_refresh_deferred > CUBE_REFRESH_MAX_DEFERRED
 
     def _draw_realtime(self, camera, scale: float) -> float:
         """The real-time frame at ``scale`` times the window's size, upsampled (bilinear) into the

@@ -90,6 +90,24 @@ def test_held_keys_count_wall_clock_time_between_frames():
     assert keys.take(10.0) == pytest.approx({"s": 1.0})
 
 
+def test_a_stale_cube_map_waits_for_room_in_a_moving_frame_but_not_forever():
+    from types import SimpleNamespace
+
+    from lobeview.app.window import CUBE_REFRESH_MAX_DEFERRED, LobeviewWindow
+
+    window = SimpleNamespace(
+        renderer=SimpleNamespace(stale_cube_count=2), render_scale=RenderScale(1 / 15), cube_ms=50.0,
+        cube_refresh_deferred=0,
+    )  # fmt: skip
+    fits = LobeviewWindow._cube_refresh_fits
+    assert fits(window, moving=False, elapsed_s=1.0)  # at rest: always
+    assert fits(window, moving=True, elapsed_s=0.01)  # 10 + 50 ms within 66.7 ms
+    decisions = [fits(window, moving=True, elapsed_s=0.03) for _ in range(CUBE_REFRESH_MAX_DEFERRED + 1)]
+    assert decisions == [False] * CUBE_REFRESH_MAX_DEFERRED + [True]
+    window.renderer.stale_cube_count = 0
+    assert not fits(window, moving=False, elapsed_s=0.0)  # nothing to refresh
+
+
 # -- the real window ---------------------------------------------------------------------------------
 xlib = pytest.importorskip("Xlib", reason="python-xlib (dev dependency) drives the pointer")
 
