@@ -1,0 +1,25 @@
+"""The prepared GPU bench (bench/gpu.py, issue 42 item 3) runs end to end on llvmpipe at small
+sizes, so that it works the moment a GPU machine is lent (bench/gpu_device.sh runs it there at
+1680x1050)."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+
+
+def test_the_gpu_bench_writes_every_table_at_small_sizes(tmp_path):
+    result = subprocess.run(
+        [sys.executable, "-m", "lobeview.bench.gpu", "--small", "--out", str(tmp_path), "--cache", str(tmp_path / "c")],
+        capture_output=True, text=True, timeout=1200,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr[-3000:]
+    (summary,) = tmp_path.glob("gpu-*.md")
+    text = summary.read_text()
+    assert "FAILED" not in text
+    rows = re.findall(r"^\| (\d+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| (\d+) / (\d+) \|$", text, re.M)
+    assert [int(row[0]) for row in rows] == [3, 7], text  # Table 4.1 at the small plan's N
+    assert all(float(row[1]) > 0 and float(row[3]) > 0 for row in rows)
+    linked = re.findall(r"\]\(((?:mirrors|walkthrough)-[^)]+\.md)\)", text)
+    assert len(linked) == 2 and all((tmp_path / name).exists() for name in linked), text
