@@ -6,7 +6,6 @@ reproduces a view (F12 prints it; tests/test_app_commands.py pastes it back)."""
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 from pathlib import Path
 
@@ -203,10 +202,12 @@ def camera_from_args(args, default) -> Camera:
 # -- scene set-up ---------------------------------------------------------------------------------
 def read_material_edits(path: str | Path) -> dict:
     """A materials file (material name -> description), as the viewer's save and F12 write it."""
+    from lobeview.core.jsonio import JSONInputError, read_json_file
+
     try:
-        data = json.loads(Path(path).read_bytes().decode("utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise OptionError(f"--materials {path}: not valid JSON ({exc})") from None
+        data = read_json_file(path, "--materials")
+    except JSONInputError as exc:
+        raise OptionError(str(exc)) from None
     if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
         raise OptionError(f"--materials {path}: expected an object of material name -> description")
     return data

@@ -30,7 +30,6 @@ frame N (in order; steps of earlier frames first):
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -99,10 +98,12 @@ class ScriptError(ValueError):
 
 def load_script(path: str | Path) -> list[dict]:
     """Read and check a script: a clear message for a bad step before the window opens."""
+    from lobeview.core.jsonio import JSONInputError, read_json_file
+
     try:
-        steps = json.loads(Path(path).read_bytes().decode("utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ScriptError(f"--script {path}: not valid JSON ({exc})") from None
+        steps = read_json_file(path, "--script")
+    except JSONInputError as exc:
+        raise ScriptError(str(exc)) from None
     if not isinstance(steps, list) or not all(isinstance(s, dict) for s in steps):
         raise ScriptError(f"--script {path}: expected a list of steps {{'frame': N, 'action': ...}}")
     for k, step in enumerate(steps):

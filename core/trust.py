@@ -60,7 +60,9 @@ DEFAULT_LIMITS = Limits()
 
 
 def _describe_size(n: int) -> str:
-    return f"{n / GIB:.2f} GiB" if n >= GIB else f"{n / MIB:.1f} MiB"
+    if n >= GIB:
+        return f"{n / GIB:.2f} GiB"
+    return f"{n / MIB:.1f} MiB" if n >= MIB else f"{n} bytes"  # "0.0 MiB exceeds 0.0 MiB" said nothing
 
 
 def check_regular_file(path: Path, what: str, limits: Limits = DEFAULT_LIMITS) -> int:

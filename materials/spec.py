@@ -28,7 +28,6 @@ value is silently clamped.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -283,22 +282,22 @@ def load_material(source: str) -> dict:
 
     if source in PRESETS:
         return validate(PRESETS[source])
+    from lobeview.core.jsonio import JSONInputError, parse_json_text, read_json_file
+
     text = source.strip()
     if text.startswith("{"):
         try:
-            return validate(json.loads(text))
-        except json.JSONDecodeError as exc:
-            raise MaterialError(f"inline material JSON is malformed: {exc}") from None
+            return validate(parse_json_text(text, "inline material JSON"))
+        except JSONInputError as exc:
+            raise MaterialError(str(exc)) from None
     path = Path(source)
     if not path.exists():
         names = ", ".join(sorted(PRESETS))
         raise MaterialError(f"{source!r} is neither a preset name ({names}) nor an existing file")
     try:
-        desc = json.loads(path.read_bytes().decode("utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise MaterialError(f"{path}: not valid JSON: {exc}") from None
-    except OSError as exc:
-        raise MaterialError(f"{path}: cannot read: {exc}") from None
+        desc = read_json_file(path, "material file")
+    except JSONInputError as exc:
+        raise MaterialError(str(exc)) from None
     try:
         return validate(desc)
     except MaterialError as exc:

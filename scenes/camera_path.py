@@ -148,15 +148,11 @@ class CameraPath:
 
     @classmethod
     def load(cls, path: str | Path) -> CameraPath:
+        from lobeview.core.jsonio import JSONInputError, read_json_file
+
         path = Path(path)
         try:
-            size = path.stat().st_size
-        except OSError as exc:
-            raise CameraPathError(f"camera path {path}: cannot read it ({exc.strerror})") from None
-        if size > MAX_PATH_BYTES:
-            raise CameraPathError(f"camera path {path}: {size} bytes, more than the {MAX_PATH_BYTES} allowed")
-        try:
-            data = json.loads(path.read_bytes().decode("utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise CameraPathError(f"camera path {path}: not valid JSON ({exc})") from None
+            data = read_json_file(path, "camera path", MAX_PATH_BYTES)
+        except JSONInputError as exc:
+            raise CameraPathError(str(exc)) from None
         return cls.from_json(data, f"camera path {path}")
