@@ -9,7 +9,11 @@
 set -uo pipefail
 for deb in .gl/*.deb; do dpkg -x "$deb" /; done
 ldconfig
-export __EGL_VENDOR_LIBRARY_FILENAMES=${__EGL_VENDOR_LIBRARY_FILENAMES:-/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json}
+# The NVIDIA EGL vendor file, where the image has it and nothing else was said (device README).
+vendor=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+if [ -z "${__EGL_VENDOR_LIBRARY_FILENAMES:-}" ] && [ -f "$vendor" ]; then
+    export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor
+fi
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl || exit 1
 # The checkout is the package: reach it as `lobeview` from a folder beside it.
 mkdir -p /tmp/lobeview-pkg && ln -sfn "$PWD" /tmp/lobeview-pkg/lobeview
