@@ -10,7 +10,7 @@ release in order, at any frame rate.
 The window also needs to know, when an event arrives, whether it belongs to the panel: ImGui's
 ``want_capture_mouse`` is the previous frame's answer for the previous pointer position, so a
 click that moved onto the panel since then went through to the scene. :class:`PanelArea` holds
-the rectangles the panel's windows covered when last drawn, and the window asks it as well.
+where the panel was when last drawn and whether a popup was open, and the window asks it.
 """
 
 from __future__ import annotations
@@ -49,36 +49,30 @@ class QueuedInputRenderer(ModernglWindowRenderer):
 
 
 class PanelArea:
-    """The rectangles (x, y, w, h in window coordinates) the panel's windows and open popups
-    covered in the last drawn frame."""
+    """Where the panel was when last drawn (x, y, w, h in window coordinates), and whether ImGui
+    then held the mouse whatever its position (a popup open, a widget being dragged)."""
 
     def __init__(self):
-        self.rects: list[tuple[float, float, float, float]] = []
+        self.rect: tuple[float, float, float, float] | None = None
         self.holds_mouse = False
-        self._drawing: list[tuple[float, float, float, float]] = []
 
-    def begin_frame(self) -> None:
-        self._drawing = []
-
-    def add_current_window(self) -> None:
-        """The ImGui window being drawn (call between its begin and end)."""
-        x, y = imgui.get_window_pos()
-        w, h = imgui.get_window_size()
-        self._drawing.append((float(x), float(y), float(w), float(h)))
-
-    def end_frame(self) -> None:
-        """After the panel's last window, inside ImGui's frame."""
-        self.rects = self._drawing
+    def record(self) -> None:
+        """Call between the panel window's begin and end, after its last widget."""
+        (x, y), (w, h) = imgui.get_window_pos(), imgui.get_window_size()
+        self.rect = (float(x), float(y), float(w), float(h))
         any_popup = imgui.PopupFlags_.any_popup_id.value | imgui.PopupFlags_.any_popup_level.value
         self.holds_mouse = imgui.is_popup_open("", any_popup) or imgui.is_any_item_active()
 
     def contains(self, x: float, y: float) -> bool:
-        return any(rx <= x < rx + w and ry <= y < ry + h for rx, ry, w, h in self.rects)
+        if self.rect is None:
+            return False
+        rx, ry, w, h = self.rect
+        return rx <= x < rx + w and ry <= y < ry + h
 
     def captures(self, x: float, y: float) -> bool:
         """Whether a mouse event at (x, y) belongs to the panel: over it when it was last drawn,
-        or ImGui holds the mouse whatever its position (a popup is open: a click anywhere closes
-        it; a widget is being dragged). Not ``want_capture_mouse``, which also answers for where
-        the pointer hovered last frame: a click in the scene just after the pointer left the
-        panel would be lost."""
+        or ImGui holds the mouse whatever its position (an open popup, also one outside the
+        panel: a click anywhere closes it; a widget being dragged). Not ``want_capture_mouse``,
+        which also answers for where the pointer hovered last frame: a click in the scene just
+        after the pointer left the panel would be lost."""
         return self.contains(x, y) or self.holds_mouse

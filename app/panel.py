@@ -31,13 +31,11 @@ def draw_panel(window) -> None:
     section shows without scrolling whatever the scene's size; a click that selects an object in
     the scene brings the Material tab forward."""
     imgui.new_frame()
-    window.panel_area.begin_frame()
     window.widget_rects = {}
     imgui.set_next_window_pos((10, 10), imgui.Cond_.first_use_ever.value)
     height = max(min(window.wnd.size[1] - 20, 900), 200)
     imgui.set_next_window_size((PANEL_WIDTH, height), imgui.Cond_.first_use_ever.value)
     imgui.begin("lobeview")
-    window.panel_area.add_current_window()
     imgui.push_item_width(-LABEL_WIDTH)
     _status(window)
     if window.message:
@@ -59,8 +57,8 @@ def draw_panel(window) -> None:
                 imgui.end_tab_item()
         imgui.end_tab_bar()
     imgui.pop_item_width()
+    window.panel_area.record()
     imgui.end()
-    window.panel_area.end_frame()
     imgui.render()
     window.ctx.screen.use()
     window.imgui.render(imgui.get_draw_data())
@@ -111,15 +109,13 @@ def _report_lines(summary: str, lines: list[str], fold_above: int = 6) -> None:
 
 def _method_combo(window, kinds: list[str]) -> tuple[bool, int]:
     """imgui.combo for the method, with its box and (while open) its items' rectangles recorded
-    in ``window.widget_rects`` (the frame log's: tests click them) and its popup in the panel's
-    area."""
+    in ``window.widget_rects`` (the frame log's: tests click them)."""
     current = kinds.index(method_choice(window.method))
     x, y = imgui.get_cursor_screen_pos()
     width, height = imgui.calc_item_width(), imgui.get_frame_height()
     window.widget_rects["method"] = (float(x), float(y), float(width), float(height))
     chosen = current
     if imgui.begin_combo("method", kinds[current]):
-        window.panel_area.add_current_window()
         # A popup's first frame lays it out hidden, at a provisional place: not where it shows.
         shown = not imgui.is_window_appearing()
         for k, kind in enumerate(kinds):
@@ -165,7 +161,6 @@ def _rendering(window) -> None:
         preview = "(walking: choose one)" if window.camera_index is None else names[window.camera_index]
         pick = None
         if imgui.begin_combo("scene camera", preview):
-            window.panel_area.add_current_window()
             for i, name in enumerate(names):
                 if imgui.selectable(f"{name}##{i}", i == window.camera_index)[0]:
                     pick = i

@@ -28,16 +28,13 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 DEFAULT_SCENES = ("builtin:demo", "builtin:apartment")
 
 
 def _say(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
-
-
-def _percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(round(q * (len(ordered) - 1))))]
 
 
 def summarise(frames: list[dict]) -> dict:
@@ -55,7 +52,7 @@ def summarise(frames: list[dict]) -> dict:
         "frames": len(frames),
         "moving frames": len(moving),
         "interval median ms": statistics.median(intervals) if intervals else None,
-        "interval p90 ms": _percentile(intervals, 0.9) if intervals else None,
+        "interval p90 ms": float(np.percentile(intervals, 90, method="nearest")) if intervals else None,
         "pass median ms": statistics.median(f["pass_ms"] for f in moving) if moving else None,
         "render scales": scales,
         "median render size": moving[len(moving) // 2]["render_size"] if moving else None,

@@ -9,6 +9,17 @@ class OptionError(ValueError):
     """A bad command-line value: printed as ``lobeview: error: ...`` with exit status 2."""
 
 
+def quoted(value, limit: int = 80) -> str:
+    """A value from an input file for a message: repr'd (control characters escaped) and at most
+    about ``limit`` characters of it. A string is cut before its repr (a 25 MB string is not
+    copied) and says how long it was; anything else is repr'd and cut."""
+    if isinstance(value, str):
+        shown = repr(value[: limit + 1])
+        return shown if len(value) <= limit else shown[:-1] + f"...' ({len(value)} characters)"
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 def parse_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))

@@ -15,20 +15,16 @@ import os
 import stat
 from pathlib import Path
 
+from lobeview.core.errors import quoted
+
 MAX_JSON_BYTES = 32 * 2**20  # larger than any material, path or script lobeview writes by far
 MAX_JSON_DEPTH = 64
 MAX_NUMBER_CHARS = 40  # digits, sign, point and exponent of one number
-QUOTE_CHARS = 80
+QUOTE_CHARS = 80  # core.errors.quoted's default
 
 
 class JSONInputError(ValueError):
     """A JSON input lobeview refuses; the message names the file (or 'inline JSON') and why."""
-
-
-def quoted(text: str, limit: int = QUOTE_CHARS) -> str:
-    """``text`` for an error message: repr'd (control characters escaped), cut to ``limit``."""
-    shown = repr(text[: limit + 1])
-    return shown if len(text) <= limit else shown[:-1] + f"...' ({len(text)} characters)"
 
 
 def read_regular_file(path: str | Path, what: str, max_bytes: int) -> bytes:

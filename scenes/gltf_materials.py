@@ -12,6 +12,7 @@ import types
 
 import numpy as np
 
+from lobeview.core.errors import quoted
 from lobeview.core.trust import UntrustedReferenceError, read_reference
 from lobeview.materials.spec import MaterialError, validate
 
@@ -384,7 +385,7 @@ def _material(reader, index: int | None, scene_warnings: list) -> SceneMaterial:
     out.emission = _emission(mat, f"{path}: material {name!r}", scene_warnings)
     lightmap_ext = (mat.extensions or {}).get("MOZ_lightmap")
     if lightmap_ext is not None and not isinstance(lightmap_ext, dict):
-        _warn(scene_warnings, f"{path}: material {name!r}: MOZ_lightmap {_quoted(lightmap_ext)} is no object; ignored")
+        _warn(scene_warnings, f"{path}: material {name!r}: MOZ_lightmap {quoted(lightmap_ext)} is no object; ignored")
         lightmap_ext = None
     if lightmap_ext is not None:
         image = reader.image(lightmap_ext.get("index", -1))
@@ -399,12 +400,12 @@ def _material(reader, index: int | None, scene_warnings: list) -> SceneMaterial:
             where = f"{path}: material {name!r}: MOZ_lightmap"
             tex_coord = lightmap_ext.get("texCoord", 1)
             if isinstance(tex_coord, bool) or tex_coord not in (0, 1):
-                _warn(scene_warnings, f"{where} texCoord {_quoted(tex_coord)} is not 0 or 1; TEXCOORD_1 used")
+                _warn(scene_warnings, f"{where} texCoord {quoted(tex_coord)} is not 0 or 1; TEXCOORD_1 used")
                 tex_coord = 1
             intensity = lightmap_ext.get("intensity", 1.0)
             if not _is_number(intensity) or not np.isfinite(intensity) or intensity < 0:
                 # a negative intensity rendered negative radiance without a word (issue 43)
-                _warn(scene_warnings, f"{where} intensity {_quoted(intensity)} is not a finite number >= 0; 1 used")
+                _warn(scene_warnings, f"{where} intensity {quoted(intensity)} is not a finite number >= 0; 1 used")
                 intensity = 1.0
             out.lightmap = Lightmap(clean, tex_coord=int(tex_coord), intensity=float(intensity), source=name)
     return out
@@ -412,12 +413,6 @@ def _material(reader, index: int | None, scene_warnings: list) -> SceneMaterial:
 
 def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def _quoted(value, limit: int = 60) -> str:
-    """A value from the file for a message: repr, cut to ``limit`` characters."""
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 def _emission(mat, where: str, scene_warnings: list) -> np.ndarray:
@@ -429,15 +424,15 @@ def _emission(mat, where: str, scene_warnings: list) -> np.ndarray:
     if not (isinstance(raw, (list, tuple)) and len(raw) == 3 and all(_is_number(v) for v in raw)) or not all(
         np.isfinite(v) for v in raw
     ):
-        _warn(scene_warnings, f"{where}: emissiveFactor {_quoted(raw)} is not 3 finite numbers; no emission")
+        _warn(scene_warnings, f"{where}: emissiveFactor {quoted(raw)} is not 3 finite numbers; no emission")
         return np.zeros(3)
     emissive = np.asarray(raw, dtype=np.float64)
     if np.any((emissive < 0) | (emissive > 1)):
-        _warn(scene_warnings, f"{where}: emissiveFactor {_quoted(raw)} clamped to [0, 1]")
+        _warn(scene_warnings, f"{where}: emissiveFactor {quoted(raw)} clamped to [0, 1]")
         emissive = np.clip(emissive, 0.0, 1.0)
     extension = (mat.extensions or {}).get("KHR_materials_emissive_strength", {})
     strength = extension.get("emissiveStrength", 1.0) if isinstance(extension, dict) else None
     if not _is_number(strength) or not np.isfinite(strength) or strength < 0:
-        _warn(scene_warnings, f"{where}: emissiveStrength {_quoted(strength)} is not a finite number >= 0; 1 used")
+        _warn(scene_warnings, f"{where}: emissiveStrength {quoted(strength)} is not a finite number >= 0; 1 used")
         strength = 1.0
     return emissive * float(strength)
