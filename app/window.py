@@ -433,7 +433,9 @@ class LobeviewWindow(mglw.WindowConfig):
         t0 = time.perf_counter()
         if changed:
             self.frame_state = "moving"
-            scale = self.render_scale.scale
+            # A screenshot due this frame is taken of the full-resolution frame, as its printed
+            # `lobeview shot` command renders it, not of the upsampled one.
+            scale = 1.0 if self.pending_screenshots else self.render_scale.scale
             self.pass_ms = self._draw_realtime(camera, scale)
             self._moving_pass = (scale, self.pass_ms / 1000.0)
         elif self.realtime_scale < 1.0:

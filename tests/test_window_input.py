@@ -193,3 +193,22 @@ def test_panel_clicks_never_pick_and_its_combo_works_when_a_frame_takes_seconds(
     assert code == 0, viewer.stderr_tail()
     picks = [line for line in viewer.printed if line.startswith("picked ")]
     assert len(picks) == 1, picks  # only the scene click's (its position checked by click)
+
+
+def test_a_screenshot_while_moving_is_of_the_full_resolution_frame(xvfb, tmp_path):
+    """F12 (here a scripted screenshot) while a key walks the camera: the saved image is the
+    full-resolution frame its printed `lobeview shot` line renders, not the upsampled moving one."""
+    from conftest import run_scripted_view
+
+    stats = tmp_path / "frames.jsonl"
+    script = [
+        {"frame": 2, "action": "press", "key": "D"},
+        {"frame": 6, "action": "screenshot", "name": "moving"},
+        {"frame": 8, "action": "release", "key": "D"},
+        {"frame": 10, "action": "quit"},
+    ]
+    args = ["--view=table", "--size=480x300", "--face-size=32", "--target-fps=15", f"--stats={stats}"]
+    run_scripted_view(xvfb, tmp_path, script, args, 40)
+    frames = {f["frame"]: f for f in _frames(stats)}
+    assert frames[6]["state"] == "moving" and frames[6]["render_size"] == [480, 300], frames[6]
+    assert (tmp_path / "moving.png").exists()
