@@ -112,6 +112,11 @@ class _Reader:
         self.path = path
         self.limits = limits
         self.budget = LoadBudget(limits, str(path))
+        # Decoded images by (image index, stored): a texture or lightmap several materials share
+        # is decoded and charged to the budget once, and its materials share one array (one
+        # GPU texture, so their objects can be drawn by one multi-draw: viewer/object_batches.py).
+        self._images: dict[tuple[int, bool], tuple[np.ndarray | None, str]] = {}
+        self.sanitized: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # id(image) -> (image, clean)
         self._buffers: dict[int, bytes] = {}
 
     def buffer(self, index: int) -> bytes:
@@ -214,6 +219,14 @@ class _Reader:
         except GltfError as exc:
             self.last_image_problem = str(exc)
             return None
+        key = (int(texture.source), bool(stored))
+        if key not in self._images:
+            decoded = self._decode_image(texture, image, stored)
+            self._images[key] = (decoded, self.last_image_problem)
+        decoded, self.last_image_problem = self._images[key]
+        return decoded
+
+    def _decode_image(self, texture, image, stored: bool) -> np.ndarray | None:
         try:
             if image.uri is not None and not image.uri.startswith("data:"):
                 file = resolve_reference(self.path.parent, image.uri, "image", self.limits)

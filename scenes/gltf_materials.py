@@ -396,7 +396,9 @@ def _material(reader, index: int | None, scene_warnings: list) -> SceneMaterial:
                 + FALLBACKS["missing lightmap"],
             )
         else:
-            clean, _ = sanitize_radiance(image, f"{path}: lightmap of {name!r}")
+            if id(image) not in reader.sanitized:  # once per image, however many materials share it
+                reader.sanitized[id(image)] = (image, sanitize_radiance(image, f"{path}: lightmap of {name!r}")[0])
+            clean = reader.sanitized[id(image)][1]
             where = f"{path}: material {name!r}: MOZ_lightmap"
             tex_coord = lightmap_ext.get("texCoord", 1)
             if isinstance(tex_coord, bool) or tex_coord not in (0, 1):

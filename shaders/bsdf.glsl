@@ -160,8 +160,10 @@ float lobe_f90(Lobe l) {
 
 // KHR_materials_sheen, approximated (materials/gltf.py GltfSheen): sheenColor E_s(N.V) / pi lit
 // like the diffuse, E_s the white sheen lobe's albedo at N.V = (i + 0.5) / SHEEN_TABLE_SIZE.
+#if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform vec3 u_sheen_color;
 uniform float u_sheen_albedo[SHEEN_TABLE_SIZE];
+#endif
 // The pixel's sheenColorTexture texel (scene.frag sets it; white everywhere else).
 vec3 g_sheen_texel = vec3(1.0);
 
@@ -285,11 +287,13 @@ vec3 lobe_sample_and_pdf(Lobe l, vec2 u, vec3 wo, out float pdf) {
 
 // ---- glTF diffuse (gltf.py GltfDiffuse) -------------------------------------------------------
 
+#if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform float u_gltf_diffuse;  // 1: the material's diffuse is glTF's, under a dielectric layer
 uniform vec3 u_dielectric_f0;  // KHR_materials_ior/_specular f0 (0.04 without them)
 uniform float u_specular_weight;
 uniform float u_clearcoat;
 uniform float u_transmission;  // KHR_materials_transmission: the diffuse keeps 1 - transmission
+#endif
 
 // The weight of the diffuse term: glTF's 1 - specular max(F_d(V.H)) (Appendix B fresnel_mix, with
 // the KHR_materials_ior/_specular f0 and weight) times the clearcoat's 1 - clearcoat F_c(N.V);

@@ -25,7 +25,9 @@ mat3 shading_frame(vec3 normal, vec4 tangent, vec3 geometric_normal) {
 // KHR_materials_anisotropy's direction: the frame turned by `angle` about its normal, tangent
 // towards the bitangent (materials/gltf.py anisotropy_frame). u_tangent_rotation is the
 // material's (PackedMaterial.tangent_rotation); 0 leaves the frame as it is.
+#if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform float u_tangent_rotation;
+#endif
 
 mat3 rotate_tangent(mat3 tbn, float angle) {
     float c = cos(angle), s = sin(angle);

@@ -22,7 +22,9 @@ uniform int u_sample_offset;        // first Sobol index of this pass (progressi
 uniform int u_samples;              // N
 uniform float u_lod_bias;
 uniform vec2 u_pattern[MAX_LOBES * MAX_PATTERN];  // per-lobe ring pattern (xi1, xi2): lobe_pattern_xi
+#if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform vec3 u_kd;                  // Lambert kd, or (1 - metallic) baseColor for glTF
+#endif
 uniform uint u_seed;
 
 uint pcg_hash(uint v) {

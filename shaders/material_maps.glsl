@@ -6,24 +6,53 @@
 // repeat is folded here (the texture repeats, so the GPU only sees coordinates in [0, 1]).
 
 uniform sampler2D u_material_maps[MATERIAL_MAPS];
+#if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform int u_map_texcoord[MATERIAL_MAPS];      // 0 or 1: the UV set; -1: the slot has no texture
 uniform mat3 u_map_transform[MATERIAL_MAPS];    // uv' = T (u, v, 1): KHR_texture_transform
 uniform ivec2 u_map_mirrored[MATERIAL_MAPS];    // MIRRORED_REPEAT in s, t
+#endif
 
 float mirrored_repeat(float x) {
     float t = x - 2.0 * floor(0.5 * x);  // [0, 2)
     return t > 1.0 ? 2.0 - t : t;
 }
 
-// The slot's texel at this fragment, or `absent` without a texture. Called in uniform control
-// flow (before any discard): the derivatives of the unfolded coordinates pick the MIP level.
-vec4 sample_map(int slot, vec2 uv0, vec2 uv1, vec4 absent) {
-    if (u_map_texcoord[slot] < 0) return absent;
-    vec2 uv = (u_map_transform[slot] * vec3(u_map_texcoord[slot] == 1 ? uv1 : uv0, 1.0)).xy;
-    vec2 gx = dFdx(uv);
-    vec2 gy = dFdy(uv);
+#if defined(OBJECT_RECORDS)
+// With OBJECT_RECORDS the slot's texcoord and transform are read from a storage buffer, and the
+// helper invocations of a pixel quad do not read one on every driver (llvmpipe gives them 0):
+// derivatives of a value computed from them would be garbage there. The derivatives then come
+// from the interpolated UV sets alone (taken in uniform control flow), carried through the
+// affine texture transform; equal to dFdx of the transformed coordinates up to rounding.
+vec2 map_uv_derivative(int slot, vec2 d_uv0, vec2 d_uv1) {
+    return (u_map_transform[slot] * vec3(u_map_texcoord[slot] == 1 ? d_uv1 : d_uv0, 0.0)).xy;
+}
+#endif
+
+// The slot's coordinates (folded where the sampler mirrors) and their screen derivatives, or
+// false without a texture. Called in uniform control flow (before any discard).
+bool map_coordinates(int slot, vec2 uv0, vec2 uv1, out vec2 uv, out vec2 gx, out vec2 gy) {
+#if defined(OBJECT_RECORDS)
+    vec2 d0x = dFdx(uv0), d0y = dFdy(uv0), d1x = dFdx(uv1), d1y = dFdy(uv1);
+    if (u_map_texcoord[slot] < 0) return false;
+    uv = (u_map_transform[slot] * vec3(u_map_texcoord[slot] == 1 ? uv1 : uv0, 1.0)).xy;
+    gx = map_uv_derivative(slot, d0x, d1x);
+    gy = map_uv_derivative(slot, d0y, d1y);
+#else
+    if (u_map_texcoord[slot] < 0) return false;
+    uv = (u_map_transform[slot] * vec3(u_map_texcoord[slot] == 1 ? uv1 : uv0, 1.0)).xy;
+    gx = dFdx(uv);
+    gy = dFdy(uv);
+#endif
     if (u_map_mirrored[slot].x == 1) uv.x = mirrored_repeat(uv.x);
     if (u_map_mirrored[slot].y == 1) uv.y = mirrored_repeat(uv.y);
+    return true;
+}
+
+// The slot's texel at this fragment, or `absent` without a texture: the derivatives of the
+// unfolded coordinates pick the MIP level.
+vec4 sample_map(int slot, vec2 uv0, vec2 uv1, vec4 absent) {
+    vec2 uv, gx, gy;
+    if (!map_coordinates(slot, uv0, uv1, uv, gx, gy)) return absent;
     return textureGrad(u_material_maps[slot], uv, gx, gy);
 }
 
@@ -32,12 +61,10 @@ vec4 sample_map(int slot, vec2 uv0, vec2 uv1, vec4 absent) {
 // from the longer footprint axis. textureGrad with the widened gradients would do the same, but
 // llvmpipe ignores explicit gradients once a sampler filters anisotropically.
 vec4 sample_map_widened(int slot, vec2 uv0, vec2 uv1, vec4 absent, float widen) {
-    if (u_map_texcoord[slot] < 0) return absent;
-    vec2 uv = (u_map_transform[slot] * vec3(u_map_texcoord[slot] == 1 ? uv1 : uv0, 1.0)).xy;
+    vec2 uv, gx, gy;
+    if (!map_coordinates(slot, uv0, uv1, uv, gx, gy)) return absent;
     vec2 texels = vec2(textureSize(u_material_maps[slot], 0));
-    float footprint = max(length(dFdx(uv) * texels), length(dFdy(uv) * texels)) * widen;
-    if (u_map_mirrored[slot].x == 1) uv.x = mirrored_repeat(uv.x);
-    if (u_map_mirrored[slot].y == 1) uv.y = mirrored_repeat(uv.y);
+    float footprint = max(length(gx * texels), length(gy * texels)) * widen;
     return textureLod(u_material_maps[slot], uv, log2(max(footprint, 1e-8)));
 }
 

@@ -1,6 +1,10 @@
 #version 450 core
 // Light-mapped scene: diffuse kd E / pi from the lightmap (thesis Eq. 4.1) plus emission; with
 // SPECULAR the view-dependent lobes integrated from the object's cube map (thesis 4.4).
+// OBJECT_RECORDS (viewer/object_drawer.py ObjectBatches): the per-object uniforms come from the
+// object's record in a storage buffer instead, so one multi-draw shades many objects; included
+// first, its #defines stand for the uniforms in every file below.
+#include "object_records.glsl"
 #include "frame.glsl"
 #include "integrate.glsl"
 #include "material_maps.glsl"
@@ -13,12 +17,15 @@ in vec2 v_uv1;
 
 uniform vec3 u_camera_position;
 uniform sampler2D u_lightmap;
+#if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform int u_lightmap_texcoord;      // 0 or 1; -1: no lightmap, the environment's irradiance
 uniform float u_lightmap_intensity;
 uniform vec3 u_emission;              // emissive factor x KHR_materials_emissive_strength
+#endif
 // glTF metallic-roughness per pixel (Appendix B): with u_gltf_model the textures' base colour,
 // metallic and roughness replace the material's in the diffuse term and in its glTF lobe;
 // otherwise the base-colour texture multiplies kd (thesis and microfacet models).
+#if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform int u_gltf_model;
 uniform vec4 u_base_color_factor;     // rgb: the material's base colour, a: baseColorFactor alpha
 uniform float u_metallic_factor;
@@ -26,6 +33,7 @@ uniform float u_anisotropy;           // KHR_materials_anisotropy strength (0: i
 uniform float u_roughness_factor;
 uniform float u_normal_scale;
 uniform float u_occlusion_strength;
+#endif
 // The occlusion texture on a lightmapped surface: ao / (ao averaged over one lightmap texel), the
 // mean floored (an all-black region would divide by 0) and the ratio capped (its detail can
 // brighten a pixel, but not arbitrarily); a lightmap texel is averaged over at most 4096 pixels.
@@ -34,12 +42,14 @@ const float MAX_OCCLUSION_DETAIL = 4.0;
 const float MAX_LIGHTMAP_TEXEL_PIXELS = 4096.0;
 // KHR material extensions per pixel (their textures x these factors; u_clearcoat, u_specular_weight,
 // u_transmission and u_sheen_color are bsdf.glsl's): materials/gltf.py and scenes/texturing.py.
+#if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform float u_clearcoat_roughness;
 uniform float u_clearcoat_normal_scale;
 uniform vec3 u_specular_f0_raw;       // ((ior - 1) / (ior + 1))^2 specularColorFactor, before min(., 1)
 uniform int u_alpha_mode;             // ALPHA_OPAQUE, ALPHA_MASK (u_alpha_cutoff), ALPHA_BLEND
 uniform float u_alpha_cutoff;
 uniform float u_object_id;            // for picking: written + 1 into the normal buffer's w
+#endif
 
 layout(location = 0) out vec4 out_radiance;
 layout(location = 1) out vec4 out_position;
@@ -82,10 +92,27 @@ void main() {
     // The occlusion texture averaged over one lightmap texel: how many pixels a lightmap texel
     // spans here (>= 1; the condition is uniform, so the derivatives are fine). Without an
     // occlusion texture the mean is the absent texel's 1 and none of this is needed.
+    // The lightmap's coordinates and their derivatives. With OBJECT_RECORDS the UV set is chosen
+    // by a per-object value that a quad's helper invocations may not read (material_maps.glsl):
+    // the derivatives come from the UV sets themselves, taken in uniform control flow.
+    vec2 lightmap_uv = u_lightmap_texcoord == 1 ? v_uv1 : v_uv0;
+#if defined(OBJECT_RECORDS)
+    vec2 lightmap_dx = u_lightmap_texcoord == 1 ? dFdx(v_uv1) : dFdx(v_uv0);
+    vec2 lightmap_dy = u_lightmap_texcoord == 1 ? dFdy(v_uv1) : dFdy(v_uv0);
+    // Both sets read with implicit derivatives, as the per-object variant reads its one (the
+    // same texels bit for bit; textureGrad's LOD differs in the last bits on llvmpipe).
+    vec3 lightmap_texel_uv0 = texture(u_lightmap, v_uv0).rgb;
+    vec3 lightmap_texel_uv1 = texture(u_lightmap, v_uv1).rgb;
+    vec3 lightmap_texel = u_lightmap_texcoord == 1 ? lightmap_texel_uv1 : lightmap_texel_uv0;
+#else
+    vec2 lightmap_dx = dFdx(lightmap_uv);
+    vec2 lightmap_dy = dFdy(lightmap_uv);
+    vec3 lightmap_texel = texture(u_lightmap, lightmap_uv).rgb;  // a white texel without a lightmap
+#endif
     float lightmap_texel_pixels = 1.0;
     if (u_lightmap_texcoord >= 0 && u_map_texcoord[MAP_OCCLUSION] >= 0) {
-        vec2 lightmap_texels = (u_lightmap_texcoord == 1 ? v_uv1 : v_uv0) * vec2(textureSize(u_lightmap, 0));
-        float texels_per_pixel = max(length(dFdx(lightmap_texels)), length(dFdy(lightmap_texels)));
+        vec2 texels = vec2(textureSize(u_lightmap, 0));
+        float texels_per_pixel = max(length(lightmap_dx * texels), length(lightmap_dy * texels));
         lightmap_texel_pixels = clamp(1.0 / max(texels_per_pixel, 1e-6), 1.0, MAX_LIGHTMAP_TEXEL_PIXELS);
     }
     vec4 occlusion_mean = sample_map_widened(MAP_OCCLUSION, v_uv0, v_uv1, vec4(1.0), lightmap_texel_pixels);
@@ -128,10 +155,7 @@ void main() {
     // Without a lightmap: the environment's irradiance at the shading normal (viewer/cubemap.py
     // irradiance_cube: exact per texel, bilinear between; nothing occludes it).
     vec3 irradiance = textureLod(u_irradiance, tbn[2], 0.0).rgb;
-    if (u_lightmap_texcoord >= 0) {
-        vec2 uv = u_lightmap_texcoord == 1 ? v_uv1 : v_uv0;
-        irradiance = texture(u_lightmap, uv).rgb * u_lightmap_intensity;
-    }
+    if (u_lightmap_texcoord >= 0) irradiance = lightmap_texel * u_lightmap_intensity;
     // Occlusion darkens the indirect diffuse only: mix(1, ao, strength) (spec 3.9.3). A baked
     // lightmap already holds the occlusion of the geometry at its texel size (the bake traced
     // it; Cycles, path tracing the same geometry, ignores the texture), so on a lightmapped

@@ -7,6 +7,12 @@ in vec2 in_uv0;
 in vec2 in_uv1;
 
 uniform mat4 u_view_projection;
+#if defined(OBJECT_RECORDS)
+// The object's index: a per-instance attribute, so a multi-draw command's baseInstance picks
+// it (viewer/object_drawer.py ObjectBatches); GL 4.2 core, no draw-parameters extension.
+in uint in_object;
+flat out uint v_object;
+#endif
 
 out vec3 v_position;
 out vec3 v_normal;
@@ -22,5 +28,8 @@ void main() {
     v_tangent = in_tangent;
     v_uv0 = in_uv0;
     v_uv1 = in_uv1;
+#if defined(OBJECT_RECORDS)
+    v_object = in_object;
+#endif
     gl_Position = u_view_projection * vec4(in_position, 1.0);
 }

@@ -18,6 +18,7 @@ from .camera import box_corners, outside_frustum_many
 from .cubemap import RadianceCube
 from .interface import method_defines, set_uniform
 from .material_gpu import PackedMaterial
+from .object_batches import ObjectBatches, SceneGeometry
 from .occlusion import OcclusionTest
 from .render_base import draw_environment
 from .scene_shading import SceneShading, per_pixel_lobes
@@ -55,13 +56,27 @@ class DrawCounts:
         ]
 
 
+@dataclass
+class DrawCalls:
+    """Draw calls made since start-up (a bench takes differences): per-object draws, multi-draws
+    and the compute passes that build their commands (viewer/object_batches.py)."""
+
+    single: int = 0
+    multi: int = 0
+    culls: int = 0
+
+    def total(self) -> tuple[int, int, int]:
+        return self.single, self.multi, self.culls
+
+
 class GpuObject:
-    def __init__(self, ctx, obj, material: PackedMaterial, index: int):
+    """An object as the drawer keeps it: its index range in the scene's geometry buffers
+    (viewer/object_batches.py SceneGeometry), material, bounds and cube map."""
+
+    def __init__(self, obj, material: PackedMaterial, index: int, first_index: int, index_count: int):
         m = obj.mesh
-        uv1 = obj.uv1 if obj.uv1 is not None else np.zeros((len(m.positions), 2), np.float32)
-        data = np.concatenate([m.positions, m.normals, m.tangents, m.uvs, uv1], axis=1).astype(np.float32)
-        self.vbo = ctx.buffer(data.tobytes())
-        self.ibo = ctx.buffer(np.ascontiguousarray(m.indices, dtype=np.uint32).tobytes())
+        self.first_index = int(first_index)
+        self.index_count = int(index_count)
         self.material = material
         self.index = index
         self.name = obj.name
@@ -77,8 +92,6 @@ class GpuObject:
         self.probe_exclude = frozenset((index,))
 
     def release(self):
-        self.vbo.release()
-        self.ibo.release()
         if self.cube is not None:
             self.cube.release()
 
@@ -109,14 +122,22 @@ class ObjectDrawer:
         self.frame = frame
         self.settings = settings
         self.analysis = analysis
-        self.objects = [GpuObject(ctx, obj, materials[i], i) for i, obj in enumerate(scene.objects)]
+        self.geometry = SceneGeometry(ctx, scene.objects)
+        self.objects = [
+            GpuObject(obj, materials[i], i, self.geometry.first_index[i], self.geometry.index_count[i])
+            for i, obj in enumerate(scene.objects)
+        ]
         self.object_corners = np.array([obj.corners for obj in self.objects]).reshape(len(self.objects), 8, 3)
         self.object_methods: dict[int, Method] = {}  # the panel's per-object real-time methods
         self.draw_counts = DrawCounts()
-        self.occlusion = OcclusionTest(ctx, self.programs)
+        self.draw_calls = DrawCalls()
+        self.occlusion = OcclusionTest(ctx, self.programs, self.geometry, self.draw_calls)
+        boxes = np.array([obj.box for obj in self.objects], dtype=np.float64).reshape(len(self.objects), 2, 3)
+        self.batches = ObjectBatches(ctx, self.programs, self.geometry, boxes)
         self.residency = None
         self.mirror_passes = None
         self._vaos: dict = {}
+        self._masks_key = self._order_key = None  # what _batch_masks and draw_order cached
 
     def material_of(self, index: int):
         """The scene material of object ``index``."""
@@ -165,36 +186,26 @@ class ObjectDrawer:
     def visible_samples(self, view_proj, size, indices: list) -> dict[int, int]:
         """Pixels of a frame of ``size`` in which each reflector in ``indices`` is not hidden by an
         opaque object (viewer/occlusion.py)."""
+        batches = self.batches if self.settings.indirect_draws else None
         return self.occlusion.visible_samples(
-            view_proj, size, self.opaque_objects(True), {index: self.objects[index] for index in indices}
-        )
+            view_proj, size, self.opaque_objects(True), {index: self.objects[index] for index in indices},
+            batches, len(self.objects),
+        )  # fmt: skip
 
     def draw_depth(self, view_proj) -> tuple[int, int]:
         """The opaque objects' depth (the camera pass's pre-pass): (drawn, culled)."""
-        return self.occlusion.draw_depth(view_proj, self.opaque_objects(False))
+        batches = self.batches if self.settings.indirect_draws else None
+        return self.occlusion.draw_depth(view_proj, self.opaque_objects(False), batches, len(self.objects))
 
     def draw_background(self, cube, view_proj) -> None:
         """The environment ``cube`` behind everything (viewer/render_base.py draw_environment)."""
         draw_environment(self.ctx, self.programs, self._vaos, cube, view_proj)
 
-    def _vao(self, program, obj: GpuObject):
-        key = (id(program), obj.index)
+    def _vao(self, program):
+        """The vertex array of every object for ``program`` (one per program)."""
+        key = ("objects", id(program))
         if key not in self._vaos:
-            self._vaos[key] = self.ctx.vertex_array(
-                program,
-                [
-                    (
-                        obj.vbo,
-                        "3f 3f 4f 2f 2f",
-                        "in_position",
-                        "in_normal",
-                        "in_tangent",
-                        "in_uv0",
-                        "in_uv1",
-                    )
-                ],
-                obj.ibo,
-            )
+            self._vaos[key] = self.geometry.vertex_array(self.ctx, program)
         return self._vaos[key]
 
     def draw(
@@ -227,7 +238,13 @@ class ObjectDrawer:
         view_proj_values = tuple(view_proj.T.astype("f4").ravel())
         eye_values = tuple(float(x) for x in eye)
         excluded = exclude if isinstance(exclude, frozenset | set | tuple) else (exclude,)
-        for obj, blended in self.draw_order(eye):
+        batched = None
+        if self.settings.indirect_draws and self.objects:
+            batched = self._draw_batched(
+                view_proj_values, eye_values, cull_view_projection, method, specular, excluded, lod_bias,
+                sample_offset, seed, mirrors, cull, culled, counts,
+            )  # fmt: skip
+        for obj, blended in self.draw_order(eye, batched):  # what the multi-draw did not draw
             if obj.index in excluded or (not specular and self.analysis.objects[obj.index].transmission_lobes):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
                 # maps (as in the baker): a black pane would hide what lies behind it.
@@ -273,25 +290,114 @@ class ObjectDrawer:
                         program, self.analysis.reflectors[obj.index], mirror, eye, self.shading.white,
                         self.frame.previous_plane_states(),
                     )  # fmt: skip
-            self._vao(program, obj).render(moderngl.TRIANGLES)
+            self._vao(program).render(moderngl.TRIANGLES, vertices=obj.index_count, first=obj.first_index)
+            self.draw_calls.single += 1
         self.ctx.disable(moderngl.BLEND | moderngl.CULL_FACE)
         self.ctx.fbo.depth_mask = True
 
-    def draw_order(self, eye) -> list:
+    def _batch_masks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(batchable, transmissive, single-sided) per object: which objects the multi-draw may
+        draw (opaque or masked, no Rational BRDF: its storage buffer is bound per object),
+        which a diffuse pass leaves out, which lose their back faces in the camera pass."""
+        key = (id(self.analysis), self.shading.record_generation)
+        if self._masks_key != key:
+            n = len(self.objects)
+            mats = [self.material_of(i) for i in range(n)]
+            batchable = np.array(
+                [
+                    m.alpha_mode.upper() != "BLEND" and not o.material.has_rational
+                    for m, o in zip(mats, self.objects, strict=True)
+                ],
+                dtype=bool,
+            )
+            transmissive = np.array([bool(self.analysis.objects[i].transmission_lobes) for i in range(n)], dtype=bool)
+            single_sided = np.array([not m.double_sided for m in mats], dtype=bool)
+            self._masks, self._masks_key = (batchable, transmissive, single_sided), key
+        return self._masks
+
+    def batch_program(self):
+        """The diffuse scene program that reads per-object records (viewer/object_records.py)."""
+        return self.programs.program(
+            "scene.vert", "scene.frag", {"METHOD_LOBE": True, "HAS_RATIONAL": False, "OBJECT_RECORDS": True}
+        )
+
+    def _draw_batched(
+        self, view_proj_values, eye_values, cull_view_projection, method, specular, excluded, lod_bias,
+        sample_offset, seed, mirrors, cull, culled, counts,
+    ) -> np.ndarray:  # fmt: skip
+        """Draw this pass's diffuse-shaded objects by multi-draws (viewer/object_batches.py) and
+        count them; returns which objects were handled here (the rest go through the loop)."""
+        n = len(self.objects)
+        batchable, transmissive, single_sided = self._batch_masks()
+        shading = self.shading
+        key = (shading.record_generation, shading.textures.evictions, shading.material_textures.evictions)
+        record_method = Method.parse("lobe-3")  # diffuse programs read no method state
+
+        def record_state(recorder, obj):
+            shading.set_object_state(recorder, obj, record_method, False, None, obj.probe_centre)
+
+        self.batches.prepare(key, self.objects, batchable, record_state, single_sided)
+        mask = batchable.copy()
+        if specular:  # objects with a cube map or a mirror buffer are shaded with their lobes
+            owners = np.fromiter((obj.probe_owner for obj in self.objects), dtype=np.int64, count=n)
+            has_cube = np.fromiter((obj.cube is not None for obj in self.objects), dtype=bool, count=n)
+            mask &= ~has_cube[owners]
+            if mirrors:
+                mask[np.fromiter(mirrors, dtype=np.int64)] = False
+        else:
+            mask &= ~transmissive
+        for index in excluded:
+            if index is not None and 0 <= int(index) < n:
+                mask[int(index)] = False
+        visible = mask if culled is None else mask & ~culled
+        drawn = int(np.count_nonzero(visible))
+        counts.drawn += drawn
+        counts.culled += int(np.count_nonzero(mask)) - drawn
+        if drawn == 0:
+            return mask
+        self.batches.cull(mask, cull_view_projection, self.settings.frustum_culling)
+        self.draw_calls.culls += 1
+        program = self.batch_program()
+        set_uniform(program, "u_view_projection", view_proj_values)
+        set_uniform(program, "u_camera_position", eye_values)
+        shading.set_pass_state(program, method, lod_bias, seed)
+        set_uniform(program, "u_sample_offset", int(sample_offset))
+        vao = self._vao(program)
+        for group in self.batches.groups:
+            if not visible[group.objects].any():
+                continue
+            if cull and group.single_sided:
+                self.ctx.enable(moderngl.CULL_FACE)  # glTF doubleSided false: back faces are not drawn
+            else:
+                self.ctx.disable(moderngl.CULL_FACE)
+            rep = group.representative
+            shading.object_state(program, rep, method, False, None, rep.probe_centre)  # the group's textures
+            self.batches.draw_group(program, vao, group)
+            self.draw_calls.multi += 1
+        return mask
+
+    def draw_order(self, eye, skip: np.ndarray | None = None) -> list:
         """(object, blended): opaque and masked objects first, then the alphaMode BLEND ones
-        from back to front by the distance of their bounding-box centre (glTF 3.9.4)."""
-        opaque, blended = [], []
-        for obj in self.objects:
-            mode = self.material_of(obj.index).alpha_mode
-            (blended if mode == "BLEND" else opaque).append(obj)
+        from back to front by the distance of their bounding-box centre (glTF 3.9.4); without
+        the objects ``skip`` marks (those the multi-draw drew), chosen without a Python loop
+        over the others."""
+        key = self.shading.record_generation  # a material edit may change an alpha mode
+        if self._order_key != key:
+            modes = [self.material_of(i).alpha_mode for i in range(len(self.objects))]
+            self._opaque = np.array([i for i, mode in enumerate(modes) if mode != "BLEND"], dtype=np.int64)
+            self._blended = [self.objects[i] for i, mode in enumerate(modes) if mode == "BLEND"]
+            self._order_key = key
+        opaque = self._opaque if skip is None else self._opaque[~skip[self._opaque]]
         eye = np.asarray(eye, dtype=np.float64)
-        blended.sort(key=lambda o: -float(np.linalg.norm(o.centre - eye)))
-        return [(o, False) for o in opaque] + [(o, True) for o in blended]
+        blended = sorted(self._blended, key=lambda o: -float(np.linalg.norm(o.centre - eye)))
+        return [(self.objects[i], False) for i in opaque] + [(o, True) for o in blended]
 
     def release(self) -> None:
         self.occlusion.release()
+        self.batches.release()
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
         for obj in self.objects:
             obj.release()
+        self.geometry.release()

@@ -28,20 +28,21 @@ from .camera import outside_frustum_many
 from .frame import new_framebuffer
 from .interface import set_uniform
 
-# Vertex layout of the scene renderer's object buffers: position, then normal, tangent and two
-# UV sets (3 + 4 + 2 + 2 floats) that the depth pass skips.
-POSITION_ONLY = "3f 44x"
-
 
 class OcclusionTest:
-    def __init__(self, ctx: moderngl.Context, programs):
+    """``geometry``: the scene's vertex and index buffers (viewer/object_batches.py SceneGeometry);
+    ``draw_calls``: the drawer's counters (viewer/object_drawer.py DrawCalls)."""
+
+    def __init__(self, ctx: moderngl.Context, programs, geometry, draw_calls):
         self.ctx = ctx
         self.programs = programs
+        self.geometry = geometry
         self.size: tuple[int, int] | None = None
         self.depth = None
         self.fbo = None
-        self._vaos: dict[int, moderngl.VertexArray] = {}
+        self._vao = None
         self._query = None
+        self.draw_calls = draw_calls
 
     def _targets(self, size) -> None:
         size = (int(size[0]), int(size[1]))
@@ -52,18 +53,19 @@ class OcclusionTest:
         self.depth = self.ctx.depth_renderbuffer(size)
         self.fbo = new_framebuffer(self.ctx, [], self.depth)
 
-    def _vao(self, program, obj):
-        vao = self._vaos.get(obj.index)
-        if vao is None:
-            vao = self._vaos[obj.index] = self.ctx.vertex_array(
-                program, [(obj.vbo, POSITION_ONLY, "in_position")], obj.ibo
-            )
-        return vao
+    def _draw(self, program, obj) -> None:
+        """Object ``obj``'s triangles, positions only."""
+        if self._vao is None:
+            self._vao = self.geometry.vertex_array(self.ctx, program, position_only=True)
+        self._vao.render(moderngl.TRIANGLES, vertices=obj.index_count, first=obj.first_index)
+        self.draw_calls.single += 1
 
-    def draw_depth(self, view_proj: np.ndarray, objects: list) -> tuple[int, int]:
+    def draw_depth(self, view_proj: np.ndarray, objects: list, batches=None, object_count: int = 0) -> tuple[int, int]:
         """Depth of ``objects`` ((GPU object, single-sided) pairs) into the bound framebuffer's
         depth buffer (less-than test, colour untouched: the program has no outputs); objects
-        outside the frustum are skipped. Returns (drawn, culled)."""
+        outside the frustum are skipped. ``batches`` (viewer/object_batches.py ObjectBatches,
+        with the scene's ``object_count``): drawn by multi-draws culled on the GPU instead of
+        one draw each. Returns (drawn, culled) by the frustum test."""
         program = self.programs.program("depth.vert", "depth.frag", {})
         set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
         ctx = self.ctx
@@ -72,6 +74,19 @@ class OcclusionTest:
         ctx.depth_func = "<"
         drawn = culled = 0
         outside = outside_frustum_many(np.array([obj.corners for obj, _ in objects]), view_proj) if objects else []
+        if batches is not None:
+            enabled = np.zeros(object_count, dtype=bool)
+            single_sided = np.zeros(object_count, dtype=bool)
+            for obj, one_sided in objects:
+                enabled[obj.index] = True
+                single_sided[obj.index] = one_sided
+            hidden = int(np.count_nonzero(outside))
+            if hidden < len(objects):
+                if self._vao is None:
+                    self._vao = self.geometry.vertex_array(self.ctx, program, position_only=True)
+                self.draw_calls.multi += batches.draw_depth(self._vao, enabled, single_sided, view_proj, True)
+                self.draw_calls.culls += 1
+            return len(objects) - hidden, hidden
         for (obj, single_sided), hidden in zip(objects, outside, strict=True):
             if hidden:
                 culled += 1
@@ -80,21 +95,24 @@ class OcclusionTest:
                 ctx.enable(moderngl.CULL_FACE)
             else:
                 ctx.disable(moderngl.CULL_FACE)
-            self._vao(program, obj).render(moderngl.TRIANGLES)
+            self._draw(program, obj)
             drawn += 1
         ctx.disable(moderngl.CULL_FACE)
         return drawn, culled
 
-    def visible_samples(self, view_proj: np.ndarray, size, occluders: list, queried: dict) -> dict[int, int]:
+    def visible_samples(
+        self, view_proj: np.ndarray, size, occluders: list, queried: dict, batches=None, object_count: int = 0
+    ) -> dict[int, int]:
         """Samples of each ``queried`` object (index -> GPU object) that no occluder hides from
-        the camera of ``view_proj``. ``occluders``: (GPU object, single-sided) pairs."""
+        the camera of ``view_proj``. ``occluders``: (GPU object, single-sided) pairs;
+        ``batches``, ``object_count``: as in draw_depth."""
         self._targets(size)
         ctx = self.ctx
         ctx.scissor = None
         self.fbo.use()
         ctx.viewport = (0, 0, *self.size)
         self.fbo.clear(depth=1.0)
-        self.draw_depth(view_proj, occluders)
+        self.draw_depth(view_proj, occluders, batches, object_count)
         program = self.programs.program("depth.vert", "depth.frag", {})
         self.fbo.depth_mask = False
         ctx.depth_func = "<="  # a reflector lying on an occluder (a floor under a wall) is not hidden by it
@@ -103,7 +121,7 @@ class OcclusionTest:
         samples = {}
         for index, obj in queried.items():
             with self._query:
-                self._vao(program, obj).render(moderngl.TRIANGLES)
+                self._draw(program, obj)
             samples[index] = int(self._query.samples)
         self.fbo.depth_mask = True
         ctx.depth_func = "<"
@@ -118,7 +136,7 @@ class OcclusionTest:
 
     def release(self) -> None:
         self.release_targets()
-        for vao in self._vaos.values():
-            vao.release()
-        self._vaos.clear()
+        if self._vao is not None:
+            self._vao.release()
+            self._vao = None
         self._query = None  # moderngl 5.13 queries have no release(): the context frees them

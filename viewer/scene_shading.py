@@ -189,7 +189,7 @@ class SceneShading(ShadingBinder):
         records are made again after a material edit or a proxy change (``record_generation``)
         and after a texture cache released a texture they bind."""
         if not self.draw_records:
-            self._set_object_state(program, obj, method, planar, proxy, probe_centre)
+            self.set_object_state(program, obj, method, planar, proxy, probe_centre)
             return
         key = (
             program,
@@ -204,13 +204,14 @@ class SceneShading(ShadingBinder):
 
         def make():
             recorder = DrawRecorder(program)
-            self._set_object_state(recorder, obj, method, planar, proxy, probe_centre)
+            self.set_object_state(recorder, obj, method, planar, proxy, probe_centre)
             self.record_builds += 1
             return recorder.record()
 
         replay(program, self._records.get(key, make))
 
-    def _set_object_state(self, program, obj, method: Method, planar: bool, proxy, probe_centre) -> None:
+    def set_object_state(self, program, obj, method: Method, planar: bool, proxy, probe_centre) -> None:
+        """object_state without the records (what a record holds; viewer/object_batches.py packs it)."""
         mat = self.scene.materials[self.scene.objects[obj.index].material]
         self.set_material_state(program, obj.material, method, planar)
         set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))

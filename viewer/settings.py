@@ -53,6 +53,9 @@ class RenderSettings:
     depth_prepass: bool = True  # opaque depth first: the camera pass shades once per pixel
     # Per-object draw state recorded once and replayed per draw (viewer/interface.py DrawRecorder).
     draw_records: bool = True
+    # The diffuse-shaded objects drawn by a few multi-draws whose commands a compute pass culls
+    # (viewer/object_batches.py, issue 42); False: one draw call per object (kept for comparison).
+    indirect_draws: bool = True
 
     def __post_init__(self):
         check_mip_filter(self.mip_filter)

@@ -16,6 +16,7 @@ from importlib import resources
 import moderngl
 
 from .interface import SHADER_CONSTANTS, declared_uniforms, lobe_layout_glsl
+from .object_records import object_records_glsl
 
 #: the variant switches a caller may set (the shared constants come from interface.py)
 KNOWN_DEFINES = {
@@ -32,6 +33,7 @@ KNOWN_DEFINES = {
     "SPECULAR",
     "PARALLAX",
     "MIRROR",
+    "OBJECT_RECORDS",
 }
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
@@ -42,7 +44,7 @@ class ShaderError(RuntimeError):
 
 
 #: sources made from the Python side's single description of a contract (``#include`` them by name)
-GENERATED_SOURCES = {"lobe_layout.glsl": lobe_layout_glsl}
+GENERATED_SOURCES = {"lobe_layout.glsl": lobe_layout_glsl, "object_records.glsl": object_records_glsl}
 
 
 def read_source(name: str) -> str:

@@ -1,0 +1,203 @@
+"""CPU cost of a frame against the scene's size (issue 42): one draw call per object against the
+multi-draws of viewer/object_batches.py, on the apartment at several room counts.
+
+    python -m lobeview.bench.draw_cost                      # 1, 6, 18 rooms at 64x40 and 160x100
+    python -m lobeview.bench.draw_cost --rooms 1 6 18 40 --frames 24
+
+For each apartment (lightmaps baked at 512^2, 16 rays, 1 bounce, cached; cube faces 64^2) and
+each frame size, the recorded path is flown twice in one run, with ``RenderSettings``
+``indirect_draws`` off and on; every frame draws its mirror passes again (as while moving).
+Per frame it records the milliseconds ``SceneRenderer.draw_frame`` takes to return (the CPU's
+part: Python, uniform and binding calls, the driver's submission; on llvmpipe also its vertex
+processing) and to glFinish (everything), and the draw calls made (per-object draws, multi-draws,
+culling compute passes). At these small sizes llvmpipe's rasterising is small, as the shading
+is beside a GPU. Wall-clock on a shared machine: compare the rows of one run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_ROOMS = (1, 6, 18)
+DEFAULT_SIZES = ("64x40", "160x100")
+BAKE = {"resolution": 512, "rays": 16, "bounces": 1}  # as bench/walkthrough.py's object-count sweep
+FACE_SIZE = 64
+
+
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def walk(renderer, path, method, frames: int) -> list[dict]:
+    """Per frame of ``path``: submit and finished milliseconds and the draw calls."""
+    from lobeview.viewer.camera import Camera
+
+    ctx = renderer.ctx
+    rows = []
+    renderer.draw_frame(Camera.from_scene_camera(path.camera_at(0.0)), method)  # compile shaders
+    ctx.finish()
+    for t in path.frame_times(frames):
+        camera = Camera.from_scene_camera(path.camera_at(float(t)))
+        renderer.invalidate_mirrors()
+        ctx.finish()
+        calls = renderer.drawer.draw_calls.total()
+        t0 = time.perf_counter()
+        renderer.draw_frame(camera, method)
+        submitted = time.perf_counter()
+        ctx.finish()
+        finished = time.perf_counter()
+        single, multi, culls = np.subtract(renderer.drawer.draw_calls.total(), calls)
+        rows.append(
+            {
+                "t": float(t),
+                "submit_ms": (submitted - t0) * 1e3,
+                "finished_ms": (finished - t0) * 1e3,
+                "single_draws": int(single),
+                "multi_draws": int(multi),
+                "cull_passes": int(culls),
+                "objects_drawn": renderer.draw_counts.of("camera").drawn + renderer.draw_counts.of("mirror").drawn,
+            }
+        )
+    return rows
+
+
+def measure(ctx, rooms: int, sizes, frames: int, cache: Path, method: str) -> list[dict]:
+    from lobeview.core.methods import Method
+    from lobeview.scenes.apartment import apartment_path, build_apartment_scene
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.setup import load_scene_and_environment
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    _say(f"apartment-{rooms}: building (lightmaps cached after the first run)")
+    glb = build_apartment_scene(rooms, directory=cache / "apartment", **BAKE)
+    scene = load_gltf(glb)
+    _, _, env, _ = load_scene_and_environment(None, None, str(cache))
+    path = apartment_path(rooms)
+    out = []
+    for size in sizes:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            renderer = SceneRenderer(
+                ctx, scene, env, size=size, progress=False, cache_dir=cache / "cubes",
+                settings=RenderSettings(cube_face_size=FACE_SIZE),
+            )  # fmt: skip
+        try:
+            for indirect in (False, True):
+                renderer.configure(indirect_draws=indirect)
+                _say(f"apartment-{rooms} {size[0]}x{size[1]}: {'multi-draws' if indirect else 'per-object draws'}")
+                rows = walk(renderer, path, Method.parse(method), frames)
+                out.append(
+                    {
+                        "rooms": rooms,
+                        "objects": len(scene.objects),
+                        "size": list(size),
+                        "indirect": indirect,
+                        "frames": rows,
+                    }
+                )
+        finally:
+            renderer.release()
+    return out
+
+
+def summary(run: dict) -> dict:
+    rows = run["frames"]
+
+    def median(key):
+        return statistics.median(r[key] for r in rows)
+
+    def mean(key):
+        return statistics.fmean(r[key] for r in rows)
+
+    return {
+        "submit_ms": median("submit_ms"),
+        "finished_ms": median("finished_ms"),
+        "single_draws": mean("single_draws"),
+        "multi_draws": mean("multi_draws"),
+        "cull_passes": mean("cull_passes"),
+        "objects_drawn": mean("objects_drawn"),
+    }
+
+
+def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: float) -> str:
+    lines = [
+        "# Frame CPU cost against scene size (issue 42)",
+        "",
+        f"Device: {device}. Method {method}, cube faces {FACE_SIZE}^2, {frames} frames along each apartment's "
+        "recorded path, mirror passes redrawn every frame. *submit*: milliseconds until `draw_frame` returns "
+        "(Python, GL calls, driver submission; llvmpipe also shades vertices there), *finished*: until glFinish. "
+        f"Medians over the frames; draw calls are means per frame. Whole run {elapsed / 60:.1f} min.",
+        "",
+        "| rooms | objects | size | path | submit ms | finished ms | per-object draws | multi-draws | culling passes "
+        "| objects drawn (camera + mirror) | submit vs per-object |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    base = {}
+    for run in runs:
+        s = summary(run)
+        key = (run["rooms"], tuple(run["size"]))
+        if not run["indirect"]:
+            base[key] = s["submit_ms"]
+        ratio = s["submit_ms"] / base[key] if key in base and base[key] > 0 else float("nan")
+        lines.append(
+            f"| {run['rooms']} | {run['objects']} | {run['size'][0]}x{run['size'][1]} "
+            f"| {'multi-draw' if run['indirect'] else 'per object'} | {s['submit_ms']:.1f} | {s['finished_ms']:.1f} "
+            f"| {s['single_draws']:.0f} | {s['multi_draws']:.0f} | {s['cull_passes']:.0f} | {s['objects_drawn']:.0f} "
+            f"| {ratio:.2f} |"
+        )
+    by_size: dict = {}
+    for run in runs:
+        if run["indirect"]:
+            by_size.setdefault(tuple(run["size"]), []).append((run["rooms"], summary(run)["submit_ms"]))
+    lines += ["", "Growth with the scene (multi-draw path, submit ms against the smallest apartment):", ""]
+    for size, values in by_size.items():
+        values.sort()
+        first = values[0][1]
+        growth = ", ".join(f"{rooms} rooms {ms / first:.2f}x" for rooms, ms in values)
+        lines.append(f"- {size[0]}x{size[1]}: {growth}")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    from lobeview.core.errors import parse_size
+    from lobeview.core.paths import cache_dir
+    from lobeview.viewer.context import create_headless_context, renderer_description
+
+    p = argparse.ArgumentParser(prog="python -m lobeview.bench.draw_cost", description=__doc__.split("\n\n")[0])
+    p.add_argument("--rooms", type=int, nargs="+", default=list(DEFAULT_ROOMS), help="apartment sizes (default 1 6 18)")
+    p.add_argument("--sizes", nargs="+", default=list(DEFAULT_SIZES), help="frame sizes (default 64x40 160x100)")
+    p.add_argument("--frames", type=int, default=16, help="frames along each path (default 16)")
+    p.add_argument("--method", default="lobe-7", help="the frame's method (default lobe-7)")
+    p.add_argument("--cache", default=None, help="cache folder (default: lobeview's)")
+    p.add_argument("--out", default=None, help="Markdown report (default bench/results/draw-cost-STAMP.md, + .json)")
+    args = p.parse_args(argv)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    out = Path(args.out) if args.out else Path(__file__).parent / "results" / f"draw-cost-{stamp}.md"
+    sizes = [parse_size(s) for s in args.sizes]
+    ctx = create_headless_context()
+    device = renderer_description(ctx)
+    t0 = time.perf_counter()
+    runs = []
+    for rooms in args.rooms:
+        runs += measure(ctx, rooms, sizes, args.frames, cache_dir(args.cache), args.method)
+    text = markdown(runs, device, args.method, args.frames, time.perf_counter() - t0)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    out.with_suffix(".json").write_text(json.dumps({"device": device, "runs": runs}, indent=1) + "\n")
+    print(text)
+    _say(f"written {out}")
+    ctx.release()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
