@@ -150,6 +150,10 @@ def _rendering(window) -> None:
     if c6:
         renderer.configure(frustum_culling=culling)
         window.dirty = True  # the image is the same; the counts below are the next frame's
+    c7, indirect = imgui.checkbox("GPU-driven drawing (multi-draw)", renderer.settings.indirect_draws)
+    if c7:  # the same image (tests/test_indirect_draws.py); the draw calls below change
+        renderer.configure(indirect_draws=indirect)
+        window.dirty = True
     for line in renderer.draw_report:
         imgui.text_wrapped(line)
     if window.camera_path is not None:

@@ -39,6 +39,7 @@ def test_demo_frames_are_bit_identical_with_fewer_draws(ctx, method):
         np.testing.assert_array_equal(multi, single)
         assert calls_single[1] == 0 and calls_multi[1] > 0  # the switch switches
         assert calls_multi[0] < calls_single[0]  # fewer draw calls: the diffuse objects are batched
+        assert renderer.frame_draw_calls[1] > 0 and "multi-draws" in renderer.draw_report[-1]  # the panel's line
         # The cube-map faces (the diffuse bounce draws everything but transmissive panes batched).
         eye = np.array(_scene_camera(scene, "overview").position)
         faces = {}

@@ -88,6 +88,7 @@ class SceneRenderer(RendererBase):
         shading.draw_records = settings.draw_records
         self.objects = self.drawer.objects
         self.draw_counts = self.drawer.draw_counts  # objects drawn and culled per kind of pass
+        self.frame_draw_calls = (0, 0, 0)  # the last draw_frame's: per-object, multi-draws, culling passes
         for needs in self.analysis.objects:
             if not needs.has_lightmap:
                 warnings.warn(
@@ -141,8 +142,10 @@ class SceneRenderer(RendererBase):
     @property
     def draw_report(self) -> list[str]:
         """Objects drawn and culled: by the last frame's camera and mirror passes, and by every
-        cube-map face rendered since start-up."""
-        return self.draw_counts.report()
+        cube-map face rendered since start-up; the last frame's draw calls."""
+        single, multi, culls = self.frame_draw_calls
+        calls = f"draw calls (last frame): {single} per object, {multi} multi-draws, {culls} GPU culling passes"
+        return [*self.draw_counts.report(), calls]
 
     @property
     def mirror_report(self) -> list[str]:
@@ -241,6 +244,7 @@ class SceneRenderer(RendererBase):
         width, height = self.size
         view_proj = jittered(camera.view_projection(width / height), jitter, self.size)
         self.draw_counts.new_frame()
+        calls_before = self.drawer.draw_calls.total()
         # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
         # lookup per lobe, so there they keep their cube maps and no mirror pass is drawn.
         self.probes.restore(view_proj)
@@ -265,6 +269,7 @@ class SceneRenderer(RendererBase):
         drawer.draw(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors, cull=True)
         self.ctx.depth_func = "<"
         self.probes.residency.evict(self.objects)
+        self.frame_draw_calls = tuple(int(x) for x in np.subtract(self.drawer.draw_calls.total(), calls_before))
 
     def pick(self, x: int, y: int) -> int | None:
         """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
