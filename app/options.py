@@ -255,9 +255,12 @@ def lobe_width_cubes(args, method: Method | None = None) -> bool:
     return choice == "lobe"
 
 
-def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method | None = None):
+def scene_renderer_from_args(
+    ctx, scene, env, size, cache, args, method: Method | None = None, progressive_cubes: bool = False
+):
     """The SceneRenderer of ``shot`` and ``view``: cube-map size, cache and mirror-pass options
-    (``method``: what shot renders, for --cube-sizes auto)."""
+    (``method``: what shot renders, for --cube-sizes auto; ``progressive_cubes``: the viewer's
+    start on preview cube maps, SceneRenderer says more)."""
     from lobeview.viewer.scene_renderer import SceneRenderer
     from lobeview.viewer.settings import RenderSettings
 
@@ -277,6 +280,7 @@ def scene_renderer_from_args(ctx, scene, env, size, cache, args, method: Method 
             bright_sources=bool(getattr(args, "bright_sources", True)),
             mirrors=bool(args.mirrors),
         ),
+        progressive_cubes=progressive_cubes,
     )
     return renderer
 

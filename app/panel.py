@@ -154,6 +154,8 @@ def _rendering(window) -> None:
     if c7:  # the same image (tests/test_indirect_draws.py); the draw calls below change
         renderer.configure(indirect_draws=indirect)
         window.dirty = True
+    if renderer.cube_build_status is not None:
+        imgui.text_wrapped(renderer.cube_build_status)
     for line in renderer.draw_report:
         imgui.text_wrapped(line)
     if window.camera_path is not None:

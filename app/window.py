@@ -50,6 +50,7 @@ from lobeview.viewer.tonemap import to_uint8, tonemap
 
 FRAME_TIME_SMOOTHING = 0.2  # exponential smoothing of the shown frame interval
 CUBE_REFRESH_MAX_DEFERRED = 8  # moving frames a stale cube map waits at most for room in the budget
+CUBE_BUILD_REDRAW_S = 2.0  # the progressive cube-map build redraws the view this often (full resolution)
 
 
 @dataclass
@@ -106,8 +107,10 @@ class LobeviewWindow(mglw.WindowConfig):
         self.widget_rects: dict = {}  # a few widgets' rectangles (the frame log's, for tests)
         size = self.wnd.buffer_size
         self.show_progress("scene renderer", None)
+        # Without cached cube maps the window opens on previews and builds the exact ones over the
+        # next frames (_continue_cube_build), the nearest first: the first frame in seconds.
         self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
-                                                 self.args)  # fmt: skip
+                                                 self.args, progressive_cubes=True)  # fmt: skip
         self._make_accumulators(size)
         self.pending_screenshots: list[str] = []
         position, target, up, fov = scene_view(self.scene, self.args.view)
@@ -131,6 +134,8 @@ class LobeviewWindow(mglw.WindowConfig):
         self._moving_pass = None  # (scale, seconds) of the last frame rendered while the view changed
         self.show_material_tab = False
         self.cube_refresh_deferred = 0  # moving frames since a stale cube map was due (_cube_refresh_fits)
+        self.cube_build_redrawn_at = 0.0  # when the progressive cube-map build last redrew the frame
+        self.full_frame_due = False  # the next changed frame at full resolution (the build's redraws)
         self.panel_drag = False  # a left or right drag that began on the panel stays the panel's
         self._pointer = (0.0, 0.0)  # the last pointer position (scroll events carry none)
         self.selected: int | None = next(
@@ -422,6 +427,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.poll_fit()
 
         camera = self.walk.camera()
+        self._continue_cube_build(camera, t_frame)
         refinement = self.refinement
         changed = self.dirty
         if changed:
@@ -435,7 +441,8 @@ class LobeviewWindow(mglw.WindowConfig):
             self.frame_state = "moving"
             # A screenshot due this frame is taken of the full-resolution frame, as its printed
             # `lobeview shot` command renders it, not of the upsampled one.
-            scale = 1.0 if self.pending_screenshots else self.render_scale.scale
+            scale = 1.0 if self.pending_screenshots or self.full_frame_due else self.render_scale.scale
+            self.full_frame_due = False
             self.pass_ms = self._draw_realtime(camera, scale)
             self._moving_pass = (scale, self.pass_ms / 1000.0)
         elif self.realtime_scale < 1.0:
@@ -447,7 +454,12 @@ class LobeviewWindow(mglw.WindowConfig):
                 self.pass_ms = self._draw_realtime(camera, 1.0)
             else:
                 self.frame_state = "waiting"
-        elif refinement.still_frames > 0 and self.progressive and not refinement.finished:
+        elif (
+            refinement.still_frames > 0
+            and self.progressive
+            and not refinement.finished
+            and self.renderer.cube_build_status is None  # refining a preview would be thrown away
+        ):
             self.frame_state = "refining"
             # Refinement reads level 0: faces sized for lobe-N are re-rendered at full size, one
             # per frame below, each restarting the accumulation (converges as shot's reference).
@@ -478,6 +490,38 @@ class LobeviewWindow(mglw.WindowConfig):
         self.frame += 1
         if self.quit_requested or (self.args.exit_after and self.frame >= self.args.exit_after):
             self.wnd.close()  # releases GPU objects (on_close): the frame is finished
+
+    def _continue_cube_build(self, camera, t_frame: float) -> None:
+        """One object's cube map of the progressive start (SceneRenderer continue_cube_build: the
+        nearest first) in a frame where the view has rested REST_DELAY_S and no key is held (a
+        step takes up to seconds without a GPU: never while the user moves), which changes the
+        frame; all that is left when a screenshot is due, so that it shows what its printed
+        `lobeview shot` command renders."""
+        status = self.renderer.cube_build_status
+        if status is None:
+            return
+        finish = bool(self.pending_screenshots)
+        resting = not self.dirty and t_frame - self.last_change >= REST_DELAY_S and not self.held_keys.down_since
+        if not (finish or resting):
+            return
+        if finish:
+            self.show_progress("finishing the cube maps for the screenshot", None)
+        while True:
+            self.renderer.continue_cube_build(0.0, camera)
+            status = self.renderer.cube_build_status
+            if status is None or not finish:
+                break
+        if status is None:
+            self.message = "cube maps finished"  # the panel showed the build's progress
+        # The frame shows the new cube maps at full resolution every CUBE_BUILD_REDRAW_S, or every
+        # four full frames' time where a frame is slow (a moving frame after each step would keep
+        # the view blurred at the moving scale for the whole build), and when the build ends.
+        now = time.perf_counter()
+        interval = max(CUBE_BUILD_REDRAW_S, 4.0 * self.pass_ms / 1000.0)
+        if status is None or finish or now - self.cube_build_redrawn_at >= interval:
+            self.cube_build_redrawn_at = now
+            self.dirty = True
+            self.full_frame_due = True
 
     def _cube_refresh_fits(self, moving: bool, elapsed_s: float) -> bool:
         """Whether this frame re-renders a stale cube map (after a material edit): always while

@@ -188,15 +188,16 @@ class CubeBake:
             raise ValueError(f"cube map is not a finite array of shape {shape}")
         return faces
 
-    def build(self, objects: list, wanted: list[int], key: str, sizes: dict | None = None) -> None:
-        """Cube maps of the objects ``wanted``, from the disk cache when it has them all; ``sizes``
-        gives an object's face size (default: the full one, scenes/analysis.py chooses); ``key``
-        names the cache files (scene_content_key)."""
+    def _sizes(self, wanted: list[int], sizes: dict | None) -> dict[int, int]:
+        return {i: int((sizes or {}).get(i, self.face_size)) for i in wanted}
+
+    def build_from_cache(self, objects: list, wanted: list[int], key: str, sizes: dict | None = None) -> bool:
+        """Install the cube maps of ``wanted`` from the disk cache when it holds them all, at
+        their sizes; False when it does not (nothing installed). Sets the cache ``key``."""
         self.key = key
         if not wanted:
-            return
-        sizes = {i: int((sizes or {}).get(i, self.face_size)) for i in wanted}
-        cache_file = self._cache_file()
+            return True
+        sizes = self._sizes(wanted, sizes)
 
         def read(path: Path) -> dict | None:
             with np.load(path, allow_pickle=False) as data:
@@ -211,24 +212,65 @@ class CubeBake:
                     raise ValueError("cube maps are not finite")
             return cached
 
-        cached = read_cache_file(cache_file, read, "cube maps")
-        if cached is not None:
-            for i in wanted:
-                self._install(objects[i], cached[i])
+        cached = read_cache_file(self._cache_file(), read, "cube maps")
+        if cached is None:
+            return False
+        for i in wanted:
+            self._install(objects[i], cached[i])
+        return True
+
+    def build(self, objects: list, wanted: list[int], key: str, sizes: dict | None = None) -> None:
+        """Cube maps of the objects ``wanted``, from the disk cache when it has them all; ``sizes``
+        gives an object's face size (default: the full one, scenes/analysis.py chooses); ``key``
+        names the cache files (scene_content_key)."""
+        if not self.build_from_cache(objects, wanted, key, sizes):
+            for _ in self.build_steps(objects, wanted, sizes):
+                pass
+
+    def build_steps(
+        self,
+        objects: list,
+        wanted: list[int],
+        sizes: dict | None = None,
+        cache: bool = True,
+        nearest=None,
+        announce: bool = True,
+    ):
+        """Render the cube maps of ``wanted`` with every bounce, one object's six faces per step
+        (a generator: it yields (steps done, steps in all) after each), so a window can spread the
+        work over frames. The result is :meth:`build`'s exactly: the first bounce's cube maps are
+        installed as each is made (that bounce draws no cube map, so the order does not matter
+        and ``nearest(remaining)`` may choose the next object, the camera's nearest first); a
+        later bounce's are installed together at its end, as every object of it reads the
+        previous bounce's. ``cache``: write the cache file (under the key set before) at the end;
+        ``announce``: tell the progress listeners (a window's loading overlay) of each step."""
+        if not wanted:
             return
+        sizes = self._sizes(wanted, sizes)
         faces = {}
+        total = self.bounces * len(wanted)
         for bounce in range(self.bounces):
             t0 = time.perf_counter()
-            for k, i in enumerate(wanted):
+            remaining = list(wanted)
+            while remaining:
+                i = nearest(remaining) if nearest is not None and bounce == 0 else remaining[0]
+                remaining.remove(i)
                 obj = objects[i]
-                report(
-                    f"cube maps, bounce {bounce + 1} of {self.bounces}: {obj.name} ({k + 1} of {len(wanted)})",
-                    (bounce * len(wanted) + k) / (self.bounces * len(wanted)),
-                )
+                done = bounce * len(wanted) + len(wanted) - len(remaining) - 1
+                if announce:
+                    report(
+                        f"cube maps, bounce {bounce + 1} of {self.bounces}: {obj.name} ({done % len(wanted) + 1} of "
+                        f"{len(wanted)})",
+                        done / total,
+                    )
                 faces[i] = self.render_faces(obj.probe_centre, obj.probe_exclude, specular=bounce > 0, size=sizes[i])
-            for i in wanted:
-                self._install(objects[i], faces[i])
-            if self.progress:
+                if bounce == 0:
+                    self._install(obj, faces[i])
+                yield done + 1, total
+            if bounce > 0:
+                for i in wanted:
+                    self._install(objects[i], faces[i])
+            if self.progress and announce:
                 counts = np.unique(list(sizes.values()), return_counts=True)
                 shapes = ", ".join(f"{c} of {s}^2" for s, c in zip(*counts, strict=True))
                 print(
@@ -237,6 +279,7 @@ class CubeBake:
                     file=sys.stderr,
                     flush=True,
                 )
+        cache_file = self._cache_file() if cache else None
         if cache_file is not None:
             # float32, not float16: a sun seen through a window exceeds half precision's 65504.
             arrays = {f"cube_{i}": f.astype(np.float32) for i, f in faces.items()}

@@ -21,13 +21,24 @@ from .cube_bake import CubeBake, CubeResidency, scene_content_key
 from .object_drawer import ObjectDrawer
 from .settings import RenderSettings
 
+# Progressive start: preview cube maps this many times smaller across (never below PREVIEW_MIN_FACE).
+PREVIEW_DIVISOR = 8
+PREVIEW_MIN_FACE = 8
+
 
 class CubeProbes:
     """Builds the cube maps the analysis asks for at start-up (``environment_key``: the
     environment's content hash, part of the cache key) and keeps them current."""
 
     def __init__(
-        self, ctx, drawer: ObjectDrawer, settings: RenderSettings, environment_key: str, progress=True, cache_dir=None
+        self,
+        ctx,
+        drawer: ObjectDrawer,
+        settings: RenderSettings,
+        environment_key: str,
+        progress=True,
+        cache_dir=None,
+        progressive: bool = False,
     ):
         self.drawer = drawer
         self.objects = drawer.objects
@@ -51,11 +62,27 @@ class CubeProbes:
         self.probe_corners = drawer.object_corners.copy()
         self.groups: list = []
         self.apply_groups(self.rule_groups())
-        analysis = drawer.analysis
+        self.environment_key = environment_key
+        self.edited = False  # a material edit makes the start-up cache files outdated
+        # Progressive start (the viewer, issue 42 item 2): without a cache, every cube map at a
+        # preview size first, then the exact build one object per step (continue_build).
+        self.progressive = bool(progressive) and settings.cube_budget_mb is None
+        self.pending = None  # the exact build's steps while it runs (CubeBake.build_steps)
+        self.pending_progress = (0, 0)
+        self.focus = None  # the camera's position: the first bounce renders its nearest first
+        at_start, sizes, key = self._start_plan()
+        if not self.progressive:
+            self.bake.build(self.objects, at_start, key, sizes)
+        elif not self.bake.build_from_cache(self.objects, at_start, key, sizes):
+            self._start_progressive(at_start, sizes)
+
+    def _start_plan(self) -> tuple[list[int], dict, str]:
+        """(the cube maps made at start-up, their face sizes, the cache key)."""
+        analysis, settings = self.drawer.analysis, self.settings
         sizes = {i: self.cube_size(i) for i in analysis.cube_mapped}
         key = scene_content_key(
-            drawer.scene,
-            environment_key,
+            self.drawer.scene,
+            self.environment_key,
             self.bake.face_size,
             self.bake.bounces,
             sizes,
@@ -68,8 +95,47 @@ class CubeProbes:
             key += "-g" + hashlib.sha256(repr([g.members for g in self.groups]).encode()).hexdigest()[:8]
         # Objects of a group read the owner's cube map: only owners get one.
         at_start = [i for i in analysis.cubes_at_start if self.objects[i].probe_owner == i]
-        self.bake.build(self.objects, at_start, key, sizes)
-        self.edited = False  # a material edit makes the start-up cache files outdated
+        return at_start, sizes, key
+
+    # -- progressive start ---------------------------------------------------------------------
+    def _start_progressive(self, at_start: list[int], sizes: dict) -> None:
+        """Every cube map at PREVIEW_DIVISOR times smaller faces now (all bounces, not cached),
+        then the exact build as steps; its cache file is written when it finishes."""
+        preview = {i: max(PREVIEW_MIN_FACE, sizes.get(i, self.bake.face_size) // PREVIEW_DIVISOR) for i in at_start}
+        for _ in self.bake.build_steps(self.objects, at_start, preview, cache=False):
+            pass
+        # Its steps run between a window's frames: no loading overlay for them (the panel says).
+        self.pending = self.bake.build_steps(
+            self.objects, at_start, sizes, cache=not self.edited, nearest=self._nearest, announce=False
+        )
+        self.pending_progress = (0, self.bake.bounces * len(at_start))
+
+    def _nearest(self, remaining: list[int]) -> int:
+        if self.focus is None:
+            return remaining[0]
+        focus = np.asarray(self.focus, dtype=np.float64)
+        return min(remaining, key=lambda i: float(np.linalg.norm(self.objects[i].probe_centre - focus)))
+
+    def continue_build(self, seconds: float) -> int:
+        """Advance the progressive build by whole steps (one object's faces each) while
+        ``seconds`` last, at least one; returns the steps made, its end (the last bounce's
+        install and the cache file) counting as one (0: nothing pending)."""
+        if self.pending is None:
+            return 0
+        t0, steps = time.perf_counter(), 0
+        while self.pending is not None and (steps == 0 or time.perf_counter() - t0 < seconds):
+            step = next(self.pending, None)
+            steps += 1
+            if step is None:
+                self.pending = None
+            else:
+                self.pending_progress = step
+        return steps
+
+    @property
+    def building(self) -> bool:
+        """Whether the progressive build still runs (the cube maps are previews or partial)."""
+        return self.pending is not None
 
     # -- shared probes (scenes/probe_groups.py) ---------------------------------------------------
     def rule_groups(self) -> list:
@@ -166,7 +232,8 @@ class CubeProbes:
             own = self.drawer.object_method(index, method)
             if index in enabled and method.kind != "prefiltered" and own.kind != "prefiltered":
                 continue
-            self.bake.build_one(self.objects, index, analysis.objects[index].cube_face)
+            # Read or written to the cache only over finished cube maps (not during a progressive build).
+            self.bake.build_one(self.objects, index, analysis.objects[index].cube_face, cached=not self.building)
 
     def request_full_faces(self, view_projection) -> int:
         """Queue the sized cube maps of the objects in this frustum for re-rendering at the full
@@ -196,6 +263,14 @@ class CubeProbes:
         self.edited = True
         analysis, scene = self.drawer.analysis, self.drawer.scene
         regrouped = self.apply_groups(self.rule_groups())
+        if self.pending is not None:
+            # The exact build was for the old material: start it again for the edited scene
+            # (the cube maps shown meanwhile stay; nothing of it is cached, the scene was edited).
+            at_start, sizes, _ = self._start_plan()
+            self.pending = self.bake.build_steps(
+                self.objects, at_start, sizes, cache=False, nearest=self._nearest, announce=False
+            )
+            self.pending_progress = (0, self.bake.bounces * len(at_start))
         # Everything else that reflects this object now sees an outdated appearance.
         self.bake.stale = [i for i in analysis.cube_mapped if scene.objects[i].material != material_index]
         for gpu_obj in self.objects:

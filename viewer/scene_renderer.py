@@ -58,7 +58,11 @@ class SceneRenderer(RendererBase):
         settings: RenderSettings | None = None,
         cache_dir: Path | None = None,
         progress: bool = True,
+        progressive_cubes: bool = False,
     ):
+        """``progressive_cubes`` (the viewer): without cached cube maps, start with preview cube
+        maps and build the exact ones over later frames (``continue_cube_build``), so the first
+        frame comes in seconds; ``shot`` and the benchmarks build them all first."""
         settings = settings if settings is not None else RenderSettings()
         self._settings = settings
         self.scene = scene
@@ -101,7 +105,7 @@ class SceneRenderer(RendererBase):
         self.bounds = scene.bounds  # static scene: near/far planes are fitted to it every frame
         env_hash = hashlib.sha256(environment.image.tobytes()).hexdigest()[:16]
         report("cube maps", 0.0)
-        self.probes = CubeProbes(ctx, self.drawer, settings, env_hash, progress, self.cache_dir)
+        self.probes = CubeProbes(ctx, self.drawer, settings, env_hash, progress, self.cache_dir, progressive_cubes)
         self.mirror_passes = MirrorPasses(ctx, self.drawer, self.probes, settings.mip_filter)
         self.drawer.mirror_passes = self.mirror_passes
         self.timings["cube maps"] = time.perf_counter() - t0
@@ -306,6 +310,28 @@ class SceneRenderer(RendererBase):
             return 0
         width, height = self.size
         return self.probes.request_full_faces(camera.fitted_to(self.bounds).view_projection(width / height))
+
+    @property
+    def cube_build_status(self) -> str | None:
+        """What the progressive cube-map build has left (None: the cube maps are finished)."""
+        if not self.probes.building:
+            return None
+        done, total = self.probes.pending_progress
+        return f"cube maps: {done} of {total} object renders done (previews shown meanwhile)"
+
+    def continue_cube_build(self, seconds: float, camera: Camera | None = None) -> int:
+        """Advance the progressive cube-map build for about ``seconds`` (at least one object's
+        faces; the first bounce renders the objects nearest ``camera`` first). Returns the steps
+        made; any step changes what the frame shows (the mirror buffers are drawn again)."""
+        if not self.probes.building:
+            return 0
+        if camera is not None:
+            self.probes.focus = np.asarray(camera.position, dtype=np.float64)
+        viewport = self.ctx.viewport
+        steps = self.probes.continue_build(seconds)
+        self.ctx.viewport = viewport
+        self.mirror_passes.invalidate()
+        return steps
 
     def refresh_one_stale_cube(self) -> str | None:
         """Re-render one out-of-date cube map (after a material edit changed what it sees);
