@@ -568,6 +568,7 @@ class LobeviewWindow(mglw.WindowConfig):
             "camera": [round(float(v), 5) for v in self.walk.position],
             "walk_speed": self.walk.speed,
             "path_time": self.path_time,
+            "cube_build": self.renderer.probes.pending_progress if self.renderer.cube_build_status else None,
             "widgets": {name: [round(v, 1) for v in rect] for name, rect in self.widget_rects.items()},
         }
         self.stats_file.write(json.dumps(record) + "\n")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -117,6 +118,7 @@ class CubeBake:
         self.drawer = drawer
         self.progress = progress
         self.stale: list[int] = []  # cube maps that show an outdated appearance of another object
+        self.cache_writer: threading.Thread | None = None  # a progressive build's cache file being written
         # Sized cube maps to re-render at the full face size (refinement in view: SceneRenderer
         # request_full_faces), after the stale ones.
         self.upgrades: list[int] = []
@@ -235,6 +237,7 @@ class CubeBake:
         cache: bool = True,
         nearest=None,
         announce: bool = True,
+        background_write: bool = False,
     ):
         """Render the cube maps of ``wanted`` with every bounce, one object's six faces per step
         (a generator: it yields (steps done, steps in all) after each), so a window can spread the
@@ -243,12 +246,15 @@ class CubeBake:
         and ``nearest(remaining)`` may choose the next object, the camera's nearest first); a
         later bounce's are installed together at its end, as every object of it reads the
         previous bounce's. ``cache``: write the cache file (under the key set before) at the end;
-        ``announce``: tell the progress listeners (a window's loading overlay) of each step."""
+        ``announce``: tell the progress listeners (a window's loading overlay) of each step;
+        ``background_write``: write the cache file in a thread (``cache_writer``)."""
         if not wanted:
             return
         sizes = self._sizes(wanted, sizes)
         faces = {}
-        total = self.bounces * len(wanted)
+        cache_file = self._cache_file() if cache else None
+        total = self.steps_for(len(wanted), cache_file is not None)
+        done = 0
         for bounce in range(self.bounces):
             t0 = time.perf_counter()
             remaining = list(wanted)
@@ -256,20 +262,22 @@ class CubeBake:
                 i = nearest(remaining) if nearest is not None and bounce == 0 else remaining[0]
                 remaining.remove(i)
                 obj = objects[i]
-                done = bounce * len(wanted) + len(wanted) - len(remaining) - 1
                 if announce:
                     report(
-                        f"cube maps, bounce {bounce + 1} of {self.bounces}: {obj.name} ({done % len(wanted) + 1} of "
-                        f"{len(wanted)})",
+                        f"cube maps, bounce {bounce + 1} of {self.bounces}: {obj.name} "
+                        f"({len(wanted) - len(remaining)} of {len(wanted)})",
                         done / total,
                     )
                 faces[i] = self.render_faces(obj.probe_centre, obj.probe_exclude, specular=bounce > 0, size=sizes[i])
                 if bounce == 0:
                     self._install(obj, faces[i])
-                yield done + 1, total
-            if bounce > 0:
+                done += 1
+                yield done, total
+            if bounce > 0:  # every face of this bounce is made: installing them now is exact, one per step
                 for i in wanted:
                     self._install(objects[i], faces[i])
+                    done += 1
+                    yield done, total
             if self.progress and announce:
                 counts = np.unique(list(sizes.values()), return_counts=True)
                 shapes = ", ".join(f"{c} of {s}^2" for s, c in zip(*counts, strict=True))
@@ -279,11 +287,27 @@ class CubeBake:
                     file=sys.stderr,
                     flush=True,
                 )
-        cache_file = self._cache_file() if cache else None
         if cache_file is not None:
             # float32, not float16: a sun seen through a window exceeds half precision's 65504.
             arrays = {f"cube_{i}": f.astype(np.float32) for i, f in faces.items()}
-            write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, **arrays))  # read-only: re-render
+
+            def write() -> None:  # a read-only cache folder: rendered again next time
+                write_cache_file(cache_file, lambda handle: np.savez_compressed(handle, **arrays))
+
+            if background_write:
+                # Compressing the apartment's cube maps takes ~8 s: a window frame must not wait
+                # for it (zlib releases the GIL). Not a daemon: an exiting process finishes it,
+                # and the file appears whole or not at all (write_cache_file renames it).
+                self.cache_writer = threading.Thread(target=write, name="cube-map cache", daemon=False)
+                self.cache_writer.start()
+            else:
+                write()
+            yield total, total
+
+    def steps_for(self, cube_maps: int, cached: bool) -> int:
+        """The steps build_steps takes for ``cube_maps``: one render per object and bounce, one
+        install per object and later bounce, and the cache file's write."""
+        return (2 * self.bounces - 1) * cube_maps + int(cached)
 
     def build_one(self, objects: list, index: int, size: int, cached: bool = True) -> str:
         """The cube map of one object on demand (a reflector whose mirror pass does not shade it

@@ -106,9 +106,11 @@ class CubeProbes:
             pass
         # Its steps run between a window's frames: no loading overlay for them (the panel says).
         self.pending = self.bake.build_steps(
-            self.objects, at_start, sizes, cache=not self.edited, nearest=self._nearest, announce=False
-        )
-        self.pending_progress = (0, self.bake.bounces * len(at_start))
+            self.objects, at_start, sizes, cache=not self.edited, nearest=self._nearest, announce=False,
+            background_write=True,
+        )  # fmt: skip
+        cached = not self.edited and self.bake.cache_dir is not None
+        self.pending_progress = (0, self.bake.steps_for(len(at_start), cached))
 
     def _nearest(self, remaining: list[int]) -> int:
         if self.focus is None:
@@ -270,7 +272,7 @@ class CubeProbes:
             self.pending = self.bake.build_steps(
                 self.objects, at_start, sizes, cache=False, nearest=self._nearest, announce=False
             )
-            self.pending_progress = (0, self.bake.bounces * len(at_start))
+            self.pending_progress = (0, self.bake.steps_for(len(at_start), False))
         # Everything else that reflects this object now sees an outdated appearance.
         self.bake.stale = [i for i in analysis.cube_mapped if scene.objects[i].material != material_index]
         for gpu_obj in self.objects:

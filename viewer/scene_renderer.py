@@ -317,7 +317,7 @@ class SceneRenderer(RendererBase):
         if not self.probes.building:
             return None
         done, total = self.probes.pending_progress
-        return f"cube maps: {done} of {total} object renders done (previews shown meanwhile)"
+        return f"cube maps: step {done} of {total} (object renders, installs, cache file; previews shown meanwhile)"
 
     def continue_cube_build(self, seconds: float, camera: Camera | None = None) -> int:
         """Advance the progressive cube-map build for about ``seconds`` (at least one object's
