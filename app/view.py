@@ -34,7 +34,7 @@ from lobeview.app.options import (
 )
 from lobeview.core.errors import OptionError, parse_size
 from lobeview.core.methods import resolve_cli_method
-from lobeview.scenes.setup import load_scene_and_environment
+from lobeview.scenes.setup import default_environment, is_builtin, load_scene_and_environment, unbaked_builtin_scene
 
 
 def add_arguments(p) -> None:
@@ -72,6 +72,12 @@ def add_arguments(p) -> None:
     )
     p.add_argument("--script", help="JSON list of scripted actions (testing/demos): see app/script.py")
     p.add_argument("--exit-after", type=int, default=0, help="quit after this many frames (0: never)")
+    p.add_argument(
+        "--no-background-bake",
+        action="store_true",
+        help="a built-in scene's first-use bake runs before the window shows the scene (default: the window "
+        "opens on the scene without lightmaps and swaps them in when the bake, in a worker process, ends)",
+    )
 
 
 def builtin_camera_path(scene_arg: str | None, scene_path: Path):
@@ -144,17 +150,32 @@ def run(args) -> int:
 
     def load_session() -> Session:
         """Build (first use) and load the scene: inside the window, whose loading overlay shows
-        each step (app/window.py show_progress)."""
-        scene_path, scene, environment, cache = load_scene_and_environment(
-            args.scene, args.env, args.cache, args.limits
-        )
+        each step (app/window.py show_progress). A built-in scene not baked yet opens without its
+        lightmaps while a worker process bakes it (app/background_bake.py), unless
+        --no-background-bake, a --script or the scene's own --path asks for the finished scene."""
+        background = None
+        if not args.no_background_bake and is_builtin(args.scene) and not script and args.path != "builtin":
+            from lobeview.app.background_bake import BackgroundBake
+            from lobeview.core.paths import cache_dir
+            from lobeview.scenes.builtin_env import load_environment
+
+            cache = cache_dir(args.cache)
+            unbaked = unbaked_builtin_scene(args.scene, cache)
+            if unbaked is not None:
+                background = BackgroundBake(args.scene, cache)
+                scene, scene_path = unbaked, Path(f"{args.scene or 'builtin:demo'} (lightmaps baking)")
+                environment = load_environment(args.env or default_environment(args.scene))
+        if background is None:
+            scene_path, scene, environment, cache = load_scene_and_environment(
+                args.scene, args.env, args.cache, args.limits
+            )
         apply_reflection_proxy(scene, args.reflection_proxy)
         original, loaded = None, None
         if edits is not None:
             original = {m.name: m.desc for m in scene.materials}
             loaded = apply_material_edits(scene, edits)
         path = builtin_camera_path(args.scene, scene_path) if args.path == "builtin" else camera_path
-        return Session(scene, scene_path, environment, args, method, cache, script, original, loaded, path)
+        return Session(scene, scene_path, environment, args, method, cache, script, original, loaded, path, background)
 
     LobeviewWindow.load_session = staticmethod(load_session)
     LobeviewWindow.loading_title = args.scene or "builtin:demo"

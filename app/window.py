@@ -67,6 +67,7 @@ class Session:
     original_materials: dict | None = None
     loaded_materials: list | None = None
     camera_path: object | None = None  # scenes/camera_path.CameraPath flown from frame 1 (--path)
+    background_bake: object | None = None  # app/background_bake.BackgroundBake: the lightmaps on their way
 
 
 class LobeviewWindow(mglw.WindowConfig):
@@ -119,6 +120,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.walk.speed = self.default_walk_speed
         # --path: the recorded path plays from t = 0 (looping); P pauses, walking or looking takes over.
         self.camera_path = session.camera_path
+        self.background_bake = session.background_bake
         self.path_time = 0.0 if self.camera_path is not None else None
         self.path_paused_at = 0.0
         self.method = session.method
@@ -426,6 +428,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self._fly_path(frame_time)
         self.poll_fit()
 
+        self._poll_background_bake()
         camera = self.walk.camera()
         self._continue_cube_build(camera, t_frame)
         refinement = self.refinement
@@ -490,6 +493,45 @@ class LobeviewWindow(mglw.WindowConfig):
         self.frame += 1
         if self.quit_requested or (self.args.exit_after and self.frame >= self.args.exit_after):
             self.wnd.close()  # releases GPU objects (on_close): the frame is finished
+
+    def _poll_background_bake(self) -> None:
+        """Swap in the baked scene once the worker (app/background_bake.py) has written it: the
+        same objects with lightmaps, the materials as edited meanwhile (by name), the panel's
+        options and per-object methods kept; its cube maps start progressively again."""
+        bake = self.background_bake
+        if bake is None or not bake.poll():
+            return
+        self.background_bake = None
+        if bake.error is not None:
+            self.message = f"the lightmap bake failed ({bake.error}): the scene stays without lightmaps"
+            return
+        from lobeview.app.options import apply_reflection_proxy
+        from lobeview.scenes.gltf_loader import load_gltf
+
+        try:
+            scene = load_gltf(bake.path, self.args.limits)
+        except Exception as exc:  # noqa: BLE001 - the viewer keeps the scene it has
+            self.message = f"the baked scene {bake.path.name} could not be loaded ({exc}); kept the unbaked one"
+            return
+        edited = {m.name: m.desc for m in self.scene.materials}
+        for material in scene.materials:
+            if material.name in edited:
+                material.desc = edited[material.name]
+        apply_reflection_proxy(scene, self.args.reflection_proxy)
+        old = self.renderer
+        renderer = scene_renderer_from_args(
+            self.ctx, scene, self.session.environment, old.size, self.session.cache, self.args, progressive_cubes=True
+        )
+        renderer.configure(old.settings)
+        for index, method in old.drawer.object_methods.items():
+            renderer.set_object_method(index, method)
+        old.release()
+        self.renderer, self.scene = renderer, scene
+        self.editor.renderer = renderer  # its undo stack holds object indices: the same objects
+        self.session.scene, self.session.scene_path = scene, bake.path
+        self.wnd.title = f"lobeview - {bake.path.name}"
+        self.message = f"lightmaps baked: {bake.path.name} (cached for the next start)"
+        self.dirty = True
 
     def _continue_cube_build(self, camera, t_frame: float) -> None:
         """One object's cube map of the progressive start (SceneRenderer continue_cube_build: the
@@ -569,6 +611,7 @@ class LobeviewWindow(mglw.WindowConfig):
             "walk_speed": self.walk.speed,
             "path_time": self.path_time,
             "cube_build": self.renderer.probes.pending_progress if self.renderer.cube_build_status else None,
+            "background_bake": self.background_bake.status if self.background_bake is not None else None,
             "widgets": {name: [round(v, 1) for v in rect] for name, rect in self.widget_rects.items()},
         }
         self.stats_file.write(json.dumps(record) + "\n")
@@ -638,5 +681,7 @@ class LobeviewWindow(mglw.WindowConfig):
             self.stats_file.close()
         if self.fit_job is not None:
             self.fit_job.cancel()
+        if self.background_bake is not None:
+            self.background_bake.cancel()
         self._release_accumulators()
         self.renderer.release()

@@ -373,7 +373,7 @@ def build_apartment_scene(
     directory = Path(directory) if directory else cache_dir() / "apartment"
     path = directory / f"apartment-{rooms}-{apartment_key(rooms, resolution, rays, bounces)}.glb"
     path_file = apartment_path_file(path)
-    if path.exists() and path_file.exists() and not force:
+    if apartment_is_built(path) and not force:
         return path
     scene = apartment_geometry(rooms)
     print(
@@ -387,6 +387,18 @@ def build_apartment_scene(
     apartment_path(rooms).save(path_file)  # before the .glb: a built scene always has its path
     bake_and_write(scene, path, APARTMENT_ENVIRONMENT, resolution, rays, bounces, light_samples=LIGHT_SAMPLES)
     return path
+
+
+def apartment_scene_file(rooms: int = DEFAULT_ROOMS, directory: Path | None = None) -> Path:
+    """Where build_apartment_scene writes (or has written) the apartment with the default bake."""
+    directory = Path(directory) if directory else cache_dir() / "apartment"
+    key = apartment_key(rooms, DEFAULT_RESOLUTION, DEFAULT_RAYS, DEFAULT_BOUNCES)
+    return directory / f"apartment-{rooms}-{key}.glb"
+
+
+def apartment_is_built(path: Path) -> bool:
+    """Whether the built apartment at ``path`` and its recorded path are both there."""
+    return Path(path).exists() and apartment_path_file(path).exists()
 
 
 def apartment_path_file(scene_path: Path) -> Path:

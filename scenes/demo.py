@@ -336,6 +336,12 @@ def demo_key(resolution: int, rays: int, bounces: int) -> str:
     )
 
 
+def demo_scene_file(directory: Path | None = None) -> Path:
+    """Where build_demo_scene writes (or has written) the demo with the default bake."""
+    directory = Path(directory) if directory else cache_dir() / "demo"
+    return directory / f"demo-{demo_key(DEFAULT_RESOLUTION, DEFAULT_RAYS, DEFAULT_BOUNCES)}.glb"
+
+
 def build_demo_scene(
     resolution: int = DEFAULT_RESOLUTION,
     rays: int = DEFAULT_RAYS,

@@ -58,19 +58,49 @@ def load_scene_and_environment(scene_arg: str | None, env_arg: str | None, cache
     from lobeview.core.paths import cache_dir
     from lobeview.core.trust import DEFAULT_LIMITS
     from lobeview.scenes.builtin_env import load_environment
-    from lobeview.scenes.demo import DEMO_ENVIRONMENT, build_demo_scene
     from lobeview.scenes.gltf_loader import load_gltf
 
     cache = cache_dir(cache_arg)
-    if scene_arg is None or scene_arg == "builtin:demo":
-        path = build_demo_scene(directory=cache / "demo")
-        env_name = env_arg or DEMO_ENVIRONMENT
-    elif scene_arg.startswith("builtin:"):
-        from lobeview.scenes.apartment import APARTMENT_ENVIRONMENT, build_apartment_scene
-
-        path = build_apartment_scene(builtin_apartment_rooms(scene_arg), directory=cache / "apartment")
-        env_name = env_arg or APARTMENT_ENVIRONMENT
+    if is_builtin(scene_arg):
+        path = build_builtin_scene(scene_arg, cache)
     else:
         path = Path(scene_arg)
-        env_name = env_arg or SCENE_ENV
+    env_name = env_arg or default_environment(scene_arg)
     return path, load_gltf(path, limits or DEFAULT_LIMITS), load_environment(env_name), cache
+
+
+def is_builtin(scene_arg: str | None) -> bool:
+    """Whether ``scene_arg`` names a built-in scene (None: the demo)."""
+    return scene_arg is None or scene_arg.startswith("builtin:")
+
+
+def default_environment(scene_arg: str | None) -> str:
+    """The environment a scene is shown under when --env is not given."""
+    from lobeview.scenes.apartment import APARTMENT_ENVIRONMENT
+    from lobeview.scenes.demo import DEMO_ENVIRONMENT
+
+    if scene_arg is None or scene_arg == "builtin:demo":
+        return DEMO_ENVIRONMENT
+    return APARTMENT_ENVIRONMENT if scene_arg.startswith("builtin:") else SCENE_ENV
+
+
+def build_builtin_scene(scene_arg: str | None, cache: Path) -> Path:
+    """The built-in scene's cached .glb, built and baked first when needed (minutes)."""
+    from lobeview.scenes.apartment import build_apartment_scene
+    from lobeview.scenes.demo import build_demo_scene
+
+    if scene_arg is None or scene_arg == "builtin:demo":
+        return build_demo_scene(directory=cache / "demo")
+    return build_apartment_scene(builtin_apartment_rooms(scene_arg), directory=cache / "apartment")
+
+
+def unbaked_builtin_scene(scene_arg: str | None, cache: Path):
+    """The built-in scene without its lightmaps when its bake is not cached yet (the window shows
+    it while the bake runs in the background: app/background_bake.py), else None."""
+    from lobeview.scenes.apartment import apartment_geometry, apartment_is_built, apartment_scene_file
+    from lobeview.scenes.demo import demo_geometry, demo_scene_file
+
+    if scene_arg is None or scene_arg == "builtin:demo":
+        return None if demo_scene_file(cache / "demo").exists() else demo_geometry()
+    rooms = builtin_apartment_rooms(scene_arg)
+    return None if apartment_is_built(apartment_scene_file(rooms, cache / "apartment")) else apartment_geometry(rooms)

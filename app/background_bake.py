@@ -1,0 +1,89 @@
+"""A built-in scene's lightmap bake in a separate process (issue 42 item 2: a first frame in
+seconds). On first use the demo and the apartment are baked on the CPU (half a minute for the
+demo, about two for the 12-room apartment); the window does not wait: it opens on the scene
+without lightmaps (diffuse light from the environment, nothing occluded) while a worker process
+builds and caches the baked .glb, then swaps it in (app/window.py).
+
+A process, not a thread: the baker's numpy loops would hold the interpreter's lock against the
+window's frames. The worker reports its progress lines through a queue; its result is the cached
+file's path or the error that stopped it. Closing the window stops the worker; the bake writes
+its file atomically (scenes/demo.py bake_and_write), so a stopped bake leaves nothing half
+written and the next start bakes again."""
+
+from __future__ import annotations
+
+import multiprocessing
+import queue
+import time
+from pathlib import Path
+
+PROGRESS_INTERVAL_S = 0.25  # the worker sends at most this many progress lines a second
+
+
+def bake_worker(scene_arg: str | None, cache: str, messages) -> None:
+    """The worker process: build (bake) the built-in scene into the cache, telling ``messages``
+    ("progress", text, fraction), then ("done", path) or ("error", text)."""
+    from lobeview.core import progress
+    from lobeview.scenes.setup import build_builtin_scene
+
+    last = [0.0]
+
+    def listener(what: str, fraction) -> None:
+        now = time.monotonic()
+        if now - last[0] >= PROGRESS_INTERVAL_S:
+            last[0] = now
+            messages.put(("progress", what, fraction))
+
+    try:
+        with progress.listening(listener):
+            path = build_builtin_scene(scene_arg, Path(cache))
+        messages.put(("done", str(path)))
+    except BaseException as exc:  # noqa: BLE001 - any failure is the window's message, not a crash
+        messages.put(("error", f"{type(exc).__name__}: {exc}"))
+
+
+class BackgroundBake:
+    """The worker for ``scene_arg`` (a built-in scene) baking into ``cache``."""
+
+    def __init__(self, scene_arg: str | None, cache: Path):
+        context = multiprocessing.get_context("spawn")  # no fork of a process that holds a GL context
+        self._messages = context.Queue()
+        self.process = context.Process(
+            target=bake_worker, args=(scene_arg, str(cache), self._messages), name="lobeview bake", daemon=True
+        )
+        self.process.start()
+        self.status = "lightmaps: starting the bake"
+        self.fraction: float | None = None
+        self.path: Path | None = None
+        self.error: str | None = None
+
+    def poll(self) -> bool:
+        """Read what the worker said; True once it finished (``path`` or ``error`` set)."""
+        while True:
+            try:
+                message = self._messages.get_nowait()
+            except queue.Empty:
+                break
+            if message[0] == "progress":
+                self.status, self.fraction = f"lightmaps: {message[1]}", message[2]
+            elif message[0] == "done":
+                self.path = Path(message[1])
+            else:
+                self.error = message[1]
+        if self.path is None and self.error is None and not self.process.is_alive():
+            self.process.join(timeout=1.0)
+            try:  # a last message may have arrived between the reads and the exit
+                kind, value = self._messages.get(timeout=0.5)
+                if kind == "done":
+                    self.path = Path(value)
+                elif kind == "error":
+                    self.error = value
+            except queue.Empty:
+                self.error = f"the bake process ended without a result (exit code {self.process.exitcode})"
+        return self.path is not None or self.error is not None
+
+    def cancel(self) -> None:
+        """Stop the worker (the window closes)."""
+        if self.process.is_alive():
+            self.process.terminate()
+            self.process.join(timeout=5.0)
