@@ -154,8 +154,8 @@ def _rendering(window) -> None:
     if c7:  # the same image (tests/test_indirect_draws.py); the draw calls below change
         renderer.configure(indirect_draws=indirect)
         window.dirty = True
-    if window.background_bake is not None:  # app/background_bake.py
-        imgui.text_wrapped(f"{window.background_bake.status} (in the background; until then diffuse light is the "
+    if window.finishing.bake_status is not None:  # app/background_bake.py
+        imgui.text_wrapped(f"{window.finishing.bake_status} (in the background; until then diffuse light is the "
                            "environment's, unoccluded)")  # fmt: skip
     if renderer.cube_build_status is not None:
         imgui.text_wrapped(renderer.cube_build_status)

@@ -25,6 +25,7 @@ import numpy as np
 from imgui_bundle import imgui, implot
 
 from lobeview.app.editor import MaterialEditor
+from lobeview.app.finishing import SceneFinishing
 from lobeview.app.fit_job import FitJob, lockable_parameters
 from lobeview.app.frame_pacing import (
     MOTION_STALL_CAP_S,
@@ -50,7 +51,6 @@ from lobeview.viewer.tonemap import to_uint8, tonemap
 
 FRAME_TIME_SMOOTHING = 0.2  # exponential smoothing of the shown frame interval
 CUBE_REFRESH_MAX_DEFERRED = 8  # moving frames a stale cube map waits at most for room in the budget
-CUBE_BUILD_REDRAW_S = 2.0  # the progressive cube-map build redraws the view this often (full resolution)
 
 
 @dataclass
@@ -109,7 +109,7 @@ class LobeviewWindow(mglw.WindowConfig):
         size = self.wnd.buffer_size
         self.show_progress("scene renderer", None)
         # Without cached cube maps the window opens on previews and builds the exact ones over the
-        # next frames (_continue_cube_build), the nearest first: the first frame in seconds.
+        # next frames (app/finishing.py), the nearest first: the first frame in seconds.
         self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
                                                  self.args, progressive_cubes=True)  # fmt: skip
         self._make_accumulators(size)
@@ -120,7 +120,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.walk.speed = self.default_walk_speed
         # --path: the recorded path plays from t = 0 (looping); P pauses, walking or looking takes over.
         self.camera_path = session.camera_path
-        self.background_bake = session.background_bake
+        self.finishing = SceneFinishing(session.background_bake)  # app/finishing.py
         self.path_time = 0.0 if self.camera_path is not None else None
         self.path_paused_at = 0.0
         self.method = session.method
@@ -136,7 +136,6 @@ class LobeviewWindow(mglw.WindowConfig):
         self._moving_pass = None  # (scale, seconds) of the last frame rendered while the view changed
         self.show_material_tab = False
         self.cube_refresh_deferred = 0  # moving frames since a stale cube map was due (_cube_refresh_fits)
-        self.cube_build_redrawn_at = 0.0  # when the progressive cube-map build last redrew the frame
         self.full_frame_due = False  # the next changed frame at full resolution (the build's redraws)
         self.panel_drag = False  # a left or right drag that began on the panel stays the panel's
         self._pointer = (0.0, 0.0)  # the last pointer position (scroll events carry none)
@@ -428,9 +427,9 @@ class LobeviewWindow(mglw.WindowConfig):
         self._fly_path(frame_time)
         self.poll_fit()
 
-        self._poll_background_bake()
+        self.finishing.poll_background_bake(self)
         camera = self.walk.camera()
-        self._continue_cube_build(camera, t_frame)
+        self.finishing.continue_cube_build(self, camera, t_frame)
         refinement = self.refinement
         changed = self.dirty
         if changed:
@@ -494,77 +493,6 @@ class LobeviewWindow(mglw.WindowConfig):
         if self.quit_requested or (self.args.exit_after and self.frame >= self.args.exit_after):
             self.wnd.close()  # releases GPU objects (on_close): the frame is finished
 
-    def _poll_background_bake(self) -> None:
-        """Swap in the baked scene once the worker (app/background_bake.py) has written it: the
-        same objects with lightmaps, the materials as edited meanwhile (by name), the panel's
-        options and per-object methods kept; its cube maps start progressively again."""
-        bake = self.background_bake
-        if bake is None or not bake.poll():
-            return
-        self.background_bake = None
-        if bake.error is not None:
-            self.message = f"the lightmap bake failed ({bake.error}): the scene stays without lightmaps"
-            return
-        from lobeview.app.options import apply_reflection_proxy
-        from lobeview.scenes.gltf_loader import load_gltf
-
-        try:
-            scene = load_gltf(bake.path, self.args.limits)
-        except Exception as exc:  # noqa: BLE001 - the viewer keeps the scene it has
-            self.message = f"the baked scene {bake.path.name} could not be loaded ({exc}); kept the unbaked one"
-            return
-        edited = {m.name: m.desc for m in self.scene.materials}
-        for material in scene.materials:
-            if material.name in edited:
-                material.desc = edited[material.name]
-        apply_reflection_proxy(scene, self.args.reflection_proxy)
-        old = self.renderer
-        renderer = scene_renderer_from_args(
-            self.ctx, scene, self.session.environment, old.size, self.session.cache, self.args, progressive_cubes=True
-        )
-        renderer.configure(old.settings)
-        for index, method in old.drawer.object_methods.items():
-            renderer.set_object_method(index, method)
-        old.release()
-        self.renderer, self.scene = renderer, scene
-        self.editor.renderer = renderer  # its undo stack holds object indices: the same objects
-        self.session.scene, self.session.scene_path = scene, bake.path
-        self.wnd.title = f"lobeview - {bake.path.name}"
-        self.message = f"lightmaps baked: {bake.path.name} (cached for the next start)"
-        self.dirty = True
-
-    def _continue_cube_build(self, camera, t_frame: float) -> None:
-        """One object's cube map of the progressive start (SceneRenderer continue_cube_build: the
-        nearest first) in a frame where the view has rested REST_DELAY_S and no key is held (a
-        step takes up to seconds without a GPU: never while the user moves), which changes the
-        frame; all that is left when a screenshot is due, so that it shows what its printed
-        `lobeview shot` command renders."""
-        status = self.renderer.cube_build_status
-        if status is None:
-            return
-        finish = bool(self.pending_screenshots)
-        resting = not self.dirty and t_frame - self.last_change >= REST_DELAY_S and not self.held_keys.down_since
-        if not (finish or resting):
-            return
-        if finish:
-            self.show_progress("finishing the cube maps for the screenshot", None)
-        while True:
-            self.renderer.continue_cube_build(0.0, camera)
-            status = self.renderer.cube_build_status
-            if status is None or not finish:
-                break
-        if status is None:
-            self.message = "cube maps finished"  # the panel showed the build's progress
-        # The frame shows the new cube maps at full resolution every CUBE_BUILD_REDRAW_S, or every
-        # four full frames' time where a frame is slow (a moving frame after each step would keep
-        # the view blurred at the moving scale for the whole build), and when the build ends.
-        now = time.perf_counter()
-        interval = max(CUBE_BUILD_REDRAW_S, 4.0 * self.pass_ms / 1000.0)
-        if status is None or finish or now - self.cube_build_redrawn_at >= interval:
-            self.cube_build_redrawn_at = now
-            self.dirty = True
-            self.full_frame_due = True
-
     def _cube_refresh_fits(self, moving: bool, elapsed_s: float) -> bool:
         """Whether this frame re-renders a stale cube map (after a material edit): always while
         the view rests; while it changes, only where the last refresh's time fits in what is
@@ -611,7 +539,7 @@ class LobeviewWindow(mglw.WindowConfig):
             "walk_speed": self.walk.speed,
             "path_time": self.path_time,
             "cube_build": self.renderer.probes.pending_progress if self.renderer.cube_build_status else None,
-            "background_bake": self.background_bake.status if self.background_bake is not None else None,
+            "background_bake": self.finishing.bake_status,
             "widgets": {name: [round(v, 1) for v in rect] for name, rect in self.widget_rects.items()},
         }
         self.stats_file.write(json.dumps(record) + "\n")
@@ -681,7 +609,6 @@ class LobeviewWindow(mglw.WindowConfig):
             self.stats_file.close()
         if self.fit_job is not None:
             self.fit_job.cancel()
-        if self.background_bake is not None:
-            self.background_bake.cancel()
+        self.finishing.cancel()
         self._release_accumulators()
         self.renderer.release()
