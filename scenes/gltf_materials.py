@@ -16,7 +16,7 @@ from lobeview.core.errors import quoted
 from lobeview.core.trust import UntrustedReferenceError, read_reference
 from lobeview.materials.spec import MaterialError, validate
 
-from .gltf_common import FALLBACKS, GltfError, _finite, _index, _warn
+from .gltf_common import FALLBACKS, GltfError, _index, _warn
 from .hdrio import sanitize_radiance
 from .scene import (
     ALPHA_MODES,
@@ -143,6 +143,28 @@ def _texture_slot(reader, info, slot: str, material: str, scene_warnings: list, 
     return out
 
 
+def _checked_number(value, default, limits, label: str, scene_warnings: list):
+    """A glTF number or array of ``default``'s shape (None: absent, ``default``): a value of
+    another shape or type, or not finite, is unusable (warned, ``default`` used); one outside
+    ``limits`` (low, high; None: any) is clamped with a warning. Returns a float or a list.
+    docs/guide.md "glTF numbers" lists every number the loader checks."""
+    if value is None:  # absent: the specification's default
+        return default if isinstance(default, float) else list(default)
+    try:
+        if isinstance(value, bool):
+            raise TypeError
+        array = np.asarray(value, dtype=np.float64)
+        if array.shape != np.shape(default) or not np.all(np.isfinite(array)):
+            raise ValueError
+    except (TypeError, ValueError):
+        _warn(scene_warnings, f"{label} {quoted(value)} is unusable; {default} used")
+        array = np.asarray(default, dtype=np.float64)
+    if limits is not None and (np.any(array < limits[0]) or np.any(array > limits[1])):
+        _warn(scene_warnings, f"{label} {array.tolist()} clamped to {list(limits)}")
+        array = np.clip(array, *limits)
+    return array.tolist() if array.ndim else float(array)
+
+
 def _model_extensions(mat, where: str, scene_warnings: list) -> dict:
     """KHR_materials_anisotropy/_ior/_specular/_clearcoat/_transmission/_sheen as the gltf
     model's optional keys (materials/spec.py GLTF_EXTENSION_KEYS). Out-of-range factors are
@@ -156,18 +178,10 @@ def _model_extensions(mat, where: str, scene_warnings: list) -> dict:
             _warn(scene_warnings, f"{where}: {extension} is not an object; ignored")
             continue
         for field, (key, default, limits) in fields.items():
-            value = data.get(field, default)
-            try:
-                array = np.asarray(value, dtype=np.float64)
-                if array.shape != np.shape(default) or not np.all(np.isfinite(array)):
-                    raise ValueError(f"{value!r}")
-            except (TypeError, ValueError) as exc:
-                _warn(scene_warnings, f"{where}: {extension}.{field} {exc} is unusable; {default} used")
-                array = np.asarray(default, dtype=np.float64)
-            if limits is not None and (np.any(array < limits[0]) or np.any(array > limits[1])):
-                _warn(scene_warnings, f"{where}: {extension}.{field} {array.tolist()} clamped to {list(limits)}")
-                array = np.clip(array, *limits)
-            out[key] = array.tolist() if array.ndim else float(array)
+            value = _checked_number(
+                data.get(field, default), default, limits, f"{where}: {extension}.{field}", scene_warnings
+            )
+            out[key] = value
         unused = [name for name in EXTENSION_TEXTURES_UNUSED.get(extension, ()) if data.get(name) is not None]
         if unused:
             _warn(
@@ -259,7 +273,9 @@ def _extension_textures(reader, mat, name: str, out: SceneMaterial, scene_warnin
                 continue
             gathered.setdefault(slot, []).append((texture, channels, field_name))
             if field_name == "clearcoatNormalTexture":
-                out.clearcoat_normal_scale = _finite(info.scale, 1.0)
+                out.clearcoat_normal_scale = _checked_number(
+                    1.0 if info.scale is None else info.scale, 1.0, None, f"{where}.scale", scene_warnings
+                )
     for slot, parts in gathered.items():
         where = f"{reader.path}: material {name!r}: {slot.replace('_', ' ')} texture"
         out.textures[slot] = _extension_slot(slot, parts, where, scene_warnings)
@@ -302,38 +318,36 @@ def _material(reader, index: int | None, scene_warnings: list) -> SceneMaterial:
     pbr = mat.pbrMetallicRoughness
     extras = mat.extras or {}
     custom = extras.get("lobeview") if isinstance(extras, dict) else None
+    where = f"{path}: material {name!r}"
+    raw_base = getattr(pbr, "baseColorFactor", None) if pbr else None
+    base_factor = _checked_number(
+        [1.0, 1.0, 1.0, 1.0] if raw_base is None else raw_base, [1.0, 1.0, 1.0, 1.0], (0.0, 1.0),
+        f"{where}: baseColorFactor", scene_warnings,
+    )  # fmt: skip
     try:
         if custom is not None:
             desc = _custom_material(reader, custom)
         else:
-            base = list(pbr.baseColorFactor[:3]) if pbr and pbr.baseColorFactor else [1.0, 1.0, 1.0]
             desc = validate(
                 {
                     "model": "gltf",
-                    "base_color": [min(max(float(c), 0.0), 1.0) for c in base],
-                    "metallic": min(
-                        max(
-                            float(pbr.metallicFactor if pbr and pbr.metallicFactor is not None else 1.0),
-                            0.0,
-                        ),
-                        1.0,
+                    "base_color": base_factor[:3],
+                    "metallic": _checked_number(
+                        getattr(pbr, "metallicFactor", None) if pbr else None, 1.0, (0.0, 1.0),
+                        f"{where}: metallicFactor", scene_warnings,
                     ),
-                    "roughness": min(
-                        max(
-                            float(pbr.roughnessFactor if pbr and pbr.roughnessFactor is not None else 1.0),
-                            0.0,
-                        ),
-                        1.0,
+                    "roughness": _checked_number(
+                        getattr(pbr, "roughnessFactor", None) if pbr else None, 1.0, (0.0, 1.0),
+                        f"{where}: roughnessFactor", scene_warnings,
                     ),
-                    **_model_extensions(mat, f"{path}: material {name!r}", scene_warnings),
+                    **_model_extensions(mat, where, scene_warnings),
                 }
-            )
+            )  # fmt: skip
     except MaterialError as exc:
         raise GltfError(f"{path}: material {name!r}: {exc}") from None
     out = SceneMaterial(name, desc, double_sided=bool(mat.doubleSided))
     gltf_model = desc["model"] == "gltf"
-    factor = list(pbr.baseColorFactor) if pbr and pbr.baseColorFactor else [1.0, 1.0, 1.0, 1.0]
-    out.base_alpha = min(max(float(factor[3]), 0.0), 1.0) if len(factor) > 3 and np.isfinite(factor[3]) else 1.0
+    out.base_alpha = float(base_factor[3])
     mode = mat.alphaMode or "OPAQUE"
     if mode not in ALPHA_MODES:
         _warn(scene_warnings, f"{path}: material {name!r}: alphaMode {mode!r} is not a glTF mode; OPAQUE used")
@@ -372,9 +386,19 @@ def _material(reader, index: int | None, scene_warnings: list) -> SceneMaterial:
     if gltf_model:
         _extension_textures(reader, mat, name, out, scene_warnings)
     if mat.normalTexture is not None and "normal" in out.textures:
-        out.normal_scale = _finite(getattr(mat.normalTexture, "scale", 1.0), 1.0)
+        scale = getattr(mat.normalTexture, "scale", None)
+        out.normal_scale = _checked_number(
+            1.0 if scale is None else scale, 1.0, None, f"{where}: normalTexture.scale", scene_warnings
+        )
     if mat.occlusionTexture is not None and "occlusion" in out.textures:
-        out.occlusion_strength = min(max(_finite(getattr(mat.occlusionTexture, "strength", 1.0), 1.0), 0.0), 1.0)
+        strength = getattr(mat.occlusionTexture, "strength", None)
+        out.occlusion_strength = _checked_number(
+            1.0 if strength is None else strength,
+            1.0,
+            (0.0, 1.0),
+            f"{where}: occlusionTexture.strength",
+            scene_warnings,
+        )
     # Material extensions lobeview does not honour yet: said once per material, never dropped silently.
     for extension in sorted(set(mat.extensions or {}) - MATERIAL_EXTENSIONS_USED):
         _warn(

@@ -36,6 +36,41 @@ def test_emissive_factor_is_validated(tmp_path, factor, expected, message):
     assert message in text
 
 
+@pytest.mark.parametrize(
+    "material, message, check",
+    [
+        ({"pbrMetallicRoughness": {"baseColorFactor": [1, 1]}}, "baseColorFactor [1.0, 1.0] is unusable",
+         lambda m: m.desc["base_color"] == [1.0, 1.0, 1.0] and m.base_alpha == 1.0),
+        ({"pbrMetallicRoughness": {"baseColorFactor": [2, -1, 0.5, 1.5]}}, "baseColorFactor [2.0, -1.0, 0.5, 1.5] "
+         "clamped to [0.0, 1.0]", lambda m: m.desc["base_color"] == [1.0, 0.0, 0.5] and m.base_alpha == 1.0),
+        ({"pbrMetallicRoughness": {"baseColorFactor": [1e400, 1, 1, 1]}},
+         "baseColorFactor [inf, 1.0, 1.0, 1.0] is unusable", lambda m: m.desc["base_color"] == [1.0, 1.0, 1.0]),
+        ({"pbrMetallicRoughness": {"metallicFactor": 5}}, "metallicFactor 5.0 clamped to [0.0, 1.0]",
+         lambda m: m.desc["metallic"] == 1.0),
+        ({"pbrMetallicRoughness": {"metallicFactor": 1e400}}, "metallicFactor inf is unusable; 1.0 used",
+         lambda m: m.desc["metallic"] == 1.0),
+        ({"pbrMetallicRoughness": {"roughnessFactor": -1}}, "roughnessFactor -1.0 clamped to [0.0, 1.0]",
+         lambda m: m.desc["roughness"] == 0.0),
+        ({"normalTexture": {"index": 0, "scale": 1e400}}, "normalTexture.scale inf is unusable; 1.0 used",
+         lambda m: m.normal_scale == 1.0),
+        ({"normalTexture": {"index": 0, "scale": -2}}, None, lambda m: m.normal_scale == -2.0),  # the spec allows it
+        ({"occlusionTexture": {"index": 0, "strength": 5}}, "occlusionTexture.strength 5.0 clamped to [0.0, 1.0]",
+         lambda m: m.occlusion_strength == 1.0),
+        ({"occlusionTexture": {"index": 0, "strength": 1e400}}, "occlusionTexture.strength inf is unusable",
+         lambda m: m.occlusion_strength == 1.0),
+    ],
+)  # fmt: skip
+def test_core_material_numbers_are_validated(tmp_path, material, message, check):
+    """Out-of-range factors were clamped or replaced without a word, and a baseColorFactor of
+    two numbers stopped the load; each is now a warned fallback (docs/guide.md "glTF numbers")."""
+    scene, text = _load(tmp_path, material, [GREY])
+    assert check(scene.materials[0]), (scene.materials[0].desc, text)
+    if message is None:
+        assert "unusable" not in text and "clamped" not in text
+    else:
+        assert message in text, text
+
+
 def test_emissive_factor_of_the_wrong_type_is_a_clear_error(tmp_path):
     from lobeview.scenes.gltf_common import GltfError
 
