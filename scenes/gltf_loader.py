@@ -300,12 +300,37 @@ def _decode_data_uri(uri: str, what: str) -> bytes:
         raise GltfError(f"{what}: corrupt data URI") from None
 
 
-def _node_matrix(node) -> np.ndarray:
-    if node.matrix is not None and len(node.matrix) == 16:
+QUATERNION_TOLERANCE = 1e-3  # |q| - 1 allowed before a node's rotation is normalised with a warning
+
+
+def _node_vector(value, default: list, label: str) -> np.ndarray:
+    """A node's translation / rotation / scale: ``default``'s length, else the load stops."""
+    vector = np.asarray(default if value is None else value, dtype=np.float64)
+    if vector.shape != (len(default),):
+        raise GltfError(f"{label} has {vector.size} numbers, not {len(default)}")
+    return vector
+
+
+def _node_matrix(node, label: str, scene_warnings: list) -> np.ndarray:
+    """The node's local transform (its matrix, else translation x rotation x scale). A matrix or
+    vector of the wrong length stops the load; a rotation that is not a unit quaternion (the
+    specification requires one) is normalised with a warning, a zero one is the identity."""
+    if node.matrix is not None:
+        if len(node.matrix) != 16:
+            raise GltfError(f"{label}: matrix has {len(node.matrix)} numbers, not 16")
         return np.asarray(node.matrix, dtype=np.float64).reshape(4, 4).T
-    t = np.asarray(node.translation or [0, 0, 0], dtype=np.float64)
-    x, y, z, w = np.asarray(node.rotation or [0, 0, 0, 1], dtype=np.float64)
-    s = np.asarray(node.scale or [1, 1, 1], dtype=np.float64)
+    t = _node_vector(node.translation, [0.0, 0.0, 0.0], f"{label}: translation")
+    q = _node_vector(node.rotation, [0.0, 0.0, 0.0, 1.0], f"{label}: rotation")
+    s = _node_vector(node.scale, [1.0, 1.0, 1.0], f"{label}: scale")
+    length = float(np.linalg.norm(q))
+    if np.isfinite(length) and abs(length - 1.0) > QUATERNION_TOLERANCE:
+        if length > 1e-12:
+            _warn(scene_warnings, f"{label}: rotation {q.tolist()} is not a unit quaternion; normalised")
+            q = q / length
+        else:
+            _warn(scene_warnings, f"{label}: rotation {q.tolist()} is zero; no rotation used")
+            q = np.array([0.0, 0.0, 0.0, 1.0])
+    x, y, z, w = q
     r = np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
@@ -377,7 +402,7 @@ def _load(path: Path, limits: Limits) -> Scene:
                 f"{path}: node {node_index} is reached twice (a cycle or a shared child); glTF nodes have one parent"
             )
         visited.add(node_index)
-        world = parent @ _node_matrix(node)
+        world = parent @ _node_matrix(node, f"{path}: node {node_index}", scene_warnings)
         if not np.all(np.isfinite(world)):
             raise GltfError(f"{path}: node {node_index} has a NaN/Inf transform")
         if node.mesh is not None:

@@ -137,3 +137,51 @@ def test_names_with_control_characters_are_escaped(tmp_path):
     assert printable_name("m" * 5000) == "m" * (NAME_LIMIT - 3) + "..."
     assert printable_name("Wohnzimmer Süd") == "Wohnzimmer Süd"  # printable text stays as it is
     assert printable_name(None) is None and printable_name(12) == "12"
+
+
+def _node_edit(tmp_path, **node):
+    import json
+    from pathlib import Path
+
+    from test_textures import _textured_gltf
+
+    path = Path(_textured_gltf(tmp_path, {}, []))
+    gltf = json.loads(path.read_text())
+    gltf["nodes"][0].update(node)
+    path.write_text(json.dumps(gltf))
+    return path
+
+
+@pytest.mark.parametrize(
+    "node, message",
+    [
+        ({"translation": [1, 2]}, "node 0: translation has 2 numbers, not 3"),
+        ({"scale": [1, 1, 1, 1]}, "node 0: scale has 4 numbers, not 3"),
+        ({"matrix": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0]}, "node 0: matrix has 15 numbers, not 16"),
+    ],
+)
+def test_node_transforms_of_the_wrong_length_stop_the_load(tmp_path, node, message):
+    """A matrix of 15 numbers was ignored without a word (the node drawn untransformed) and a
+    translation of 2 numbers failed inside numpy ("could not broadcast")."""
+    from lobeview.scenes.gltf_common import GltfError
+
+    with pytest.raises(GltfError, match=message.replace("[", r"\[")):
+        load_gltf(_node_edit(tmp_path, **node))
+
+
+def test_a_rotation_that_is_not_a_unit_quaternion_is_normalised_with_a_warning(tmp_path):
+    """The rotation formula assumes |q| = 1: twice the quarter turn about z, (0, 0, 2s, 2s) with
+    s = sqrt(1/2), stretched the unit quad threefold; normalised it is the quarter turn."""
+    half = float(np.sqrt(0.5))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        turned = load_gltf(_node_edit(tmp_path, rotation=[0, 0, 2 * half, 2 * half]))
+    assert any("is not a unit quaternion; normalised" in str(w.message) for w in caught)
+    positions = turned.objects[0].mesh.positions
+    np.testing.assert_allclose(positions.min(axis=0), [-1, 0, 0], atol=1e-6)
+    np.testing.assert_allclose(positions.max(axis=0), [0, 1, 0], atol=1e-6)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        zero = load_gltf(_node_edit(tmp_path, rotation=[0, 0, 0, 0]))
+    assert any("is zero; no rotation used" in str(w.message) for w in caught)
+    np.testing.assert_allclose(zero.objects[0].mesh.positions.max(axis=0), [1, 1, 0], atol=1e-6)
