@@ -55,8 +55,9 @@ class SceneFinishing:
         apply_reflection_proxy(scene, window.args.reflection_proxy)
         old, session = window.renderer, window.session
         renderer = scene_renderer_from_args(
-            window.ctx, scene, session.environment, old.size, session.cache, window.args, progressive_cubes=True
-        )
+            window.ctx, scene, session.environment, old.size, session.cache, window.args,
+            progressive_cubes=old.progressive_cubes,
+        )  # fmt: skip
         renderer.configure(old.settings)
         for index, method in old.drawer.object_methods.items():
             renderer.set_object_method(index, method)

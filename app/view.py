@@ -152,9 +152,9 @@ def run(args) -> int:
         """Build (first use) and load the scene: inside the window, whose loading overlay shows
         each step (app/window.py show_progress). A built-in scene not baked yet opens without its
         lightmaps while a worker process bakes it (app/background_bake.py), unless
-        --no-background-bake, a --script or the scene's own --path asks for the finished scene."""
+        --no-background-bake, a --script or a --path asks for the finished scene."""
         background = None
-        if not args.no_background_bake and is_builtin(args.scene) and not script and args.path != "builtin":
+        if not args.no_background_bake and is_builtin(args.scene) and not script and args.path is None:
             from lobeview.app.background_bake import BackgroundBake
             from lobeview.core.paths import cache_dir
             from lobeview.scenes.builtin_env import load_environment

@@ -109,9 +109,11 @@ class LobeviewWindow(mglw.WindowConfig):
         size = self.wnd.buffer_size
         self.show_progress("scene renderer", None)
         # Without cached cube maps the window opens on previews and builds the exact ones over the
-        # next frames (app/finishing.py), the nearest first: the first frame in seconds.
+        # next frames (app/finishing.py), the nearest first: the first frame in seconds. A script
+        # or a camera path gets the finished cube maps first (its frames are measured or compared).
+        progressive = not self.args.script and self.args.path is None
         self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
-                                                 self.args, progressive_cubes=True)  # fmt: skip
+                                                 self.args, progressive_cubes=progressive)  # fmt: skip
         self._make_accumulators(size)
         self.pending_screenshots: list[str] = []
         position, target, up, fov = scene_view(self.scene, self.args.view)

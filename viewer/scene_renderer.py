@@ -105,6 +105,7 @@ class SceneRenderer(RendererBase):
         self.bounds = scene.bounds  # static scene: near/far planes are fitted to it every frame
         env_hash = hashlib.sha256(environment.image.tobytes()).hexdigest()[:16]
         report("cube maps", 0.0)
+        self.progressive_cubes = bool(progressive_cubes)
         self.probes = CubeProbes(ctx, self.drawer, settings, env_hash, progress, self.cache_dir, progressive_cubes)
         self.mirror_passes = MirrorPasses(ctx, self.drawer, self.probes, settings.mip_filter)
         self.drawer.mirror_passes = self.mirror_passes
