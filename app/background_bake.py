@@ -57,30 +57,34 @@ class BackgroundBake:
         self.path: Path | None = None
         self.error: str | None = None
 
-    def poll(self) -> bool:
-        """Read what the worker said; True once it finished (``path`` or ``error`` set)."""
+    @property
+    def finished(self) -> bool:
+        return self.path is not None or self.error is not None
+
+    def _read(self, wait: float = 0.0) -> None:
+        """Take every message the worker has sent, waiting up to ``wait`` seconds for the first."""
         while True:
             try:
-                message = self._messages.get_nowait()
+                kind, *values = self._messages.get(timeout=wait) if wait > 0 else self._messages.get_nowait()
             except queue.Empty:
-                break
-            if message[0] == "progress":
-                self.status, self.fraction = f"lightmaps: {message[1]}", message[2]
-            elif message[0] == "done":
-                self.path = Path(message[1])
+                return
+            wait = 0.0
+            if kind == "progress":
+                self.status, self.fraction = f"lightmaps: {values[0]}", values[1]
+            elif kind == "done":
+                self.path = Path(values[0])
             else:
-                self.error = message[1]
-        if self.path is None and self.error is None and not self.process.is_alive():
+                self.error = values[0]
+
+    def poll(self) -> bool:
+        """Read what the worker said; True once it finished (``path`` or ``error`` set)."""
+        self._read()
+        if not self.finished and not self.process.is_alive():
             self.process.join(timeout=1.0)
-            try:  # a last message may have arrived between the reads and the exit
-                kind, value = self._messages.get(timeout=0.5)
-                if kind == "done":
-                    self.path = Path(value)
-                elif kind == "error":
-                    self.error = value
-            except queue.Empty:
+            self._read(wait=0.5)  # what it sent just before it exited may arrive after the exit
+            if not self.finished:
                 self.error = f"the bake process ended without a result (exit code {self.process.exitcode})"
-        return self.path is not None or self.error is not None
+        return self.finished
 
     def cancel(self) -> None:
         """Stop the worker (the window closes)."""

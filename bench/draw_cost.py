@@ -26,9 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.bench.walkthrough import COUNT_BAKE
+
 DEFAULT_ROOMS = (1, 6, 18)
 DEFAULT_SIZES = ("64x40", "160x100")
-BAKE = {"resolution": 512, "rays": 16, "bounces": 1}  # as bench/walkthrough.py's object-count sweep
 FACE_SIZE = 64
 
 
@@ -78,7 +79,8 @@ def measure(ctx, rooms: int, sizes, frames: int, cache: Path, method: str) -> li
     from lobeview.viewer.settings import RenderSettings
 
     _say(f"apartment-{rooms}: building (lightmaps cached after the first run)")
-    glb = build_apartment_scene(rooms, directory=cache / "apartment", **BAKE)
+    # The walkthrough sweep's lightmaps: cached, shared with it.
+    glb = build_apartment_scene(rooms, directory=cache / "apartment", **COUNT_BAKE)
     scene = load_gltf(glb)
     _, _, env, _ = load_scene_and_environment(None, None, str(cache))
     path = apartment_path(rooms)

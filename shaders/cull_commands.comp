@@ -1,6 +1,6 @@
 #version 450 core
 // Frustum culling on the GPU (issue 42): sets the instance count (1 drawn, 0 not) of every
-// multi-draw command of a pass (viewer/object_drawer.py ObjectBatches). A command's object is
+// multi-draw command of a pass (viewer/object_batches.py ObjectBatches). A command's object is
 // its baseInstance; it is drawn when the pass enables it and its world-space bounding box is
 // not entirely beyond one clip plane - the test of viewer/camera.py outside_frustum_many, made
 // conservative by a relative margin so that float32 never culls what the float64 test keeps.

@@ -1,7 +1,7 @@
 #version 450 core
 // Light-mapped scene: diffuse kd E / pi from the lightmap (thesis Eq. 4.1) plus emission; with
 // SPECULAR the view-dependent lobes integrated from the object's cube map (thesis 4.4).
-// OBJECT_RECORDS (viewer/object_drawer.py ObjectBatches): the per-object uniforms come from the
+// OBJECT_RECORDS (viewer/object_batches.py ObjectBatches): the per-object uniforms come from the
 // object's record in a storage buffer instead, so one multi-draw shades many objects; included
 // first, its #defines stand for the uniforms in every file below.
 #include "object_records.glsl"
@@ -89,13 +89,10 @@ void main() {
     vec4 mr_texel = sample_map(MAP_METALLIC_ROUGHNESS, v_uv0, v_uv1, vec4(1.0));
     vec4 normal_texel = sample_map(MAP_NORMAL, v_uv0, v_uv1, vec4(0.5, 0.5, 1.0, 1.0));
     vec4 occlusion_texel = sample_map(MAP_OCCLUSION, v_uv0, v_uv1, vec4(1.0));
-    // The occlusion texture averaged over one lightmap texel: how many pixels a lightmap texel
-    // spans here (>= 1; the condition is uniform, so the derivatives are fine). Without an
-    // occlusion texture the mean is the absent texel's 1 and none of this is needed.
-    // The lightmap's coordinates and their derivatives. With OBJECT_RECORDS the UV set is chosen
-    // by a per-object value that a quad's helper invocations may not read (material_maps.glsl):
-    // the derivatives come from the UV sets themselves, taken in uniform control flow.
-    vec2 lightmap_uv = u_lightmap_texcoord == 1 ? v_uv1 : v_uv0;
+    // The lightmap's texel and the derivatives of its coordinates. With OBJECT_RECORDS the UV set
+    // is chosen by a per-object value that a quad's helper invocations may not read
+    // (material_maps.glsl): the derivatives come from the UV sets themselves, taken in uniform
+    // control flow.
 #if defined(OBJECT_RECORDS)
     vec2 lightmap_dx = u_lightmap_texcoord == 1 ? dFdx(v_uv1) : dFdx(v_uv0);
     vec2 lightmap_dy = u_lightmap_texcoord == 1 ? dFdy(v_uv1) : dFdy(v_uv0);
@@ -105,10 +102,14 @@ void main() {
     vec3 lightmap_texel_uv1 = texture(u_lightmap, v_uv1).rgb;
     vec3 lightmap_texel = u_lightmap_texcoord == 1 ? lightmap_texel_uv1 : lightmap_texel_uv0;
 #else
+    vec2 lightmap_uv = u_lightmap_texcoord == 1 ? v_uv1 : v_uv0;
     vec2 lightmap_dx = dFdx(lightmap_uv);
     vec2 lightmap_dy = dFdy(lightmap_uv);
     vec3 lightmap_texel = texture(u_lightmap, lightmap_uv).rgb;  // a white texel without a lightmap
 #endif
+    // The occlusion texture averaged over one lightmap texel: how many pixels a lightmap texel
+    // spans here (>= 1). Without an occlusion texture the mean is the absent texel's 1 and none
+    // of this is needed.
     float lightmap_texel_pixels = 1.0;
     if (u_lightmap_texcoord >= 0 && u_map_texcoord[MAP_OCCLUSION] >= 0) {
         vec2 texels = vec2(textureSize(u_lightmap, 0));

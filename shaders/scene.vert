@@ -9,7 +9,7 @@ in vec2 in_uv1;
 uniform mat4 u_view_projection;
 #if defined(OBJECT_RECORDS)
 // The object's index: a per-instance attribute, so a multi-draw command's baseInstance picks
-// it (viewer/object_drawer.py ObjectBatches); GL 4.2 core, no draw-parameters extension.
+// it (viewer/object_batches.py ObjectBatches); GL 4.2 core, no draw-parameters extension.
 in uint in_object;
 flat out uint v_object;
 #endif

@@ -104,13 +104,15 @@ class CubeProbes:
         preview = {i: max(PREVIEW_MIN_FACE, sizes.get(i, self.bake.face_size) // PREVIEW_DIVISOR) for i in at_start}
         for _ in self.bake.build_steps(self.objects, at_start, preview, cache=False):
             pass
-        # Its steps run between a window's frames: no loading overlay for them (the panel says).
+        self._pend_exact_build(at_start, sizes, cache=not self.edited)
+
+    def _pend_exact_build(self, at_start: list[int], sizes: dict, cache: bool) -> None:
+        """The exact build as pending steps (continue_build runs them between a window's frames:
+        no loading overlay for them, the panel says how far it is)."""
         self.pending = self.bake.build_steps(
-            self.objects, at_start, sizes, cache=not self.edited, nearest=self._nearest, announce=False,
-            background_write=True,
-        )  # fmt: skip
-        cached = not self.edited and self.bake.cache_dir is not None
-        self.pending_progress = (0, self.bake.steps_for(len(at_start), cached))
+            self.objects, at_start, sizes, cache=cache, nearest=self._nearest, announce=False, background_write=True
+        )
+        self.pending_progress = (0, self.bake.steps_for(len(at_start), cache and self.bake.cache_dir is not None))
 
     def _nearest(self, remaining: list[int]) -> int:
         if self.focus is None:
@@ -269,10 +271,7 @@ class CubeProbes:
             # The exact build was for the old material: start it again for the edited scene
             # (the cube maps shown meanwhile stay; nothing of it is cached, the scene was edited).
             at_start, sizes, _ = self._start_plan()
-            self.pending = self.bake.build_steps(
-                self.objects, at_start, sizes, cache=False, nearest=self._nearest, announce=False
-            )
-            self.pending_progress = (0, self.bake.steps_for(len(at_start), False))
+            self._pend_exact_build(at_start, sizes, cache=False)
         # Everything else that reflects this object now sees an outdated appearance.
         self.bake.stale = [i for i in analysis.cube_mapped if scene.objects[i].material != material_index]
         for gpu_obj in self.objects:

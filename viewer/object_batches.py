@@ -135,18 +135,24 @@ class ObjectBatches:
                 grouped.setdefault((binds, bool(single_sided[obj.index])), []).append(obj)
         self.release_buffers()
         self.records = self.ctx.buffer(b"".join(records) if records else bytes(16))
-        commands, self.groups = [], []
+        self.groups, first = [], 0
         for (_, one_sided), members in grouped.items():
             indices = np.array([obj.index for obj in members], dtype=np.int64)
-            self.groups.append(DrawGroup(indices, len(commands), one_sided, members[0]))
-            for i in indices:
-                commands.append(
-                    (self.geometry.index_count[i], 0, self.geometry.first_index[i], 0, i)
-                )  # fmt: skip
-        data = np.array(commands, dtype=np.uint32).reshape(-1, COMMAND_WORDS)
-        self.commands = self.ctx.buffer(data.tobytes() if len(data) else bytes(4 * COMMAND_WORDS))
-        self.command_count = len(data)
+            self.groups.append(DrawGroup(indices, first, one_sided, members[0]))
+            first += len(indices)
+        ordered = [group.objects for group in self.groups]
+        self.commands, self.command_count = self._command_buffer(np.concatenate(ordered) if ordered else [])
         self._key = key
+
+    def _command_buffer(self, objects) -> tuple[moderngl.Buffer, int]:
+        """(buffer, count): one draw command per object of ``objects``, in that order, its
+        instance count 0 until a cull writes it, its baseInstance the object's index."""
+        objects = np.asarray(objects, dtype=np.int64)
+        data = np.zeros((len(objects), COMMAND_WORDS), dtype=np.uint32)
+        data[:, 0] = self.geometry.index_count[objects]
+        data[:, 2] = self.geometry.first_index[objects]
+        data[:, 4] = objects
+        return self.ctx.buffer(data.tobytes() if len(data) else bytes(4 * COMMAND_WORDS)), len(data)
 
     @staticmethod
     def unbatched_uniforms(recorded: set[str], samplers: set[str]) -> set[str]:
@@ -182,15 +188,16 @@ class ObjectBatches:
         if self._depth_key != key:
             if self.depth_commands is not None:
                 self.depth_commands.release()
-            commands, self.depth_groups = [], []
+            self.depth_groups, first = [], 0
             for one_sided in (True, False):
                 members = np.flatnonzero(single_sided == one_sided)
                 if len(members):
-                    self.depth_groups.append((len(commands), members, one_sided))
-                commands += [(self.geometry.index_count[i], 0, self.geometry.first_index[i], 0, i) for i in members]
-            data = np.array(commands, dtype=np.uint32).reshape(-1, COMMAND_WORDS)
-            self.depth_commands = self.ctx.buffer(data.tobytes() if len(data) else bytes(4 * COMMAND_WORDS))
-            self.depth_command_count = len(data)
+                    self.depth_groups.append((first, members, one_sided))
+                    first += len(members)
+            ordered = [members for _, members, _ in self.depth_groups]
+            self.depth_commands, self.depth_command_count = self._command_buffer(
+                np.concatenate(ordered) if ordered else []
+            )
             self._depth_key = key
         self._cull(self.depth_commands, self.depth_command_count, enabled, view_projection, frustum_culling)
         draws = 0

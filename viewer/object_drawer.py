@@ -188,14 +188,13 @@ class ObjectDrawer:
         opaque object (viewer/occlusion.py)."""
         batches = self.batches if self.settings.indirect_draws else None
         return self.occlusion.visible_samples(
-            view_proj, size, self.opaque_objects(True), {index: self.objects[index] for index in indices},
-            batches, len(self.objects),
-        )  # fmt: skip
+            view_proj, size, self.opaque_objects(True), {index: self.objects[index] for index in indices}, batches
+        )
 
     def draw_depth(self, view_proj) -> tuple[int, int]:
         """The opaque objects' depth (the camera pass's pre-pass): (drawn, culled)."""
         batches = self.batches if self.settings.indirect_draws else None
-        return self.occlusion.draw_depth(view_proj, self.opaque_objects(False), batches, len(self.objects))
+        return self.occlusion.draw_depth(view_proj, self.opaque_objects(False), batches)
 
     def draw_background(self, cube, view_proj) -> None:
         """The environment ``cube`` behind everything (viewer/render_base.py draw_environment)."""

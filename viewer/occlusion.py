@@ -53,19 +53,23 @@ class OcclusionTest:
         self.depth = self.ctx.depth_renderbuffer(size)
         self.fbo = new_framebuffer(self.ctx, [], self.depth)
 
-    def _draw(self, program, obj) -> None:
-        """Object ``obj``'s triangles, positions only."""
+    def _positions(self, program) -> moderngl.VertexArray:
+        """Every object's positions for the depth program (one vertex array)."""
         if self._vao is None:
             self._vao = self.geometry.vertex_array(self.ctx, program, position_only=True)
-        self._vao.render(moderngl.TRIANGLES, vertices=obj.index_count, first=obj.first_index)
+        return self._vao
+
+    def _draw(self, program, obj) -> None:
+        """Object ``obj``'s triangles, positions only."""
+        self._positions(program).render(moderngl.TRIANGLES, vertices=obj.index_count, first=obj.first_index)
         self.draw_calls.single += 1
 
-    def draw_depth(self, view_proj: np.ndarray, objects: list, batches=None, object_count: int = 0) -> tuple[int, int]:
+    def draw_depth(self, view_proj: np.ndarray, objects: list, batches=None) -> tuple[int, int]:
         """Depth of ``objects`` ((GPU object, single-sided) pairs) into the bound framebuffer's
         depth buffer (less-than test, colour untouched: the program has no outputs); objects
-        outside the frustum are skipped. ``batches`` (viewer/object_batches.py ObjectBatches,
-        with the scene's ``object_count``): drawn by multi-draws culled on the GPU instead of
-        one draw each. Returns (drawn, culled) by the frustum test."""
+        outside the frustum are skipped. ``batches`` (viewer/object_batches.py ObjectBatches):
+        drawn by multi-draws culled on the GPU instead of one draw each. Returns (drawn, culled)
+        by the frustum test."""
         program = self.programs.program("depth.vert", "depth.frag", {})
         set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
         ctx = self.ctx
@@ -75,16 +79,15 @@ class OcclusionTest:
         drawn = culled = 0
         outside = outside_frustum_many(np.array([obj.corners for obj, _ in objects]), view_proj) if objects else []
         if batches is not None:
-            enabled = np.zeros(object_count, dtype=bool)
-            single_sided = np.zeros(object_count, dtype=bool)
+            enabled = np.zeros(self.geometry.first_index.size, dtype=bool)
+            single_sided = np.zeros_like(enabled)
             for obj, one_sided in objects:
                 enabled[obj.index] = True
                 single_sided[obj.index] = one_sided
             hidden = int(np.count_nonzero(outside))
             if hidden < len(objects):
-                if self._vao is None:
-                    self._vao = self.geometry.vertex_array(self.ctx, program, position_only=True)
-                self.draw_calls.multi += batches.draw_depth(self._vao, enabled, single_sided, view_proj, True)
+                vao = self._positions(program)
+                self.draw_calls.multi += batches.draw_depth(vao, enabled, single_sided, view_proj, True)
                 self.draw_calls.culls += 1
             return len(objects) - hidden, hidden
         for (obj, single_sided), hidden in zip(objects, outside, strict=True):
@@ -101,18 +104,18 @@ class OcclusionTest:
         return drawn, culled
 
     def visible_samples(
-        self, view_proj: np.ndarray, size, occluders: list, queried: dict, batches=None, object_count: int = 0
+        self, view_proj: np.ndarray, size, occluders: list, queried: dict, batches=None
     ) -> dict[int, int]:
         """Samples of each ``queried`` object (index -> GPU object) that no occluder hides from
         the camera of ``view_proj``. ``occluders``: (GPU object, single-sided) pairs;
-        ``batches``, ``object_count``: as in draw_depth."""
+        ``batches``: as in draw_depth."""
         self._targets(size)
         ctx = self.ctx
         ctx.scissor = None
         self.fbo.use()
         ctx.viewport = (0, 0, *self.size)
         self.fbo.clear(depth=1.0)
-        self.draw_depth(view_proj, occluders, batches, object_count)
+        self.draw_depth(view_proj, occluders, batches)
         program = self.programs.program("depth.vert", "depth.frag", {})
         self.fbo.depth_mask = False
         ctx.depth_func = "<="  # a reflector lying on an occluder (a floor under a wall) is not hidden by it
