@@ -134,7 +134,7 @@ def _rendering(window) -> None:
     c, k = _method_combo(window, kinds)
     c2, n = _sample_slider("samples N", window.method.kind, window.method.samples)
     c3, window.lobe_normalize = imgui.checkbox("lobe-N energy normalisation", window.lobe_normalize)
-    # lobe-N+ring: the thesis' ring at every N instead of the spiral from N = 15 (for comparison)
+    # lobe-N+ring: the thesis' ring at every N instead of the double ring from N = 11 (for comparison)
     c_ring, ring = imgui.checkbox("lobe-N: thesis ring at every N", window.method.pattern == "ring")
     if c or c2 or c3 or c_ring:
         window.set_method(method_from_choice(kinds[k], n, window.lobe_normalize, "ring" if ring else "auto"))

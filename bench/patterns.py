@@ -1,13 +1,14 @@
-"""lobe-N's pattern against N: the thesis' ring against the Fibonacci spiral (issue 20, item 1).
+"""lobe-N's pattern against N: the thesis' ring against lobeview's default (issue 20 item 1, issue 45).
 
 The thesis' ring puts every sample but the centre at 40 % of the lobe radius and filters each over
 lobe area / N (Eq. 4.14-4.17): as N grows the footprints shrink while the lobe's rim stays
-unsampled, so PSNR fell with N on glossy lobes. Since this change lobe-N takes a Fibonacci
-(Vogel) spiral from N = 15 on (11 for narrow lobes; materials/patterns.py step 3), whose samples sit at the centres of
-equal-area cells of the lobe. This bench renders lobe-N+norm (the viewer's default) with the
-default pattern and with ``+ring`` (the thesis' ring at every N) for N = 3..19 on the preview
-sphere under each environment, against the box-filtered `reference` (two halves: 'floor' is its
-own noise), and lists every step where PSNR falls as N grows. The figure has, per preset, at the
+unsampled, so PSNR fell with N on glossy lobes. lobe-N takes a double ring (centre, inner ring at
+35 %, outer ring at 70 % of the lobe radius) from N = 11 on (materials/patterns.py step 3; it
+replaced a Fibonacci spiral that made lobe-15 worse than lobe-7 against Mitsuba). This bench
+renders lobe-N+norm (the viewer's default) with the default pattern and with ``+ring`` (the
+thesis' ring at every N) for N = 3..19 on the preview sphere under each environment, against
+the box-filtered `reference` (two halves: 'floor' is its own noise), and lists every step where
+PSNR falls as N grows. The figure has, per preset, at the
 largest N: ring | default | reference | |error| x 8 of each.
 
     .venv/bin/python -m lobeview.bench.patterns [--envs interior courtyard] [--size 200] [--spp 1024]
@@ -28,7 +29,7 @@ from lobeview.bench.metrics import exposure_for, psnr_8bit, relative_rmse
 from lobeview.bench.report import write_image_rows
 from lobeview.bench.targets import resolve_environment
 from lobeview.core.methods import DEFAULT_LOBE_LOD_BIAS, Method
-from lobeview.materials.patterns import NARROW_LOBE_ALPHA, SPIRAL_MIN_SAMPLES, SPIRAL_MIN_SAMPLES_NARROW
+from lobeview.materials.patterns import DOUBLE_RING_MIN_SAMPLES
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.camera import Camera
@@ -129,16 +130,14 @@ def main(argv=None) -> int:
     figure = write_image_rows(out, f"patterns-{stamp}.png", figure_rows)
     n_text = " | ".join(f"N={n}" for n in samples)
     lines = [
-        "# lobe-N against N: the thesis' ring and the Fibonacci spiral",
+        "# lobe-N against N: the thesis' ring and lobeview's default pattern",
         "",
         f"Run {stamp}: `python -m lobeview.bench.patterns --envs {' '.join(args.envs)} --size {args.size} "
         f"--spp {args.spp}`; {device}; {time.perf_counter() - started:.0f} s.",
         f"Preview sphere {args.size}x{args.size}, cube faces 256 px, environments {', '.join(env_names)}.",
         "Methods: lobe-N+norm (the viewer's default: Eq. 4.25, energy-normalised, "
         f"LOD bias {DEFAULT_LOBE_LOD_BIAS:+g}, {DEFAULT_MIP_FILTER} MIP chain) with the default pattern ('auto': "
-        f"the ring below N = {SPIRAL_MIN_SAMPLES}, "
-        f"the spiral from N = {SPIRAL_MIN_SAMPLES}, from N = {SPIRAL_MIN_SAMPLES_NARROW} for roughness <= "
-        f"{NARROW_LOBE_ALPHA:g})",
+        f"the ring below N = {DOUBLE_RING_MIN_SAMPLES}, the double ring from N = {DOUBLE_RING_MIN_SAMPLES})",
         "and with +ring (the thesis' ring at every N); anisotropic lobes (max/min roughness >= 3) take the",
         "line pattern either way.",
         f"Reference: `reference`, {args.spp} samples per lobe, box-filtered pixel integral, two halves ('floor':",

@@ -5,8 +5,8 @@ tables, the scripts and every printed command.
                     lobeview's energy normalisation of Eq. 4.25 by the lobe's albedo table
     lobe-N+eq4.24   the same pattern with the thesis' derived quadrature Eq. 4.24 instead of
                     its empirical Eq. 4.25 (for the comparison of Fig. 4.24; not normalised)
-    lobe-N...+ring  the thesis' ring at every N (by default isotropic lobes take a Fibonacci
-                    spiral from N = 15 on, materials/patterns.py step 3); after +norm / +eq4.24
+    lobe-N...+ring  the thesis' ring at every N (by default isotropic lobes take a double
+                    ring from N = 11 on, materials/patterns.py step 3); after +norm / +eq4.24
     fis-N           filtered importance sampling (Colbert & Krivanek 2007), N in [1, MAX_SAMPLES]
     mc-N            plain importance sampling, no filtering
     reference       converged MIS integration, REFERENCE_BATCH samples per lobe and pass
@@ -51,8 +51,8 @@ NORMALIZE_SUFFIX = "+norm"
 #: lobe-N quadratures (thesis 4.4.3): Eq. 4.25 (lobeview's and the thesis' choice) and Eq. 4.24
 WEIGHTINGS = ("eq4.25", "eq4.24")
 EQ424_SUFFIX = "+eq4.24"
-#: lobe-N pattern choices: auto = the thesis' ring below N = 15 and a Fibonacci spiral from 15 on
-#: (materials/patterns.py SPIRAL_MIN_SAMPLES), ring = the thesis' ring at every N
+#: lobe-N pattern choices: auto = the thesis' ring below N = 11 and a double ring from 11 on
+#: (materials/patterns.py DOUBLE_RING_MIN_SAMPLES), ring = the thesis' ring at every N
 LOBE_PATTERNS = ("auto", "ring")
 RING_SUFFIX = "+ring"
 # A reference is the pixel's integral under a box filter: each pass shades at another sub-pixel

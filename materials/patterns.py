@@ -17,17 +17,20 @@ Steps, with the thesis equations:
      anisotropic lobes; ``multi_ring`` = centre + concentric rings of about three samples
      (section 4.5.3, for planar mirror buffers); ``spiral`` (lobeview's, not the thesis') =
      centre + a Fibonacci (Vogel) spiral, radius fraction 1 - xi1 = sqrt((k + 1/2) / N) at
-     azimuth parameter xi2 = frac(k (3 - sqrt 5) / 2), so that every sample's Voronoi cell in the
-     uniformised lobe disc has about the area 1 / N that step 4 filters it over. The ring puts
-     all of its samples at 40 % of the lobe radius: with more samples each one's footprint
-     (lobe area / N) shrinks while the outer 60 % of the lobe stays unsampled, and PSNR fell as
-     N grew (gold-ggx on interior.exr, 200 px: lobe-7 23.9 dB, lobe-15 22.5, lobe-19 21.8); the
-     spiral at N = 15 / 19 gives 26.1 / 25.9. At N = 11 the ring is still ahead on wide lobes
-     without long tails (frosted glass 31.2 against 26.1 dB, a Beckmann alpha = 0.25 conductor
-     27.7 against 26.6), at N <= 7 on most (few spiral samples are neither symmetric nor in the
-     core), so :func:`choose_pattern` takes the spiral from SPIRAL_MIN_SAMPLES on, and for
-     narrow lobes, which the spiral serves better already at N = 11, from
-     SPIRAL_MIN_SAMPLES_NARROW on (measured ring vs spiral per N: bench/patterns.py).
+     azimuth parameter xi2 = frac(k (3 - sqrt 5) / 2); ``double_ring`` (lobeview's) = centre +
+     an inner ring of min(6, (N - 1) // 2) samples at 35 % of the lobe radius + the rest on an
+     outer ring at 70 %, rotated by half its step. The ring puts all of its samples at 40 % of
+     the lobe radius: with more samples each one's footprint (lobe area / N) shrinks while the
+     outer 60 % of the lobe stays unsampled, and accuracy fell as N grew. The spiral (the
+     default from N = 15 until 2026-11-26) fixed that on gold under interior.exr but made lobe-15
+     worse than lobe-7 on 5 of 6 isotropic lobes of the Mitsuba comparison (bench/mitsuba.py:
+     GGX 0.5 18.2 against 13.9 %, Beckmann 0.5 15.4 against 11.8) and on frosted glass (interior:
+     15.1 against 4.4 %): its outer samples sit at the lobe's rim, where the weights are small,
+     and its inner ones are too few for the core. :func:`choose_pattern` takes the double ring
+     from DOUBLE_RING_MIN_SAMPLES = 11 on: lobe-11 / 15 / 19 are then better than lobe-7 on every
+     case of the Mitsuba table and never worse by more than 0.2 points on 8 presets x 2 captures
+     but frosted glass at N = 11 under interior.exr (5.8 against 4.4 %; docs/measurements.md
+     "lobe-N against N").
      :func:`choose_pattern` picks the line pattern from the anisotropy ratio max(mx, my) /
      min(mx, my): >= 3 gives a line along the longer axis.
   4. MIP level per sample (Eq. 4.14-4.17): the lobe cross-section is an ellipse with semi-axes
@@ -88,18 +91,17 @@ MULTI_RING_SAMPLES_PER_RING = 3  # thesis 4.5.3 / Fig. 4.34: rings of three samp
 # Widest lobe extent the footprint follows (lobe_sample_area): the thesis' tan form blows up at
 # 90 deg; the solid-angle form does not, and keeps the clamp so footprints stay below a hemisphere.
 MAX_ELLIPSE_ANGLE = np.radians(80.0)
-PATTERN_KINDS = ("ring", "multi_ring", "line_x", "line_y", "spiral")
-# lobe-N takes the spiral instead of the ring from this N on (step 3: measured on the preview
-# sphere, 7 presets x 2 captures; the ring stays the thesis' pattern below it and on request).
-SPIRAL_MIN_SAMPLES = 15
-# ... and from this N on for narrow lobes (largest roughness <= NARROW_LOBE_ALPHA). Measured on the
-# tent MIP chain (bench/patterns.py, 200 px, spiral against ring at N = 11): chrome (alpha 0.01)
-# +0.8 / +1.5 dB, lacquer (0.02) +0.6 / +1.2 (interior / courtyard.exr), which turns their fall
-# from the ring at 7 to the ring at 11 into a rise; Alanod (0.11 x 0.07) +0.2, gold-ggx (0.15)
-# +0.2 / -0.1, but plastic (0.12) -2.2 / -1.3, glTF red plastic (0.16) -1.2 / -0.8, frosted glass
-# (0.25) -6.8: those keep the ring below SPIRAL_MIN_SAMPLES.
-SPIRAL_MIN_SAMPLES_NARROW = 11
-NARROW_LOBE_ALPHA = 0.05
+PATTERN_KINDS = ("ring", "multi_ring", "line_x", "line_y", "spiral", "double_ring")
+# lobe-N takes the double ring instead of the ring from this N on (step 3; the ring at N = 8-10
+# is within a few tenths of lobe-7, a double ring with an outer ring of 1-4 samples was worse).
+DOUBLE_RING_MIN_SAMPLES = 11
+# The double ring: the centre, min(DOUBLE_RING_INNER_SAMPLES, (N - 1) // 2) samples on an inner
+# ring and the rest on an outer one, at these fractions of the lobe radius (1 - xi1). Chosen on
+# the Mitsuba sky at the default LOD bias from radii (0.4, 0.8), (0.35, 0.7), (0.45, 0.85) and
+# inner counts 5 / 6 / (N - 1) // 2, checked on interior / courtyard / studio / chinese_garden:
+# (0.35, 0.7) with at most 6 inside is the one where N = 11 < 15 < 19 on every Mitsuba case.
+DOUBLE_RING_INNER_SAMPLES = 6
+DOUBLE_RING_RADII = (0.35, 0.7)
 # The golden angle in turns, 1 - 1 / golden ratio: successive spiral samples 137.5 deg apart.
 GOLDEN_ANGLE_TURNS = (3.0 - np.sqrt(5.0)) / 2.0
 # Step 7, the GGX tail of lobe-N+norm: the pattern covers tan(theta_h) <= sqrt(T) alpha with
@@ -129,9 +131,8 @@ def choose_pattern(
 ) -> str:
     """The thesis' rule: line pattern along the longer axis for strongly anisotropic lobes,
     otherwise the ring (cube maps) or the multi-ring (planar mirror buffers); with the sample
-    count ``n`` and ``pattern`` 'auto' the spiral replaces the ring on cube maps from
-    SPIRAL_MIN_SAMPLES samples on, for narrow lobes (both alphas <= NARROW_LOBE_ALPHA) from
-    SPIRAL_MIN_SAMPLES_NARROW on ('ring', the method suffix +ring: the thesis' ring at any N)."""
+    count ``n`` and ``pattern`` 'auto' the double ring replaces the ring on cube maps from
+    DOUBLE_RING_MIN_SAMPLES on ('ring', the method suffix +ring: the thesis' ring at any N)."""
     if pattern not in LOBE_PATTERNS:
         raise ValueError(f"unknown lobe-N pattern choice {pattern!r}; use one of {LOBE_PATTERNS}")
     ratio = max(alpha_x, alpha_y) / min(alpha_x, alpha_y)
@@ -139,10 +140,9 @@ def choose_pattern(
         return "line_y" if alpha_y > alpha_x else "line_x"
     if planar:
         return "multi_ring"
-    narrow = max(alpha_x, alpha_y) <= NARROW_LOBE_ALPHA
-    spiral_from = SPIRAL_MIN_SAMPLES_NARROW if narrow else SPIRAL_MIN_SAMPLES
-    spiral = pattern == "auto" and n is not None and n >= spiral_from
-    return "spiral" if spiral else "ring"
+    if pattern != "auto" or n is None:
+        return "ring"
+    return "double_ring" if n >= DOUBLE_RING_MIN_SAMPLES else "ring"
 
 
 def pattern_xi(n: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
@@ -172,6 +172,14 @@ def pattern_xi(n: int, kind: str) -> tuple[np.ndarray, np.ndarray]:
     xi2 = [0.0]
     ring_samples = n - 1
     if ring_samples == 0:
+        return np.array(xi1), np.array(xi2)
+    if kind == "double_ring":
+        # The centre, then up to DOUBLE_RING_INNER_SAMPLES on the inner ring and the rest on the
+        # outer one, rotated by half its step so that the two rings interleave.
+        inner = min(DOUBLE_RING_INNER_SAMPLES, ring_samples // 2)
+        outer = ring_samples - inner
+        xi1 += [1.0 - DOUBLE_RING_RADII[0]] * inner + [1.0 - DOUBLE_RING_RADII[1]] * outer
+        xi2 += list(np.arange(inner) / inner) + list((np.arange(outer) + 0.5) / max(outer, 1))
         return np.array(xi1), np.array(xi2)
     if kind == "ring":
         xi1 += [RING_XI1] * ring_samples
@@ -333,7 +341,7 @@ def lobe_samples(
     pattern: str = "auto",
 ) -> LobeSamples:
     """``kind`` forces a pattern; otherwise :func:`choose_pattern` picks one, with ``pattern``
-    'auto' (the spiral from SPIRAL_MIN_SAMPLES on) or 'ring' (the thesis' ring at every N)."""
+    'auto' (the double ring from DOUBLE_RING_MIN_SAMPLES on) or 'ring' (the thesis' ring at every N)."""
     dist = lobe.distribution
     kind = kind or choose_pattern(dist.alpha_x, dist.alpha_y, n=n, pattern=pattern)
     xi1, xi2 = pattern_xi(n, kind)

@@ -234,7 +234,7 @@ def test_pattern_bench_reports_falls_and_writes_the_figure(tmp_path):
     for row in rows:
         values = [float(v) for v in row.split(" | ")[3:5]]
         assert all(np.isfinite(values)) and min(values) > 10.0
-    # N = 7 is below SPIRAL_MIN_SAMPLES: both patterns are the ring there, the same image.
+    # N = 7 is below DOUBLE_RING_MIN_SAMPLES: both patterns are the ring there, the same image.
     assert rows[0].split(" | ")[3] == rows[1].split(" | ")[3]
     (figure,) = tmp_path.glob("patterns-*.png")
     assert Image.open(figure).size == (5 * 24, 2 * 24)

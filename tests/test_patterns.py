@@ -13,7 +13,6 @@ from lobeview.materials.patterns import (
     GGX_TAIL_OUTER_TAN,
     MAX_ELLIPSE_ANGLE,
     RING_XI1,
-    SPIRAL_MIN_SAMPLES,
     XI_BORDER,
     choose_pattern,
     cube_map_lod,
@@ -36,7 +35,7 @@ def constant(value=1.0):
     return lambda dirs, lod: np.full((len(dirs), 3), value)
 
 
-@pytest.mark.parametrize("kind", ["ring", "multi_ring", "line_x", "line_y", "spiral"])
+@pytest.mark.parametrize("kind", ["ring", "multi_ring", "line_x", "line_y", "spiral", "double_ring"])
 @pytest.mark.parametrize("n", [1, 2, 3, 5, 7, 10, 11, 15, 19, 20, 32])
 def test_pattern_has_n_samples_inside_the_lobe(kind, n):
     xi1, xi2 = pattern_xi(n, kind)
@@ -53,7 +52,7 @@ def test_pattern_has_n_samples_inside_the_lobe(kind, n):
         assert np.all(theta <= theta_thresh(dist, phi) + 1e-12)
 
 
-@pytest.mark.parametrize("kind", ["ring", "multi_ring", "line_x", "line_y"])
+@pytest.mark.parametrize("kind", ["ring", "multi_ring", "line_x", "line_y", "double_ring"])
 @pytest.mark.parametrize("n", [5, 7, 10, 15, 19])
 def test_pattern_is_symmetric_about_the_lobe_centre(kind, n):
     """Isotropic lobe: the pattern's half-vector offsets balance out (ring and line patterns are
@@ -79,103 +78,43 @@ def test_pattern_layouts_follow_the_thesis():
     assert choose_pattern(0.2, 0.2, planar=True) == "multi_ring"
 
 
-def test_narrow_lobes_take_the_spiral_from_eleven_samples_on_cube_maps_and_in_the_packed_patterns():
-    from lobeview.materials.patterns import NARROW_LOBE_ALPHA, SPIRAL_MIN_SAMPLES_NARROW
+def test_lobe_n_takes_the_double_ring_from_eleven_samples_unless_asked_for_the_ring():
+    from lobeview.materials.patterns import DOUBLE_RING_MIN_SAMPLES, DOUBLE_RING_RADII
     from lobeview.viewer.material_gpu import pack_material, pack_patterns
 
-    assert SPIRAL_MIN_SAMPLES_NARROW == 11 < SPIRAL_MIN_SAMPLES
-    assert choose_pattern(NARROW_LOBE_ALPHA, 0.02, n=11) == "spiral"
-    assert choose_pattern(0.02, 0.02, n=10) == "ring"
-    assert choose_pattern(NARROW_LOBE_ALPHA * 1.01, NARROW_LOBE_ALPHA, n=11) == "ring"  # the wider axis decides
-    assert choose_pattern(0.02, 0.02, n=11, pattern="ring") == "ring"
-    assert choose_pattern(0.02, 0.02, planar=True, n=11) == "multi_ring"
-    assert choose_pattern(0.005, 0.02, n=11) == "line_y"  # ratio 4: the line, whatever the width
-    # The GPU gets each lobe's own pattern: chrome (alpha 0.01) the spiral, plastic (0.12) the ring,
-    # equal to what the numpy lobe_samples takes for the same lobe.
-    wo = direction_from_angles_deg(30)
-    for preset, kind in (("chrome", "spiral"), ("plastic", "ring")):
-        material = pack_material(build_bsdf(PRESETS[preset]))
-        (lobe,) = material.lobe_components
-        assert lobe_samples(lobe, wo, 11).kind == kind
-        packed = pack_patterns(material, 11)[:11]
-        np.testing.assert_allclose(packed, np.stack(pattern_xi(11, kind), -1), rtol=1e-6, atol=1e-7)
-
-
-def test_lobe_n_takes_the_spiral_from_fifteen_samples_unless_asked_for_the_ring():
-    assert SPIRAL_MIN_SAMPLES == 15
-    assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES - 1) == "ring"
-    assert choose_pattern(0.1, 0.1, n=SPIRAL_MIN_SAMPLES) == "spiral"
+    assert DOUBLE_RING_MIN_SAMPLES == 11
+    assert choose_pattern(0.1, 0.1, n=10) == "ring"
+    assert choose_pattern(0.1, 0.1, n=11) == "double_ring"
+    assert choose_pattern(0.01, 0.01, n=11) == "double_ring"  # narrow lobes too (no spiral any more)
     assert choose_pattern(0.1, 0.1, n=None) == "ring"  # no N: the thesis' rule
     assert choose_pattern(0.1, 0.1, n=19, pattern="ring") == "ring"  # lobe-N+ring
     assert choose_pattern(0.1, 0.1, planar=True, n=19) == "multi_ring"  # mirror buffers: not measured
     assert choose_pattern(0.3, 0.05, n=19) == "line_x"  # anisotropic lobes keep the line
     lobe = KurtLobe(1.0, 0.2, 0.2, 1.0, 0.0)
     wo = direction_from_angles_deg(30)
-    assert lobe_samples(lobe, wo, 15).kind == "spiral"
+    assert lobe_samples(lobe, wo, 15).kind == "double_ring"
     assert lobe_samples(lobe, wo, 15, pattern="ring").kind == "ring"
-    assert lobe_samples(lobe, wo, 11).kind == "ring"
-    xi1, xi2 = pattern_xi(11, "spiral")
-    assert xi1[0] == 1.0  # the centre first, as in the ring
-    np.testing.assert_allclose(1.0 - xi1[1:], np.sqrt((np.arange(1, 11) + 0.5) / 11))
-    np.testing.assert_allclose(np.diff(xi2) % 1.0, (3.0 - np.sqrt(5.0)) / 2.0)  # golden angle
+    assert lobe_samples(lobe, wo, 7).kind == "ring"
     with pytest.raises(ValueError, match="pattern choice"):
         lobe_samples(lobe, wo, 15, pattern="spiral")
-
-
-def _voronoi_centroid_offset(kind: str, n: int, resolution: int = 400) -> float:
-    """Largest distance between a sample and the centroid of its Voronoi cell in the
-    uniformised lobe disc (radius fraction 1 - xi1, angle 2 pi xi2), in units of the radius
-    sqrt(1 / N) of the disc of area pi / N that step 4 filters each sample over."""
-    xi1, xi2 = pattern_xi(n, kind)
-    points = np.stack([(1 - xi1) * np.cos(2 * np.pi * xi2), (1 - xi1) * np.sin(2 * np.pi * xi2)], -1)
-    grid = (np.arange(resolution) + 0.5) / resolution * 2.0 - 1.0
-    x, y = np.meshgrid(grid, grid)
-    inside = x**2 + y**2 <= 1.0
-    disc = np.stack([x[inside], y[inside]], -1)
-    owner = np.argmin(np.sum((disc[:, None, :] - points[None]) ** 2, axis=-1), axis=1)
-    counts = np.bincount(owner, minlength=n)
-    assert np.all(counts > 0)
-    centroids = np.stack([np.bincount(owner, disc[:, i], n) for i in range(2)], -1) / counts[:, None]
-    return float(np.max(np.linalg.norm(centroids - points, axis=1)) / np.sqrt(1.0 / n))
-
-
-@pytest.mark.parametrize("n", [11, 15, 19, 32])
-def test_spiral_samples_sit_at_their_cells_unlike_the_ring(n):
-    """Step 4 filters every sample over lobe area / N: that footprint covers the lobe only if
-    each sample sits near the centre of the part of the lobe it stands for. The spiral's samples
-    stay within half a footprint radius of their Voronoi cells' centroids at every N; the ring's
-    drift further out of their cells as N grows (its samples crowd one circle while the lobe's
-    rim is owned by samples at 40 % of the radius)."""
-    spiral = _voronoi_centroid_offset("spiral", n)
-    ring = _voronoi_centroid_offset("ring", n)
-    assert spiral < 0.5
-    assert ring > 0.9 and ring > 1.8 * spiral
-
-
-def _banded_radiance(dirs, lod):
-    """A bright band and smooth gradients: structure at a glossy lobe's scale (no filtering)."""
-    band = np.exp(-(((dirs[:, 0] - 0.25) / 0.08) ** 2))
-    return np.stack([1 + 5 * band, 1 + 0.7 * dirs[:, 1] ** 2 + 3 * band, 1.5 + dirs[:, 2]], -1)
-
-
-@pytest.mark.parametrize("preset", ["gold-ggx", "plastic", "frosted-glass"])
-def test_spiral_quadrature_beats_the_ring_at_many_samples(preset):
-    """Pattern quadrature alone (lookups unfiltered) against a 400 000-sample Monte Carlo
-    estimate: at N = 15 and 19 the spiral's error is below the ring's, whose samples never leave
-    their circle (measured: gold-ggx 0.041 / 0.074 vs 0.089 relative to the peak channel,
-    plastic 0.0037 / 0.0030 vs 0.009, frosted glass 0.100 / 0.045 vs 0.133)."""
-    bsdf = build_bsdf(PRESETS[preset])
-    spec = BSDF(specular_lobes(bsdf))
-    wo = direction_from_angles_deg(35, 60)
-    u = np.random.default_rng(4).random((2, 400_000))
-    s = spec.sample(u[0], u[1], wo)
-    reference = np.mean(s.weight * _banded_radiance(s.wi, None), axis=0)
-    for n in (15, 19):
-        errors = {}
-        for pattern in ("auto", "ring"):
-            value = integrate_specular(bsdf, wo, _banded_radiance, n, pattern=pattern)
-            errors[pattern] = np.max(np.abs(value - reference)) / np.max(reference)
-        assert errors["auto"] < 0.85 * errors["ring"], (n, errors)
+    # The layout: the centre, min(6, (N - 1) // 2) on the inner ring, the rest on the outer ring,
+    # each ring evenly spaced and the outer one turned by half its step.
+    for n, inner in ((11, 5), (13, 6), (15, 6), (19, 6)):
+        xi1, xi2 = pattern_xi(n, "double_ring")
+        radius = 1.0 - xi1
+        assert radius[0] == 0.0
+        np.testing.assert_allclose(radius[1 : 1 + inner], DOUBLE_RING_RADII[0])
+        np.testing.assert_allclose(radius[1 + inner :], DOUBLE_RING_RADII[1])
+        outer = n - 1 - inner
+        np.testing.assert_allclose(xi2[1 : 1 + inner], np.arange(inner) / inner)
+        np.testing.assert_allclose(xi2[1 + inner :], (np.arange(outer) + 0.5) / outer)
+    # The GPU gets each lobe's own pattern, equal to what the numpy lobe_samples takes.
+    for preset, n, kind in (("chrome", 11, "double_ring"), ("plastic", 15, "double_ring"), ("plastic", 7, "ring")):
+        material = pack_material(build_bsdf(PRESETS[preset]))
+        (lobe,) = material.lobe_components
+        assert lobe_samples(lobe, wo, n).kind == kind
+        packed = pack_patterns(material, n)[:n]
+        np.testing.assert_allclose(packed, np.stack(pattern_xi(n, kind), -1), rtol=1e-6, atol=1e-7)
 
 
 def test_theta_thresh_matches_equation_4_10():
@@ -228,7 +167,9 @@ def test_sample_footprint_is_the_lobe_solid_angle(alpha):
 # Measured worst relative error over n = 5, 11, 19 and theta <= 50 deg, rounded up: lobes with
 # m <= 0.15 stay within 2 %; the wide m = 0.25 lobes (frosted glass, the foil's transmission)
 # and GGX's long tails (cut at xi_border = 0.01, which for GGX leaves 1 % of the mass outside)
-# reach 7.5 %. Those are properties of the method; bench/ quantifies them per view.
+# reach 7.5 % (frosted glass 8.8 % at 50 deg with the double ring's outer samples from N = 11 on:
+# they reach further into the horizon-cut part of the lobe). Those are properties of the method
+# without +norm (which is exact here); bench/ quantifies them per view.
 CONSTANT_RADIANCE_TOLERANCE = {
     "alanod-2000gs-1lobe": 0.02,
     "alanod-2000gs-2lobe": 0.02,
@@ -236,7 +177,7 @@ CONSTANT_RADIANCE_TOLERANCE = {
     "chrome": 0.02,
     "plastic": 0.02,
     "white-foil": 0.03,
-    "frosted-glass": 0.08,
+    "frosted-glass": 0.09,
     "gold-ggx": 0.06,
 }
 

@@ -241,7 +241,7 @@ def _load_or_build_albedo_table(comp, key: tuple, directory: Path | None) -> Alb
 
 def pack_patterns(material: PackedMaterial, n: int, planar: bool = False, pattern: str = "auto") -> np.ndarray:
     """(MAX_LOBES * MAX_PATTERN, 2) pattern coordinates of each lobe's ring (or, with ``pattern``
-    'auto', its spiral from SPIRAL_MIN_SAMPLES on, SPIRAL_MIN_SAMPLES_NARROW for narrow lobes), or
+    'auto', its double ring from DOUBLE_RING_MIN_SAMPLES on), or
     with ``planar`` the multi-ring pattern of thesis 4.5.3 for objects shaded from a mirror
     buffer. The line
     patterns of strongly anisotropic lobes (:func:`lobeview.materials.patterns.choose_pattern`)
@@ -257,7 +257,7 @@ def pack_patterns(material: PackedMaterial, n: int, planar: bool = False, patter
         if getattr(comp, "sampled_pattern", False):
             out[i * MAX_PATTERN : i * MAX_PATTERN + n] = lattice
             continue
-        # Ring or spiral by the lobe's widest roughness (isotropic here: the line patterns are the
+        # Ring or double ring by the lobe's widest roughness (isotropic here: the line patterns are the
         # shader's, per pixel); a roughness texture can only widen it (materials/gltf.py).
         dist = getattr(comp, "distribution", None)
         alpha = max(float(dist.alpha_x), float(dist.alpha_y)) if dist is not None else 1.0
