@@ -19,7 +19,8 @@ cache folder, keyed by the scene, samples and Mitsuba's version): a rerun after 
 method renders only lobeview.
 
     pip install mitsuba==3.9.1   # not a lobeview dependency; the scalar_rgb variant is used
-    .venv/bin/python -m lobeview.bench.mitsuba [--size 192] [--spp 8192] [--cases ggx:0.5 ...] [--no-cache]
+    .venv/bin/python -m lobeview.bench.mitsuba [--size 192] [--spp 8192] [--supersample 4] [--bright-sources]
+                                               [--cases ggx:0.5 ...] [--no-cache]
 """
 
 from __future__ import annotations
@@ -173,8 +174,20 @@ def relative_rmse(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) ->
 
 
 def run(
-    cases, methods, size: int, spp: int, work: Path, progress=print, cache: Path | None = None, bright_sources=False
+    cases,
+    methods,
+    size: int,
+    spp: int,
+    work: Path,
+    progress=print,
+    cache: Path | None = None,
+    bright_sources=False,
+    supersample: int = 1,
 ) -> dict:
+    """``supersample``: the real-time methods render at that many times the size and are averaged
+    down (issue 45's protocol: 768 x 768 averaged to 192 x 192), so that they and the two
+    box-filtered references integrate the same pixel footprints; 1 shades the pixel centres
+    (a sharp reflection's edges then count as the method's error)."""
     from lobeview.materials.spec import build_bsdf, validate
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.meshes import uv_sphere
@@ -197,6 +210,14 @@ def run(
         renderer = PreviewRenderer(
             ctx, env, uv_sphere(1.0), size=(size, size), face_size=256, bright_sources=bright_sources
         )
+        fine = size * supersample
+        fine_renderer = (
+            renderer
+            if supersample == 1
+            else PreviewRenderer(
+                ctx, env, uv_sphere(1.0), size=(fine, fine), face_size=256, bright_sources=bright_sources
+            )
+        )
     camera = Camera(*CAMERA)
     rows = []
     for case in cases:
@@ -206,7 +227,8 @@ def run(
         row = {"case": case, "mitsuba seconds": round(mitsuba_seconds, 1),
                "reference": relative_rmse(reference.radiance, truth, reference.mask), "sun": {}}  # fmt: skip
         for method in methods:
-            frame = renderer.render(camera, bsdf, method, spp=1).radiance
+            frame = fine_renderer.render(camera, bsdf, method, spp=1).radiance
+            frame = frame.reshape(size, supersample, size, supersample, 3).mean(axis=(1, 3))
             row[method] = relative_rmse(frame, truth, reference.mask)
             row["sun"][method] = sun_ratios(frame, truth, size)
         row["sun"]["reference"] = sun_ratios(reference.radiance, truth, size)
@@ -214,9 +236,11 @@ def run(
         progress(f"[mitsuba] {case}: " + ", ".join(f"{k} {100 * v:.1f} %" for k, v in row.items()
                                                   if k not in ("case", "mitsuba seconds", "sun")))  # fmt: skip
     renderer.release()
+    if fine_renderer is not renderer:
+        fine_renderer.release()
     ctx.release()
     return {"rows": rows, "methods": list(methods), "size": size, "spp": spp, "mitsuba": mitsuba_version,
-            "bright_sources": bool(bright_sources),
+            "bright_sources": bool(bright_sources), "supersample": supersample,
             "device": "Mesa llvmpipe (lobeview), Mitsuba scalar_rgb on the CPU"}  # fmt: skip
 
 
@@ -227,7 +251,9 @@ def markdown(results: dict, stamp: str, command: str) -> str:
         "",
         f"`{command}`",
         "",
-        f"Preview sphere, {results['size']}x{results['size']} px, box filter; Mitsuba path tracer at "
+        f"Preview sphere, {results['size']}x{results['size']} px, box filter "
+        f"(real-time methods at {results.get('supersample', 1)}x{results.get('supersample', 1)} points per pixel, "
+        "averaged); Mitsuba path tracer at "
         f"{results['spp']} spp (scalar_rgb), lobeview's reference at {results['spp']} samples per lobe; "
         f"{results['device']}. Relative RMSE (%) over the sphere's pixels against Mitsuba; the reference "
         "column is the floor (both renderers' noise and model differences). Scene and conventions: "
@@ -264,6 +290,8 @@ def main(argv=None) -> int:
     parser.add_argument("--methods", nargs="+", default=list(METHODS))
     parser.add_argument("--size", type=int, default=192, help="frame width and height in pixels (default 192)")
     parser.add_argument("--spp", type=int, default=8192, help="samples per pixel of both references (default 8192)")
+    parser.add_argument("--supersample", type=int, default=4, help="real-time methods at this many times the "
+                        "size, averaged down (default 4, issue 45's protocol; 1: pixel centres)")  # fmt: skip
     parser.add_argument("--bright-sources", action="store_true", help="separate the sun into a cap light "
                         "(scenes/bright_sources.py) for every lobeview method but the reference")  # fmt: skip
     parser.add_argument("--no-cache", action="store_true", help="render Mitsuba's images again (default: reuse the "
@@ -280,7 +308,14 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory(prefix="lobeview-mitsuba-") as work:
         cache = None if args.no_cache else cache_dir() / "mitsuba"
         results = run(
-            args.cases, args.methods, args.size, args.spp, Path(work), cache=cache, bright_sources=args.bright_sources
+            args.cases,
+            args.methods,
+            args.size,
+            args.spp,
+            Path(work),
+            cache=cache,
+            bright_sources=args.bright_sources,
+            supersample=args.supersample,
         )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

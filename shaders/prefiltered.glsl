@@ -62,13 +62,19 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     if (wo.z <= 0.0) return vec3(0.0);
     if (u_lobe_map_mode[lobe_index] == LOBE_MAP_SPLITSUM) {
         // The mirror direction, or for a thin transmission lobe its mirror image: straight through.
-        vec3 r = tbn * vec3(-wo.xy, lobe_is_transmission(l) ? -wo.z : wo.z);
+        bool through = lobe_is_transmission(l);
+        vec3 r = tbn * vec3(-wo.xy, through ? -wo.z : wo.z);
+        float alpha = sqrt(l.ax * l.ay);
+        float roughness = sqrt(alpha);
+        // ... turned towards the normal (materials/prefilter.py split_sum_lean: a rough lobe at a
+        // grazing view leans off the mirror direction, Lagarde & de Rousiers 2014, listing 22).
+        float smooth_part = 1.0 - clamp(alpha, 0.0, 1.0);
+        float lean = smooth_part * (sqrt(smooth_part) + (1.0 - smooth_part));
+        r = normalize(mix(through ? -tbn[2] : tbn[2], r, lean));
 #if defined(PARALLAX)
         float unused_offset;
         r = proxy_direction(r, unused_offset);
 #endif
-        float alpha = sqrt(l.ax * l.ay);
-        float roughness = sqrt(alpha);
         vec3 radiance = textureLod(u_split_sum[l.dist], r, split_sum_lod(alpha, u_split_sum_max_level)).rgb;
         vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;

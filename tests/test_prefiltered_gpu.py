@@ -128,8 +128,9 @@ def test_lobe_map_slices_match_brute_force(gl):
 
 
 def test_split_sum_render_matches_numpy_twin(gl):
-    """gold-ggx: textureLod(split-sum cube, r, split_sum_lod(alpha)) (F0 A + B), F0 of the exact
-    conductor Fresnel, A and B from the numpy DFG table."""
+    """gold-ggx: textureLod(split-sum cube, d, split_sum_lod(alpha)) (F0 A + B), F0 of the exact
+    conductor Fresnel, A and B from the numpy DFG table, d the mirror direction leant towards the
+    normal by split_sum_lean."""
     renderer, lookup = gl
     desc = load_material("gold-ggx")
     result = renderer.render(CAMERA, build_bsdf(desc), "prefiltered", background=False)
@@ -140,7 +141,8 @@ def test_split_sum_render_matches_numpy_twin(gl):
     roughness = np.sqrt(np.sqrt(desc["alpha_u"] * desc["alpha_v"]))
     for y, x in _pixels(result, count=16):
         frame, wo = _frame(result, y, x)
-        r = frame @ np.array([-wo[0], -wo[1], wo[2]])
+        mirror = frame @ np.array([-wo[0], -wo[1], wo[2]])
+        r = pf.split_sum_direction(frame[:, 2], mirror, pf.split_sum_lean(roughness**2))
         radiance = lookup(cube, r[None], float(pf.split_sum_lod(roughness**2)))[0]
         a, b = pf.dfg_lookup(table, wo[2], roughness)
         expected = radiance * (f0 * a + b)
@@ -181,8 +183,10 @@ def test_split_sum_of_glTF_extension_lobes_matches_numpy_twin(gl, desc, lobe_typ
         expected = np.zeros(3)
         for lobe in lobes:
             through = getattr(lobe, "transmission", False)
-            r = frame @ np.array([-wo[0], -wo[1], -wo[2] if through else wo[2]])
             roughness = np.sqrt(lobe.distribution.alpha_x)
+            normal = -frame[:, 2] if through else frame[:, 2]
+            mirror = frame @ np.array([-wo[0], -wo[1], -wo[2] if through else wo[2]])
+            r = pf.split_sum_direction(normal, mirror, pf.split_sum_lean(roughness**2))
             radiance = lookup(cube, r[None], float(pf.split_sum_lod(roughness**2)))[0]
             expected += radiance * pf.dfg_albedo(lobe, wo[2], pf.dfg_lookup(table, wo[2], roughness))
         assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
