@@ -289,6 +289,49 @@ def split_sum_lean(alpha):
     return s * (np.sqrt(s) + (1.0 - s))
 
 
+# Anisotropic lobes under split-sum (issue 45: prefiltered was isotropic, 30 % off on GGX
+# 0.05 x 0.3 against Mitsuba). The map is filtered with an isotropic kernel, so an anisotropic
+# lobe reads it at its narrower roughness alpha_min, at SPLIT_SUM_LINE_NODES slopes along its wider
+# axis, equal weights, placed at the quantiles (k + 1/2) / K of the slope marginal along that axis
+# with scale sqrt(alpha_max^2 - alpha_min^2) (what the narrow kernel does not already spread; 0 for
+# an isotropic lobe, so the line collapses onto the single lookup): GGX's slope density
+# (1 + s^2 / alpha^2)^-2 has the marginal (1 + s^2 / alpha^2)^-3/2 (Student t with 2 degrees of
+# freedom, scaled by alpha / sqrt 2; quantile (2u - 1) / (2 sqrt(u (1 - u)))), Beckmann's is normal
+# with variance alpha^2 / 2 (quantile erfinv(2u - 1)). Measured on the Mitsuba sky (GGX 0.05 x 0.3,
+# 4x4 supersampled): one lookup 31.6 %; 5 Gauss-Hermite nodes of a normal 19.3; 17 quantiles of a
+# normal (GGX's marginal taken for one of finite variance) 19.5; Student-t quantiles, 9 nodes 13.0,
+# 17 nodes 12.0. Lobes within SPLIT_SUM_LINE_RATIO of isotropic keep one lookup.
+SPLIT_SUM_LINE_NODES = 9
+SPLIT_SUM_LINE_RATIO = 1.05
+
+
+def split_sum_line_quantiles(kind: str, count: int = SPLIT_SUM_LINE_NODES) -> np.ndarray:
+    """The slopes (in units of the scale) of the line's nodes for distribution ``kind``."""
+    from scipy.special import erfinv
+
+    u = (np.arange(count) + 0.5) / count
+    if kind == "ggx":
+        return (2.0 * u - 1.0) / (2.0 * np.sqrt(u * (1.0 - u)))
+    return erfinv(2.0 * u - 1.0)
+
+
+def split_sum_line(wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The split-sum lookups of a lobe in its local frame: (mirror directions (k, 3) before the
+    lean, weights (k,), the alpha whose map level they read). One lookup at sqrt(alpha_x alpha_y)
+    for (nearly) isotropic lobes; otherwise the quantile line above at min(alpha_x, alpha_y): each
+    node's slope s along the wider axis is the half vector normalize(-s e, 1), reflected."""
+    wo = np.asarray(wo, dtype=np.float64).reshape(3)
+    a_min, a_max = min(alpha_x, alpha_y), max(alpha_x, alpha_y)
+    if a_max <= SPLIT_SUM_LINE_RATIO * a_min:
+        return np.array([[-wo[0], -wo[1], wo[2]]]), np.ones(1), float(np.sqrt(alpha_x * alpha_y))
+    slopes = split_sum_line_quantiles(kind) * np.sqrt(a_max * a_max - a_min * a_min)
+    major = np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
+    h = np.concatenate([-slopes[:, None] * major[None], np.ones((len(slopes), 1))], axis=1)
+    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    r = 2.0 * (h @ wo)[:, None] * h - wo
+    return r, np.full(len(slopes), 1.0 / len(slopes)), float(a_min)
+
+
 def split_sum_direction(normal: np.ndarray, mirror: np.ndarray, t) -> np.ndarray:
     """The lookup direction normalize(mix(normal, mirror, t)) of shaders/prefiltered.glsl (a thin
     transmission lobe passes -normal and its straight-through direction)."""

@@ -46,6 +46,16 @@ vec3 banks_lookup(int lobe_index, vec3 wo, mat3 tbn) {
     return radiance * energy;
 }
 
+// materials/prefilter.py split_sum_line_quantiles (tests/test_methods_on_mitsuba_sky.py checks
+// these against it): the line's slopes per unit scale, by distribution (DIST_BECKMANN, DIST_GGX).
+const float SPLIT_SUM_LINE_SLOPES[2][9] = float[2][9](
+    float[9](-1.126575830, -0.684070350, -0.416808192, -0.199556951, 0.0, 0.199556951, 0.416808192, 0.684070350,
+             1.126575830),
+    float[9](-1.940285000, -0.894427191, -0.496138938, -0.227921153, 0.0, 0.227921153, 0.496138938, 0.894427191,
+             1.940285000));
+#define SPLIT_SUM_LINE_NODES 9
+#define SPLIT_SUM_LINE_RATIO 1.05
+
 // materials/prefilter.py split_sum_lod: from level PEAK_MATCHED_FROM on, the blend whose peak is alpha's.
 #define PEAK_MATCHED_FROM 2.0
 float split_sum_lod(float alpha, float max_level) {
@@ -61,21 +71,38 @@ float split_sum_lod(float alpha, float max_level) {
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     if (wo.z <= 0.0) return vec3(0.0);
     if (u_lobe_map_mode[lobe_index] == LOBE_MAP_SPLITSUM) {
-        // The mirror direction, or for a thin transmission lobe its mirror image: straight through.
+        // The mirror direction, or for a thin transmission lobe its mirror image (straight
+        // through), turned towards the normal (materials/prefilter.py split_sum_lean: a rough lobe
+        // at a grazing view leans off the mirror direction, Lagarde & de Rousiers 2014); an
+        // anisotropic lobe reads the map at its narrower alpha at quantiles of its slopes along its
+        // wider axis (split_sum_line).
         bool through = lobe_is_transmission(l);
-        vec3 r = tbn * vec3(-wo.xy, through ? -wo.z : wo.z);
         float alpha = sqrt(l.ax * l.ay);
         float roughness = sqrt(alpha);
-        // ... turned towards the normal (materials/prefilter.py split_sum_lean: a rough lobe at a
-        // grazing view leans off the mirror direction, Lagarde & de Rousiers 2014, listing 22).
         float smooth_part = 1.0 - clamp(alpha, 0.0, 1.0);
         float lean = smooth_part * (sqrt(smooth_part) + (1.0 - smooth_part));
-        r = normalize(mix(through ? -tbn[2] : tbn[2], r, lean));
+        vec3 normal_side = through ? -tbn[2] : tbn[2];
+        float a_min = min(l.ax, l.ay);
+        float a_max = max(l.ax, l.ay);
+        bool line = a_max > SPLIT_SUM_LINE_RATIO * a_min;
+        float spread = line ? sqrt(a_max * a_max - a_min * a_min) : 0.0;
+        vec2 major = l.ax >= l.ay ? vec2(1.0, 0.0) : vec2(0.0, 1.0);
+        float lod = split_sum_lod(line ? a_min : alpha, u_split_sum_max_level);
+        vec3 radiance = vec3(0.0);
+        int nodes = line ? SPLIT_SUM_LINE_NODES : 1;
+        for (int k = 0; k < nodes; ++k) {
+            float slope = line ? SPLIT_SUM_LINE_SLOPES[l.dist][k] * spread : 0.0;
+            vec3 h = normalize(vec3(-slope * major, 1.0));
+            vec3 local_r = 2.0 * dot(h, wo) * h - wo;
+            vec3 r = tbn * vec3(local_r.xy, through ? -local_r.z : local_r.z);
+            r = normalize(mix(normal_side, r, lean));
 #if defined(PARALLAX)
-        float unused_offset;
-        r = proxy_direction(r, unused_offset);
+            float unused_offset;
+            r = proxy_direction(r, unused_offset);
 #endif
-        vec3 radiance = textureLod(u_split_sum[l.dist], r, split_sum_lod(alpha, u_split_sum_max_level)).rgb;
+            radiance += textureLod(u_split_sum[l.dist], r, lod).rgb;
+        }
+        radiance /= float(nodes);
         vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
         return radiance * lobe_dfg_albedo(l, ab, wo.z);
