@@ -25,10 +25,10 @@ Steps, with the thesis equations:
      default from N = 15 until 2026-11-26) fixed that on gold under interior.exr but made lobe-15
      worse than lobe-7 on 5 of 6 isotropic lobes of the Mitsuba comparison (bench/mitsuba.py:
      GGX 0.5 18.2 against 13.9 %, Beckmann 0.5 15.4 against 11.8) and on frosted glass (interior:
-     15.1 against 4.4 %): its outer samples sit at the lobe's rim, where the weights are small,
-     and its inner ones are too few for the core. :func:`choose_pattern` takes the double ring
-     from DOUBLE_RING_MIN_SAMPLES = 11 on: lobe-11 / 15 / 19 are then better than lobe-7 on every
-     case of the Mitsuba table and never worse by more than 0.2 points on 8 presets x 2 captures
+     15.1 against 4.4 %; why the spiral loses is not established: the lookups' shape is not it,
+     a smoother MIP chain changed nothing). :func:`choose_pattern` takes the double ring from
+     DOUBLE_RING_MIN_SAMPLES = 11 on: lobe-11 / 15 / 19 are then better than lobe-7 on every case
+     of the Mitsuba table and never worse by more than 0.2 points on 8 materials x 2 captures
      but frosted glass at N = 11 under interior.exr (5.8 against 4.4 %; docs/measurements.md
      "lobe-N against N").
      :func:`choose_pattern` picks the line pattern from the anisotropy ratio max(mx, my) /
