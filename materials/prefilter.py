@@ -340,6 +340,22 @@ def split_sum_direction(normal: np.ndarray, mirror: np.ndarray, t) -> np.ndarray
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 
+def split_sum_lookups(
+    wo: np.ndarray, frame: np.ndarray, kind: str, alpha_x: float, alpha_y: float, transmission: bool = False
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """The numpy twin of shaders/prefiltered.glsl's split-sum lookups for one pixel: (world
+    directions (k, 3), weights (k,), the alpha whose map level they read). :func:`split_sum_line`'s
+    mirror directions (mirrored below the surface for a thin transmission lobe: straight through),
+    taken to world space by ``frame`` (columns tangent, bitangent, normal) and leant towards the
+    normal (the transmission lobe's -normal) by :func:`split_sum_lean` at sqrt(alpha_x alpha_y)."""
+    local, weights, level_alpha = split_sum_line(wo, kind, alpha_x, alpha_y)
+    if transmission:
+        local = local * np.array([1.0, 1.0, -1.0])
+    normal = -frame[:, 2] if transmission else frame[:, 2]
+    world = split_sum_direction(normal, local @ np.asarray(frame).T, split_sum_lean(np.sqrt(alpha_x * alpha_y)))
+    return world, weights, level_alpha
+
+
 # Per-pixel albedo of anisotropic glTF GGX lobes (KHR_materials_anisotropy with a texture: every
 # pixel has its own strength and roughness). The isotropic DFG at the geometric-mean alpha was 45 %
 # too bright at strength 1, roughness 0.4 (0.78 against 0.53 by quadrature), the root-mean-square

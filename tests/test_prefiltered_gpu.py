@@ -141,9 +141,9 @@ def test_split_sum_render_matches_numpy_twin(gl):
     roughness = np.sqrt(np.sqrt(desc["alpha_u"] * desc["alpha_v"]))
     for y, x in _pixels(result, count=16):
         frame, wo = _frame(result, y, x)
-        mirror = frame @ np.array([-wo[0], -wo[1], wo[2]])
-        r = pf.split_sum_direction(frame[:, 2], mirror, pf.split_sum_lean(roughness**2))
-        radiance = lookup(cube, r[None], float(pf.split_sum_lod(roughness**2)))[0]
+        dirs, weights, level_alpha = pf.split_sum_lookups(wo, frame, "ggx", desc["alpha_u"], desc["alpha_v"])
+        assert len(weights) == 1 and level_alpha == pytest.approx(roughness**2)
+        radiance = lookup(cube, dirs, float(pf.split_sum_lod(level_alpha)))[0]
         a, b = pf.dfg_lookup(table, wo[2], roughness)
         expected = radiance * (f0 * a + b)
         assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
@@ -163,9 +163,8 @@ def test_anisotropic_split_sum_render_matches_numpy_twin(gl):
     alpha = np.sqrt(0.06 * 0.3)
     for y, x in _pixels(result, count=16):
         frame, wo = _frame(result, y, x)
-        local, weights, level_alpha = pf.split_sum_line(wo, "ggx", 0.06, 0.3)
+        dirs, weights, level_alpha = pf.split_sum_lookups(wo, frame, "ggx", 0.06, 0.3)
         assert len(weights) == pf.SPLIT_SUM_LINE_NODES and level_alpha == 0.06
-        dirs = pf.split_sum_direction(frame[:, 2], local @ frame.T, pf.split_sum_lean(alpha))
         radiance = weights @ lookup(cube, dirs, float(pf.split_sum_lod(level_alpha)))
         a, b = pf.dfg_lookup(table, wo[2], np.sqrt(alpha))
         expected = radiance * (a + b)
@@ -207,10 +206,8 @@ def test_split_sum_of_glTF_extension_lobes_matches_numpy_twin(gl, desc, lobe_typ
         for lobe in lobes:
             through = getattr(lobe, "transmission", False)
             roughness = np.sqrt(lobe.distribution.alpha_x)
-            normal = -frame[:, 2] if through else frame[:, 2]
-            mirror = frame @ np.array([-wo[0], -wo[1], -wo[2] if through else wo[2]])
-            r = pf.split_sum_direction(normal, mirror, pf.split_sum_lean(roughness**2))
-            radiance = lookup(cube, r[None], float(pf.split_sum_lod(roughness**2)))[0]
+            dirs, _, level_alpha = pf.split_sum_lookups(wo, frame, "ggx", roughness**2, roughness**2, through)
+            radiance = lookup(cube, dirs, float(pf.split_sum_lod(level_alpha)))[0]
             expected += radiance * pf.dfg_albedo(lobe, wo[2], pf.dfg_lookup(table, wo[2], roughness))
         assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
 
