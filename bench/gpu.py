@@ -10,9 +10,17 @@ One Markdown (``gpu-STAMP.md``) with, on the device it names:
   driver's is meaningful;
 - Table 4.2: planar mirror passes (bench/mirrors.py: 0 / 1 / 2 reflectors, the mirror passes alone
   and the whole frame), its own Markdown beside this one;
+- the CPU's cost of a frame against the scene's size, per-object draws against the multi-draws
+  (bench/draw_cost.py), its own Markdown beside this one;
 - the apartment along its recorded path and the cost against object count (bench/walkthrough.py),
   its own Markdown beside this one.
-Each part is timed and a failing part is reported in the summary without stopping the others.
+Each part is timed and a failing part is reported in the summary without stopping the others; the
+summary is rewritten after every part, so a lease that ends early keeps what was measured. The
+parts run in order of what a lease must not miss: the timings first, the mirrors' ray-traced
+refinement (a CPU measurement, bench/mirrors.py) only in the small plan.
+
+The first lease (bench/results/gpu-20261126-210515.md, an H200) timed out at 540 s: the mirrors'
+refinement against the CPU ray tracer took 290 s of it, and the bakes (CPU) another 130 s.
 """
 
 from __future__ import annotations
@@ -25,10 +33,12 @@ from pathlib import Path
 
 FULL = {"size": (1680, 1050), "fps_samples": (3, 7, 11, 19), "mirror_sizes": ((1680, 1050),),
         "mirror_samples": (3, 7, 11, 19), "walk_size": (1680, 1050), "frames": 24, "rooms": 12,
-        "count_rooms": (1, 6, 18), "face_size": 256, "repeats": 5, "spp": 256}  # fmt: skip
+        "count_rooms": (1, 18), "draw_sizes": ((64, 40), (160, 100), (1680, 1050)), "draw_frames": 16,
+        "face_size": 256, "repeats": 9, "spp": 256, "refinement": False}  # fmt: skip
 SMALL = {"size": (160, 100), "fps_samples": (3, 7), "mirror_sizes": ((160, 100),), "mirror_samples": (3,),
-         "walk_size": (160, 100), "frames": 3, "rooms": 1, "count_rooms": (1,), "face_size": 32, "repeats": 1,
-         "spp": 16}  # fmt: skip
+         "walk_size": (160, 100), "frames": 3, "rooms": 1, "count_rooms": (1,), "draw_sizes": ((64, 40),),
+         "draw_frames": 3, "face_size": 32, "repeats": 1, "spp": 16, "refinement": True}  # fmt: skip
+PARTS = ("fps", "draw-cost", "walkthrough", "mirrors")  # in order of what a short lease must not miss
 
 
 def _say(text: str) -> None:
@@ -44,15 +54,16 @@ def fps_rows(ctx, plan: dict, timer: str) -> list[str]:
     lines = [
         f"## Table 4.1: lobe-N, {plan['size'][0]}x{plan['size'][1]}, glossy plane over the whole / half frame",
         "",
-        "| N | full ms | full fps | half ms | half fps | thesis GTS 450 fps full / half |",
-        "|---|---|---|---|---|---|",
+        "| N | full ms | full fps | half ms | half fps | thesis GTS 450 fps full / half | wall ms full / half |",
+        "|---|---|---|---|---|---|---|",
     ]
     for row in run_fps_table(ctx, settings):
         full, half = row["full"]["ms"], row["half"]["ms"]
         thesis = THESIS_FPS.get(row["samples"])
         lines.append(
             f"| {row['samples']} | {full:.2f} | {1000 / full:.1f} | {half:.2f} | {1000 / half:.1f} | "
-            f"{'-' if thesis is None else f'{thesis[0]} / {thesis[1]}'} |"
+            f"{'-' if thesis is None else f'{thesis[0]} / {thesis[1]}'} "
+            f"| {row['full']['wall_ms']:.2f} / {row['half']['wall_ms']:.2f} |"
         )
     return lines
 
@@ -63,8 +74,7 @@ def main(argv: list[str] | None = None) -> int:
 
     p = argparse.ArgumentParser(prog="python -m lobeview.bench.gpu", description=__doc__.split("\n\n")[0])
     p.add_argument("--small", action="store_true", help="llvmpipe sizes (seconds to minutes on a CPU)")
-    p.add_argument("--parts", nargs="+", choices=("fps", "mirrors", "walkthrough"),
-                   default=["fps", "mirrors", "walkthrough"], help="which tables (default all)")  # fmt: skip
+    p.add_argument("--parts", nargs="+", choices=PARTS, default=list(PARTS), help="which tables (default all)")
     results = str(Path(__file__).parent / "results")
     p.add_argument("--out", default=results, help="output folder (default bench/results)")
     p.add_argument("--cache", help="cache folder for scenes and cube maps (default ~/.cache/lobeview)")
@@ -88,10 +98,12 @@ def main(argv: list[str] | None = None) -> int:
     parts = {
         "fps": lambda: fps_rows(ctx, plan, timer),
         "mirrors": lambda: _mirrors(ctx, device, out, stamp, plan),
+        "draw-cost": lambda: _draw_cost(ctx, device, out, stamp, plan, cache_dir(args.cache)),
         "walkthrough": lambda: _walkthrough(ctx, device, out, stamp, plan, cache_dir(args.cache), args.small),
     }
     failed = 0
-    for name in args.parts:
+    path = out / f"gpu-{stamp}.md"
+    for name in sorted(args.parts, key=PARTS.index):
         t0 = time.perf_counter()
         _say(f"{name} ...")
         try:
@@ -102,9 +114,8 @@ def main(argv: list[str] | None = None) -> int:
             summary += [f"## {name}: FAILED after {time.perf_counter() - t0:.0f} s", "", "```",
                         traceback.format_exc()[-3000:], "```", ""]  # fmt: skip
             _say(f"{name} failed:\n{traceback.format_exc()}")
+        path.write_text("\n".join(summary) + "\n")  # after every part: a lease may end before the next
     ctx.release()
-    path = out / f"gpu-{stamp}.md"
-    path.write_text("\n".join(summary) + "\n")
     print("\n".join(summary))
     _say(f"wrote {path}")
     return 1 if failed else 0
@@ -114,8 +125,20 @@ def _mirrors(ctx, device: str, out: Path, stamp: str, plan: dict) -> list[str]:
     from .mirrors import run_mirror_bench
 
     path = run_mirror_bench(ctx, device, out, stamp, list(plan["mirror_sizes"]), list(plan["mirror_samples"]),
-                            plan["repeats"], plan["spp"])  # fmt: skip
+                            plan["repeats"], plan["spp"], refinement=plan["refinement"])  # fmt: skip
     return ["## Table 4.2: planar mirror passes", "", f"[{path.name}]({path.name})", ""]
+
+
+def _draw_cost(ctx, device: str, out: Path, stamp: str, plan: dict, cache: Path) -> list[str]:
+    from .draw_cost import markdown, measure
+
+    t0 = time.perf_counter()
+    runs = []
+    for rooms in plan["count_rooms"]:
+        runs += measure(ctx, rooms, list(plan["draw_sizes"]), plan["draw_frames"], cache, "lobe-7")
+    path = out / f"draw-cost-{stamp}.md"
+    path.write_text(markdown(runs, device, "lobe-7", plan["draw_frames"], time.perf_counter() - t0))
+    return ["## The CPU's cost of a frame against the scene's size", "", f"[{path.name}]({path.name})", ""]
 
 
 def _walkthrough(ctx, device: str, out: Path, stamp: str, plan: dict, cache: Path, small: bool) -> list[str]:

@@ -55,7 +55,21 @@ def _frame_ms(renderer, camera, method, repeats: int) -> tuple[float, float, obj
     return statistics.median(frame), statistics.median(passes), result
 
 
-def run_mirror_bench(ctx, device: str, out_dir: Path, stamp: str, resolutions, samples, repeats: int, spp: int) -> Path:
+def run_mirror_bench(
+    ctx,
+    device: str,
+    out_dir: Path,
+    stamp: str,
+    resolutions,
+    samples,
+    repeats: int,
+    spp: int,
+    *,
+    refinement: bool = True,
+) -> Path:
+    """Frame and mirror-pass times at each resolution with 0 / 1 / 2 reflectors, the floor's error
+    against ``reference``, the convergence figure and (``refinement``) the mirror buffer's
+    refinement against the CPU ray tracer; writes ``mirrors-STAMP.md`` into ``out_dir``."""
     from lobeview.core.methods import Method
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.mirror_scene import CAMERA, mirror_floor_scene
@@ -109,9 +123,11 @@ def run_mirror_bench(ctx, device: str, out_dir: Path, stamp: str, resolutions, s
     out_dir.mkdir(parents=True, exist_ok=True)
     figure = write_convergence_figure(ctx, env, camera, out_dir / f"mirrors-{stamp}.png", resolutions[0], spp)
     half = (max(1, resolutions[0][0] // 2), max(1, resolutions[0][1] // 2))
-    refinement, refinement_figure = refinement_against_ray_tracing(
-        ctx, camera, half, spp, out_dir / f"mirrors-{stamp}-refinement.png", say
-    )
+    refined = None
+    if refinement:
+        refined = refinement_against_ray_tracing(
+            ctx, camera, half, spp, out_dir / f"mirrors-{stamp}-refinement.png", say
+        )
     path = out_dir / f"mirrors-{stamp}.md"
     lines = [
         "# lobeview bench --mirrors: planar mirror passes (thesis 4.5)",
@@ -141,28 +157,38 @@ def run_mirror_bench(ctx, device: str, out_dir: Path, stamp: str, resolutions, s
             "|---|---|---|",
         ]
         lines += [f"| {e['method']} | {e['rel_rmse']:.4f} | {e['psnr']:.1f} dB |" for e in errors]
+    if refined is not None:
+        refinement_rows, refinement_figure = refined
+        lines += [
+            "",
+            f"## Refinement against a ray tracer ({half[0]}x{half[1]}, {spp} samples per pixel, grey environment)",
+            "",
+            "`reference` through the mirror buffer with the plain two-step projection (4.5.2) and with the"
+            " averaged tangent plane (Fig. 4.46b, plus a third step), relative RMSE over the floor pixels against"
+            " a ray tracer with the same number of samples; 'noise floor' = the ray tracer's own noise (its"
+            " difference from a second trace with another seed, / sqrt 2): what an exact renderer would score."
+            " The rest is the mirror buffer's approximation: rays that hit geometry the mirrored camera does"
+            " not see, or whose hit the tangent planes do not find.",
+            "",
+            "| floor roughness | plain two-step | averaged plane | noise floor |",
+            "|---|---|---|---|",
+        ]
+        lines += [
+            f"| {r['roughness']:g} | {r['plain']:.4f} | {r['averaged']:.4f} | {r['noise']:.4f} |"
+            for r in refinement_rows
+        ]
+        lines += [
+            "",
+            f"![refinement]({refinement_figure.name})",
+            "",
+            "m = 0.15: plain two-step | averaged tangent plane | ray traced. The plain projection switches"
+            " planes where P_R crosses a depth edge, so the blurred reflections of the floating box and the"
+            " pillar are framed by sharp outlines; with the averaged plane they fade softly.",
+        ]
+    else:
+        lines += ["", "Refinement against the ray tracer: not run here (a CPU measurement; `python -m"
+                  " lobeview.bench.mirrors` runs it)."]  # fmt: skip
     lines += [
-        "",
-        f"## Refinement against a ray tracer ({half[0]}x{half[1]}, {spp} samples per pixel, grey environment)",
-        "",
-        "`reference` through the mirror buffer with the plain two-step projection (4.5.2) and with the"
-        " averaged tangent plane (Fig. 4.46b, plus a third step), relative RMSE over the floor pixels against"
-        " a ray tracer with the same number of samples; 'noise floor' = the ray tracer's own noise (its"
-        " difference from a second trace with another seed, / sqrt 2): what an exact renderer would score."
-        " The rest is the mirror buffer's approximation: rays that hit geometry the mirrored camera does"
-        " not see, or whose hit the tangent planes do not find.",
-        "",
-        "| floor roughness | plain two-step | averaged plane | noise floor |",
-        "|---|---|---|---|",
-    ]
-    lines += [f"| {r['roughness']:g} | {r['plain']:.4f} | {r['averaged']:.4f} | {r['noise']:.4f} |" for r in refinement]
-    lines += [
-        "",
-        f"![refinement]({refinement_figure.name})",
-        "",
-        "m = 0.15: plain two-step | averaged tangent plane | ray traced. The plain projection switches"
-        " planes where P_R crosses a depth edge, so the blurred reflections of the floating box and the"
-        " pillar are framed by sharp outlines; with the averaged plane they fade softly.",
         "",
         f"![mirror floor]({figure.name})",
         "",

@@ -18,8 +18,15 @@ def test_the_gpu_bench_writes_every_table_at_small_sizes(tmp_path):
     (summary,) = tmp_path.glob("gpu-*.md")
     text = summary.read_text()
     assert "FAILED" not in text
-    rows = re.findall(r"^\| (\d+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| ([\d.]+) \| (\d+) / (\d+) \|$", text, re.M)
+    number = r"([\d.]+)"
+    rows = re.findall(
+        rf"^\| (\d+) \| {number} \| {number} \| {number} \| {number} \| (\d+) / (\d+) \| {number} / {number} \|$",
+        text, re.M,
+    )  # fmt: skip
     assert [int(row[0]) for row in rows] == [3, 7], text  # Table 4.1 at the small plan's N
-    assert all(float(row[1]) > 0 and float(row[3]) > 0 for row in rows)
-    linked = re.findall(r"\]\(((?:mirrors|walkthrough)-[^)]+\.md)\)", text)
-    assert len(linked) == 2 and all((tmp_path / name).exists() for name in linked), text
+    assert all(float(row[1]) > 0 and float(row[3]) > 0 and float(row[7]) > 0 for row in rows)
+    linked = re.findall(r"\]\(((?:mirrors|walkthrough|draw-cost)-[^)]+\.md)\)", text)
+    assert sorted(name.split("-")[0] for name in linked) == ["draw", "mirrors", "walkthrough"], text
+    assert all((tmp_path / name).exists() for name in linked), text
+    draw_cost = (tmp_path / next(name for name in linked if name.startswith("draw-cost"))).read_text()
+    assert draw_cost.count("| 1 | ") == 2, draw_cost  # one apartment room: per-object and multi-draw rows
