@@ -30,9 +30,10 @@ from .cubemap import RadianceCube
 from .frame import begin_pass, new_framebuffer
 from .mip_chain import DEFAULT_MIP_FILTER, check_mip_filter, downsample_cube_faces
 
+# 7: the environment read at the face texel's MIP level (shaders/background.frag), not level 0;
 # 6: the second bounce shades with bright-source lights and residual cubes (issue 39);
 # 5: per-object face sizes (supersampled); 4: glTF textures, alpha modes, culling
-CUBE_CACHE_VERSION = 6
+CUBE_CACHE_VERSION = 7
 CUBE_SUPERSAMPLE = 2
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
 
