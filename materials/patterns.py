@@ -87,6 +87,15 @@ XI_BORDER = 0.01  # Eq. 4.10: empirical lobe border of the thesis
 LOBE_LOD_BIAS = DEFAULT_LOBE_LOD_BIAS
 RING_XI1 = 0.6  # single ring at 40 % of the lobe radius (thesis 4.4.3)
 ANISOTROPY_LINE_RATIO = 3.0  # max/min roughness at which the line pattern replaces the ring
+# A line-pattern sample stands for the lobe's width as well as for its piece of the line: its
+# footprint is at least a disc of half the lobe's short semi-axis (area pi (v / 2)^2, v = the
+# short axis' equal-area radius). Without it the footprints of N samples on a line shrink with N
+# below the lobe's width, and lobe-N grew worse with N on lobes anisotropic by 3: GGX 0.2 x 0.6
+# on the method table's sky, lobe-7 / 11 / 19 14.3 / 16.7 / 21.0 % -> 14.0 / 14.1 / 14.0; Beckmann
+# 12.8 / 12.7 / 12.6 (was 13.5 / 17.6 / 23.2); ratio 8 unchanged within 0.1 point but for GGX and
+# Beckmann 0.1 x 0.8 at N = 19 (11.6 -> 10.9, 14.5 -> 13.2). 0.15 left Beckmann 0.2 x 0.6 growing
+# (16.6 -> 17.3), 0.35 and 0.5 cost ratio 3 up to 1.5 points, a whole disc (1) up to 8.
+LINE_MIN_FOOTPRINT_FRACTION = 0.25
 MULTI_RING_SAMPLES_PER_RING = 3  # thesis 4.5.3 / Fig. 4.34: rings of three samples
 # Widest lobe extent the footprint follows (lobe_sample_area): the thesis' tan form blows up at
 # 90 deg; the solid-angle form does not, and keeps the clamp so footprints stay below a hemisphere.
@@ -246,14 +255,21 @@ def lobe_sample_area(
     elliptical ones (identical to the thesis' for narrow lobes). Measured (bench/patterns.py,
     lobe-7+norm, 200 px): frosted glass 28.4 -> 31.1 dB (interior.exr), 21.0 -> 26.1
     (courtyard.exr); GGX gold loses 0.4-1.2 dB, which the overstated footprint had made up for
-    the GGX tail beyond the pattern's core (theta_thresh)."""
+    the GGX tail beyond the pattern's core (theta_thresh). On the line pattern of a strongly
+    anisotropic lobe, at least a disc of LINE_MIN_FOOTPRINT_FRACTION of the short axis' radius
+    squared (the lobe's width)."""
     phis = np.array([0.0, np.pi / 2.0])
     h_border = spherical_direction(theta_thresh(distribution, phis, xi_border), phis)
     w_centre = reflect(wo, np.array([0.0, 0.0, 1.0]))
     w_border = reflect(np.broadcast_to(wo, h_border.shape), h_border)
     angles = np.arccos(np.clip(dot(w_border, w_centre), -1.0, 1.0))
     u, v = 2.0 * np.sin(0.5 * np.minimum(angles, MAX_ELLIPSE_ANGLE))
-    return float(np.pi * u * v / n)
+    area = np.pi * u * v / n
+    if max(distribution.alpha_x, distribution.alpha_y) >= ANISOTROPY_LINE_RATIO * min(
+        distribution.alpha_x, distribution.alpha_y
+    ):  # the line pattern (choose_pattern): not narrower than the lobe's width
+        area = max(area, np.pi * LINE_MIN_FOOTPRINT_FRACTION * min(u, v) ** 2)
+    return float(area)
 
 
 def cube_map_lod(world_dirs: np.ndarray, sample_area: float | np.ndarray, face_size: int) -> np.ndarray:

@@ -17,7 +17,8 @@ vec3 pattern_half_vector(Lobe l, vec2 xi) {
 }
 
 // Eq. 4.14-4.15 divided by n: solid angle of one sample, the ellipse with the equal-area
-// radii 2 sin(angle / 2) instead of the thesis' tan(angle) (patterns.py lobe_sample_area).
+// radii 2 sin(angle / 2) instead of the thesis' tan(angle); on the line pattern at least a disc
+// of half the short semi-axis (patterns.py lobe_sample_area, LINE_MIN_FOOTPRINT_FRACTION).
 float lobe_sample_area(Lobe l, vec3 wo, int n) {
     vec3 centre = vec3(-wo.xy, wo.z);
     vec3 hu = spherical_dir(theta_thresh(l, 0.0), 0.0);
@@ -26,7 +27,13 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
     vec3 wv = 2.0 * dot(wo, hv) * hv - wo;
     float au = min(acos(clamp(dot(wu, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
     float av = min(acos(clamp(dot(wv, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
-    return PI * 4.0 * sin(0.5 * au) * sin(0.5 * av) / float(n);
+    float area = PI * 4.0 * sin(0.5 * au) * sin(0.5 * av) / float(n);
+    // The line pattern (integrate.glsl lobe_pattern_xi): not narrower than the lobe's width.
+    if (max(l.ax, l.ay) >= ANISOTROPY_LINE_RATIO * min(l.ax, l.ay)) {
+        float across = 2.0 * sin(0.5 * min(au, av));
+        area = max(area, PI * across * across * LINE_MIN_FOOTPRINT_FRACTION);
+    }
+    return area;
 }
 
 #if defined(LOBE_NORMALIZE)

@@ -70,7 +70,9 @@ def _errors(renderers, case: str) -> dict:
     }
 
 
-@pytest.mark.parametrize("case", ["ggx:0.15", "ggx:0.5", "beckmann:0.5"])
+# The anisotropic cases take the line pattern (ratio 3): before its footprints were held to the
+# lobe's width (patterns.py LINE_MIN_FOOTPRINT_FRACTION), lobe-19 was 1.5x lobe-7 on them.
+@pytest.mark.parametrize("case", ["ggx:0.15", "ggx:0.5", "beckmann:0.5", "ggx:0.2x0.6", "beckmann:0.1x0.3"])
 def test_more_lobe_samples_are_never_less_accurate(renderers, case):
     errors = _errors(renderers, case)
     for smaller, larger in zip(SAMPLE_COUNTS[:-1], SAMPLE_COUNTS[1:], strict=True):

@@ -144,6 +144,24 @@ def test_lod_formula_equations_4_14_to_4_17():
     assert lobe_sample_area(dist, wo, 1) == pytest.approx(cone, rel=1e-12)
 
 
+def test_a_line_samples_footprint_is_held_to_the_lobes_width():
+    """Line pattern (ratio >= ANISOTROPY_LINE_RATIO): N samples' footprints shrink as 1 / N until
+    each is a disc of half the short semi-axis, then stay; below the ratio nothing changes."""
+    from lobeview.materials.patterns import LINE_MIN_FOOTPRINT_FRACTION
+
+    wo = direction_from_angles_deg(0)
+    line = MicrofacetDistribution("ggx", 0.1, 0.32)
+    t_short = theta_thresh(line, np.array(0.0))  # the short axis: alpha_x = 0.1, along phi = 0
+    short_radius = 2 * np.sin(float(t_short))  # the reflected cone's half-angle is 2 t: radius 2 sin(t)
+    floor = np.pi * LINE_MIN_FOOTPRINT_FRACTION * short_radius**2
+    ellipse = lobe_sample_area(line, wo, 1)
+    assert lobe_sample_area(line, wo, 2) == pytest.approx(ellipse / 2)  # above the floor: 1 / N
+    assert ellipse / 19 < floor  # ratio 3.2: N = 19 would be narrower than the lobe's width
+    assert lobe_sample_area(line, wo, 19) == pytest.approx(floor, rel=1e-9)
+    ring = MicrofacetDistribution("ggx", 0.1, 0.29)  # just under the ratio: the ring, no floor
+    assert lobe_sample_area(ring, wo, 19) == pytest.approx(lobe_sample_area(ring, wo, 1) / 19)
+
+
 @pytest.mark.parametrize("alpha", [0.02, 0.12, 0.25, 0.35])
 def test_sample_footprint_is_the_lobe_solid_angle(alpha):
     """The footprint of Eq. 4.14-4.15 as a solid angle: for an isotropic lobe at normal

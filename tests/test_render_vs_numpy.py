@@ -33,6 +33,8 @@ def smooth_sky(d):
 
 RATIONAL_GOLD = str(Path(__file__).parent / "data" / "gold-ggx-rational.json")
 ROUGH_GGX = '{"model": "microfacet", "distribution": "ggx", "alpha_u": 0.5, "alpha_v": 0.5, "scale": 1.0}'
+# Anisotropic by 3.2: the line pattern, whose footprints at N = 19 are held to the lobe's width.
+LINE_GGX = '{"model": "microfacet", "distribution": "ggx", "alpha_u": 0.1, "alpha_v": 0.32, "scale": 1.0}'
 SIZE = (72, 72)
 CAMERA = Camera(position=(0.4, 0.6, 3.0), target=(0.0, 0.0, 0.0), fov_y=45.0)
 
@@ -117,6 +119,7 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     + [(p, 7, True) for p in ("alanod-2000gs-2lobe", "frosted-glass", "miro5-2lobe", "gold-ggx", "gltf-red-plastic")]
     # A wide GGX lobe: its tail lookups' footprints (issue 45) and their fade at the horizon.
     + [(ROUGH_GGX, n, True) for n in (7, 15)]
+    + [(LINE_GGX, n, True) for n in (5, 19)]
     # The Rational BRDF (seed 002): its lattice mapped through the rational inverse CDFs.
     + [(RATIONAL_GOLD, n, normalize) for n, normalize in ((7, False), (11, True))]
     # Eq. 4.24 (lobe-N+eq4.24) on the thesis' Fig. 4.24 materials.

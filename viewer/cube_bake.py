@@ -30,10 +30,11 @@ from .cubemap import RadianceCube
 from .frame import begin_pass, new_framebuffer
 from .mip_chain import DEFAULT_MIP_FILTER, check_mip_filter, downsample_cube_faces
 
+# 8: line-pattern footprints held to the lobe's width (materials/patterns.py LINE_MIN_FOOTPRINT_FRACTION);
 # 7: the environment read at the face texel's MIP level (shaders/background.frag), not level 0;
 # 6: the second bounce shades with bright-source lights and residual cubes (issue 39);
 # 5: per-object face sizes (supersampled); 4: glTF textures, alpha modes, culling
-CUBE_CACHE_VERSION = 7
+CUBE_CACHE_VERSION = 8
 CUBE_SUPERSAMPLE = 2
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
 

@@ -38,6 +38,7 @@ from lobeview.materials.patterns import (
     GGX_TAIL_MEDIAN_TAN,
     GGX_TAIL_OUTER_TAN,
     GGX_TAIL_SAMPLES,
+    LINE_MIN_FOOTPRINT_FRACTION,
     MAX_ELLIPSE_ANGLE,
     XI_BORDER,
 )
@@ -246,6 +247,7 @@ SHADER_CONSTANTS: dict = {
     "GGX_TAIL_SAMPLES": GGX_TAIL_SAMPLES,
     "GGX_TAIL_FADE": float(GGX_TAIL_FADE),
     "ANISOTROPY_LINE_RATIO": float(ANISOTROPY_LINE_RATIO),  # materials/patterns.py choose_pattern
+    "LINE_MIN_FOOTPRINT_FRACTION": float(LINE_MIN_FOOTPRINT_FRACTION),  # ... lobe_sample_area
     "CDF_ROW": CDF_ROW,
     "MAX_PROXY_PLANES": MAX_PROXY_PLANES,
     # shaders/rational.glsl: the storage buffer of a Rational BRDF (material_gpu.pack_rational)
