@@ -25,6 +25,17 @@ DEFAULT_FACE_SIZE = 256
 
 
 # -- option declarations -------------------------------------------------------------------------
+def _percent(text: str) -> float:
+    """--method-target: a percentage in (0, 100] as a fraction."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number (a percentage, e.g. 8)") from None
+    if not 0.0 < value <= 100.0:
+        raise argparse.ArgumentTypeError(f"{text}: the target must be in (0, 100] percent")
+    return value / 100.0
+
+
 def add_method_arguments(p, default: str = "lobe-11", what: str = "") -> None:
     p.add_argument("--method", default=default, help=f"{what}{GRAMMAR_HELP} (default {default})")
     p.add_argument(
@@ -54,6 +65,16 @@ def add_scene_arguments(p) -> None:
         "lobe-N lookups still read MIP level 0 or coarser (the scene analysis prints each size and why); 'full' = "
         "every cube map at --face-size; 'auto' (default) = 'lobe', but 'full' for shot's reference, mc-N and "
         "prefiltered methods, which read finer than lobe-N",
+    )
+    a(
+        "--method-target",
+        type=_percent,
+        default=None,
+        metavar="PERCENT",
+        help="per object, the cheapest real-time method whose measured error under bright light is at most "
+        "PERCENT relative RMSE (e.g. 8; materials/method_choice.py, its table bench/method_table.py): it replaces "
+        "--method on every object with microfacet lobes (the scene analysis prints each pick, its error and "
+        "lookups); the panel can still override one. Default: off, every object takes --method",
     )
     a(
         "--shared-probes",
@@ -278,6 +299,7 @@ def scene_renderer_from_args(
             cube_budget_mb=getattr(args, "cube_budget", None),
             mip_filter=getattr(args, "mip_filter", DEFAULT_MIP_FILTER),
             bright_sources=bool(getattr(args, "bright_sources", True)),
+            method_target=getattr(args, "method_target", None),
             mirrors=bool(args.mirrors),
         ),
         progressive_cubes=progressive_cubes,
@@ -331,6 +353,8 @@ def shot_command(
             parts.append(f"--cube-sizes={args.cube_sizes}")
         if getattr(args, "shared_probes", False):
             parts.append("--shared-probes")
+        if getattr(args, "method_target", None) is not None:
+            parts.append(f"--method-target={100 * args.method_target:g}")
         if getattr(args, "mip_filter", DEFAULT_MIP_FILTER) != DEFAULT_MIP_FILTER:
             parts.append(f"--mip-filter={args.mip_filter}")
         if not getattr(args, "bright_sources", True):

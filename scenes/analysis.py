@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lobeview.materials.bsdf import diffuse_albedo
+from lobeview.materials.method_choice import MethodChoice, choose_method, lobe_shapes
 from lobeview.materials.patterns import finest_sample_solid_angle, lobe_width_face_size, specular_lobes
 from lobeview.materials.spec import build_bsdf
 
@@ -38,6 +39,8 @@ class ObjectNeeds:
     lobe_width_rule: bool = True  # False: every cube map at full size (SceneRenderer option)
     # Set by the renderer when the object reads a group's shared probe (scenes/probe_groups.py).
     shared_probe: str = ""
+    # The cheapest-method rule's pick (materials/method_choice.py), when analysed with a target.
+    method_choice: MethodChoice | None = None
 
     @property
     def needs_cube_map(self) -> bool:
@@ -108,6 +111,10 @@ class SceneAnalysis:
             if o.shared_probe:
                 cube = f"shared probe {o.shared_probe}"
             lines.append(f"{o.name:<24} {lobes:<42} {cube:<42} {lightmap:<14} {proxy:<24} {o.mirror}")
+        chosen = [o for o in self.objects if o.method_choice is not None]
+        if chosen:
+            lines.append("method by the cheapest-method rule (materials/method_choice.py):")
+            lines += [f"  {o.name:<24} {o.method_choice.describe()}" for o in chosen]
         return "\n".join(lines)
 
 
@@ -135,11 +142,14 @@ def analyse(
     full_cube_face: int = DEFAULT_CUBE_FACE,
     lobe_width_cubes: bool = True,
     reflector_cubes_on_demand: bool = False,
+    method_target: float | None = None,
 ) -> SceneAnalysis:
     """``full_cube_face``: the cube-map face size of the narrowest lobes; with ``lobe_width_cubes``
     every object's face shrinks to what its lobes' lobe-N footprints resolve (issue 18; False:
     every cube map at full size); ``reflector_cubes_on_demand``: planar reflectors' cube maps are
-    not built at start-up (SceneAnalysis.cubes_at_start)."""
+    not built at start-up (SceneAnalysis.cubes_at_start); ``method_target``: each view-dependent
+    object's cheapest real-time method within that relative error (ObjectNeeds.method_choice;
+    the lobes its textures can give count too)."""
     needs = []
     low, high = scene.bounds if scene.objects else (np.zeros(3), np.zeros(3))
     scene_diagonal = float(np.linalg.norm(high - low))
@@ -164,6 +174,14 @@ def analyse(
             lobes_for_face = lobes
         footprint = finest_sample_solid_angle(lobes_for_face) if lobes else None
         face = lobe_width_face_size(footprint, full_cube_face) if lobe_width_cubes else int(full_cube_face)
+        choice = None
+        if method_target is not None and lobes and reflector is not None:
+            # Its mirror pass is read by the frame's lobe-N; a prefiltered pick would swap it for a
+            # cube map, and the table measured cube maps of a distant environment, not mirror buffers.
+            choice = MethodChoice(None, None, 0, True, "planar reflector: its mirror pass takes the frame's method")
+        elif method_target is not None and lobes:
+            shapes = lobe_shapes(bsdf) + (lobe_shapes(build_bsdf(narrowest)) if lobes_for_face is not lobes else [])
+            choice = choose_method(shapes, method_target)
         needs.append(
             ObjectNeeds(
                 obj.name,
@@ -179,6 +197,7 @@ def analyse(
                 footprint,
                 face,
                 lobe_width_cubes,
+                method_choice=choice,
             )
         )
     return SceneAnalysis(needs, int(full_cube_face), bool(reflector_cubes_on_demand))

@@ -83,9 +83,7 @@ class SceneRenderer(RendererBase):
             bright_sources=settings.bright_sources,
         )
         self.environment_name = environment.name
-        analysis = analyse(
-            scene, settings.cube_face_size, settings.lobe_width_cubes, settings.reflector_cubes_on_demand
-        )
+        analysis = self._analyse(scene, settings, settings.cube_face_size)
         report(f"materials and geometry of {len(scene.objects)} objects")
         packed = [pack_material(build_bsdf(scene.materials[obj.material].desc)) for obj in scene.objects]
         self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, analysis)
@@ -93,6 +91,7 @@ class SceneRenderer(RendererBase):
         self.objects = self.drawer.objects
         self.draw_counts = self.drawer.draw_counts  # objects drawn and culled per kind of pass
         self.frame_draw_calls = (0, 0, 0)  # the last draw_frame's: per-object, multi-draws, culling passes
+        self._apply_method_rule()
         for needs in self.analysis.objects:
             if not needs.has_lightmap:
                 warnings.warn(
@@ -124,9 +123,15 @@ class SceneRenderer(RendererBase):
         fixed = [name for name in CUBE_MAP_FIELDS if getattr(new, name) != getattr(self._settings, name)]
         if fixed:
             raise ValueError(f"{', '.join(fixed)} decide what the cube maps hold: make a new renderer to change them")
+        rule_changed = new.method_target != self._settings.method_target
         self._settings = new
         self.drawer.settings = self.probes.settings = new
         self.shading.draw_records = new.draw_records
+        if rule_changed:  # the rule's picks again, or (None) every object back on the frame's method
+            self.drawer.analysis = self._analyse(self.scene, new, self.cube_face_size)
+            if new.method_target is None:
+                self.drawer.object_methods.clear()
+            self._apply_method_rule()
         return new
 
     @property
@@ -181,6 +186,20 @@ class SceneRenderer(RendererBase):
             raise ValueError("the per-object method must be a real-time one; refinement uses the reference")
         else:
             self.drawer.object_methods[index] = method
+
+    @staticmethod
+    def _analyse(scene, settings: RenderSettings, face_size: int):
+        return analyse(scene, face_size, settings.lobe_width_cubes, settings.reflector_cubes_on_demand,
+                       settings.method_target)  # fmt: skip
+
+    def _apply_method_rule(self) -> None:
+        """With ``settings.method_target``: each object the rule has a table for takes its pick as
+        its own method (again after a material edit; the panel can still override one)."""
+        if self._settings.method_target is None:
+            return
+        for index, needs in enumerate(self.analysis.objects):
+            if needs.method_choice is not None and needs.method_choice.method is not None:
+                self.set_object_method(index, Method.parse(needs.method_choice.method))
 
     def object_method(self, index: int) -> Method | None:
         """Object ``index``'s own method, or None when it follows the frame's."""
@@ -295,10 +314,8 @@ class SceneRenderer(RendererBase):
         for gpu_obj in self.objects:  # before any cube map is rendered below (and its draws recorded)
             if self.scene.objects[gpu_obj.index].material == material_index:
                 gpu_obj.material = packed
-        settings = self._settings
-        self.drawer.analysis = analyse(
-            self.scene, self.cube_face_size, settings.lobe_width_cubes, settings.reflector_cubes_on_demand
-        )
+        self.drawer.analysis = self._analyse(self.scene, self._settings, self.cube_face_size)
+        self._apply_method_rule()
         self.probes.material_edited(material_index)
 
     def request_full_faces(self, camera: Camera) -> int:

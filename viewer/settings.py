@@ -35,6 +35,9 @@ class RenderSettings:
     # Bright sources (suns, windows, lamps seen in a cube) become cap lights integrated exactly,
     # the cube keeps their surroundings (scenes/bright_sources.py, issue 39); not for the reference.
     bright_sources: bool = True
+    # Per object, the cheapest real-time method whose measured error is at most this (relative
+    # RMSE; materials/method_choice.py); None: every object takes the frame's method.
+    method_target: float | None = None
     # -- per frame ---------------------------------------------------------------------------
     mirrors: bool = True  # planar mirror passes (thesis 4.5)
     mirror_scale: float = 1.0  # mirror buffers at this times the frame's resolution
@@ -66,6 +69,8 @@ class RenderSettings:
             raise ValueError(f"cube_budget_mb must be positive, got {self.cube_budget_mb}")
         if int(self.cube_face_size) < 1:
             raise ValueError(f"cube_face_size must be positive, got {self.cube_face_size}")
+        if self.method_target is not None and not 0.0 < float(self.method_target) <= 1.0:
+            raise ValueError(f"method_target must be in (0, 1] (a relative error), got {self.method_target}")
         if not float(self.probe_link) > 0:
             raise ValueError(f"probe_link must be positive, got {self.probe_link}")
         if self.enabled_reflectors is not None:
