@@ -116,14 +116,21 @@ class ErrorTable:
         for row in data["rows"]:
             key = (row["kind"], float(row["alpha_min"]), float(row["ratio"]))
             for method in self.methods:
-                values = [row["overall"][method], *row["bins"][method]]
+                overall = row["overall"][method]
+                # a bin without pixels (None) takes the whole sphere's error
+                values = [overall, *(overall if v is None else v for v in row["bins"][method])]
                 old = cells.setdefault(key, {}).get(method)
-                # worst light per value; a bin without pixels (None) takes the whole sphere's error
-                values = [row["overall"][method] if v is None else v for v in values]
+                # the worse light per value
                 cells[key][method] = values if old is None else [max(a, b) for a, b in zip(old, values, strict=True)]
         self.cells = cells
-        self.alphas = {k: sorted({a for kk, a, _ in cells if kk == k}) for k in {key[0] for key in cells}}
-        self.ratios = {k: sorted({r for kk, _, r in cells if kk == k}) for k in self.alphas}
+        # The alpha grid of each (kind, ratio) (a ratio's grid stops where alpha_max would pass 1)
+        # and the ratios of each kind.
+        self.alphas: dict = {}
+        for kind, alpha, ratio in cells:
+            self.alphas.setdefault((kind, ratio), []).append(alpha)
+        for grid in self.alphas.values():
+            grid.sort()
+        self.ratios = {kind: sorted(r for k, r in self.alphas if k == kind) for kind, _ in self.alphas}
 
     @classmethod
     @functools.cache
@@ -133,7 +140,7 @@ class ErrorTable:
     def error(self, shape: LobeShape, method: str, nv: tuple[float, float] | None = None) -> float:
         """Estimated relative RMSE of ``method`` on a lobe of ``shape``: over the whole sphere, or
         the worst n.v bin overlapping ``nv`` = (low, high)."""
-        if shape.kind not in self.alphas:
+        if shape.kind not in self.ratios:
             raise KeyError(f"no table for {shape.kind} lobes")
         columns = [0]
         if nv is not None:
@@ -154,8 +161,7 @@ class ErrorTable:
         r0, r1, tr = _bracket(ratios, shape.ratio)
         out = []
         for ratio in (r0, r1):
-            alphas = sorted(a for k, a, r in self.cells if k == shape.kind and r == ratio)
-            a0, a1, ta = _bracket(alphas, shape.alpha_min)
+            a0, a1, ta = _bracket(self.alphas[(shape.kind, ratio)], shape.alpha_min)
             e0 = self.cells[(shape.kind, a0, ratio)][method][column]
             e1 = self.cells[(shape.kind, a1, ratio)][method][column]
             out.append(e0 + ta * (e1 - e0))

@@ -135,6 +135,12 @@ GOLDEN_LATTICE_STEP = (np.sqrt(5.0) - 1.0) / 2.0
 LATTICE_U2_START = 0.25
 
 
+def uses_line_pattern(alpha_x: float, alpha_y: float) -> bool:
+    """Whether a lobe is anisotropic enough for the line pattern: max / min roughness of at least
+    ANISOTROPY_LINE_RATIO, written as the shaders test it (patterns.glsl uses_line_pattern)."""
+    return max(alpha_x, alpha_y) >= ANISOTROPY_LINE_RATIO * min(alpha_x, alpha_y)
+
+
 def choose_pattern(
     alpha_x: float, alpha_y: float, planar: bool = False, n: int | None = None, pattern: str = "auto"
 ) -> str:
@@ -144,8 +150,7 @@ def choose_pattern(
     DOUBLE_RING_MIN_SAMPLES on ('ring', the method suffix +ring: the thesis' ring at any N)."""
     if pattern not in LOBE_PATTERNS:
         raise ValueError(f"unknown lobe-N pattern choice {pattern!r}; use one of {LOBE_PATTERNS}")
-    ratio = max(alpha_x, alpha_y) / min(alpha_x, alpha_y)
-    if ratio >= ANISOTROPY_LINE_RATIO:
+    if uses_line_pattern(alpha_x, alpha_y):
         return "line_y" if alpha_y > alpha_x else "line_x"
     if planar:
         return "multi_ring"
@@ -265,9 +270,7 @@ def lobe_sample_area(
     angles = np.arccos(np.clip(dot(w_border, w_centre), -1.0, 1.0))
     u, v = 2.0 * np.sin(0.5 * np.minimum(angles, MAX_ELLIPSE_ANGLE))
     area = np.pi * u * v / n
-    if max(distribution.alpha_x, distribution.alpha_y) >= ANISOTROPY_LINE_RATIO * min(
-        distribution.alpha_x, distribution.alpha_y
-    ):  # the line pattern (choose_pattern): not narrower than the lobe's width
+    if uses_line_pattern(distribution.alpha_x, distribution.alpha_y):  # not narrower than the lobe's width
         area = max(area, np.pi * LINE_MIN_FOOTPRINT_FRACTION * min(u, v) ** 2)
     return float(area)
 

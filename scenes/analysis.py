@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lobeview.materials.bsdf import diffuse_albedo
-from lobeview.materials.method_choice import MethodChoice, choose_method, lobe_shapes
+from lobeview.materials.method_choice import LobeShape, MethodChoice, choose_method
 from lobeview.materials.patterns import finest_sample_solid_angle, lobe_width_face_size, specular_lobes
 from lobeview.materials.spec import build_bsdf
 
@@ -180,8 +180,9 @@ def analyse(
             # cube map, and the table measured cube maps of a distant environment, not mirror buffers.
             choice = MethodChoice(None, None, 0, True, "planar reflector: its mirror pass takes the frame's method")
         elif method_target is not None and lobes:
-            shapes = lobe_shapes(bsdf) + (lobe_shapes(build_bsdf(narrowest)) if lobes_for_face is not lobes else [])
-            choice = choose_method(shapes, method_target)
+            # The factors' lobes and, where textures can narrow them, the narrowest ones (built above).
+            both = lobes if lobes_for_face is lobes else lobes + lobes_for_face
+            choice = choose_method([LobeShape.of(lobe) for lobe in both], method_target)
         needs.append(
             ObjectNeeds(
                 obj.name,

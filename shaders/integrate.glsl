@@ -83,7 +83,7 @@ vec3 cosine_hemisphere(vec2 u) {
 // anisotropic by ANISOTROPY_LINE_RATIO or more (roughness and anisotropy textures change the
 // ratio from pixel to pixel), else the ring or multi-ring of u_pattern (material_gpu.py).
 vec2 lobe_pattern_xi(Lobe l, int lobe_index, int i, int n) {
-    if (max(l.ax, l.ay) >= ANISOTROPY_LINE_RATIO * min(l.ax, l.ay)) {
+    if (uses_line_pattern(l)) {
         float s = (2.0 * float(i) + 1.0) / float(n) - 1.0;
         bool along_y = l.ay > l.ax;
         float xi2 = s < 0.0 ? (along_y ? 0.25 : 0.0) : (along_y ? 0.75 : 0.5);

@@ -16,6 +16,12 @@ vec3 pattern_half_vector(Lobe l, vec2 xi) {
     return spherical_dir((1.0 - xi.x) * theta_thresh(l, phi), phi);
 }
 
+// Whether this pixel's lobe takes the line pattern: anisotropic by ANISOTROPY_LINE_RATIO or more
+// (patterns.py uses_line_pattern; roughness and anisotropy textures change it from pixel to pixel).
+bool uses_line_pattern(Lobe l) {
+    return max(l.ax, l.ay) >= ANISOTROPY_LINE_RATIO * min(l.ax, l.ay);
+}
+
 // Eq. 4.14-4.15 divided by n: solid angle of one sample, the ellipse with the equal-area
 // radii 2 sin(angle / 2) instead of the thesis' tan(angle); on the line pattern at least a disc
 // of half the short semi-axis (patterns.py lobe_sample_area, LINE_MIN_FOOTPRINT_FRACTION).
@@ -29,7 +35,7 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
     float av = min(acos(clamp(dot(wv, centre), -1.0, 1.0)), MAX_ELLIPSE_ANGLE);
     float area = PI * 4.0 * sin(0.5 * au) * sin(0.5 * av) / float(n);
     // The line pattern (integrate.glsl lobe_pattern_xi): not narrower than the lobe's width.
-    if (max(l.ax, l.ay) >= ANISOTROPY_LINE_RATIO * min(l.ax, l.ay)) {
+    if (uses_line_pattern(l)) {
         float across = 2.0 * sin(0.5 * min(au, av));
         area = max(area, PI * across * across * LINE_MIN_FOOTPRINT_FRACTION);
     }

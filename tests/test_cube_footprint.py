@@ -13,7 +13,7 @@ import moderngl
 import numpy as np
 import pytest
 
-from lobeview.core.cube_layout import face_directions
+from lobeview.core.cube_layout import face_directions, texel_solid_angles
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.viewer.cubemap import RadianceCube, equirect_to_cube_faces, face_supersample
 
@@ -33,16 +33,9 @@ def _env_integral(env: EnvironmentMap) -> np.ndarray:
 
 
 def _integral(faces: np.ndarray) -> np.ndarray:
-    """Radiance integrated over the sphere of directions from cube faces (texel solid angles)."""
-    size = faces.shape[1]
-    total = np.zeros(3)
-    for face in range(6):
-        # Solid angle of a texel at (sc, tc): (2 / size)^2 / (1 + sc^2 + tc^2)^(3/2).
-        sc = (np.arange(size) + 0.5) / size * 2.0 - 1.0
-        tc, scg = np.meshgrid(sc, sc, indexing="ij")
-        omega = (2.0 / size) ** 2 / (1.0 + scg**2 + tc**2) ** 1.5
-        total += np.einsum("ij,ijc->c", omega, faces[face])
-    return total
+    """Radiance integrated over the sphere of directions from cube faces (exact texel solid angles)."""
+    omega = texel_solid_angles(faces.shape[1])
+    return np.einsum("ij,fijc->c", omega, faces.astype(np.float64))
 
 
 def test_face_supersample_covers_the_source_texels():
