@@ -190,19 +190,24 @@ def choose_method(
     nv: tuple[float, float] | None = None,
     table: ErrorTable | None = None,
     candidates: tuple[str, ...] | None = None,
+    extremes: list[LobeShape | None] | None = None,
 ) -> MethodChoice:
     """The cheapest candidate whose estimated error, for the worst of the material's lobes
-    ``shapes`` (materials/method_choice.py lobe_shapes; several lobe sets, e.g. a textured
-    material's narrowest and widest, concatenated) and views ``nv``, is at most ``target``."""
+    ``shapes`` (:func:`lobe_shapes`) and views ``nv``, is at most ``target``. ``extremes``: the
+    same lobes, index for index, at the other end of what the material's textures can give (its
+    narrowest roughness): their errors count, their lookups do not add (a pixel shades each lobe
+    once, and pays for the costlier of its two shapes)."""
+    # zip(strict=True): extremes that do not pair with the lobes raise ValueError
+    variants = [[s] for s in shapes] if extremes is None else [list(p) for p in zip(shapes, extremes, strict=True)]
     if not shapes:
         return MethodChoice(None, None, 0, True, "no specular lobes: nothing view-dependent to shade")
-    if any(shape is None for shape in shapes):
+    if any(shape is None for lobe in variants for shape in lobe):
         return MethodChoice(None, None, 0, False, "a lobe without a microfacet distribution: no error table")
     table = table or ErrorTable.load()
     candidates = tuple(m for m in (candidates or table.methods) if m in table.methods)
-    errors = {m: max(table.error(shape, shape.as_read_by(m), nv) for shape in shapes) for m in candidates}
+    errors = {m: max(table.error(s, s.as_read_by(m), nv) for lobe in variants for s in lobe) for m in candidates}
     lookups = {
-        m: sum(lookups_per_lobe(shape.as_read_by(m), shape.anisotropic, shape.kind) for shape in shapes)
+        m: sum(max(lookups_per_lobe(s.as_read_by(m), s.anisotropic, s.kind) for s in lobe) for lobe in variants)
         for m in candidates
     }
     order = sorted(candidates, key=lambda m: (lookups[m], errors[m]))

@@ -180,9 +180,10 @@ def analyse(
             # cube map, and the table measured cube maps of a distant environment, not mirror buffers.
             choice = MethodChoice(None, None, 0, True, "planar reflector: its mirror pass takes the frame's method")
         elif method_target is not None and lobes:
-            # The factors' lobes and, where textures can narrow them, the narrowest ones (built above).
-            both = lobes if lobes_for_face is lobes else lobes + lobes_for_face
-            choice = choose_method([LobeShape.of(lobe) for lobe in both], method_target)
+            # The factors' lobes and, where textures can narrow them, the same lobes at their narrowest
+            # (built above): both ends' errors count, each lobe's lookups once.
+            extremes = None if lobes_for_face is lobes else [LobeShape.of(lobe) for lobe in lobes_for_face]
+            choice = choose_method([LobeShape.of(lobe) for lobe in lobes], method_target, extremes=extremes)
         needs.append(
             ObjectNeeds(
                 obj.name,

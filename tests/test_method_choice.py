@@ -82,6 +82,11 @@ def test_the_rule_picks_the_cheapest_method_within_the_target():
     # Two lobes: their lookups add up, the worse lobe's error counts.
     two = choose_method(shapes * 2, 0.12, table=table)
     assert two.lookups == 4 and two.error == pytest.approx(0.10)
+    # One lobe at two ends of a texture's range: both errors count, its lookups once.
+    ends = choose_method(shapes, 0.12, table=table, extremes=[LobeShape("beckmann", 0.05, 1.0)])
+    assert ends.lookups == 2 and ends.method == "prefiltered"
+    with pytest.raises(ValueError):
+        choose_method(shapes, 0.12, table=table, extremes=[])
 
 
 def test_a_transmission_lobe_is_read_by_split_sum_under_rsibr():
@@ -175,6 +180,9 @@ def test_the_analysis_the_renderer_and_the_command_line_use_the_rule(ctx):
     shapes = lobe_shapes(build_bsdf(material.desc)) + lobe_shapes(build_bsdf(narrowest_lobe_desc(material)))
     assert min(s.alpha_min for s in shapes) < 0.1 < max(s.alpha_min for s in shapes)  # both ends
     assert choice.error == pytest.approx(max(ErrorTable.load().error(s, choice.method) for s in shapes))
+    # Both ends count toward the error, but the pixel shades each lobe once: the lookups are one set's.
+    one_set = lobe_shapes(build_bsdf(material.desc))
+    assert choice.lookups == sum(lookups_per_lobe(choice.method, s.anisotropic, s.kind) for s in one_set)
     assert "cheapest-method rule" in analysis.report() and choice.method in analysis.report()
     assert analyse(scene).objects[0].method_choice is None  # off by default
 
