@@ -29,6 +29,42 @@ import numpy as np
 from lobeview.bench.walkthrough import COUNT_BAKE
 
 DEFAULT_ROOMS = (1, 6, 18)
+# The calls in which a driver does the pass's work (llvmpipe shades vertices and runs compute
+# passes inside them; a GPU's driver only queues it): the rest of the submit time is Python and
+# state calls, which a GPU does not take away.
+DRIVER_WORK_CALLS = (("VertexArray", "render"), ("VertexArray", "render_indirect"), ("ComputeShader", "run"),
+                     ("Context", "memory_barrier"))  # fmt: skip
+
+
+class DriverWorkTimer:
+    """Seconds spent inside DRIVER_WORK_CALLS while installed (moderngl's Python wrappers timed)."""
+
+    def __init__(self):
+        import moderngl
+
+        self.seconds = 0.0
+        self._originals = []
+        for class_name, method in DRIVER_WORK_CALLS:
+            cls = getattr(moderngl, class_name)
+            original = getattr(cls, method)
+            self._originals.append((cls, method, original))
+            setattr(cls, method, self._timed(original))
+
+    def _timed(self, original):
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return original(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - t0
+
+        return timed
+
+    def remove(self) -> None:
+        for cls, method, original in self._originals:
+            setattr(cls, method, original)
+
+
 DEFAULT_SIZES = ("64x40", "160x100")
 FACE_SIZE = 64
 
@@ -37,7 +73,7 @@ def _say(text: str) -> None:
     print(text, file=sys.stderr, flush=True)
 
 
-def walk(renderer, path, method, frames: int) -> list[dict]:
+def walk(renderer, path, method, frames: int, timer: DriverWorkTimer) -> list[dict]:
     """Per frame of ``path``: submit and finished milliseconds and the draw calls."""
     from lobeview.viewer.camera import Camera
 
@@ -50,9 +86,11 @@ def walk(renderer, path, method, frames: int) -> list[dict]:
         renderer.invalidate_mirrors()
         ctx.finish()
         calls = renderer.drawer.draw_calls.total()
+        driver_before = timer.seconds
         t0 = time.perf_counter()
         renderer.draw_frame(camera, method)
         submitted = time.perf_counter()
+        driver = timer.seconds - driver_before
         ctx.finish()
         finished = time.perf_counter()
         single, multi, culls = np.subtract(renderer.drawer.draw_calls.total(), calls)
@@ -60,6 +98,7 @@ def walk(renderer, path, method, frames: int) -> list[dict]:
             {
                 "t": float(t),
                 "submit_ms": (submitted - t0) * 1e3,
+                "python_ms": (submitted - t0 - driver) * 1e3,
                 "finished_ms": (finished - t0) * 1e3,
                 "single_draws": int(single),
                 "multi_draws": int(multi),
@@ -96,7 +135,11 @@ def measure(ctx, rooms: int, sizes, frames: int, cache: Path, method: str) -> li
             for indirect in (False, True):
                 renderer.configure(indirect_draws=indirect)
                 _say(f"apartment-{rooms} {size[0]}x{size[1]}: {'multi-draws' if indirect else 'per-object draws'}")
-                rows = walk(renderer, path, Method.parse(method), frames)
+                timer = DriverWorkTimer()
+                try:
+                    rows = walk(renderer, path, Method.parse(method), frames, timer)
+                finally:
+                    timer.remove()
                 out.append(
                     {
                         "rooms": rooms,
@@ -122,6 +165,7 @@ def summary(run: dict) -> dict:
 
     return {
         "submit_ms": median("submit_ms"),
+        "python_ms": median("python_ms"),
         "finished_ms": median("finished_ms"),
         "single_draws": mean("single_draws"),
         "multi_draws": mean("multi_draws"),
@@ -136,12 +180,14 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         "",
         f"Device: {device}. Method {method}, cube faces {FACE_SIZE}^2, {frames} frames along each apartment's "
         "recorded path, mirror passes redrawn every frame. *submit*: milliseconds until `draw_frame` returns "
-        "(Python, GL calls, driver submission; llvmpipe also shades vertices there), *finished*: until glFinish. "
+        "(Python, GL calls, driver submission; llvmpipe also shades vertices there), *Python + state*: submit "
+        "minus the time inside the draw, dispatch and barrier calls (where llvmpipe does the pass's work and a "
+        "GPU's driver only queues it: the CPU cost a GPU does not take away), *finished*: until glFinish. "
         f"Medians over the frames; draw calls are means per frame. Whole run {elapsed / 60:.1f} min.",
         "",
-        "| rooms | objects | size | path | submit ms | finished ms | per-object draws | multi-draws | culling passes "
-        "| objects drawn (camera + mirror) | submit vs per-object |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| rooms | objects | size | path | submit ms | Python + state ms | finished ms | per-object draws "
+        "| multi-draws | culling passes | objects drawn (camera + mirror) | submit vs per-object |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     base = {}
     for run in runs:
@@ -152,20 +198,22 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         ratio = s["submit_ms"] / base[key] if key in base and base[key] > 0 else float("nan")
         lines.append(
             f"| {run['rooms']} | {run['objects']} | {run['size'][0]}x{run['size'][1]} "
-            f"| {'multi-draw' if run['indirect'] else 'per object'} | {s['submit_ms']:.1f} | {s['finished_ms']:.1f} "
+            f"| {'multi-draw' if run['indirect'] else 'per object'} | {s['submit_ms']:.1f} | {s['python_ms']:.1f} "
+            f"| {s['finished_ms']:.1f} "
             f"| {s['single_draws']:.0f} | {s['multi_draws']:.0f} | {s['cull_passes']:.0f} | {s['objects_drawn']:.0f} "
             f"| {ratio:.2f} |"
         )
-    by_size: dict = {}
-    for run in runs:
-        if run["indirect"]:
-            by_size.setdefault(tuple(run["size"]), []).append((run["rooms"], summary(run)["submit_ms"]))
-    lines += ["", "Growth with the scene (multi-draw path, submit ms against the smallest apartment):", ""]
-    for size, values in by_size.items():
-        values.sort()
-        first = values[0][1]
-        growth = ", ".join(f"{rooms} rooms {ms / first:.2f}x" for rooms, ms in values)
-        lines.append(f"- {size[0]}x{size[1]}: {growth}")
+    for column, label in (("submit_ms", "submit"), ("python_ms", "Python + state")):
+        by_size: dict = {}
+        for run in runs:
+            if run["indirect"]:
+                by_size.setdefault(tuple(run["size"]), []).append((run["rooms"], summary(run)[column]))
+        lines += ["", f"Growth with the scene (multi-draw path, {label} ms against the smallest apartment):", ""]
+        for size, values in by_size.items():
+            values.sort()
+            first = max(values[0][1], 1e-9)
+            growth = ", ".join(f"{rooms} rooms {ms / first:.2f}x ({ms:.1f} ms)" for rooms, ms in values)
+            lines.append(f"- {size[0]}x{size[1]}: {growth}")
     return "\n".join(lines) + "\n"
 
 

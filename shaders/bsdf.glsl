@@ -11,7 +11,9 @@ const float COS_EPS = 1e-7;
 // get_lobe come from LOBE_LAYOUT there (generated: lobe_layout.glsl), as the Python packing does.
 #include "lobe_layout.glsl"
 
+#if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
 uniform int u_lobe_count;
+#endif
 
 bool lobe_is_transmission(Lobe l) { return l.type == LOBE_KURT_TRANSMISSION || l.type == LOBE_GLTF_TRANSMISSION; }
 

@@ -6,9 +6,11 @@
 #define CAP_POINTS 8
 #define CAP_LOBE_POINTS 8
 
+#if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
 uniform int u_cap_light_count;                      // 0: none (and always 0 for the reference)
 uniform vec4 u_cap_light_axis[MAX_CAP_LIGHTS];      // xyz: direction (world), w: cos(radius)
 uniform vec3 u_cap_light_radiance[MAX_CAP_LIGHTS];
+#endif
 
 // materials/patterns.py lattice_xi: ((i + 1/2) / n, frac(1/4 + i / golden ratio))
 vec2 cap_lattice_point(int i, int n) {

@@ -12,12 +12,14 @@ vec3 g_shading_position;                        // world position, set by the fr
 // Reflected-geometry correction (thesis 4.4.1; scenes/reflection_proxy.py): the secondary ray
 // from the shading point is intersected with the object's proxy (bounding planes or a box seen
 // from inside) and the cube map is read toward the hit point as seen from its centre.
+#if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
 uniform vec3 u_cube_centre;
 uniform int u_proxy_kind;                       // PROXY_PLANES or PROXY_BOX
 uniform int u_proxy_plane_count;
 uniform vec4 u_proxy_planes[MAX_PROXY_PLANES];  // unit normal n, d: n.x + d = 0
 uniform vec3 u_proxy_box_min;
 uniform vec3 u_proxy_box_max;
+#endif
 
 float proxy_hit_distance(vec3 o, vec3 d) {
     float t = 1e38;
@@ -58,10 +60,10 @@ vec3 lookup(vec3 dir_world, float lod) {
 #if !defined(METHOD_MC)
     lod += lod_offset;  // filtered methods only; mc-N and the reference read level 0
 #endif
-    return textureLod(u_radiance, d, max(lod, 0.0)).rgb;
+    return RADIANCE_LOD(d, max(lod, 0.0)).rgb;
 }
 #else
-vec3 lookup(vec3 dir_world, float lod) { return textureLod(u_radiance, dir_world, max(lod, 0.0)).rgb; }
+vec3 lookup(vec3 dir_world, float lod) { return RADIANCE_LOD(dir_world, max(lod, 0.0)).rgb; }
 #endif
 
 #if defined(MIRROR)

@@ -13,15 +13,20 @@
 #include "patterns.glsl"
 #include "cap_lights.glsl"
 
-uniform samplerCube u_radiance;     // incident radiance, full MIP chain
+#if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
+uniform samplerCube u_radiance;     // incident radiance, full MIP chain (RADIANCE_LOD reads it)
 uniform float u_face_size;          // size of MIP level 0 of u_radiance
+#define RADIANCE_LOD(dir, lod) textureLod(u_radiance, dir, lod)
+#endif
 uniform samplerCube u_irradiance;   // irradiance E(n) for the diffuse term (lobe-N, fis-N)
 uniform sampler2D u_sobol;          // 4D Sobol points (RGBA), row-major, u_sobol_count of them
 uniform int u_sobol_count;
 uniform int u_sample_offset;        // first Sobol index of this pass (progressive refinement)
 uniform int u_samples;              // N
 uniform float u_lod_bias;
+#if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
 uniform vec2 u_pattern[MAX_LOBES * MAX_PATTERN];  // per-lobe ring pattern (xi1, xi2): lobe_pattern_xi
+#endif
 #if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform vec3 u_kd;                  // Lambert kd, or (1 - metallic) baseColor for glTF
 #endif

@@ -53,7 +53,9 @@ uniform sampler2D u_albedo;
 // an anisotropic one (KHR_materials_anisotropy: alpha_x = mix(alpha, 1, strength^2) along local x)
 // from the anisotropic table over the view, roughness and strength (anisotropic_dfg_table): the
 // isotropic table at the geometric-mean alpha was 45 % too bright at strength 1.
+#if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
 uniform int u_albedo_per_pixel;
+#endif
 uniform sampler2D u_dfg;                // rg: Beckmann (A, B), ba: GGX; x = cos, y = roughness
 uniform sampler3D u_dfg_anisotropic;    // rg: GGX (A, B); x = cos, y = azimuth, z = roughness, strength
 
@@ -67,11 +69,13 @@ vec2 anisotropic_dfg(float cos_o, vec2 azimuth, float roughness, float strength)
     float s = clamp(strength, 0.0, 1.0) * float(ANISO_DFG_STRENGTH - 1) + 0.5;
     float depth = float(ANISO_DFG_ROUGHNESS * ANISO_DFG_STRENGTH);
     float x = sqrt(max(cos_o, 0.0));  // the table is uniform in sqrt(cos theta_o)
-    vec2 low = texture(u_dfg_anisotropic, vec3(x, y, (r0 * float(ANISO_DFG_STRENGTH) + s) / depth)).rg;
-    vec2 high = texture(u_dfg_anisotropic, vec3(x, y, ((r0 + 1.0) * float(ANISO_DFG_STRENGTH) + s) / depth)).rg;
+    vec2 low = textureLod(u_dfg_anisotropic, vec3(x, y, (r0 * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
+    vec2 high = textureLod(u_dfg_anisotropic, vec3(x, y, ((r0 + 1.0) * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
     return mix(low, high, r - r0);
 }
 
+// The tables have one level: read at LOD 0 (a multi-draw's helper invocations hold no record
+// values, so implicit derivatives of coordinates made from them are meaningless).
 vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
     if (u_albedo_per_pixel == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
         if (l.dist == DIST_GGX && l.ax != l.ay) {
@@ -79,7 +83,7 @@ vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
             float strength = sqrt(max(l.ax - l.ay, 0.0) / max(1.0 - l.ay, 1e-6));
             return lobe_dfg_albedo(l, anisotropic_dfg(wo.z, wo.xy, sqrt(l.ay), strength), wo.z);
         }
-        vec4 dfg = texture(u_dfg, vec2(wo.z, sqrt(sqrt(l.ax * l.ay))));  // roughness = sqrt(alpha)
+        vec4 dfg = textureLod(u_dfg, vec2(wo.z, sqrt(sqrt(l.ax * l.ay))), 0.0);  // roughness = sqrt(alpha)
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
         return lobe_dfg_albedo(l, ab, wo.z);
     }
@@ -87,6 +91,6 @@ vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
     phi = phi - floor(phi);
     float row = float(lobe_index * ALBEDO_ROWS) + phi * float(ALBEDO_PHI) + 0.5;
     // Columns are uniform in sqrt(cos theta_o) (AlbedoTable: dense near grazing).
-    return texture(u_albedo, vec2(sqrt(max(wo.z, 0.0)), row / float(MAX_LOBES * ALBEDO_ROWS))).rgb;
+    return textureLod(u_albedo, vec2(sqrt(max(wo.z, 0.0)), row / float(MAX_LOBES * ALBEDO_ROWS)), 0.0).rgb;
 }
 #endif

@@ -9,6 +9,7 @@ import warnings
 
 import numpy as np
 import pytest
+from test_lobe_batches import assert_within_rounding
 
 from lobeview.core.methods import Method
 from lobeview.viewer.cube_bake import cube_gpu_bytes
@@ -76,10 +77,12 @@ def test_budget_evicts_what_the_frame_did_not_draw_and_restores_it_exactly(demo,
         assert _resident_bytes(budgeted) <= BUDGET_MB * 2**20 or all(
             residency.last_used.get(i) == residency.frame - 1 for i in resident
         )
-        np.testing.assert_array_equal(table.radiance, expected["table"])
+        # Under a budget the lobe-shaded objects are drawn one by one (viewer/lobe_batches.py),
+        # without it by multi-draws: the same frame within rounding (tests/test_lobe_batches.py).
+        assert_within_rounding(table.radiance, expected["table"], "table")
         overview = budgeted.render(cameras["overview"], method)  # evicted objects come back into view
         assert sum(residency.restores.values()) > 0 and set(residency.restores) == {"disk cache"}
-        np.testing.assert_array_equal(overview.radiance, expected["overview"])
+        assert_within_rounding(overview.radiance, expected["overview"], "overview")
         assert "evicted" in residency.report(budgeted.objects)
     finally:
         budgeted.release()

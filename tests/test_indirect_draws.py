@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_frames_unchanged import _demo_scene, _model, _model_camera, _renderer, _scene_camera
+from test_lobe_batches import assert_within_rounding
 from test_textures import _textured_quad_scene
 
 from lobeview.core.methods import Method
@@ -36,7 +37,10 @@ def test_demo_frames_are_bit_identical_with_fewer_draws(ctx, method):
     try:
         frames = _frames(renderer, _scene_camera(scene, "overview"), method)
         (single, calls_single), (multi, calls_multi) = frames[False], frames[True]
-        np.testing.assert_array_equal(multi, single)
+        if method == "reference" or method == "prefiltered":
+            np.testing.assert_array_equal(multi, single)
+        else:  # lobe-shaded objects multi-drawn too: equal within rounding (tests/test_lobe_batches.py)
+            assert_within_rounding(multi, single, method)
         assert calls_single[1] == 0 and calls_multi[1] > 0  # the switch switches
         assert calls_multi[0] < calls_single[0]  # fewer draw calls: the diffuse objects are batched
         assert renderer.frame_draw_calls[1] > 0 and "multi-draws" in renderer.draw_report[-1]  # the panel's line

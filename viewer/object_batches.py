@@ -141,10 +141,10 @@ class ObjectBatches:
             self.groups.append(DrawGroup(indices, first, one_sided, members[0]))
             first += len(indices)
         ordered = [group.objects for group in self.groups]
-        self.commands, self.command_count = self._command_buffer(np.concatenate(ordered) if ordered else [])
+        self.commands, self.command_count = self.command_buffer(np.concatenate(ordered) if ordered else [])
         self._key = key
 
-    def _command_buffer(self, objects) -> tuple[moderngl.Buffer, int]:
+    def command_buffer(self, objects) -> tuple[moderngl.Buffer, int]:
         """(buffer, count): one draw command per object of ``objects``, in that order, its
         instance count 0 until a cull writes it, its baseInstance the object's index."""
         objects = np.asarray(objects, dtype=np.int64)
@@ -163,9 +163,9 @@ class ObjectBatches:
 
     def cull(self, enabled: np.ndarray, view_projection: np.ndarray, frustum_culling: bool) -> None:
         """The compute pass that writes every command's instance count for this pass."""
-        self._cull(self.commands, self.command_count, enabled, view_projection, frustum_culling)
+        self.cull_commands(self.commands, self.command_count, enabled, view_projection, frustum_culling)
 
-    def _cull(self, commands, command_count: int, enabled, view_projection, frustum_culling: bool) -> None:
+    def cull_commands(self, commands, command_count: int, enabled, view_projection, frustum_culling: bool) -> None:
         flags = np.ascontiguousarray(enabled, dtype=np.uint32).tobytes()
         if flags != self._enabled_bytes:
             self.enabled.write(flags)
@@ -195,11 +195,11 @@ class ObjectBatches:
                     self.depth_groups.append((first, members, one_sided))
                     first += len(members)
             ordered = [members for _, members, _ in self.depth_groups]
-            self.depth_commands, self.depth_command_count = self._command_buffer(
+            self.depth_commands, self.depth_command_count = self.command_buffer(
                 np.concatenate(ordered) if ordered else []
             )
             self._depth_key = key
-        self._cull(self.depth_commands, self.depth_command_count, enabled, view_projection, frustum_culling)
+        self.cull_commands(self.depth_commands, self.depth_command_count, enabled, view_projection, frustum_culling)
         draws = 0
         for first, members, one_sided in self.depth_groups:
             if not enabled[members].any():

@@ -6,6 +6,7 @@ through it: the camera pass, the mirror passes (viewer/mirror_pass.py) and the c
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import moderngl
@@ -15,8 +16,10 @@ from lobeview.core.methods import Method
 from lobeview.scenes.scene import Scene
 
 from .camera import box_corners, outside_frustum_many
+from .cube_arrays import direct_gl
 from .cubemap import RadianceCube
-from .interface import method_defines, set_uniform
+from .interface import DrawRecorder, method_defines, set_uniform
+from .lobe_batches import BATCHED_METHOD_KINDS, LobeBatches
 from .material_gpu import PackedMaterial
 from .object_batches import ObjectBatches, SceneGeometry
 from .occlusion import OcclusionTest
@@ -69,9 +72,32 @@ class DrawCalls:
         return self.single, self.multi, self.culls
 
 
+#: cube maps and probe owners assigned to any GpuObject since start-up (what the multi-draws know
+#: of them is made again when this changes)
+CUBE_ASSIGNMENTS = [0]
+
+
 class GpuObject:
     """An object as the drawer keeps it: its index range in the scene's geometry buffers
     (viewer/object_batches.py SceneGeometry), material, bounds and cube map."""
+
+    @property
+    def cube(self) -> RadianceCube | None:
+        return self._cube
+
+    @cube.setter
+    def cube(self, cube: RadianceCube | None) -> None:
+        self._cube = cube
+        CUBE_ASSIGNMENTS[0] += 1
+
+    @property
+    def probe_owner(self) -> int:
+        return self._probe_owner
+
+    @probe_owner.setter
+    def probe_owner(self, owner: int) -> None:
+        self._probe_owner = owner
+        CUBE_ASSIGNMENTS[0] += 1
 
     def __init__(self, obj, material: PackedMaterial, index: int, first_index: int, index_count: int):
         m = obj.mesh
@@ -84,10 +110,10 @@ class GpuObject:
         self.centre = (lo + hi) / 2.0
         self.corners = box_corners(lo, hi)  # world space (meshes are stored transformed): frustum culling
         self.box = (lo, hi)
-        self.cube: RadianceCube | None = None
+        self._cube: RadianceCube | None = None
         # Shared probes (scenes/probe_groups.py): the object whose cube map this one reads (itself
         # unless it shares a group's), and where its own cube map is rendered from and without whom.
-        self.probe_owner = index
+        self._probe_owner = index
         self.probe_centre = self.centre
         self.probe_exclude = frozenset((index,))
 
@@ -134,20 +160,31 @@ class ObjectDrawer:
         self.occlusion = OcclusionTest(ctx, self.programs, self.geometry, self.draw_calls)
         boxes = np.array([obj.box for obj in self.objects], dtype=np.float64).reshape(len(self.objects), 2, 3)
         self.batches = ObjectBatches(ctx, self.programs, self.geometry, boxes)
+        self.lobe_batches: LobeBatches | None = None  # made on the first lobe-shaded multi-draw
+        self.lobe_batches_unavailable = ""  # why lobe-shaded objects are drawn one by one, if so
         self.residency = None
         self.mirror_passes = None
         self._vaos: dict = {}
-        self._masks_key = self._order_key = None  # what _batch_masks and draw_order cached
+        self._masks_key = self._order_key = self._owners_key = None  # what _batch_masks, draw_order, owner_cubes cached
+        self._opaque_cache: dict = {}  # occluders only -> (analysis, material generation, opaque_objects)
 
     def material_of(self, index: int):
         """The scene material of object ``index``."""
         return self.scene.materials[self.scene.objects[index].material]
 
     def program(
-        self, method: Method, specular: bool, parallax: bool = False, mirror: bool = False, rational: bool = False
+        self,
+        method: Method,
+        specular: bool,
+        parallax: bool = False,
+        mirror: bool = False,
+        rational: bool = False,
+        records: bool = False,
     ):
         defines = {**method_defines(method), "SPECULAR": True} if specular else {"METHOD_LOBE": True}
         defines["HAS_RATIONAL"] = rational  # a Rational BRDF's functions (shaders/rational.glsl)
+        if records:  # per-object uniforms from the records of a multi-draw (viewer/object_records.py)
+            defines["OBJECT_RECORDS"] = True
         if specular and mirror:
             # Incident light from the mirror buffer; the cube's importance map does not apply, so
             # the reference samples the BSDF only (still unbiased for what the buffer holds).
@@ -172,6 +209,9 @@ class ObjectDrawer:
         MASK or BLEND: their discarded or blended pixels hide nothing). ``occluders_only``: also
         without reflectors and transmissive objects (the reflectors' occlusion test:
         viewer/occlusion.py says why)."""
+        cached = self._opaque_cache.get(occluders_only)
+        if cached is not None and cached[0] is self.analysis and cached[1] == self.shading.record_generation:
+            return cached[2]
         reflectors = self.analysis.reflectors
         found = []
         for obj in self.objects:
@@ -181,6 +221,7 @@ class ObjectDrawer:
             if occluders_only and (obj.index in reflectors or self.analysis.objects[obj.index].transmission_lobes):
                 continue
             found.append((obj, not mat.double_sided))
+        self._opaque_cache[occluders_only] = (self.analysis, self.shading.record_generation, found)
         return found
 
     def visible_samples(self, view_proj, size, indices: list) -> dict[int, int]:
@@ -243,6 +284,11 @@ class ObjectDrawer:
                 view_proj_values, eye_values, cull_view_projection, method, specular, excluded, lod_bias,
                 sample_offset, seed, mirrors, cull, culled, counts,
             )  # fmt: skip
+            if specular and method.kind in BATCHED_METHOD_KINDS:
+                batched = batched | self._draw_lobe_batched(
+                    view_proj_values, eye_values, cull_view_projection, method, excluded, lod_bias,
+                    sample_offset, seed, mirrors, cull, culled, counts,
+                )  # fmt: skip
         for obj, blended in self.draw_order(eye, batched):  # what the multi-draw did not draw
             if obj.index in excluded or (not specular and self.analysis.objects[obj.index].transmission_lobes):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
@@ -314,6 +360,16 @@ class ObjectDrawer:
             self._masks, self._masks_key = (batchable, transmissive, single_sided), key
         return self._masks
 
+    def owner_cubes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(probe owner, whether its cube map exists) per object, made again only after a cube
+        map or an owner was assigned (a Python loop over the objects, not one per pass)."""
+        if self._owners_key != CUBE_ASSIGNMENTS[0]:
+            n = len(self.objects)
+            owners = np.fromiter((obj.probe_owner for obj in self.objects), dtype=np.int64, count=n)
+            has_cube = np.fromiter((obj.cube is not None for obj in self.objects), dtype=bool, count=n)
+            self._owner_cubes, self._owners_key = (owners, has_cube), CUBE_ASSIGNMENTS[0]
+        return self._owner_cubes
+
     def batch_program(self):
         """The diffuse scene program that reads per-object records (viewer/object_records.py)."""
         return self.programs.program(
@@ -338,8 +394,7 @@ class ObjectDrawer:
         self.batches.prepare(key, self.objects, batchable, record_state, single_sided)
         mask = batchable.copy()
         if specular:  # objects with a cube map or a mirror buffer are shaded with their lobes
-            owners = np.fromiter((obj.probe_owner for obj in self.objects), dtype=np.int64, count=n)
-            has_cube = np.fromiter((obj.cube is not None for obj in self.objects), dtype=bool, count=n)
+            owners, has_cube = self.owner_cubes()
             mask &= ~has_cube[owners]
             if mirrors:
                 mask[np.fromiter(mirrors, dtype=np.int64)] = False
@@ -375,6 +430,104 @@ class ObjectDrawer:
             self.draw_calls.multi += 1
         return mask
 
+    def _lobe_batches(self) -> LobeBatches | None:
+        """The lobe-shaded objects' multi-draws (viewer/lobe_batches.py), or None where they do
+        not apply: a cube-map memory budget, or no direct GL calls (warned once)."""
+        if self.residency is not None and self.residency.budget is not None:
+            return None
+        if self.lobe_batches is None and not self.lobe_batches_unavailable:
+            gl, why = direct_gl(self.ctx)
+            if gl is None:
+                self._stop_lobe_batches(why)
+                return None
+            self.lobe_batches = LobeBatches(self.ctx, self.batches, gl)
+        return self.lobe_batches
+
+    def _stop_lobe_batches(self, why: str) -> None:
+        """Draw lobe-shaded objects one by one from now on, and say why (once)."""
+        if self.lobe_batches is not None:
+            self.lobe_batches.release()
+            self.lobe_batches = None
+        self.lobe_batches_unavailable = why
+        warnings.warn(
+            f"lobe-shaded objects are drawn one by one (the same frames, more draw calls): {why}", stacklevel=3
+        )
+
+    def _draw_lobe_batched(
+        self, view_proj_values, eye_values, cull_view_projection, method, excluded, lod_bias, sample_offset, seed,
+        mirrors, cull, culled, counts,
+    ) -> np.ndarray:  # fmt: skip
+        """Draw this pass's lobe-shaded objects (their own cube map, methods lobe-N and fis-N) by
+        multi-draws (viewer/lobe_batches.py); returns which objects were handled here."""
+        n = len(self.objects)
+        handled = np.zeros(n, dtype=bool)
+        batches = self._lobe_batches()
+        if batches is None:
+            return handled
+        batchable, _, single_sided = self._batch_masks()
+        owners, has_cube = self.owner_cubes()
+        members = batchable & has_cube[owners]
+        for index, override in self.object_methods.items():  # the panel's per-object methods
+            if override != method:
+                members[index] = False
+        shading = self.shading
+        base_key = (
+            shading.record_generation,
+            shading.textures.evictions,
+            shading.material_textures.evictions,
+            id(self.analysis),
+        )
+        key = (base_key, CUBE_ASSIGNMENTS[0], members.tobytes(), owners.tobytes())
+
+        def record_state(obj):
+            proxy = self.scene.objects[obj.index].reflection_proxy
+            owner = self.objects[obj.probe_owner]
+            recorder = DrawRecorder(self.program(method, True, proxy is not None))
+            shading.set_object_state(recorder, obj, method, False, proxy, owner.probe_centre)
+            shading.bind_cube(recorder, owner.cube, method, obj.material, per_pixel_lobes(self.material_of(obj.index)))
+            return recorder, proxy is not None
+
+        try:
+            batch = batches.prepare(method, key, self.objects, members, record_state, single_sided)
+        except RuntimeError as exc:  # a GL error of the cube-map arrays: the per-object path still works
+            self._stop_lobe_batches(str(exc))
+            return handled
+        enabled = members.copy()
+        if mirrors:
+            enabled[np.fromiter(mirrors, dtype=np.int64)] = False
+        for index in excluded:
+            if index is not None and 0 <= int(index) < n:
+                enabled[int(index)] = False
+        visible = enabled if culled is None else enabled & ~culled
+        drawn = int(np.count_nonzero(visible))
+        counts.drawn += drawn
+        counts.culled += int(np.count_nonzero(enabled)) - drawn
+        if drawn == 0:
+            return enabled
+        batches.cull(batch, enabled, cull_view_projection, self.settings.frustum_culling)
+        self.draw_calls.culls += 1
+        for group in batch.groups:
+            if not visible[group.objects].any():
+                continue
+            program = self.program(method, True, group.parallax, records=True)
+            set_uniform(program, "u_view_projection", view_proj_values)
+            set_uniform(program, "u_camera_position", eye_values)
+            shading.set_pass_state(program, method, lod_bias, seed)
+            set_uniform(program, "u_sample_offset", int(sample_offset))
+            if cull and group.single_sided:
+                self.ctx.enable(moderngl.CULL_FACE)  # glTF doubleSided false: back faces are not drawn
+            else:
+                self.ctx.disable(moderngl.CULL_FACE)
+            rep = group.representative
+            owner = self.objects[rep.probe_owner]
+            proxy = self.scene.objects[rep.index].reflection_proxy
+            # The group's textures (its cube comes from the array: viewer/lobe_batches.py).
+            shading.object_state(program, rep, method, False, proxy, owner.probe_centre)
+            shading.bind_cube(program, owner.cube, method, rep.material, per_pixel_lobes(self.material_of(rep.index)))
+            batches.draw_group(batch, program, self._vao(program), group)
+            self.draw_calls.multi += 1
+        return enabled
+
     def draw_order(self, eye, skip: np.ndarray | None = None) -> list:
         """(object, blended): opaque and masked objects first, then the alphaMode BLEND ones
         from back to front by the distance of their bounding-box centre (glTF 3.9.4); without
@@ -394,6 +547,8 @@ class ObjectDrawer:
     def release(self) -> None:
         self.occlusion.release()
         self.batches.release()
+        if self.lobe_batches is not None:
+            self.lobe_batches.release()
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()

@@ -16,7 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .interface import SHADER_CONSTANTS
+from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
+from lobeview.scenes.bright_sources import MAX_LIGHTS as MAX_CAP_LIGHTS
+from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
+
+from .interface import LOBE_ROWS, SHADER_CONSTANTS, TEXTURE_UNITS
 
 OBJECT_RECORDS_BINDING = 2  # storage binding (RATIONAL_BINDING is 1; compute shaders use 0)
 
@@ -64,11 +68,35 @@ OBJECT_RECORD_FIELDS = (
     RecordField("u_sheen_albedo", "float", "SHEEN_TABLE_SIZE"),
 )
 
+#: What a lobe-shaded object (SPECULAR; methods lobe-N and fis-N, viewer/lobe_batches.py) sets
+#: beyond the diffuse fields, appended after them so both kinds share the diffuse offsets: its
+#: lobes and patterns, the cube's size and bright-source lights, its reflection proxy, and the
+#: layer of its cube map in the cube-map array of its face size (viewer/cube_arrays.py).
+LOBE_RECORD_FIELDS = (
+    RecordField("u_lobe_count", "int"),
+    RecordField("u_albedo_per_pixel", "int"),
+    RecordField("u_face_size", "float"),
+    RecordField("u_cube_layer", "float"),
+    RecordField("u_cap_light_count", "int"),
+    RecordField("u_proxy_kind", "int"),
+    RecordField("u_proxy_plane_count", "int"),
+    RecordField("u_cube_centre", "vec3"),
+    RecordField("u_proxy_box_min", "vec3"),
+    RecordField("u_proxy_box_max", "vec3"),
+    RecordField("u_lobes", "vec4", MAX_LOBES * LOBE_ROWS),
+    RecordField("u_pattern", "vec2", MAX_LOBES * MAX_PATTERN),
+    RecordField("u_cap_light_axis", "vec4", MAX_CAP_LIGHTS),
+    RecordField("u_cap_light_radiance", "vec3", MAX_CAP_LIGHTS),
+    RecordField("u_proxy_planes", "vec4", MAX_PROXY_PLANES),
+)
+
 # std430 (GL 4.5 spec 7.6.2.2): base alignment and size in bytes; the stride of an array of
-# scalars or two-vectors is their size (no rounding to 16 as in std140); mat3 is three vec3
-# columns, each aligned to 16.
-_ALIGN = {"float": 4, "int": 4, "ivec2": 8, "vec3": 16, "vec4": 16, "mat3": 16}
-_SIZE = {"float": 4, "int": 4, "ivec2": 8, "vec3": 12, "vec4": 16, "mat3": 48}
+# scalars or two-vectors is their size (no rounding to 16 as in std140), of three-vectors 16;
+# mat3 is three vec3 columns, each aligned to 16.
+_ALIGN = {"float": 4, "int": 4, "ivec2": 8, "vec2": 8, "vec3": 16, "vec4": 16, "mat3": 16}
+_SIZE = {"float": 4, "int": 4, "ivec2": 8, "vec2": 8, "vec3": 12, "vec4": 16, "mat3": 48}
+# Types whose std430 elements are padded beyond moderngl's tight packing: (floats sent, floats stored).
+_PADDED = {"mat3": (3, 4), "vec3": (3, 4)}
 
 
 def _length(field: RecordField) -> int:
@@ -76,65 +104,97 @@ def _length(field: RecordField) -> int:
     return int(SHADER_CONSTANTS[length]) if isinstance(length, str) else int(length)
 
 
-def _layout() -> tuple[dict[str, tuple[int, RecordField]], int]:
-    offsets, offset = {}, 0
-    for field in OBJECT_RECORD_FIELDS:
-        align = _ALIGN[field.glsl_type]
-        offset = (offset + align - 1) // align * align
-        offsets[field.uniform] = (offset, field)
-        offset += _SIZE[field.glsl_type] * max(_length(field), 1)
-    return offsets, (offset + 15) // 16 * 16  # a struct's alignment is its largest member's (16)
+def _stride(field: RecordField) -> int:
+    """Bytes per array element (the field's size where it is not an array)."""
+    if _length(field) and field.glsl_type == "vec3":
+        return 16
+    return _SIZE[field.glsl_type]
 
 
-RECORD_OFFSETS, RECORD_SIZE = _layout()
-#: the uniforms the records replace
-RECORD_UNIFORMS = frozenset(RECORD_OFFSETS)
+class RecordLayout:
+    """The std430 layout of a record made of ``fields``: each uniform's offset, the record's size
+    (a multiple of 16: a struct's alignment is its largest member's), and the packing."""
+
+    def __init__(self, fields: tuple[RecordField, ...]):
+        self.fields = fields
+        self.offsets: dict[str, tuple[int, RecordField]] = {}
+        offset = 0
+        for field in fields:
+            align = _ALIGN[field.glsl_type]
+            offset = (offset + align - 1) // align * align
+            self.offsets[field.uniform] = (offset, field)
+            offset += _stride(field) * max(_length(field), 1)
+        self.size = (offset + 15) // 16 * 16
+        self.uniforms = frozenset(self.offsets)
+
+    def pack(self, uniforms: dict[str, bytes]) -> bytes:
+        """One object's record from the bytes each uniform would be sent as (moderngl's packing:
+        arrays tight, mat3 as 9 floats column by column); a field absent from ``uniforms`` (a
+        uniform the compiler dropped from the per-object program: unread) stays 0."""
+        out = bytearray(self.size)
+        for name, data in uniforms.items():
+            entry = self.offsets.get(name)
+            if entry is None:
+                continue
+            offset, field = entry
+            count = max(_length(field), 1)
+            expected = (36 if field.glsl_type == "mat3" else _SIZE[field.glsl_type]) * count  # mat3 sent tight
+            if len(data) != expected:
+                raise ValueError(f"{name}: {len(data)} bytes for a {field.glsl_type} field of {expected}")
+            padded = _PADDED.get(field.glsl_type)
+            if padded is not None and (field.glsl_type == "mat3" or count > 1):
+                sent, stored = padded
+                rows = np.frombuffer(data, dtype=np.float32).reshape(-1, sent)
+                wide = np.zeros((len(rows), stored), dtype=np.float32)
+                wide[:, :sent] = rows
+                data = wide.tobytes()
+            out[offset : offset + len(data)] = data
+        return bytes(out)
+
+
+DIFFUSE_RECORDS = RecordLayout(OBJECT_RECORD_FIELDS)
+LOBE_RECORDS = RecordLayout(OBJECT_RECORD_FIELDS + LOBE_RECORD_FIELDS)
+# The diffuse layout under its earlier names (object_batches, tests).
+RECORD_OFFSETS, RECORD_SIZE, RECORD_UNIFORMS = DIFFUSE_RECORDS.offsets, DIFFUSE_RECORDS.size, DIFFUSE_RECORDS.uniforms
+pack_object_record = DIFFUSE_RECORDS.pack
+
+
+def _members(fields) -> list[str]:
+    return [f"    {f.glsl_type} {f.member}{f'[{f.length}]' if f.length else ''};" for f in fields]
+
+
+def _defines(fields) -> list[str]:
+    return [f"#define {f.uniform} g_object_records[v_object].{f.member}" for f in fields]
 
 
 def object_records_glsl() -> str:
     """shaders/object_records.glsl (viewer/shaders.py GENERATED_SOURCES): with OBJECT_RECORDS,
     the record struct, the buffer of every object's record, the object index ``v_object`` (flat,
-    from the vertex shader's per-draw attribute) and ``#define u_name`` for each field; without
-    it, nothing (the uniforms are declared where they were)."""
-    members = []
-    for field in OBJECT_RECORD_FIELDS:
-        length = field.length
-        suffix = f"[{length}]" if length else ""
-        members.append(f"    {field.glsl_type} {field.member}{suffix};")
-    defines = [f"#define {f.uniform} g_object_records[v_object].{f.member}" for f in OBJECT_RECORD_FIELDS]
+    from the vertex shader's per-draw attribute) and ``#define u_name`` for each field; with
+    SPECULAR too (OBJECT_LOBE_RECORDS), the lobe fields and the cube-map array the radiance is
+    read from (``RADIANCE_LOD``; shaders/integrate.glsl defines it on the object's own cube
+    otherwise); without OBJECT_RECORDS, nothing (the uniforms are declared where they were)."""
     return "\n".join(
         [
             "// Generated by viewer/object_records.py object_records_glsl: do not edit.",
             "#if defined(OBJECT_RECORDS)",
+            "#if defined(SPECULAR)",
+            "#define OBJECT_LOBE_RECORDS",
+            "#endif",
             "flat in uint v_object;",
-            "struct ObjectRecord {", *members, "};",
+            "struct ObjectRecord {", *_members(OBJECT_RECORD_FIELDS),
+            "#if defined(OBJECT_LOBE_RECORDS)", *_members(LOBE_RECORD_FIELDS), "#endif",
+            "};",
             f"layout(std430, binding = {OBJECT_RECORDS_BINDING}) readonly buffer ObjectRecords {{",
             "    ObjectRecord g_object_records[];",
             "};",
-            *defines,
+            *_defines(OBJECT_RECORD_FIELDS),
+            "#if defined(OBJECT_LOBE_RECORDS)",
+            *_defines(LOBE_RECORD_FIELDS),
+            "// The object's cube map: its layer of the array of its face size (viewer/cube_arrays.py).",
+            f"layout(binding = {TEXTURE_UNITS['u_radiance_array']}) uniform samplerCubeArray u_radiance_array;",
+            "#define RADIANCE_LOD(dir, lod) textureLod(u_radiance_array, vec4(dir, u_cube_layer), lod)",
+            "#endif",
             "#endif",
         ]
     )  # fmt: skip
-
-
-def pack_object_record(uniforms: dict[str, bytes]) -> bytes:
-    """One object's record from the bytes each uniform would be sent as (moderngl's packing:
-    arrays tight, mat3 as 9 floats column by column); a field absent from ``uniforms`` (a
-    uniform the compiler dropped from the per-object program: unread) stays 0."""
-    out = bytearray(RECORD_SIZE)
-    for name, data in uniforms.items():
-        entry = RECORD_OFFSETS.get(name)
-        if entry is None:
-            continue
-        offset, field = entry
-        count = max(_length(field), 1)
-        if field.glsl_type == "mat3":
-            columns = np.frombuffer(data, dtype=np.float32).reshape(count * 3, 3)
-            padded = np.zeros((count * 3, 4), dtype=np.float32)
-            padded[:, :3] = columns
-            data = padded.tobytes()
-        expected = _SIZE[field.glsl_type] * count
-        if len(data) != expected:
-            raise ValueError(f"{name}: {len(data)} bytes for a {field.glsl_type} field of {expected}")
-        out[offset : offset + len(data)] = data
-    return bytes(out)

@@ -267,7 +267,9 @@ class SceneShading(ShadingBinder):
         write_uniform(program, "u_map_texcoord", np.asarray(texcoords, dtype=np.int32))
         write_uniform(program, "u_map_transform", np.asarray(transforms, dtype=np.float32))
         write_uniform(program, "u_map_mirrored", np.asarray(mirrored, dtype=np.int32))
-        if has_uniform(program, "u_albedo_per_pixel"):  # normalised lobe-N (shaders/patterns.glsl lobe_albedo)
+        # Normalised lobe-N (shaders/patterns.glsl lobe_albedo); a multi-drawn program reads the
+        # flag from its records (viewer/object_records.py) but binds the tables all the same.
+        if has_uniform(program, "u_albedo_per_pixel") or has_uniform(program, "u_albedo"):
             # Every texture but the normal maps, occlusion and emission changes the lobes' albedo.
             per_pixel = gltf_model and bool(set(mat.textures) - {"normal", "occlusion", "emissive", "clearcoat_normal"})
             set_uniform(program, "u_albedo_per_pixel", int(per_pixel))

@@ -1,0 +1,174 @@
+"""GPU-driven drawing of the lobe-shaded objects (issue 42 item 1, second part): the objects a
+pass shades with their lobes from their own cube map, under the real-time methods that read only
+that cube (lobe-N with or without normalisation, fis-N), drawn by one multi-draw per group instead
+of one draw call each.
+
+- The cube maps lie in cube-map arrays, one per face size (viewer/cube_arrays.py), an object's
+  layer in its record; the shader reads them through ``RADIANCE_LOD``.
+- Each object's uniforms of the per-object program (material, lobes, patterns, bright-source
+  lights, cube size, reflection proxy) become its record (viewer/object_records.py LOBE_RECORDS),
+  packed from the very bytes the per-object path sends (viewer/interface.py DrawRecorder), so the
+  frames are the same. Records depend on the method (patterns), so they are made per method,
+  and per object again only when its material, textures or cube map changed.
+- Groups: the same program variant (with or without a reflection proxy), cube-map array, texture
+  bindings (lightmap, glTF maps, albedo tables) and face culling. The commands' instance counts
+  come from the diffuse batches' frustum-culling compute pass (viewer/object_batches.py).
+
+Left to one draw per object (viewer/object_drawer.py): reflectors drawn from their mirror
+buffers, alphaMode BLEND, Rational materials, objects whose method the panel overrides, the
+prefiltered methods (per-object prefiltered maps), mc-N and the reference (per-object importance
+tables), any object while a cube-map memory budget is set (the arrays would hold copies of cubes
+the budget released), and everything where the direct GL calls are unavailable."""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from .cube_arrays import CubeMapArrays
+from .interface import TEXTURE_UNITS, bind_storage
+from .object_records import LOBE_RECORDS, OBJECT_RECORDS_BINDING
+
+#: method kinds whose per-object state is the cube, the material and the lights (batchable)
+BATCHED_METHOD_KINDS = ("lobe", "fis")
+MAX_METHOD_BATCHES = 4  # methods whose records are kept (the camera's, the mirror passes', switches)
+
+
+@dataclass
+class LobeGroup:
+    """Objects drawn by one multi-draw of the lobe-shaded program."""
+
+    objects: np.ndarray  # object indices, in the commands' order
+    first_command: int
+    single_sided: bool
+    parallax: bool  # the program variant with the reflection proxy
+    face_size: int  # the cube-map array bound
+    representative: object  # a GpuObject whose draw state binds the group's textures
+
+
+@dataclass
+class _ObjectRecord:
+    key: tuple
+    cube: object  # the RadianceCube it was made with (held: an identity that cannot alias)
+    data: bytes
+    group_key: tuple
+
+
+@dataclass
+class MethodBatch:
+    """The multi-draws of one method: its records buffer, commands and groups."""
+
+    key: tuple
+    records: moderngl.Buffer
+    commands: moderngl.Buffer
+    command_count: int
+    groups: list
+    members: np.ndarray  # which objects the groups hold
+
+    def release(self) -> None:
+        self.records.release()
+        self.commands.release()
+
+
+class LobeBatches:
+    """The records, groups and commands of the lobe-shaded objects, kept per method (the camera
+    pass's and the mirror passes' methods differ, so one frame uses two; at most
+    MAX_METHOD_BATCHES are kept). ``batches``: the drawer's ObjectBatches (command buffers,
+    culling); ``gl``: viewer/cube_arrays.py DirectGL."""
+
+    def __init__(self, ctx: moderngl.Context, batches, gl):
+        self.ctx = ctx
+        self.batches = batches
+        self.arrays = CubeMapArrays(gl)
+        self._records: dict[tuple, _ObjectRecord] = {}  # (method, object index) -> its record
+        self._methods: dict = {}  # method -> MethodBatch, least recently prepared first
+        self.current: MethodBatch | None = None  # the batch prepared last
+        self.record_builds = 0  # object records made (tests: an unchanged object is not recorded again)
+
+    @property
+    def members(self) -> np.ndarray:
+        """Which objects the last prepared batch holds."""
+        return self.current.members if self.current is not None else np.zeros(0, dtype=bool)
+
+    def prepare(self, method, key, objects: list, members, record_state, single_sided) -> MethodBatch:
+        """The batch of ``method``, made again when ``key`` changed; ``key[0]``: what every
+        record depends on (material generation, texture evictions). ``members``: the objects to
+        batch (each reads the cube map of ``objects[obj.probe_owner]``); ``record_state(obj)``
+        records an object's per-object draw state: (DrawRecorder, parallax). An object's record
+        is made again only when ``key[0]``, its cube or its layer changed."""
+        batch = self._methods.pop(method, None)
+        if batch is not None and batch.key == key:
+            self._methods[method] = batch  # most recently used last
+            self.current = batch
+            return batch
+        if batch is not None:
+            batch.release()
+        cubes = {objects[i].probe_owner: objects[objects[i].probe_owner].cube for i in np.flatnonzero(members)}
+        placed = self.arrays.update({owner: cube.residual for owner, cube in cubes.items()})
+        grouped: dict[tuple, list] = {}
+        records = bytearray(LOBE_RECORDS.size * max(len(objects), 1))
+        radiance_unit = TEXTURE_UNITS["u_radiance"]
+        for index in np.flatnonzero(members):
+            obj = objects[index]
+            face_size, layer = placed[obj.probe_owner]
+            cube = cubes[obj.probe_owner]
+            object_key = (key[0], face_size, layer)
+            entry = self._records.get((method, index))
+            if entry is None or entry.key != object_key or entry.cube is not cube:
+                recorder, parallax = record_state(obj)
+                record = recorder.record()
+                uniforms = {name: data for name, (_, data) in record.uniforms}
+                uniforms["u_cube_layer"] = struct.pack("f", float(layer))
+                # What the draw binds but the cube (read from the array) decides its group.
+                binds = tuple(
+                    (id(bind.__self__), bind.__name__, target)
+                    for bind, target in record.uses
+                    if target != radiance_unit
+                )
+                group_key = (parallax, face_size, binds, bool(single_sided[index]))
+                entry = _ObjectRecord(object_key, cube, LOBE_RECORDS.pack(uniforms), group_key)
+                self._records[(method, index)] = entry
+                self.record_builds += 1
+            records[index * LOBE_RECORDS.size : (index + 1) * LOBE_RECORDS.size] = entry.data
+            grouped.setdefault(entry.group_key, []).append(obj)
+        kept = {int(i) for i in np.flatnonzero(members)}
+        for record_key in [k for k in self._records if k[0] == method and k[1] not in kept]:
+            del self._records[record_key]
+        groups, first = [], 0
+        for (parallax, face_size, _, one_sided), group in grouped.items():
+            indices = np.array([obj.index for obj in group], dtype=np.int64)
+            groups.append(LobeGroup(indices, first, one_sided, parallax, face_size, group[0]))
+            first += len(indices)
+        ordered = [group.objects for group in groups]
+        commands, count = self.batches.command_buffer(np.concatenate(ordered) if ordered else [])
+        batch = MethodBatch(key, self.ctx.buffer(bytes(records)), commands, count, groups, members.copy())
+        self._methods[method] = batch
+        while len(self._methods) > MAX_METHOD_BATCHES:
+            oldest = next(iter(self._methods))
+            self._methods.pop(oldest).release()
+            for record_key in [k for k in self._records if k[0] == oldest]:
+                del self._records[record_key]
+        self.current = batch
+        return batch
+
+    def cull(self, batch: MethodBatch, enabled: np.ndarray, view_projection: np.ndarray, frustum_culling: bool) -> None:
+        """Every command's instance count for this pass (the diffuse batches' compute pass)."""
+        self.batches.cull_commands(batch.commands, batch.command_count, enabled, view_projection, frustum_culling)
+
+    def draw_group(self, batch: MethodBatch, program, vao, group: LobeGroup) -> None:
+        """One multi-draw of ``group``: its cube-map array and the records bound here, its other
+        textures by the caller."""
+        self.arrays.bind(group.face_size, TEXTURE_UNITS["u_radiance_array"])
+        bind_storage(program, batch.records, OBJECT_RECORDS_BINDING)
+        vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(group.objects), first=group.first_command)
+
+    def release(self) -> None:
+        for batch in self._methods.values():
+            batch.release()
+        self._methods.clear()
+        self.current = None
+        self.arrays.release()
+        self._records.clear()
