@@ -178,17 +178,7 @@ def bake_lightmap(
     if not objects:
         raise ValueError("no object has TEXCOORD_1 lightmap coordinates; unwrap the scene first")
 
-    # Ray-casting geometry: everything that is not a thin transmissive pane.
-    def transmissive(obj):
-        desc = scene.materials[obj.material].desc
-        return bool(desc.get("transmission_lobes")) or desc.get("transmission", 0.0) > 0
-
-    blockers = [o for o in scene.objects if not transmissive(o)]
-    offsets = np.cumsum([0] + [len(o.mesh.positions) for o in blockers])
-    vertices = np.concatenate([o.mesh.positions for o in blockers]).astype(np.float64)
-    faces = np.concatenate(
-        [o.mesh.indices.astype(np.int64) + off for o, off in zip(blockers, offsets[:-1], strict=True)]
-    )
+    blockers, mesh, faces = ray_casting_geometry(scene)
     uv1_all = np.concatenate(
         [o.uv1 if o.uv1 is not None else np.full((len(o.mesh.positions), 2), -1.0) for o in blockers]
     )
@@ -200,7 +190,6 @@ def bake_lightmap(
         emission_face.append(emission)
     kd_face = np.concatenate(kd_face)
     emission_face = np.concatenate(emission_face)
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
     intersector = AlphaTestedIntersector(mesh, faces, scene, blockers)
 
     texels = []
@@ -228,7 +217,7 @@ def bake_lightmap(
             flush=True,
         )
 
-    extent = float(np.max(vertices.max(0) - vertices.min(0)))
+    extent = float(np.max(mesh.vertices.max(0) - mesh.vertices.min(0)))
     origin = position + gnormal * (1e-4 * extent)
     tangent, bitangent = _frame(normal)
     sobol = qmc.Sobol(d=2, scramble=True, seed=seed).random(rays)
@@ -371,6 +360,33 @@ def _face_albedo_and_emission(obj, material, kd: np.ndarray) -> tuple[np.ndarray
     return kd_face, emission_face
 
 
+def ray_casting_geometry(scene: Scene) -> tuple[list, trimesh.Trimesh, np.ndarray]:
+    """(blockers, mesh, faces): what shadows and bounce rays hit, every object that is not a thin
+    transmissive pane, as one triangle mesh (faces index its vertices, objects in order)."""
+
+    def transmissive(obj):
+        desc = scene.materials[obj.material].desc
+        return bool(desc.get("transmission_lobes")) or desc.get("transmission", 0.0) > 0
+
+    blockers = [o for o in scene.objects if not transmissive(o)]
+    offsets = np.cumsum([0] + [len(o.mesh.positions) for o in blockers])
+    vertices = np.concatenate([o.mesh.positions for o in blockers]).astype(np.float64) if blockers else np.zeros((0, 3))
+    faces = (
+        np.concatenate(
+            [o.mesh.indices.astype(np.int64) + off for o, off in zip(blockers, offsets[:-1], strict=True)]
+        ).reshape(-1, 3)
+        if blockers
+        else np.zeros((0, 3), np.int64)
+    )
+    return blockers, trimesh.Trimesh(vertices, faces, process=False), faces
+
+
+def scene_intersector(scene: Scene) -> AlphaTestedIntersector:
+    """The bake's ray caster over ``scene`` (ray_casting_geometry), seeing through alpha cut-outs."""
+    blockers, mesh, faces = ray_casting_geometry(scene)
+    return AlphaTestedIntersector(mesh, faces, scene, blockers)
+
+
 class AlphaTestedIntersector:
     """Embree's first hit, seeing through the cut-outs of alpha-masked materials: a ray that
     hits a MASK (or BLEND) triangle where the base colour's alpha (factor x texture at the hit's
@@ -413,6 +429,10 @@ class AlphaTestedIntersector:
             cutoff = material.alpha_cutoff if material.alpha_mode == "MASK" else 0.5
             out[sel] = np.where(alpha < cutoff, 0.0, 1.0)
         return out
+
+    def hit_points(self, origins: np.ndarray, directions: np.ndarray, tris: np.ndarray) -> np.ndarray:
+        """Exact hit points of rays known to hit triangles ``tris`` (intersects_first's answer)."""
+        return _hit_points(self.mesh, origins, directions, tris)
 
     def intersects_first(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         origins = np.asarray(origins, dtype=np.float64)

@@ -464,8 +464,8 @@ def _load(path: Path, limits: Limits) -> Scene:
         _warn(
             scene_warnings,
             f"{path}: {len(lights)} KHR_lights_punctual lamp(s): `lobeview bake` bakes their light into the "
-            "lightmaps; live shading does not see them (no lamp highlights in the specular lobes, unbaked "
-            "objects get no lamp light)",
+            "lightmaps; the specular lobes reflect them live (spheres of 5 cm, shadowed per object), but "
+            "unbaked objects get no diffuse lamp light",
         )
     scene = Scene(objects, materials, cameras, str(path), scene_warnings, lights)
     if objects:

@@ -39,11 +39,11 @@ ivec2 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o) {
     return ivec2(cap_points, ratio >= LOBE_POINTS_FROM ? CAP_LOBE_POINTS : 0);
 }
 
-vec3 cap_light_radiance(Lobe l, vec3 wo, mat3 tbn, int k) {
-    vec3 axis = u_cap_light_axis[k].xyz;
-    float cos_radius = u_cap_light_axis[k].w;
+// The integral of f cos over the cap (axis, cos_radius) of unit radiance; one_minus_cos =
+// 1 - cos_radius, passed in because a distant lamp's tiny cap needs it without cancellation.
+vec3 cap_integral(Lobe l, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float one_minus_cos) {
     ivec2 counts = cap_point_counts(l, cos_radius, wo.z);
-    float cap_density = float(counts.x) / (2.0 * PI * (1.0 - cos_radius));
+    float cap_density = float(counts.x) / (2.0 * PI * one_minus_cos);
     vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
     vec3 t = normalize(cross(helper, axis));
     vec3 b = cross(axis, t);
@@ -52,7 +52,7 @@ vec3 cap_light_radiance(Lobe l, vec3 wo, mat3 tbn, int k) {
     for (int i = 0; i < counts.x; ++i) {
         vec2 u = cap_lattice_point(i, counts.x);
         if (counts.x == 1) u.x = 0.0;  // a single point on the axis
-        float cos_t = 1.0 - u.x * (1.0 - cos_radius);
+        float cos_t = 1.0 - u.x * one_minus_cos;
         float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
         float phi = 2.0 * PI * u.y;
         vec3 world = sin_t * (cos(phi) * t + sin(phi) * b) + cos_t * axis;
@@ -64,7 +64,12 @@ vec3 cap_light_radiance(Lobe l, vec3 wo, mat3 tbn, int k) {
         if (p <= 0.0 || dot(tbn * wi, axis) < cos_radius) continue;
         sum += cap_light_term(l, wi, wo, cap_density, counts.y);
     }
-    return sum * u_cap_light_radiance[k];
+    return sum;
+}
+
+vec3 cap_light_radiance(Lobe l, vec3 wo, mat3 tbn, int k) {
+    float cos_radius = u_cap_light_axis[k].w;
+    return cap_integral(l, wo, tbn, u_cap_light_axis[k].xyz, cos_radius, 1.0 - cos_radius) * u_cap_light_radiance[k];
 }
 
 vec3 cap_lights_radiance(Lobe l, vec3 wo, mat3 tbn) {

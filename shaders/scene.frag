@@ -8,6 +8,7 @@
 #include "frame.glsl"
 #include "integrate.glsl"
 #include "material_maps.glsl"
+#include "lamps.glsl"
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -194,7 +195,8 @@ void main() {
     for (int i = 0; i < u_lobe_count; ++i) {
 #if defined(METHOD_PREFILTERED)
         if (rsibr_lobe(i)) {
-            radiance += scene_cap_lights(get_lobe(i), wo, tbn);  // RSIBR's maps are baked from the residual
+            Lobe baked = get_lobe(i);  // RSIBR's maps are baked from the residual, without lamps
+            radiance += scene_cap_lights(baked, wo, tbn) + lamps_radiance(baked, wo, tbn, v_position);
             continue;
         }
 #endif
@@ -218,9 +220,11 @@ void main() {
             l.ax = coat_alpha;
             l.ay = coat_alpha;
             radiance += integrate_lobe(l, i, coat_wo, coat_tbn) + scene_cap_lights(l, coat_wo, coat_tbn);
+            radiance += lamps_radiance(l, coat_wo, coat_tbn, v_position);
             continue;
         }
         radiance += integrate_lobe(l, i, wo, tbn) + scene_cap_lights(l, wo, tbn);
+        radiance += lamps_radiance(l, wo, tbn, v_position);
     }
 #endif
     bool bad = any(isnan(radiance)) || any(isinf(radiance));

@@ -18,6 +18,7 @@ import numpy as np
 
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN
 from lobeview.scenes.bright_sources import MAX_LIGHTS as MAX_CAP_LIGHTS
+from lobeview.scenes.lamps import MAX_LAMPS
 from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
 
 from .interface import LOBE_ROWS, SHADER_CONSTANTS, TEXTURE_UNITS
@@ -70,8 +71,9 @@ OBJECT_RECORD_FIELDS = (
 
 #: What a lobe-shaded object (SPECULAR; methods lobe-N and fis-N, viewer/lobe_batches.py) sets
 #: beyond the diffuse fields, appended after them so both kinds share the diffuse offsets: its
-#: lobes and patterns, the cube's size and bright-source lights, its reflection proxy, and the
-#: layer of its cube map in the cube-map array of its face size (viewer/cube_arrays.py).
+#: lobes and patterns, the cube's size and bright-source lights, its reflection proxy, how much of
+#: it each lamp reaches (scenes/lamps.py), and the layer of its cube map in the cube-map array of
+#: its face size (viewer/cube_arrays.py).
 LOBE_RECORD_FIELDS = (
     RecordField("u_lobe_count", "int"),
     RecordField("u_albedo_per_pixel", "int"),
@@ -88,6 +90,7 @@ LOBE_RECORD_FIELDS = (
     RecordField("u_cap_light_axis", "vec4", MAX_CAP_LIGHTS),
     RecordField("u_cap_light_radiance", "vec3", MAX_CAP_LIGHTS),
     RecordField("u_proxy_planes", "vec4", MAX_PROXY_PLANES),
+    RecordField("u_lamp_visibility", "float", MAX_LAMPS),
 )
 
 # std430 (GL 4.5 spec 7.6.2.2): base alignment and size in bytes; the stride of an array of

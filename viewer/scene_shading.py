@@ -13,6 +13,7 @@ import numpy as np
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import Method
 from lobeview.materials.gltf import specular_f0_unclamped
+from lobeview.scenes.lamps import DIRECTIONAL_ANGULAR_RADIUS, LAMP_RADIUS, MAX_LAMPS, lamp_visibility, live_lamps
 from lobeview.scenes.scene import (
     CLAMP_TO_EDGE,
     LINEAR_MIPMAP_LINEAR,
@@ -38,6 +39,8 @@ from .interface import (
 )
 from .shaders import ProgramCache
 from .shading import ShadingBinder
+
+LAMP_KINDS = {"point": 0, "spot": 1, "directional": 2}  # shaders/lamps.glsl LAMP_*
 
 MAX_SCENE_TEXTURES = 256  # lightmaps and material textures kept on the GPU
 # Material textures whose sampler filters linearly between texels and MIP levels get 16x
@@ -107,6 +110,28 @@ class SceneShading(ShadingBinder):
         self._records = BoundedCache(MAX_DRAW_RECORDS)
         self.record_generation = 0  # bumped when what a record holds changes
         self.record_builds = 0  # records made so far (a count for tests and benchmarks)
+        # KHR_lights_punctual lamps with live reflections (scenes/lamps.py), their uniforms, and
+        # how much of each object each one reaches (ray cast on first use).
+        self.lamps = live_lamps(scene.lights)
+        self._lamp_uniforms = lamp_uniforms(self.lamps)
+        self._lamp_visibility: np.ndarray | None = None
+
+    def set_pass_state(self, program, method: Method, lod_bias: float | None, seed: int) -> None:
+        """ShadingBinder's pass state and the scene's lamps (shaders/lamps.glsl)."""
+        super().set_pass_state(program, method, lod_bias, seed)
+        if has_uniform(program, "u_lamp_count"):
+            set_uniform(program, "u_lamp_count", len(self.lamps))
+            for name, values in self._lamp_uniforms.items():
+                write_uniform(program, name, values)
+
+    def lamp_visibility_of(self, index: int) -> np.ndarray:
+        """(MAX_LAMPS,) float32: the fraction of object ``index`` each live lamp reaches."""
+        out = np.zeros(MAX_LAMPS, dtype=np.float32)
+        if self.lamps:
+            if self._lamp_visibility is None:
+                self._lamp_visibility = lamp_visibility(self.scene, self.lamps)
+            out[: len(self.lamps)] = self._lamp_visibility[index]
+        return out
 
     def invalidate_records(self) -> None:
         """Make the draw records again: a material, proxy or probe centre changed."""
@@ -216,6 +241,7 @@ class SceneShading(ShadingBinder):
         self.set_material_state(program, obj.material, method, planar)
         set_uniform(program, "u_emission", tuple(float(x) for x in mat.emission))
         set_uniform(program, "u_object_id", float(obj.index))
+        write_uniform(program, "u_lamp_visibility", self.lamp_visibility_of(obj.index))
         lightmap = mat.lightmap
         if lightmap is not None and (lightmap.tex_coord != 1 or self.scene.objects[obj.index].uv1 is not None):
             bind_sampler(program, "u_lightmap", self.lightmap_texture(lightmap.image))
@@ -306,3 +332,22 @@ class SceneShading(ShadingBinder):
         if self._anisotropic_dfg is not None:
             self._anisotropic_dfg.release()
         self.white.release()
+
+
+def lamp_uniforms(lamps: list) -> dict[str, np.ndarray]:
+    """shaders/lamps.glsl's per-scene arrays for ``lamps`` (scenes/lamps.py: a point or spot lamp
+    is a sphere of LAMP_RADIUS, a directional one a disc of DIRECTIONAL_ANGULAR_RADIUS)."""
+    position, colour, spot, shape = (np.zeros((MAX_LAMPS, 4), dtype=np.float32) for _ in range(4))
+    for k, lamp in enumerate(lamps[:MAX_LAMPS]):
+        direction = np.asarray(lamp.direction, dtype=np.float64)
+        if lamp.type == "directional":
+            position[k, :3] = -direction
+        else:
+            position[k, :3] = lamp.position
+        position[k, 3] = LAMP_KINDS[lamp.type]
+        colour[k, :3] = np.asarray(lamp.colour, dtype=np.float64) * float(lamp.intensity)
+        colour[k, 3] = 0.0 if lamp.range is None else float(lamp.range)
+        cos_outer, cos_inner = np.cos(lamp.outer_cone), np.cos(lamp.inner_cone)
+        spot[k] = (*direction, cos_outer)
+        shape[k] = (1.0 / max(1e-3, cos_inner - cos_outer), np.sin(DIRECTIONAL_ANGULAR_RADIUS), LAMP_RADIUS, 0.0)
+    return {"u_lamp_position": position, "u_lamp_colour": colour, "u_lamp_spot": spot, "u_lamp_shape": shape}
