@@ -150,6 +150,13 @@ def add_trust_arguments(p) -> None:
         " '..'); off by default because a downloaded scene could otherwise read any file you can",
     )
     p.add_argument(
+        "--max-objects",
+        type=int,
+        default=5000,
+        help="most drawable objects (mesh primitives) a glTF scene may place (default 5000; its nodes: 20x"
+        " that); a file with more is refused",
+    )
+    p.add_argument(
         "--memory-budget",
         default="6G",
         help="most memory one scene load may allocate for geometry and images, e.g. 6G or 512M (default 6G);"
@@ -165,7 +172,15 @@ def trust_limits(args):
         budget = parse_budget(args.memory_budget)
     except ValueError as exc:
         raise OptionError(f"--memory-budget: {exc}") from None
-    return Limits(allow_outside=args.allow_outside_references, memory_budget_bytes=budget)
+    max_objects = getattr(args, "max_objects", 5000)
+    if max_objects < 1:
+        raise OptionError(f"--max-objects: at least 1, got {max_objects}")
+    return Limits(
+        allow_outside=args.allow_outside_references,
+        memory_budget_bytes=budget,
+        max_objects=max_objects,
+        max_nodes=max(20 * max_objects, 100_000),
+    )
 
 
 def check_environment_option(env: str | None) -> None:

@@ -54,6 +54,11 @@ class Limits:
     max_image_side: int = 65536
     memory_budget_bytes: int = 6 * GIB  # decoded arrays of one load (accessors + images)
     max_nodes_visited: int = 1_000_000
+    # Drawable objects (mesh primitives placed by nodes) and nodes of one glTF scene: each object
+    # costs Python work per load and per frame and, with a cube map, draws of every other object
+    # (100 000 nodes in a 5 MB file ran for minutes, issue 43); a realistic building is well below.
+    max_objects: int = 5000
+    max_nodes: int = 100_000
 
 
 DEFAULT_LIMITS = Limits()

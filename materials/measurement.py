@@ -52,6 +52,14 @@ THESIS_ISOTROPIC_THETA_I_DEG = (0.0, 5.0, 19.0, 33.0, 47.0, 61.0, 75.0)
 
 MAX_CSV_BYTES = 512 * MIB
 MAX_TUPLES = 20_000_000
+# A virtual goniophotometer's tuples, counted before anything is allocated: each costs ~380 bytes
+# through the fit (measured: 20 M CSV rows reached 7.7 GB), so 4 M stay near 1.5 GB.
+MAX_VIRTUAL_TUPLES = 4_000_000
+# Largest transfer probability p = f |cos| accepted [1/sr]: a mirror lobe scanned at 0.02 degrees
+# reaches ~1e7; beyond 1e9 the fit's sums of p^2 x weight lose all precision (1e308 overflowed to
+# an infinite error that was then reported as 0).
+MAX_TRANSFER = 1e9
+MAX_WEIGHT = 4.0 * np.pi  # a tuple's solid angle cannot exceed the sphere's
 
 MERL_DIMS = (90, 90, 180)  # theta_h, theta_d, phi_d
 MERL_SCALE = np.array([1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0])
@@ -93,6 +101,15 @@ class Measurement:
             )
         if (self.weight < 0).any():
             raise MeasurementError(f"{self.name}: negative weight in tuple {int(np.argmax(self.weight < 0))}")
+        if (self.p > MAX_TRANSFER).any():
+            raise MeasurementError(
+                f"{self.name}: transfer probability above {MAX_TRANSFER:g} in tuple "
+                f"{int(np.argmax((self.p > MAX_TRANSFER).any(1)))} (p = f |cos theta_o| in 1/sr)"
+            )
+        if (self.weight > MAX_WEIGHT).any():
+            raise MeasurementError(
+                f"{self.name}: weight above 4 pi (a solid angle) in tuple {int(np.argmax(self.weight > MAX_WEIGHT))}"
+            )
         if (self.wi[:, 2] <= 0).any():
             raise MeasurementError(
                 f"{self.name}: incident direction at or below the surface in tuple "
@@ -157,6 +174,11 @@ def renderer_pair(wi: np.ndarray, wo: np.ndarray) -> tuple[np.ndarray, np.ndarra
 # -- lobeview's goniophotometer CSV ----------------------------------------------------------------
 
 _REQUIRED = ("theta_i", "phi_i", "theta_o", "phi_o")
+# Columns with a largest magnitude, named in the error with the line.
+_VALUE_LIMITS = (
+    *((name, MAX_TRANSFER, f"{MAX_TRANSFER:g} (p = f |cos theta_o| in 1/sr)") for name in ("p", "p_r", "p_g", "p_b")),
+    ("weight", MAX_WEIGHT, "4 pi (a solid angle)"),
+)
 
 
 def read_csv(path, negative: str = "error", limits: Limits | None = None) -> Measurement:
@@ -183,6 +205,9 @@ def read_csv(path, negative: str = "error", limits: Limits | None = None) -> Mea
         raise MeasurementError(f"{path}: no header line (expected {','.join(_REQUIRED)},p)")
     header_line, header = lines[0]
     columns = [c.strip().lower() for c in next(csv.reader([header]))]
+    repeated = sorted({c for c in columns if columns.count(c) > 1})
+    if repeated:
+        raise MeasurementError(f"{path}:{header_line}: columns {repeated} appear more than once")
     missing = [c for c in _REQUIRED if c not in columns]
     if missing:
         raise MeasurementError(
@@ -214,6 +239,12 @@ def read_csv(path, negative: str = "error", limits: Limits | None = None) -> Mea
             raise MeasurementError(f"{path}:{line_no}: not a number in {line.strip()!r}") from None
         if not np.isfinite(values[r]).all():
             raise MeasurementError(f"{path}:{line_no}: NaN or infinite value in {line.strip()!r}")
+    for name, limit, what in _VALUE_LIMITS:
+        if name in columns:
+            over = np.abs(values[:, columns.index(name)]) > limit
+            if over.any():
+                line_no, line = rows[int(np.argmax(over))]
+                raise MeasurementError(f"{path}:{line_no}: {name} above {what} in {line.strip()[:120]!r}")
     col = {name: values[:, i] for i, name in enumerate(columns)}
     theta_i, theta_o = col["theta_i"], col["theta_o"]
     bad = (theta_i < 0) | (theta_i >= 90) | (theta_o < 0) | (theta_o > 180) | (np.abs(theta_o - 90) < 1e-9)
@@ -442,6 +473,7 @@ def goniometer_directions(
     m = 0.007, a lobe of ~0.4 deg) are resolved, as a goniophotometer scanning the peak does. The
     union of both grids partitions the sphere, so the weights stay solid angles.
     """
+    _check_grid_size(theta_i_deg, phi_i_deg, theta_step_deg, phi_step_deg, transmission, peak_rings * peak_azimuths)
     th_o = np.radians(np.arange(theta_step_deg / 2, 90.0, theta_step_deg))
     ph_o = np.radians(np.arange(0.0, 360.0, phi_step_deg))  # from 0: the plane of incidence is scanned
     grid_t, grid_p = np.meshgrid(th_o, ph_o, indexing="ij")
@@ -471,6 +503,24 @@ def goniometer_directions(
                 wos.append(wo)
                 ws.append(np.concatenate([grid_w[outside], local_w[inside]]))
     return np.concatenate(wis), np.concatenate(wos), np.concatenate(ws)
+
+
+def _check_grid_size(theta_i_deg, phi_i_deg, theta_step_deg, phi_step_deg, transmission, peak_directions) -> None:
+    """Refuse a grid of more than MAX_VIRTUAL_TUPLES tuples (or non-finite steps) before any
+    array is made: ``--theta-step 0.0001`` asked for 900 million tuples and was killed for memory."""
+    for name, step in (("theta", theta_step_deg), ("phi", phi_step_deg)):
+        if not (math.isfinite(step) and step > 0):
+            raise MeasurementError(f"the {name} step must be a finite number of degrees > 0, got {step}")
+    thetas = max(0, math.ceil((90.0 - theta_step_deg / 2) / theta_step_deg))
+    phis = math.ceil(360.0 / phi_step_deg)
+    incidences = len(theta_i_deg) * len(phi_i_deg) * (2 if transmission else 1)
+    total = incidences * (thetas * phis + peak_directions)
+    if total > MAX_VIRTUAL_TUPLES:
+        raise MeasurementError(
+            f"a detector grid of {thetas} x {phis} directions ({theta_step_deg:g} x {phi_step_deg:g} deg) at "
+            f"{incidences} incidences makes {total:,} tuples, more than the limit of {MAX_VIRTUAL_TUPLES:,} "
+            "(about 1.5 GB): use larger --theta-step/--phi-step or fewer incidences"
+        )
 
 
 def _to_frame(local: np.ndarray, axis: np.ndarray) -> np.ndarray:

@@ -102,6 +102,10 @@ def test_csv_round_trip_and_format(tmp_path):
         ("theta_i,phi_i,theta_o,phi_o,p\n5,2,3,4,-1\n", "negative transfer probability"),
         ("theta_i,phi_i,theta_o,phi_o,p\n", "no data rows"),
         ("", "empty file"),
+        # Issue 43: values that overflowed the fit (a KeyError, or "L1 error: 0" for a wrong fit).
+        ("theta_i,phi_i,theta_o,phi_o,p\n5,2,3,4,1e308\n", ":2: p above 1e"),
+        ("theta_i,phi_i,theta_o,phi_o,p,weight\n5,2,3,4,1,1e308\n", ":2: weight above 4 pi"),
+        ("theta_i,phi_i,theta_o,phi_o,p,p\n5,2,3,4,1,1\n", ":1: columns ['p'] appear more than once"),
     ],
 )
 def test_csv_reader_refuses_bad_files_naming_the_line(tmp_path, body, message):
@@ -178,6 +182,10 @@ def test_merl_reader_refuses_bad_files(tmp_path):
     path.write_bytes(struct.pack("<3i", 90, 90, 180) + values.tobytes())
     with pytest.raises(ValueError, match="NaN"):
         meas.read_merl(path)
+    values[:] = 1e308  # finite, but overflowed the fit (issue 43: KeyError 'k')
+    path.write_bytes(struct.pack("<3i", 90, 90, 180) + values.tobytes())
+    with pytest.raises(ValueError, match="transfer probability above 1e"):
+        meas.merl_measurement(meas.read_merl(path))
     (tmp_path / "dir.binary").mkdir()
     with pytest.raises(ValueError, match="not a regular file"):
         meas.read_merl(tmp_path / "dir.binary")
@@ -360,3 +368,21 @@ def test_cli_measure_fit_and_plot(tmp_path, capsys):
     fitted = json.loads(out2.read_text())
     lobe = fitted["lobes"][0]
     assert lobe["mx"] == lobe["my"]  # a MERL table is isotropic
+
+
+def test_virtual_grid_is_bounded_before_anything_is_allocated(tmp_path, capsys):
+    """Issue 43: ``measure --theta-step 0.0001`` asked for 907 million tuples and was killed for
+    memory; the grid is counted first and refused with the count and the limit, non-finite
+    steps too (the default grid: 31 262 tuples)."""
+    import tracemalloc
+
+    tracemalloc.start()
+    with pytest.raises(meas.MeasurementError, match="907,214,112 tuples, more than the limit of 4,000,000"):
+        meas.goniometer_directions(meas.THESIS_THETA_I_DEG, meas.THESIS_PHI_I_DEG, 0.0001, 15.0)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert peak < 1 << 20  # refused before any array was made
+    with pytest.raises(meas.MeasurementError, match="phi step must be a finite number"):
+        meas.goniometer_directions([0.0], [0.0], 5.0, float("nan"))
+    assert main(["measure", "gold-ggx", "--theta-step", "0.0001", "-o", str(tmp_path / "m.csv")]) == 2
+    assert "more than the limit" in capsys.readouterr().err and not (tmp_path / "m.csv").exists()

@@ -185,3 +185,36 @@ def test_a_rotation_that_is_not_a_unit_quaternion_is_normalised_with_a_warning(t
         zero = load_gltf(_node_edit(tmp_path, rotation=[0, 0, 0, 0]))
     assert any("is zero; no rotation used" in str(w.message) for w in caught)
     np.testing.assert_allclose(zero.objects[0].mesh.positions.max(axis=0), [1, 1, 0], atol=1e-6)
+
+
+def _many_nodes(tmp_path, count: int):
+    """The textured quad's file with ``count`` nodes, each placing its mesh."""
+    import json
+    from pathlib import Path
+
+    path = Path(_textured_gltf(tmp_path, {}, []))
+    gltf = json.loads(path.read_text())
+    gltf["nodes"] = [{"mesh": 0, "translation": [float(i), 0.0, 0.0]} for i in range(count)]
+    gltf["scenes"] = [{"nodes": list(range(count))}]
+    path.write_text(json.dumps(gltf))
+    return path
+
+
+def test_object_and_node_counts_are_bounded(tmp_path):
+    """Issue 43: 100 000 nodes in a 5 MB file ran for minutes (per-node work, cube maps drawing
+    every object). Objects beyond ``Limits.max_objects`` (CLI --max-objects) and nodes beyond
+    ``max_nodes`` stop the load with the count, before the scene is built."""
+    import time
+
+    from lobeview.app.cli import main
+    from lobeview.core.trust import Limits
+    from lobeview.scenes.gltf_common import GltfError
+
+    assert len(load_gltf(_many_nodes(tmp_path, 6), Limits(max_objects=6)).objects) == 6
+    with pytest.raises(GltfError, match="more than 5 drawable objects"):
+        load_gltf(_many_nodes(tmp_path, 6), Limits(max_objects=5))
+    started = time.perf_counter()
+    with pytest.raises(GltfError, match="200000 nodes, more than the limit of 100000"):
+        load_gltf(_many_nodes(tmp_path, 200_000))
+    assert time.perf_counter() - started < 30  # refused from the count, not after visiting them
+    assert main(["shot", str(_many_nodes(tmp_path, 6)), "--max-objects", "0", "--out", str(tmp_path / "x.png")]) == 2
