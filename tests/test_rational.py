@@ -291,6 +291,25 @@ def test_rational_material_json_is_validated():
         validate({**desc, "theta_max": 200})
 
 
+def test_rational_denominators_without_zeros_are_required():
+    """Issue 43: a sampler whose denominator is zero gave a NaN albedo and a black object, a pole
+    (a denominator changing sign in the domain) an albedo of 455; both were accepted."""
+    zero = json.loads(GOLD_RATIONAL.read_text())
+    zero["sampling"]["theta"]["denominator"] = [0.0] * len(zero["sampling"]["theta"]["denominator"])
+    with pytest.raises(MaterialError, match=r"sampling\.theta: the denominator is zero"):
+        validate(zero)
+    pole = json.loads(GOLD_RATIONAL.read_text())
+    count = len(pole["brdf"][1]["denominator"])
+    pole["brdf"][1]["denominator"] = [0.0, 1.0] + [0.0] * (count - 2)  # q = u1 over [-1, 1]
+    with pytest.raises(MaterialError, match=r"brdf\[1\]: the denominator reaches zero inside the domain"):
+        validate(pole)
+    near = json.loads(GOLD_RATIONAL.read_text())  # q = 1 + u1 + 1e-9: positive, 1e-9 at an edge
+    terms = len(near["brdf"][2]["denominator"])
+    near["brdf"][2]["denominator"] = [1.0 + 1e-9, 1.0] + [0.0] * (terms - 2)
+    with pytest.raises(MaterialError, match="reaches zero"):
+        validate(near)
+
+
 def test_reference_on_a_rational_material_has_no_truncated_pixels():
     """`reference` on a Rational BRDF through the real pipeline: a 64-sample pass overran
     llvmpipe's loop limiter (black pixels in a grid, 2 % of the sphere); PreviewRenderer shrinks
