@@ -9,7 +9,7 @@ import warnings
 
 import numpy as np
 import pytest
-from test_lobe_batches import assert_within_rounding
+from test_indirect_draws import assert_within_rounding
 
 from lobeview.core.methods import Method
 from lobeview.viewer.cube_bake import cube_gpu_bytes

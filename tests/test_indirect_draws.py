@@ -8,7 +8,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from test_frames_unchanged import _demo_scene, _model, _model_camera, _renderer, _scene_camera
-from test_lobe_batches import assert_within_rounding
 from test_textures import _textured_quad_scene
 
 from lobeview.core.methods import Method
@@ -16,6 +15,22 @@ from lobeview.viewer.camera import Camera, outside_frustum_many, perspective
 from lobeview.viewer.interface import TEXTURE_UNITS, DrawRecorder
 from lobeview.viewer.object_batches import ObjectBatches, SceneGeometry
 from lobeview.viewer.object_records import RECORD_OFFSETS, RECORD_SIZE, pack_object_record
+
+# Bound of the multi-drawn lobe-shaded frames against one draw per object: the same values reach
+# the same GLSL, but llvmpipe compiles record reads (storage buffer) and uniform reads into
+# differently scheduled code, so a few pixels differ in their last bits (measured:
+# 4-13 of 4000 pixels on the demo, 66 on WaterBottle under fis-8; at most 2.3e-7 relative).
+RELATIVE_BOUND = 1e-6
+DIFFERING_PIXELS_BOUND = 0.05
+
+
+def assert_within_rounding(multi: np.ndarray, single: np.ndarray, what: str) -> None:
+    """Frames equal within RELATIVE_BOUND of the frame's peak, on at most DIFFERING_PIXELS_BOUND of the pixels."""
+    assert np.all(np.isfinite(multi)) and multi.max() > 0.01, what
+    scale = max(float(np.abs(single).max()), 1e-6)
+    difference = np.abs(multi - single)
+    assert float(difference.max()) <= RELATIVE_BOUND * scale, what
+    assert np.count_nonzero(np.any(difference > 0, axis=-1)) <= DIFFERING_PIXELS_BOUND * difference[..., 0].size, what
 
 
 def _frames(renderer, camera, method: str) -> dict:

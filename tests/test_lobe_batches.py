@@ -10,6 +10,7 @@ import warnings
 import numpy as np
 import pytest
 from test_frames_unchanged import _apartment_scene, _demo_scene, _renderer, _scene_camera
+from test_indirect_draws import _frames, assert_within_rounding
 
 from lobeview.core.methods import Method
 from lobeview.viewer.cube_arrays import CubeMapArrays, direct_gl
@@ -18,13 +19,6 @@ from lobeview.viewer.interface import TEXTURE_UNITS, DrawRecorder
 from lobeview.viewer.mip_chain import upload_cube
 from lobeview.viewer.object_records import LOBE_RECORDS, RECORD_SIZE
 from lobeview.viewer.scene_shading import per_pixel_lobes
-
-# Bound of the multi-drawn lobe-shaded frames against one draw per object: the same values reach
-# the same GLSL, but llvmpipe compiles record reads (storage buffer) and uniform reads into
-# differently scheduled code, so a few pixels differ in their last bits (measured:
-# 4-13 of 4000 pixels on the demo, 66 on WaterBottle under fis-8; at most 2.3e-7 relative).
-RELATIVE_BOUND = 1e-6
-DIFFERING_PIXELS_BOUND = 0.05
 
 SAMPLE_CUBES = """#version 450 core
 layout(local_size_x = 64) in;
@@ -96,25 +90,6 @@ def test_cube_map_arrays_read_like_cube_maps(ctx):
         out.release()
 
 
-def _lobe_frames(renderer, camera, method: str) -> dict:
-    out = {}
-    for indirect in (False, True):
-        renderer.configure(indirect_draws=indirect)
-        renderer.invalidate_mirrors()
-        before = renderer.drawer.draw_calls.total()
-        frame = renderer.render(camera, method, spp=1).radiance
-        out[indirect] = (frame, np.subtract(renderer.drawer.draw_calls.total(), before))
-    return out
-
-
-def assert_within_rounding(multi: np.ndarray, single: np.ndarray, what: str) -> None:
-    assert np.all(np.isfinite(multi)) and multi.max() > 0.01, what
-    scale = max(float(np.abs(single).max()), 1e-6)
-    difference = np.abs(multi - single)
-    assert float(difference.max()) <= RELATIVE_BOUND * scale, what
-    assert np.count_nonzero(np.any(difference > 0, axis=-1)) <= DIFFERING_PIXELS_BOUND * difference[..., 0].size, what
-
-
 @pytest.mark.parametrize("method", ["lobe-7", "lobe-11+norm", "fis-8"])
 def test_demo_lobe_shaded_objects_are_multi_drawn(ctx, method):
     """The demo's lobe-shaded objects go through multi-draws: per-object draws are left only for
@@ -124,7 +99,7 @@ def test_demo_lobe_shaded_objects_are_multi_drawn(ctx, method):
     scene = _demo_scene()
     renderer = _renderer(ctx, scene)
     try:
-        frames = _lobe_frames(renderer, _scene_camera(scene, "overview"), method)
+        frames = _frames(renderer, _scene_camera(scene, "overview"), method)
         (single, calls_single), (multi, calls_multi) = frames[False], frames[True]
         assert_within_rounding(multi, single, method)
         drawer = renderer.drawer
@@ -145,7 +120,7 @@ def test_apartment_lobe_shaded_frames_and_cube_faces(ctx):
     renderer = _renderer(ctx, scene)
     try:
         camera = _scene_camera(scene)
-        frames = _lobe_frames(renderer, camera, "lobe-7+norm")
+        frames = _frames(renderer, camera, "lobe-7+norm")
         assert_within_rounding(frames[True][0], frames[False][0], "apartment-1 lobe-7+norm")
         assert frames[True][1][1] > frames[False][1][1]
     finally:
@@ -213,6 +188,21 @@ def test_records_are_made_again_only_for_what_changed(ctx):
         renderer.release()
 
 
+def _assert_per_object_fallback(renderer, camera, why: str) -> None:
+    """With the lobe batches off for ``why``: a warning saying it, and lobe-7's frame with
+    multi-draws on equal bit for bit to the frame with them off."""
+    renderer.configure(indirect_draws=False)
+    single = renderer.render(camera, "lobe-7", spp=1).radiance
+    renderer.configure(indirect_draws=True)
+    renderer.invalidate_mirrors()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        multi = renderer.render(camera, "lobe-7", spp=1).radiance
+    assert any(why in str(w.message) for w in caught)
+    assert renderer.drawer.lobe_batches is None
+    np.testing.assert_array_equal(multi, single)
+
+
 def test_without_direct_gl_the_objects_are_drawn_one_by_one(ctx, monkeypatch):
     """Where the GL library cannot be reached, a warning says so and the frame is the per-object
     path's, bit for bit."""
@@ -222,19 +212,9 @@ def test_without_direct_gl_the_objects_are_drawn_one_by_one(ctx, monkeypatch):
     scene = _demo_scene()
     renderer = _renderer(ctx, scene)
     try:
-        camera = _scene_camera(scene, "overview")
-        renderer.configure(indirect_draws=False)
-        single = renderer.render(camera, "lobe-7", spp=1).radiance
-        renderer.configure(indirect_draws=True)
-        renderer.invalidate_mirrors()
         assert renderer.drawer.lobe_batches_unavailable == "no GL library (test)"  # found at start-up (cube bake)
         renderer.drawer.lobe_batches_unavailable = ""  # asked again: warned again
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            multi = renderer.render(camera, "lobe-7", spp=1).radiance
-        assert any("no GL library (test)" in str(w.message) for w in caught)
-        assert renderer.drawer.lobe_batches is None
-        np.testing.assert_array_equal(multi, single)
+        _assert_per_object_fallback(renderer, _scene_camera(scene, "overview"), "no GL library (test)")
     finally:
         renderer.release()
 
@@ -252,20 +232,10 @@ def test_a_failing_array_falls_back_to_one_draw_per_object(ctx, monkeypatch):
     scene = _demo_scene()
     renderer = _renderer(ctx, scene)
     try:
-        camera = _scene_camera(scene, "overview")
-        renderer.configure(indirect_draws=False)
-        single = renderer.render(camera, "lobe-7", spp=1).radiance
         monkeypatch.setattr(LobeBatches, "prepare", failing_prepare)
         if renderer.drawer.lobe_batches is not None:  # made again on the next frame, then failing
             renderer.drawer.lobe_batches.release()
             renderer.drawer.lobe_batches = None
-        renderer.configure(indirect_draws=True)
-        renderer.invalidate_mirrors()
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always")
-            multi = renderer.render(camera, "lobe-7", spp=1).radiance
-        assert any("GL error 0x0505 (test)" in str(w.message) for w in caught)
-        assert renderer.drawer.lobe_batches is None
-        np.testing.assert_array_equal(multi, single)
+        _assert_per_object_fallback(renderer, _scene_camera(scene, "overview"), "GL error 0x0505 (test)")
     finally:
         renderer.release()

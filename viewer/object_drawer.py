@@ -382,7 +382,6 @@ class ObjectDrawer:
     ) -> np.ndarray:  # fmt: skip
         """Draw this pass's diffuse-shaded objects by multi-draws (viewer/object_batches.py) and
         count them; returns which objects were handled here (the rest go through the loop)."""
-        n = len(self.objects)
         batchable, transmissive, single_sided = self._batch_masks()
         shading = self.shading
         key = (shading.record_generation, shading.textures.evictions, shading.material_textures.evictions)
@@ -396,18 +395,10 @@ class ObjectDrawer:
         if specular:  # objects with a cube map or a mirror buffer are shaded with their lobes
             owners, has_cube = self.owner_cubes()
             mask &= ~has_cube[owners]
-            if mirrors:
-                mask[np.fromiter(mirrors, dtype=np.int64)] = False
         else:
             mask &= ~transmissive
-        for index in excluded:
-            if index is not None and 0 <= int(index) < n:
-                mask[int(index)] = False
-        visible = mask if culled is None else mask & ~culled
-        drawn = int(np.count_nonzero(visible))
-        counts.drawn += drawn
-        counts.culled += int(np.count_nonzero(mask)) - drawn
-        if drawn == 0:
+        visible = self._pass_objects(mask, mirrors, excluded, culled, counts)
+        if not visible.any():
             return mask
         self.batches.cull(mask, cull_view_projection, self.settings.frustum_culling)
         self.draw_calls.culls += 1
@@ -429,6 +420,21 @@ class ObjectDrawer:
             self.batches.draw_group(program, vao, group)
             self.draw_calls.multi += 1
         return mask
+
+    def _pass_objects(self, mask: np.ndarray, mirrors, excluded, culled, counts) -> np.ndarray:
+        """Clear from ``mask`` (in place) the objects this pass shades from mirror buffers or
+        leaves out; count the rest as drawn or culled; returns the drawn ones."""
+        n = len(mask)
+        if mirrors:
+            mask[np.fromiter(mirrors, dtype=np.int64)] = False
+        for index in excluded:
+            if index is not None and 0 <= int(index) < n:
+                mask[int(index)] = False
+        visible = mask if culled is None else mask & ~culled
+        drawn = int(np.count_nonzero(visible))
+        counts.drawn += drawn
+        counts.culled += int(np.count_nonzero(mask)) - drawn
+        return visible
 
     def _lobe_batches(self) -> LobeBatches | None:
         """The lobe-shaded objects' multi-draws (viewer/lobe_batches.py), or None where they do
@@ -493,16 +499,8 @@ class ObjectDrawer:
             self._stop_lobe_batches(str(exc))
             return handled
         enabled = members.copy()
-        if mirrors:
-            enabled[np.fromiter(mirrors, dtype=np.int64)] = False
-        for index in excluded:
-            if index is not None and 0 <= int(index) < n:
-                enabled[int(index)] = False
-        visible = enabled if culled is None else enabled & ~culled
-        drawn = int(np.count_nonzero(visible))
-        counts.drawn += drawn
-        counts.culled += int(np.count_nonzero(enabled)) - drawn
-        if drawn == 0:
+        visible = self._pass_objects(enabled, mirrors, excluded, culled, counts)
+        if not visible.any():
             return enabled
         batches.cull(batch, enabled, cull_view_projection, self.settings.frustum_culling)
         self.draw_calls.culls += 1
