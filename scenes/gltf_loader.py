@@ -497,8 +497,8 @@ def _load(path: Path, limits: Limits) -> Scene:
         _warn(
             scene_warnings,
             f"{path}: {len(lights)} KHR_lights_punctual lamp(s): `lobeview bake` bakes their light into the "
-            "lightmaps; the specular lobes reflect them live (spheres of 5 cm, shadowed per object), but "
-            "unbaked objects get no diffuse lamp light",
+            "lightmaps with exact shadows; live, the lobes reflect them (spheres of 5 cm) and unbaked objects "
+            "get their diffuse light, both shadowed per object only",
         )
     scene = Scene(objects, materials, cameras, str(path), scene_warnings, lights)
     if objects:

@@ -168,6 +168,9 @@ void main() {
     if (u_lightmap_texcoord >= 0)
         occlusion = min(occlusion / max(occlusion_mean.r, MIN_OCCLUSION_MEAN), MAX_OCCLUSION_DETAIL);
     irradiance *= 1.0 + u_occlusion_strength * (occlusion - 1.0);
+    // Lamps light an object without a lightmap directly (the bake holds them where there is one);
+    // direct light, so the occlusion texture (indirect light only, spec 3.9.3) does not darken it.
+    if (u_lightmap_texcoord < 0) irradiance += lamps_irradiance(v_position, tbn[2]);
     vec3 base_color = u_base_color_factor.rgb * base_texel.rgb;
     float metallic = clamp(u_metallic_factor * mr_texel.b, 0.0, 1.0);
     float roughness = clamp(u_roughness_factor * mr_texel.g, 0.0, 1.0);

@@ -185,3 +185,43 @@ def test_a_lamp_on_a_glossy_floor_matches_numpy_in_every_method(ctx):
         mirror_point = eye_vec + t * (image - eye_vec)
         assert np.linalg.norm(first.position[y, x][:2] - mirror_point[:2]) < 0.12
     assert np.linalg.norm(peaks[0] - peaks[1]) > 0.2  # the highlight moved with the camera
+
+
+def test_an_unbaked_surface_gets_the_lamps_diffuse_light(ctx):
+    """Without a lightmap, a Lambertian floor under a spot lamp and a black sky shows
+    kd / pi x the bake's closed form (scenes/baker.py lamp_irradiance) per pixel, drawn by the
+    multi-draw and by one draw per object alike; with a lightmap the lamp is not added again."""
+    from lobeview.materials.spec import validate
+    from lobeview.scenes.scene import SceneMaterial
+    from lobeview.viewer.camera import Camera
+
+    lamp = _lamp("spot", position=np.array([0.2, 0.1, 1.2]), intensity=2.0, inner_cone=0.3, outer_cone=0.7,
+                 range=4.0)  # fmt: skip
+    scene = _glossy_floor_scene([lamp])
+    scene.materials[0] = SceneMaterial("white", validate({"model": "thesis", "kd": 0.8, "lobes": []}))
+    scene.objects[0].uv1 = None  # no lightmap: the environment's irradiance (black) plus the lamp's
+    camera = Camera((0.0, -2.0, 1.6), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), 55.0)
+    frames = []
+    for indirect in (True, False):
+        import warnings
+
+        from lobeview.scenes.envmap import EnvironmentMap
+        from lobeview.viewer.scene_renderer import SceneRenderer
+        from lobeview.viewer.settings import RenderSettings
+
+        black = EnvironmentMap.from_function(lambda d: np.zeros(d.shape[:-1] + (3,)), height=16, name="black")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            renderer = SceneRenderer(ctx, scene, black, size=(96, 64), progress=False,
+                                     settings=RenderSettings(cube_face_size=16, indirect_draws=indirect))  # fmt: skip
+        try:
+            frames.append(renderer.render(camera, "lobe-7"))
+        finally:
+            renderer.release()
+    frame = frames[0]
+    np.testing.assert_array_equal(frames[1].radiance, frame.radiance)
+    lit = frame.mask & (frame.radiance.max(axis=-1) > 1e-4)
+    assert lit.sum() > 200 and (frame.mask & ~lit).sum() > 200  # the cone's footprint and the dark outside
+    expected = 0.8 / math.pi * lamp_irradiance(lamp, frame.position[lit].astype(np.float64),
+                                               frame.normal[lit].astype(np.float64))  # fmt: skip
+    np.testing.assert_allclose(frame.radiance[lit], expected, rtol=2e-4, atol=1e-6)

@@ -67,13 +67,13 @@ OBJECT_RECORD_FIELDS = (
     RecordField("u_map_mirrored", "ivec2", "MATERIAL_MAPS"),
     RecordField("u_map_transform", "mat3", "MATERIAL_MAPS"),
     RecordField("u_sheen_albedo", "float", "SHEEN_TABLE_SIZE"),
+    RecordField("u_lamp_visibility", "float", MAX_LAMPS),  # scenes/lamps.py: how much of it each lamp reaches
 )
 
 #: What a lobe-shaded object (SPECULAR; methods lobe-N and fis-N, viewer/lobe_batches.py) sets
 #: beyond the diffuse fields, appended after them so both kinds share the diffuse offsets: its
-#: lobes and patterns, the cube's size and bright-source lights, its reflection proxy, how much of
-#: it each lamp reaches (scenes/lamps.py), and the layer of its cube map in the cube-map array of
-#: its face size (viewer/cube_arrays.py).
+#: lobes and patterns, the cube's size and bright-source lights, its reflection proxy, and the
+#: layer of its cube map in the cube-map array of its face size (viewer/cube_arrays.py).
 LOBE_RECORD_FIELDS = (
     RecordField("u_lobe_count", "int"),
     RecordField("u_albedo_per_pixel", "int"),
@@ -90,7 +90,6 @@ LOBE_RECORD_FIELDS = (
     RecordField("u_cap_light_axis", "vec4", MAX_CAP_LIGHTS),
     RecordField("u_cap_light_radiance", "vec3", MAX_CAP_LIGHTS),
     RecordField("u_proxy_planes", "vec4", MAX_PROXY_PLANES),
-    RecordField("u_lamp_visibility", "float", MAX_LAMPS),
 )
 
 # std430 (GL 4.5 spec 7.6.2.2): base alignment and size in bytes; the stride of an array of
