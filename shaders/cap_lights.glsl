@@ -17,6 +17,19 @@ vec2 cap_lattice_point(int i, int n) {
     return vec2((float(i) + 0.5) / float(n), fract(0.25 + float(i) * 0.6180339887498949));
 }
 
+// materials/cap_lights.py symmetric_cap_xi: one point on the axis when n is odd, then antipodal
+// pairs (pair j at u1 = (j + 1/2) / pairs, golden-ratio azimuth, the partner half a turn away).
+vec2 symmetric_cap_point(int i, int n) {
+    int odd = n & 1;
+    if (odd == 1 && i == 0) return vec2(0.0);
+    int k = i - odd;
+    int pairs = n / 2;
+    int j = k / 2;
+    float azimuth = fract(0.25 + float(j) * 0.6180339887498949);
+    if ((k & 1) == 1) azimuth = fract(azimuth + 0.5);
+    return vec2((float(j) + 0.5) / float(max(pairs, 1)), azimuth);
+}
+
 // One strategy's term: f cos / (M / Omega + K p).
 vec3 cap_light_term(Lobe l, vec3 wi, vec3 wo, float cap_density, int lobe_points) {
     vec3 f = lobe_eval(l, wi, wo);
@@ -50,8 +63,8 @@ vec3 cap_integral(Lobe l, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float 
     mat3 to_local = transpose(tbn);
     vec3 sum = vec3(0.0);
     for (int i = 0; i < counts.x; ++i) {
-        vec2 u = cap_lattice_point(i, counts.x);
-        if (counts.x == 1) u.x = 0.0;  // a single point on the axis
+        // materials/cap_lights.py cap_xi: symmetric without lobe points, the lattice with them
+        vec2 u = counts.y == 0 || counts.x == 1 ? symmetric_cap_point(i, counts.x) : cap_lattice_point(i, counts.x);
         float cos_t = 1.0 - u.x * one_minus_cos;
         float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
         float phi = 2.0 * PI * u.y;

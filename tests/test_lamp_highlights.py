@@ -55,23 +55,34 @@ def test_a_lamps_cap_gives_the_extensions_irradiance(kind, extra):
 
 
 def test_cap_integrator_on_a_glossy_lobe_against_quadrature():
-    """The deterministic integrator used per pixel (8 + 8 points) against quadrature for a GGX
-    conductor lit by a lamp 0.5-3 units away (caps of 1-6 degrees)."""
+    """The deterministic integrator used per pixel against quadrature for a GGX conductor lit by a
+    lamp 0.5-3 units away (caps of 1-6 degrees), at the highlight's peak and across it (views
+    tilted up to 10 degrees): worst 4.4 %, RMS 1.6 % (symmetric cap points, cap_xi). With the
+    golden-ratio lattice alone the 2-3 cap points' centroid lay off the axis: worst 9.9 %, RMS
+    4.2 %, a highlight skewed by half a pixel against Mitsuba (bench/lamps.py --mitsuba)."""
     from lobeview.materials.presets import PRESETS
     from lobeview.materials.spec import build_bsdf, validate
 
     lobe = build_bsdf(validate(PRESETS["gold-ggx"])).components[0]
+    errors = []
     for height in (0.5, 1.0, 3.0):
         lamp = _lamp("point", position=np.array([0.0, 0.0, height]), intensity=2.0)
         point = np.array([0.3 * height, 0.0, 0.0])
         cap = lamp_cap(lamp, point)
         to_lamp = lamp.position - point
         mirror = np.array([-to_lamp[0], -to_lamp[1], to_lamp[2]]) / np.linalg.norm(to_lamp)
-        wo = mirror  # the viewer in the mirror direction: the highlight's peak
-        got = integrate_cap_light(lobe, wo, cap)
-        truth = brute_force_cap_light(lobe, wo, cap, rings=300)
-        np.testing.assert_allclose(got, truth, rtol=0.03)
-        assert truth.max() > 0
+        for tilt_x in (-10.0, -5.0, 0.0, 5.0, 10.0):
+            for tilt_y in (-10.0, 0.0, 10.0):
+                across = np.radians(tilt_x) * np.array([mirror[2], 0.0, -mirror[0]])
+                wo = mirror + across + np.array([0.0, np.radians(tilt_y), 0.0])
+                wo /= np.linalg.norm(wo)
+                truth = brute_force_cap_light(lobe, wo, cap, rings=300)
+                if truth.max() < 1e-3 * lamp.intensity:
+                    continue
+                got = integrate_cap_light(lobe, wo, cap)
+                errors.append(float(np.max(np.abs(got / truth - 1.0))))
+    errors = np.array(errors)
+    assert len(errors) >= 30 and errors.max() < 0.05 and np.sqrt(np.mean(errors**2)) < 0.025, errors
 
 
 def test_lamp_radius_and_inside():
