@@ -30,6 +30,7 @@ import numpy as np
 
 from .cube_arrays import CubeMapArrays
 from .interface import TEXTURE_UNITS, bind_storage
+from .object_batches import binding_key
 from .object_records import LOBE_RECORDS, OBJECT_RECORDS_BINDING
 
 #: method kinds whose per-object state is the cube, the material and the lights (batchable)
@@ -122,12 +123,7 @@ class LobeBatches:
                 record = recorder.record()
                 uniforms = {name: data for name, (_, data) in record.uniforms}
                 uniforms["u_cube_layer"] = struct.pack("f", float(layer))
-                # What the draw binds but the cube (read from the array) decides its group.
-                binds = tuple(
-                    (id(bind.__self__), bind.__name__, target)
-                    for bind, target in record.uses
-                    if target != radiance_unit
-                )
+                binds = binding_key(record, skip_unit=radiance_unit)  # the cube comes from its array
                 group_key = (parallax, face_size, binds, bool(single_sided[index]))
                 entry = _ObjectRecord(object_key, cube, LOBE_RECORDS.pack(uniforms), group_key)
                 self._records[(method, index)] = entry

@@ -82,6 +82,13 @@ class SceneGeometry:
             buffer.release()
 
 
+def binding_key(record, skip_unit: int | None = None) -> tuple:
+    """What a recorded draw binds (textures, samplers, buffers and their units), as the key of
+    the multi-draw group it joins; ``skip_unit``: a unit left out (a lobe-shaded object's cube,
+    read from its cube-map array instead)."""
+    return tuple((id(bind.__self__), bind.__name__, target) for bind, target in record.uses if target != skip_unit)
+
+
 @dataclass
 class DrawGroup:
     """Objects drawn by one multi-draw: the same texture bindings and face culling."""
@@ -130,9 +137,7 @@ class ObjectBatches:
             record = recorder.record()
             records.append(pack_object_record({name: data for name, (_, data) in record.uniforms}))
             if batchable[obj.index]:
-                # What the draw binds (textures, samplers, units) decides its group.
-                binds = tuple((id(bind.__self__), bind.__name__, target) for bind, target in record.uses)
-                grouped.setdefault((binds, bool(single_sided[obj.index])), []).append(obj)
+                grouped.setdefault((binding_key(record), bool(single_sided[obj.index])), []).append(obj)
         self.release_buffers()
         self.records = self.ctx.buffer(b"".join(records) if records else bytes(16))
         self.groups, first = [], 0
