@@ -47,6 +47,9 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
 // (materials/patterns.py AlbedoTable); linear filtering between texel centres.
 const int ALBEDO_ROWS = ALBEDO_PHI + 1;
 uniform sampler2D u_albedo;
+#if !defined(ALBEDO_AT)  // a multi-draw reads its material's layer of one array (viewer/object_records.py)
+#define ALBEDO_AT(uv) textureLod(u_albedo, uv, 0.0)
+#endif
 // A glTF lobe whose base colour, metallic or roughness come from textures has its own albedo
 // at every pixel: integral of f cos = F0 A + F90 B with (A, B) from the GGX DFG table
 // (materials/prefilter.py dfg_table; Schlick Fresnel is linear in F0), bsdf.glsl lobe_dfg_albedo;
@@ -91,6 +94,6 @@ vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
     phi = phi - floor(phi);
     float row = float(lobe_index * ALBEDO_ROWS) + phi * float(ALBEDO_PHI) + 0.5;
     // Columns are uniform in sqrt(cos theta_o) (AlbedoTable: dense near grazing).
-    return textureLod(u_albedo, vec2(sqrt(max(wo.z, 0.0)), row / float(MAX_LOBES * ALBEDO_ROWS)), 0.0).rgb;
+    return ALBEDO_AT(vec2(sqrt(max(wo.z, 0.0)), row / float(MAX_LOBES * ALBEDO_ROWS))).rgb;
 }
 #endif

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import warnings
 
+import moderngl
 import numpy as np
 import pytest
 from test_frames_unchanged import _apartment_scene, _demo_scene, _renderer, _scene_camera
@@ -90,6 +91,71 @@ def test_cube_map_arrays_read_like_cube_maps(ctx):
         out.release()
 
 
+SAMPLE_TABLES = """#version 450 core
+layout(local_size_x = 64) in;
+uniform sampler2D u_table;
+layout(binding = 5) uniform sampler2DArray u_array;
+uniform float u_layer;
+layout(std430, binding = 0) writeonly buffer Out { vec4 samples[]; };
+layout(std430, binding = 1) readonly buffer Queries { vec2 queries[]; };
+void main() {
+    uint i = gl_GlobalInvocationID.x;
+    samples[2u * i] = textureLod(u_table, queries[i], 0.0);
+    samples[2u * i + 1u] = textureLod(u_array, vec3(queries[i], u_layer), 0.0);
+}
+"""
+
+
+def test_albedo_table_array_reads_like_the_tables(ctx):
+    """Each albedo table's layer gives the table's own linear-filtered texels bit for bit; a
+    table already there (same texels, another texture) keeps its layer; a full array starts afresh."""
+    from lobeview.viewer.lobe_batches import MAX_ALBEDO_LAYERS, AlbedoTableArray
+
+    rng = np.random.default_rng(5)
+    tables = [ctx.texture((32, 136), 3, rng.random((136, 32, 3)).astype(np.float32).tobytes(), dtype="f4")
+              for _ in range(3)]  # fmt: skip
+    for table in tables:
+        table.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        table.repeat_x = table.repeat_y = False
+    array = AlbedoTableArray(ctx)
+    shader = ctx.compute_shader(SAMPLE_TABLES)
+    n = 64 * 16
+    queries = rng.uniform(-0.1, 1.1, size=(n, 2)).astype(np.float32)  # clamped edges too
+    query_buffer, out = ctx.buffer(queries.tobytes()), ctx.buffer(reserve=n * 32)
+    try:
+        layers = [array.layer_of(table) for table in tables]
+        assert layers == [0, 1, 2] and array.texture.size == (32, 136, 3)
+        copy = ctx.texture((32, 136), 3, tables[1].read(), dtype="f4")
+        assert array.layer_of(copy) == 1 and array.texture.size[2] == 3  # content-addressed
+        copy.release()
+        shader["u_table"] = 0
+        for table, layer in zip(tables, layers, strict=True):
+            table.use(0)
+            array.bind(5)
+            shader["u_layer"] = float(layer)
+            out.bind_to_storage_buffer(0)
+            query_buffer.bind_to_storage_buffer(1)
+            shader.run(n // 64)
+            samples = np.frombuffer(out.read(), np.float32).reshape(n, 2, 4)
+            assert samples[:, 0, :3].max() > 0.5
+            np.testing.assert_array_equal(samples[:, 1], samples[:, 0])
+        with pytest.raises(RuntimeError, match="two sizes"):
+            other = ctx.texture((16, 136), 3, bytes(16 * 136 * 12), dtype="f4")
+            try:
+                array.layer_of(other)
+            finally:
+                other.release()
+        assert not array.full
+        array._tables += [b""] * (MAX_ALBEDO_LAYERS - 3)
+        assert array.full
+        array.clear()
+        assert not array.full and array.texture is None and array.layer_of(tables[2]) == 0
+    finally:
+        array.release()
+        for resource in (*tables, shader, query_buffer, out):
+            resource.release()
+
+
 @pytest.mark.parametrize("method", ["lobe-7", "lobe-11+norm", "fis-8"])
 def test_demo_lobe_shaded_objects_are_multi_drawn(ctx, method):
     """The demo's lobe-shaded objects go through multi-draws: per-object draws are left only for
@@ -108,6 +174,9 @@ def test_demo_lobe_shaded_objects_are_multi_drawn(ctx, method):
         assert calls_multi[0] <= calls_single[0] - batched  # their per-object draws are gone
         for index in np.flatnonzero(drawer.lobe_batches.members):  # BLEND stays per object (sorted)
             assert drawer.material_of(index).alpha_mode.upper() != "BLEND"
+        if method.endswith("+norm"):  # albedo tables from one array: materials do not split the groups
+            layers = drawer.lobe_batches.albedo_tables.texture.size[2]
+            assert layers >= 5 and len(drawer.lobe_batches.current.groups) < layers
     finally:
         renderer.release()
 

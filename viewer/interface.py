@@ -290,6 +290,9 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     # multi-drawn lobe-shaded objects: the cube-map array of their face size (viewer/cube_arrays.py;
     # fixed by layout(binding) in the shader: moderngl does not set samplerCubeArray uniforms)
     "u_radiance_array": 43,
+    # multi-drawn normalised lobe-N: every material's albedo table, one layer each
+    # (viewer/lobe_batches.py AlbedoTableArray; layout(binding) as for the cube-map arrays)
+    "u_albedo_array": 44,
 }
 
 

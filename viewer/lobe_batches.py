@@ -10,8 +10,11 @@ of one draw call each.
   packed from the very bytes the per-object path sends (viewer/interface.py DrawRecorder), so the
   frames are the same. Records depend on the method (patterns), so they are made per method,
   and per object again only when its material, textures or cube map changed.
+- Normalised lobe-N's albedo tables (one small texture per material) lie in one 2D texture
+  array (AlbedoTableArray), a record holding its layer: bound per group, they had split the
+  mirror passes' lobe-3+norm into one group per material (10 on the 18-room apartment).
 - Groups: the same program variant (with or without a reflection proxy), cube-map array, texture
-  bindings (lightmap, glTF maps, albedo tables) and face culling. The commands' instance counts
+  bindings (lightmap, glTF maps) and face culling. The commands' instance counts
   come from the diffuse batches' frustum-culling compute pass (viewer/object_batches.py).
 
 Left to one draw per object (viewer/object_drawer.py): reflectors drawn from their mirror
@@ -30,12 +33,71 @@ import numpy as np
 
 from .cube_arrays import CubeMapArrays
 from .interface import TEXTURE_UNITS, bind_storage
-from .object_batches import binding_key
+from .object_batches import binding_key, bound_texture
 from .object_records import LOBE_RECORDS, OBJECT_RECORDS_BINDING
 
 #: method kinds whose per-object state is the cube, the material and the lights (batchable)
 BATCHED_METHOD_KINDS = ("lobe", "fis")
 MAX_METHOD_BATCHES = 4  # methods whose records are kept (the camera's, the mirror passes', switches)
+# Albedo-table layers before the array is started afresh (material edits each add a table; GL 4.5
+# guarantees 2048 array layers, one table is 52 KB).
+MAX_ALBEDO_LAYERS = 64
+
+
+class AlbedoTableArray:
+    """Normalised lobe-N's per-material albedo tables (viewer/shading.py, 2D float textures of one
+    shape) copied into the layers of one 2D texture array, content-addressed: a table already
+    there keeps its layer, so records made earlier stay valid until :meth:`clear`."""
+
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self.texture: moderngl.TextureArray | None = None
+        self._layers: dict[bytes, int] = {}  # a table's texels -> its layer
+        self._tables: list[bytes] = []
+        self._size: tuple[int, int] | None = None
+
+    @property
+    def full(self) -> bool:
+        return len(self._tables) >= MAX_ALBEDO_LAYERS
+
+    def layer_of(self, table: moderngl.Texture) -> int:
+        """The layer holding ``table``'s texels (added when new; the array is made again)."""
+        if table.components != 3 or table.dtype != "f4":
+            raise RuntimeError(f"albedo table of {table.components} x {table.dtype} texels, not 3 x f4")
+        if self._size is not None and table.size != self._size:
+            raise RuntimeError(f"albedo tables of two sizes: {self._size} and {table.size}")
+        texels = table.read()
+        layer = self._layers.get(texels)
+        if layer is None:
+            layer = self._layers[texels] = len(self._tables)
+            self._tables.append(texels)
+            self._size = table.size
+            self._upload()
+        return layer
+
+    def _upload(self) -> None:
+        if self.texture is not None:
+            self.texture.release()
+        width, height = self._size
+        self.texture = self.ctx.texture_array((width, height, len(self._tables)), 3, b"".join(self._tables), dtype="f4")
+        # As the per-object table (viewer/shading.py): linear between texel centres, clamped.
+        self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.texture.repeat_x = self.texture.repeat_y = False
+
+    def bind(self, unit: int) -> None:
+        if self.texture is not None:
+            self.texture.use(location=unit)
+
+    def clear(self) -> None:
+        self.release()
+        self._layers.clear()
+        self._tables.clear()
+        self._size = None
+
+    def release(self) -> None:
+        if self.texture is not None:
+            self.texture.release()
+            self.texture = None
 
 
 @dataclass
@@ -84,6 +146,7 @@ class LobeBatches:
         self.ctx = ctx
         self.batches = batches
         self.arrays = CubeMapArrays(gl)
+        self.albedo_tables = AlbedoTableArray(ctx)
         self._records: dict[tuple, _ObjectRecord] = {}  # (method, object index) -> its record
         self._methods: dict = {}  # method -> MethodBatch, least recently prepared first
         self.current: MethodBatch | None = None  # the batch prepared last
@@ -107,11 +170,17 @@ class LobeBatches:
             return batch
         if batch is not None:
             batch.release()
+        if self.albedo_tables.full:  # start afresh: every kept record names a layer
+            self.albedo_tables.clear()
+            self._records.clear()
+            for other in self._methods.values():
+                other.release()
+            self._methods.clear()
         cubes = {objects[i].probe_owner: objects[objects[i].probe_owner].cube for i in np.flatnonzero(members)}
         placed = self.arrays.update({owner: cube.residual for owner, cube in cubes.items()})
         grouped: dict[tuple, list] = {}
         records = bytearray(LOBE_RECORDS.size * max(len(objects), 1))
-        radiance_unit = TEXTURE_UNITS["u_radiance"]
+        radiance_unit, albedo_unit = TEXTURE_UNITS["u_radiance"], TEXTURE_UNITS["u_albedo"]
         for index in np.flatnonzero(members):
             obj = objects[index]
             face_size, layer = placed[obj.probe_owner]
@@ -123,7 +192,11 @@ class LobeBatches:
                 record = recorder.record()
                 uniforms = {name: data for name, (_, data) in record.uniforms}
                 uniforms["u_cube_layer"] = struct.pack("f", float(layer))
-                binds = binding_key(record, skip_unit=radiance_unit)  # the cube comes from its array
+                table = bound_texture(record, albedo_unit)  # normalised lobe-N only
+                albedo_layer = self.albedo_tables.layer_of(table) if table is not None else 0
+                uniforms["u_albedo_layer"] = struct.pack("f", float(albedo_layer))
+                # the cube and the albedo table come from their arrays
+                binds = binding_key(record, skip_units=(radiance_unit, albedo_unit))
                 group_key = (parallax, face_size, binds, bool(single_sided[index]))
                 entry = _ObjectRecord(object_key, cube, LOBE_RECORDS.pack(uniforms), group_key)
                 self._records[(method, index)] = entry
@@ -158,6 +231,7 @@ class LobeBatches:
         """One multi-draw of ``group``: its cube-map array and the records bound here, its other
         textures by the caller."""
         self.arrays.bind(group.face_size, TEXTURE_UNITS["u_radiance_array"])
+        self.albedo_tables.bind(TEXTURE_UNITS["u_albedo_array"])
         bind_storage(program, batch.records, OBJECT_RECORDS_BINDING)
         vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(group.objects), first=group.first_command)
 
@@ -167,4 +241,5 @@ class LobeBatches:
         self._methods.clear()
         self.current = None
         self.arrays.release()
+        self.albedo_tables.release()
         self._records.clear()

@@ -82,11 +82,19 @@ class SceneGeometry:
             buffer.release()
 
 
-def binding_key(record, skip_unit: int | None = None) -> tuple:
+def binding_key(record, skip_units: tuple[int, ...] = ()) -> tuple:
     """What a recorded draw binds (textures, samplers, buffers and their units), as the key of
-    the multi-draw group it joins; ``skip_unit``: a unit left out (a lobe-shaded object's cube,
-    read from its cube-map array instead)."""
-    return tuple((id(bind.__self__), bind.__name__, target) for bind, target in record.uses if target != skip_unit)
+    the multi-draw group it joins; ``skip_units``: units left out (a lobe-shaded object's cube
+    and albedo table, read from arrays instead)."""
+    return tuple((id(bind.__self__), bind.__name__, target) for bind, target in record.uses if target not in skip_units)
+
+
+def bound_texture(record, unit: int):
+    """The texture a recorded draw binds to ``unit`` (None: nothing there)."""
+    for bind, target in record.uses:
+        if target == unit and isinstance(bind.__self__, moderngl.Texture):
+            return bind.__self__
+    return None
 
 
 @dataclass

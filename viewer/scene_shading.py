@@ -294,8 +294,9 @@ class SceneShading(ShadingBinder):
         write_uniform(program, "u_map_transform", np.asarray(transforms, dtype=np.float32))
         write_uniform(program, "u_map_mirrored", np.asarray(mirrored, dtype=np.int32))
         # Normalised lobe-N (shaders/patterns.glsl lobe_albedo); a multi-drawn program reads the
-        # flag from its records (viewer/object_records.py) but binds the tables all the same.
-        if has_uniform(program, "u_albedo_per_pixel") or has_uniform(program, "u_albedo"):
+        # flag and its albedo table's layer from its records (viewer/object_records.py) but binds
+        # the DFG tables all the same (its own u_albedo is unused there).
+        if any(has_uniform(program, name) for name in ("u_albedo_per_pixel", "u_albedo", "u_dfg")):
             # Every texture but the normal maps, occlusion and emission changes the lobes' albedo.
             per_pixel = gltf_model and bool(set(mat.textures) - {"normal", "occlusion", "emissive", "clearcoat_normal"})
             set_uniform(program, "u_albedo_per_pixel", int(per_pixel))
