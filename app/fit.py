@@ -24,6 +24,7 @@ import numpy as np
 
 from lobeview.materials import measurement as meas
 from lobeview.materials.fit import FitError, FitOptions, fit_thesis, material_error, measured_albedo
+from lobeview.materials.fit_selection import KD_EXACT_SHARE, KD_MIN_GAIN
 from lobeview.materials.lobe_fit import LUMINANCE, is_isotropic
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.materials.virtual import virtual_measurement
@@ -172,6 +173,7 @@ def _fit_thesis(args, measurement, isotropic, progress, name: str) -> dict:
         ranges=dict(args.range),
         isotropic=isotropic,
         polish=not args.no_polish,
+        diffuse=args.diffuse,
         progress=progress,
     )
     result = fit_thesis(measurement, options)
@@ -269,6 +271,17 @@ def cmd_fit(args) -> int:
     if "error_reflection" in fit:
         extra = f" (reflection {fit['error_reflection']:.6g}, transmission {fit['error_transmission']:.6g})"
     print(f"Eq. 3.7 {metric} error: {fit['error']:.6g}{extra}")
+    diffuse = fit.get("diffuse")
+    if diffuse:  # shown with --quiet too: the fit's answer depends on it
+        kd = ", ".join(f"{v:.4g}" for v in diffuse["kd_histogram"])
+        print(
+            f"diffuse term {'kept' if diffuse['kept'] else 'dropped (kd = 0): not supported by the data'}: the "
+            f"histogram's kd ({kd}) lowers the error by {100 * diffuse['gain_of_model_l1']:.1f} % of the fit's L1 "
+            f"mass, {100 * diffuse['gain_of_error']:.0f} % of the kd = 0 fit's error (kept from "
+            f"{100 * KD_MIN_GAIN:.0f} % or {100 * KD_EXACT_SHARE:.0f} %; --diffuse histogram keeps it always)"
+        )
+    for line in fit.get("warnings") or []:
+        print(f"warning: {line}")
     _print_albedo(measurement, desc)
     print(f"wrote {args.output} ({time.perf_counter() - t0:.1f} s)")
     if args.plot:
@@ -373,6 +386,14 @@ def add_fit_arguments(p) -> None:
         "--no-polish",
         action="store_true",
         help="skip the Nelder-Mead step after each brute-force search (the thesis' method exactly)",
+    )
+    p.add_argument(
+        "--diffuse",
+        default="auto",
+        choices=["auto", "histogram"],
+        help="thesis model: kd from the BRDF histogram only where it lowers the L1 error by at least "
+        "10 %% of the fit's L1 mass or half the kd = 0 fit's error, else 0 (auto, default: a conductor's "
+        "lobe tail is no diffuse term), or always (histogram, thesis 3.4.1 exactly)",
     )
     p.add_argument(
         "--isotropic",

@@ -47,6 +47,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .fit_selection import DiffuseChoice, Valley, lobe_valley
+from .fit_selection import penalty as _penalty
 from .lobe_fit import LUMINANCE
 from .measurement import Measurement, angles_deg, renderer_pair, sample_frame_eval
 from .microfacet import ALPHA_MAX, ALPHA_MIN
@@ -126,6 +128,9 @@ class FitOptions:
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)  # same keys, (lo, hi)
     isotropic: bool = False  # tie my = mx (an isotropic sample, a MERL table)
     polish: bool = True  # Nelder-Mead from each lobe's brute-force minimum (not in the thesis)
+    # "auto": the histogram's kd only where the data supports it (materials/fit_selection.py);
+    # "histogram": always (thesis 3.4.1 exactly)
+    diffuse: str = "auto"
     progress: Callable[[str], None] | None = None
 
 
@@ -152,6 +157,14 @@ class FitResult:
     evaluations: int
     seconds: float
     options: FitOptions
+    model_mass: float = 0.0  # Eq. 3.7 of the fitted model against 0 (luminance): what it explains
+    diffuse: DiffuseChoice | None = None  # kd kept or dropped by the data (None: fixed or not tested)
+    valleys: list[Valley] = field(default_factory=list)  # per reflection/transmission lobe
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the data does not determine (degenerate pairs, parameters on a bound)."""
+        return [line for valley in self.valleys for line in valley.messages()]
 
     def material(self, name: str = "fitted", description: str = "", data: str = "") -> dict:
         """The fit as a lobeview material description (docs/guide.md "Material JSON") with provenance."""
@@ -186,6 +199,9 @@ class FitResult:
                 "evaluations": self.evaluations,
                 "seconds": round(self.seconds, 2),
                 "fixed": dict(self.options.fixed),
+                "diffuse": self.diffuse.as_dict() if self.diffuse is not None else None,
+                "lobes": [valley.as_dict() for valley in self.valleys],
+                "warnings": self.warnings,
             },
         }
 
@@ -199,11 +215,6 @@ def metric_weights(m: Measurement) -> np.ndarray:
     if total <= 0:
         raise FitError(f"{m.name}: all weights are zero")
     return m.weight * np.abs(m.wi[:, 2]) / total
-
-
-def _penalty(diff: np.ndarray, metric: str) -> np.ndarray:
-    """|d| for Eq. 3.7's L1 metric, d^2 for the squared variant."""
-    return np.abs(diff) if metric == "l1" else diff * diff
 
 
 def eq37_error(measured: np.ndarray, model: np.ndarray, weights: np.ndarray, metric: str = "l1") -> float:
@@ -407,6 +418,8 @@ def check_options(options: FitOptions, reflection_lobes: int, transmission_lobes
                 raise FitError(f"{kind} {name} = {value}: outside the model's range [{lo}, {hi}]")
     if options.metric not in ("l1", "l2"):
         raise FitError(f"metric: expected 'l1' or 'l2', got {options.metric!r}")
+    if options.diffuse not in ("auto", "histogram"):
+        raise FitError(f"diffuse: expected 'auto' or 'histogram', got {options.diffuse!r}")
     if options.iterations < 1 or options.alternations < 0:
         raise FitError("iterations must be >= 1 and alternations >= 0")
 
@@ -419,9 +432,10 @@ def _fit_lobe_set(
     options: FitOptions,
     prefix: str,
     say: Callable[[str], None],
-) -> tuple[list[LobeFit], np.ndarray, int]:
-    """Fit ``count`` lobes to ``target`` by the thesis' alternating scheme; returns the lobes and
-    their per-lobe transfer probabilities (count, N)."""
+) -> tuple[list[LobeFit], np.ndarray, int, list[Valley]]:
+    """Fit ``count`` lobes to ``target`` by the thesis' alternating scheme; returns the lobes,
+    their per-lobe transfer probabilities (count, N), the evaluations and each lobe's (k, r0)
+    valley (materials/fit_selection.py; none where k or r0 is fixed)."""
     fits: list[LobeFit | None] = [None] * count
     values = np.zeros((count, len(target)))
     evaluations = 0
@@ -451,7 +465,15 @@ def _fit_lobe_set(
             fits[i] = fit
             p = fit.params
             values[i] = p["k"] * geometry.unit_lobe([p["mx"]], [p["my"]], [p["r0"]], [p["alpha"]])[0]
-    return [f for f in fits if f is not None], values, evaluations
+    valleys = []
+    for i, fit in enumerate(fits):
+        rest = np.maximum(target - (values.sum(axis=0) - values[i]), 0.0)
+        ranges, fixed = _lobe_options(options, f"{prefix}{i + 1}")
+        bounds = {name: ranges.get(name, DEFAULT_RANGES[name]) for name in LOBE_PARAMS}
+        if "r0" not in fixed and "k" not in fixed:
+            label = f"{'transmission lobe' if prefix == 'tlobe' else 'lobe'} {i + 1}"
+            valleys.append(lobe_valley(geometry, rest, weights, fit.params, options.metric, bounds, label, fixed))
+    return [f for f in fits if f is not None], values, evaluations, valleys
 
 
 def _scale_search(target, unit, weights, metric, hi: float, grid: int = 16, iterations: int = 8) -> float:
@@ -488,7 +510,6 @@ def fit_thesis(m: Measurement, options: FitOptions | None = None) -> FitResult:
     check_options(options, options.lobes, t_lobes)
 
     weights = metric_weights(m)
-    lum = m.luminance
     cos_o = np.abs(m.wo[:, 2])
     channels = m.channels
     # kd per channel from the histogram of the reflection tuples' BRDF values (thesis 3.4.1).
@@ -505,25 +526,53 @@ def fit_thesis(m: Measurement, options: FitOptions | None = None) -> FitResult:
         kd = np.clip(kd, 0.0, 1.0)
     else:
         kd = np.zeros(channels)
-    kd_lum = float(kd[0]) if channels == 1 else float(kd @ LUMINANCE)
     say(
         f"kd = {np.array2string(kd, precision=4)} (histogram mode of the BRDF values)"
         if "kd" not in options.fixed
         else f"kd = {kd[0]:.4g} (fixed)"
     )
+    result = _fit_given_kd(m, options, t_lobes, kd, weights, say)
+    if options.diffuse == "auto" and "kd" not in options.fixed and options.lobes and kd.any():
+        say("fitting again with kd = 0: does the data support a diffuse term? (materials/fit_selection.py)")
+        without = _fit_given_kd(m, options, t_lobes, np.zeros(channels), weights, say)
+        choice = DiffuseChoice(kd, result.error, without.error, result.model_mass)
+        evaluations = result.evaluations + without.evaluations
+        result = result if choice.kept else without
+        result.diffuse, result.evaluations = choice, evaluations
+        say(choice.message())
+    result.seconds = time.perf_counter() - start
+    for line in result.warnings:
+        say(f"warning: {line}")
+    say(
+        f"done: Eq. 3.7 {options.metric.upper()} error {result.error:.6g} "
+        f"({result.evaluations} candidate evaluations, {result.seconds:.1f} s)"
+    )
+    return result
+
+
+def _fit_given_kd(m: Measurement, options: FitOptions, t_lobes: int, kd: np.ndarray, weights, say) -> FitResult:
+    """The lobes and colours of thesis Eq. 3.6 for a given kd (fit_thesis's work after kd)."""
+    trans_mask = m.transmission
+    refl_mask = ~trans_mask
+    lum = m.luminance
+    cos_o = np.abs(m.wo[:, 2])
+    channels = m.channels
+    kd_lum = float(kd[0]) if channels == 1 else float(kd @ LUMINANCE)
     diffuse = kd_lum / math.pi * cos_o
 
     evaluations = 0
-    lobes, t_fits = [], []
+    lobes, t_fits, valleys, t_valleys = [], [], [], []
     refl_values = trans_values = None
     if options.lobes:
         geo = LobeGeometry(m.wi[refl_mask], m.wo[refl_mask], transmission=False)
         target = lum[refl_mask] - diffuse[refl_mask]
-        lobes, refl_values, n = _fit_lobe_set(geo, target, weights[refl_mask], options.lobes, options, "lobe", say)
+        lobes, refl_values, n, valleys = _fit_lobe_set(
+            geo, target, weights[refl_mask], options.lobes, options, "lobe", say
+        )
         evaluations += n
     if t_lobes:
         geo_t = LobeGeometry(m.wi[trans_mask], m.wo[trans_mask], transmission=True)
-        t_fits, trans_values, n = _fit_lobe_set(
+        t_fits, trans_values, n, t_valleys = _fit_lobe_set(
             geo_t, lum[trans_mask], weights[trans_mask], t_lobes, options, "tlobe", say
         )
         evaluations += n
@@ -560,11 +609,6 @@ def fit_thesis(m: Measurement, options: FitOptions | None = None) -> FitResult:
     error = eq37_error(lum, model_final_lum, weights, options.metric)
     err_r = eq37_error(lum[refl_mask], model_final_lum[refl_mask], weights[refl_mask], options.metric)
     err_t = eq37_error(lum[trans_mask], model_final_lum[trans_mask], weights[trans_mask], options.metric)
-    seconds = time.perf_counter() - start
-    say(
-        f"done: Eq. 3.7 {options.metric.upper()} error {error:.6g} "
-        f"({evaluations} candidate evaluations, {seconds:.1f} s)"
-    )
     return FitResult(
         kd,
         lobes,
@@ -577,8 +621,10 @@ def fit_thesis(m: Measurement, options: FitOptions | None = None) -> FitResult:
         channel_errors,
         options.metric,
         evaluations,
-        seconds,
+        0.0,  # fit_thesis times the whole fit
         options,
+        model_mass=eq37_error(np.zeros_like(model_final_lum), model_final_lum, weights, "l1"),
+        valleys=valleys + t_valleys,
     )
 
 
