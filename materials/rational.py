@@ -24,9 +24,12 @@ constraints in one variable (Eq. 3-4, derived below for the general form), both 
 
 Speed (section 2.3): each P(n, m) is solved on a small *training* subset; the remaining points
 are verified, and the ones that deviate most are added until the function satisfies them all.
-Algorithm 1 then scans n + m upwards, trying every split (numerator, denominator) of each count
-and keeping the feasible solution with the smallest condition number; if no count up to the
-maximum works, every interval is widened and the scan restarts.
+Algorithm 1 then looks for the smallest n + m that has a solution (in geometric steps, then by
+bisection: a count with a solution has one at every larger count; the paper scans upwards one by
+one) and keeps that count's feasible split (numerator, denominator) with the smallest condition
+number; if no count up to the maximum works, every interval is widened and the search restarts.
+Same counts as the linear scan on the bench's fits, 2.9x faster on a MERL gold table at eps 0.02
+(61.8 -> 21.5 s for three channels, three widenings each).
 """
 
 from __future__ import annotations
@@ -403,6 +406,27 @@ def _add_checks(data: IntervalData, points: np.ndarray, lower: np.ndarray | None
     data.upper = np.concatenate([data.upper, np.asarray(upper, dtype=np.float64).reshape(-1)])
 
 
+COUNT_STEP = 1.4  # the geometric steps of the count search in fit_rational
+
+
+def _best_split(data: IntervalData, total: int, stats: SolveStats, first: bool = False) -> tuple | None:
+    """The best-conditioned feasible (numerator, denominator) split of ``total`` coefficients:
+    (n_num, n_den, condition number, coefficients), or None where no split meets the intervals;
+    ``first``: the first feasible split found (whether the count has a function at all)."""
+    best = None
+    for n_num in range(total - 1, 0, -1):
+        n_den = total - n_num
+        if n_num > MAX_TERMS or n_den > MAX_TERMS:
+            continue
+        found = solve_problem(data, n_num, n_den, stats)
+        stats.tried.append((n_num, n_den, found is not None))
+        if found is not None and (best is None or found[1] < best[2]):
+            best = (n_num, n_den, found[1], found[0])
+            if first:
+                break
+    return best
+
+
 def fit_rational(
     data: IntervalData,
     max_coefficients: int = 40,
@@ -412,46 +436,62 @@ def fit_rational(
     verify: Callable[[RationalFunction], tuple | None] | None = None,
 ) -> tuple[RationalFunction, SolveStats]:
     """Algorithm 1: the rational function with the fewest coefficients (n + m + 2 <=
-    ``max_coefficients``) that meets every interval, the best-conditioned one among equal
-    counts; when none exists, widen every interval about its centre by ``widen`` (up to
-    ``max_widenings`` times). ``verify(fn)`` returns None when the found function is acceptable
-    between the data too, else (points, lower, upper) where it misbehaves: points with bounds
-    (lost monotonicity: the tabulated values there) join the data, points with ``lower`` None
+    ``max_coefficients``; counts searched in geometric steps, then by bisection) that meets every
+    interval, the best-conditioned one among equal counts; when none exists, widen every interval
+    about its centre by ``widen`` (up to ``max_widenings`` times). ``verify(fn)`` returns None
+    when the found function is acceptable between the data too, else (points, lower, upper)
+    where it misbehaves: points with bounds (lost monotonicity: the tabulated values there) join
+    the data, points with ``lower`` None
     (a pole) join ``data.check`` (q > 0 only), and the same count is fitted again."""
     if max_coefficients < 2 or max_coefficients > 2 * MAX_TERMS:
         raise RationalFitError(f"max_coefficients must be in [2, {2 * MAX_TERMS}], got {max_coefficients}")
     stats = SolveStats()
     t0 = time.perf_counter()
     for widening in range(max_widenings + 1):
-        total = 2
-        while total <= max_coefficients:
-            best = None
-            for n_num in range(total - 1, 0, -1):
-                n_den = total - n_num
-                if n_num > MAX_TERMS or n_den > MAX_TERMS:
-                    continue
-                found = solve_problem(data, n_num, n_den, stats)
-                stats.tried.append((n_num, n_den, found is not None))
-                if found is not None and (best is None or found[1] < best[2]):
-                    best = (n_num, n_den, found[1], found[0])
+        # Algorithm 1 scans n + m upwards. A function with some count is one with every larger
+        # count too (a zero coefficient more), so the scan steps up geometrically to the first
+        # count that has one and bisects the last step. Refuting a count is cheap (the training
+        # subset already fails) and solving a feasible large one slow (its verification rounds),
+        # so the steps start small (a bisection from the largest count: clean plastic 9.8 -> 20 s).
+        infeasible, step, best = 1, 2, None
+        while best is None:
+            best = _best_split(data, step, stats, first=True)
             if best is not None:
-                n_num, n_den, cond, c = best
-                fn = RationalFunction(
-                    tuple(c[:n_num]), tuple(c[n_num:]), tuple(data.domain_lower), tuple(data.domain_upper), data.form
-                )
-                extra = verify(fn) if verify is not None else None
-                if extra is None:
-                    stats.seconds = time.perf_counter() - t0
-                    return fn, stats
-                if progress:
-                    progress(
-                        f"  ({n_num}, {n_den}) coefficients misbehave at {len(extra[0])} check point(s); refitting"
-                    )
-                _add_checks(data, *extra)
-                continue  # the same count again, with the new points
-            if progress and total % 8 == 0:
-                progress(f"  no function with {total} coefficients ({time.perf_counter() - t0:.1f} s)")
-            total += 1
+                total = step
+                break
+            infeasible = step
+            if progress:
+                progress(f"  no function with {step} coefficients ({time.perf_counter() - t0:.1f} s)")
+            if step >= max_coefficients:
+                break
+            step = min(max_coefficients, max(step + 1, int(step * COUNT_STEP)))
+        if best is not None:
+            while total - infeasible > 1:
+                middle = (infeasible + total) // 2
+                found = _best_split(data, middle, stats, first=True)
+                if found is not None:
+                    total, best = middle, found
+                else:
+                    infeasible = middle
+                    if progress:
+                        progress(f"  no function with {middle} coefficients ({time.perf_counter() - t0:.1f} s)")
+            best = _best_split(data, total, stats)  # the smallest count found: its best-conditioned split
+        while best is not None:
+            n_num, n_den, cond, c = best
+            fn = RationalFunction(
+                tuple(c[:n_num]), tuple(c[n_num:]), tuple(data.domain_lower), tuple(data.domain_upper), data.form
+            )
+            extra = verify(fn) if verify is not None else None
+            if extra is None:
+                stats.seconds = time.perf_counter() - t0
+                return fn, stats
+            if progress:
+                progress(f"  ({n_num}, {n_den}) coefficients misbehave at {len(extra[0])} check point(s); refitting")
+            _add_checks(data, *extra)
+            best = _best_split(data, total, stats)  # the same count again, with the new points, then upwards
+            while best is None and total < max_coefficients:
+                total += 1
+                best = _best_split(data, total, stats)
         if widening == max_widenings:
             break
         centre = 0.5 * (data.lower + data.upper)

@@ -93,6 +93,29 @@ def test_fit_meets_every_interval_and_is_pole_free_on_a_lobe():
     np.testing.assert_allclose(again(x), r, rtol=1e-12)
 
 
+def test_count_search_finds_the_linear_scans_smallest_count_with_fewer_problems():
+    """fit_rational steps the count up geometrically and bisects (issue 44: Algorithm 1's linear
+    scan solved every count and every split on its way, 2.9x the time on a MERL gold fit): the
+    same smallest count and split as the scan, with fewer problems solved."""
+    th = np.linspace(0, 1.4, 30)
+    t, d = np.meshgrid(th, th, indexing="ij")
+    x = np.stack([t.ravel(), d.ravel()], 1)
+    f = 0.1 + 5 * np.exp(-((x[:, 0] / 0.3) ** 2)) * (1 + 0.5 * x[:, 1] ** 2)
+
+    def data():
+        return rf.IntervalData(x, f * 0.97, f * 1.03, (0.0, 0.0), (1.4, 1.4))
+
+    fn, stats = rf.fit_rational(data(), 40)
+    scan, linear = rf.SolveStats(), None
+    for total in range(2, 41):
+        linear = rf._best_split(data(), total, scan)
+        if linear is not None:
+            break
+    assert linear is not None and fn.counts == (linear[0], linear[1])
+    assert sum(fn.counts) >= 6  # not a trivial case: the scan refuted several counts
+    assert stats.problems < scan.problems
+
+
 def test_monotone_constraint_keeps_an_inverse_cdf_increasing():
     """An inverse CDF with a steep rise, fitted in the Eq. 8 form with Eq. 4's constraints: the
     boundary values hold exactly and the function increases on a grid 8x denser than the data."""
