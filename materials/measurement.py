@@ -181,12 +181,20 @@ _VALUE_LIMITS = (
 )
 
 
+CSV_CHUNK_ROWS = 1 << 16  # rows parsed at once: memory for the text is one chunk's, not the file's
+
+
 def read_csv(path, negative: str = "error", limits: Limits | None = None) -> Measurement:
     """Read a goniophotometer CSV (see the module docstring and docs/guide.md "Measured materials").
 
     ``negative``: what to do with negative p (background-subtracted noise): ``"error"``
     (default), ``"clamp"`` to 0 or ``"mask"`` (drop the tuple), both with a warning that counts
     them. Missing cells, NaN and Inf are always errors naming the line.
+
+    Streamed: CSV_CHUNK_ROWS lines at a time are parsed (numpy's C parser; a chunk it refuses is
+    read again line by line to name the line), checked and turned into the measurement's arrays,
+    so the memory is the kept tuples' arrays plus one chunk (reading the whole text and a list of
+    its lines first took 7.7 GB for a 20 M row file within the limits).
     """
     path = Path(path)
     size = check_regular_file(path, "measurement", limits or Limits(max_file_bytes=MAX_CSV_BYTES))
@@ -194,16 +202,52 @@ def read_csv(path, negative: str = "error", limits: Limits | None = None) -> Mea
         raise MeasurementError(f"{path}: empty file")
     if negative not in ("error", "clamp", "mask"):
         raise ValueError(f"negative must be 'error', 'clamp' or 'mask', got {negative!r}")
+    parts: list[tuple] = []
+    negatives = rows = 0
     try:
-        text = path.read_bytes().decode("utf-8")
+        with open(path, encoding="utf-8", newline="") as handle:
+            lines = _data_lines(handle)
+            header_line, header = next(lines, (0, None))
+            if header is None:
+                raise MeasurementError(f"{path}: no header line (expected {','.join(_REQUIRED)},p)")
+            columns, p_columns = _csv_columns(path, header_line, header)
+            chunk: list[tuple[int, str]] = []
+            for numbered in lines:
+                chunk.append(numbered)
+                if len(chunk) == CSV_CHUNK_ROWS:
+                    rows += len(chunk)
+                    if rows > MAX_TUPLES:
+                        raise MeasurementError(f"{path}: more than {MAX_TUPLES} rows (the limit)")
+                    negatives += _csv_chunk(path, chunk, columns, p_columns, negative, parts)
+                    chunk = []
+            if chunk:
+                rows += len(chunk)
+                if rows > MAX_TUPLES:
+                    raise MeasurementError(f"{path}: more than {MAX_TUPLES} rows (the limit)")
+                negatives += _csv_chunk(path, chunk, columns, p_columns, negative, parts)
     except UnicodeDecodeError as exc:
         raise MeasurementError(f"{path}: not UTF-8 text ({exc})") from None
-    lines = [
-        (i + 1, line) for i, line in enumerate(text.splitlines()) if line.strip() and not line.lstrip().startswith("#")
-    ]
-    if not lines:
-        raise MeasurementError(f"{path}: no header line (expected {','.join(_REQUIRED)},p)")
-    header_line, header = lines[0]
+    if not rows:
+        raise MeasurementError(f"{path}: header but no data rows")
+    if negatives:
+        warnings.warn(
+            f"{path}: {negatives} tuples with negative p {'clamped to 0' if negative == 'clamp' else 'dropped'}",
+            stacklevel=2,
+        )
+    wi, wo, p, weight = (np.concatenate([part[k] for part in parts]) for k in range(4))
+    return Measurement(wi, wo, p, weight, name=path.stem, source=str(path))
+
+
+def _data_lines(handle):
+    """(line number, line) of every line that is neither blank nor a comment."""
+    for number, line in enumerate(handle, start=1):
+        stripped = line.strip()
+        if stripped and not stripped.startswith("#"):
+            yield number, line
+
+
+def _csv_columns(path: Path, header_line: int, header: str) -> tuple[list[str], list[str]]:
+    """The header's column names and the p columns among them, checked."""
     columns = [c.strip().lower() for c in next(csv.reader([header]))]
     repeated = sorted({c for c in columns if columns.count(c) > 1})
     if repeated:
@@ -223,59 +267,77 @@ def read_csv(path, negative: str = "error", limits: Limits | None = None) -> Mea
     unknown = set(columns) - set(_REQUIRED) - set(p_columns) - {"weight"}
     if unknown:
         raise MeasurementError(f"{path}:{header_line}: unknown columns {sorted(unknown)}")
-    rows = lines[1:]
-    if len(rows) > MAX_TUPLES:
-        raise MeasurementError(f"{path}: {len(rows)} rows exceed the limit of {MAX_TUPLES}")
-    if not rows:
-        raise MeasurementError(f"{path}: header but no data rows")
-    values = np.empty((len(rows), len(columns)))
-    for r, (line_no, line) in enumerate(rows):
+    return columns, p_columns
+
+
+def _csv_values(path: Path, chunk: list[tuple[int, str]], width: int) -> np.ndarray:
+    """(rows, width) floats of a chunk of data lines; errors name the line."""
+    commas = width - 1
+    if all(line.count(",") == commas for _, line in chunk):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # numpy warns (and stops early) on a cell it cannot read
+            try:
+                flat = np.fromstring(",".join(line for _, line in chunk), sep=",")  # text mode: not deprecated
+            except (ValueError, DeprecationWarning):
+                flat = None
+        if flat is not None and flat.size == len(chunk) * width:
+            values = flat.reshape(len(chunk), width)
+            finite = np.isfinite(values).all(axis=1)
+            if finite.all():
+                return values
+            line_no, line = chunk[int(np.argmin(finite))]
+            raise MeasurementError(f"{path}:{line_no}: NaN or infinite value in {line.strip()[:120]!r}")
+    values = np.empty((len(chunk), width))  # the slow path finds the line numpy refused
+    for r, (line_no, line) in enumerate(chunk):
         cells = line.split(",")
-        if len(cells) != len(columns):
-            raise MeasurementError(f"{path}:{line_no}: {len(cells)} cells, the header has {len(columns)}")
+        if len(cells) != width:
+            raise MeasurementError(f"{path}:{line_no}: {len(cells)} cells, the header has {width}")
         try:
             values[r] = [float(c) for c in cells]
         except ValueError:
-            raise MeasurementError(f"{path}:{line_no}: not a number in {line.strip()!r}") from None
+            raise MeasurementError(f"{path}:{line_no}: not a number in {line.strip()[:120]!r}") from None
         if not np.isfinite(values[r]).all():
-            raise MeasurementError(f"{path}:{line_no}: NaN or infinite value in {line.strip()!r}")
+            raise MeasurementError(f"{path}:{line_no}: NaN or infinite value in {line.strip()[:120]!r}")
+    return values
+
+
+def _csv_chunk(path: Path, chunk, columns: list[str], p_columns: list[str], negative: str, parts: list) -> int:
+    """Parse and check one chunk of data lines and append its (wi, wo, p, weight) to ``parts``;
+    returns how many tuples had a negative p."""
+    values = _csv_values(path, chunk, len(columns))
     for name, limit, what in _VALUE_LIMITS:
         if name in columns:
             over = np.abs(values[:, columns.index(name)]) > limit
             if over.any():
-                line_no, line = rows[int(np.argmax(over))]
+                line_no, line = chunk[int(np.argmax(over))]
                 raise MeasurementError(f"{path}:{line_no}: {name} above {what} in {line.strip()[:120]!r}")
     col = {name: values[:, i] for i, name in enumerate(columns)}
     theta_i, theta_o = col["theta_i"], col["theta_o"]
     bad = (theta_i < 0) | (theta_i >= 90) | (theta_o < 0) | (theta_o > 180) | (np.abs(theta_o - 90) < 1e-9)
     if bad.any():
-        line_no = rows[int(np.argmax(bad))][0]
+        line_no = chunk[int(np.argmax(bad))][0]
         raise MeasurementError(
             f"{path}:{line_no}: theta_i must lie in [0, 90) and theta_o in [0, 180] without 90 (above 90: transmission)"
         )
     p = np.stack([col[c] for c in p_columns], axis=1)
-    keep = np.ones(len(rows), dtype=bool)
+    keep = np.ones(len(chunk), dtype=bool)
     neg = (p < 0).any(axis=1)
     if neg.any():
         if negative == "error":
-            line_no = rows[int(np.argmax(neg))][0]
+            line_no = chunk[int(np.argmax(neg))][0]
             raise MeasurementError(
                 f"{path}:{line_no}: negative transfer probability (pass negative='clamp' "
                 "or 'mask', CLI --negative, for background-subtracted data)"
             )
-        warnings.warn(
-            f"{path}: {int(neg.sum())} tuples with negative p {'clamped to 0' if negative == 'clamp' else 'dropped'}",
-            stacklevel=2,
-        )
         if negative == "clamp":
             p = np.maximum(p, 0.0)
         else:
             keep = ~neg
-    wi = spherical_direction(np.radians(theta_i), np.radians(col["phi_i"]))
-    wo = spherical_direction(np.radians(theta_o), np.radians(col["phi_o"]))
-    weight = col["weight"] if "weight" in col else np.abs(np.sin(np.radians(theta_o)))
-    m = Measurement(wi[keep], wo[keep], p[keep], weight[keep], name=path.stem, source=str(path))
-    return m
+    wi = spherical_direction(np.radians(theta_i[keep]), np.radians(col["phi_i"][keep]))
+    wo = spherical_direction(np.radians(theta_o[keep]), np.radians(col["phi_o"][keep]))
+    weight = col["weight"][keep] if "weight" in col else np.abs(np.sin(np.radians(theta_o[keep])))
+    parts.append((wi, wo, p[keep], weight))
+    return int(neg.sum())
 
 
 def write_csv(measurement: Measurement, path, comment: str = "") -> None:
