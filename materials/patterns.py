@@ -556,9 +556,20 @@ def integrate_sampled_lobe(
     """lobe-N of a lobe with its own sampler (step 6 of the module docstring): the lattice of
     :func:`lattice_xi` through ``lobe._sample(u1, u2, wo) -> (wi, 1 / p)``, one MIP level per
     sample from its solid angle 1 / (N p) (Eq. 4.16-4.17 with that area)."""
-    u1, u2 = lattice_xi(n)
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
-    wi, inverse_pdf = lobe._sample(u1, u2, wo)
+    # Near the normal the lattice is anchored in the tangent frame (RationalLobe
+    # tangent_anchor_weight), blended into the view-anchored one between two view angles.
+    tangent = float(lobe.tangent_anchor_weight(wo)) if hasattr(lobe, "tangent_anchor_weight") else 0.0
+    out = np.zeros(3)
+    for anchored, share in ((True, tangent), (False, 1.0 - tangent)):
+        if share > 0.0:
+            out += share * _sampled_estimate(lobe, wo, radiance, n, face_size, frame, albedo_table, lod_bias, anchored)
+    return out
+
+
+def _sampled_estimate(lobe, wo, radiance, n, face_size, frame, albedo_table, lod_bias, tangent: bool) -> np.ndarray:
+    u1, u2 = lattice_xi(n)
+    wi, inverse_pdf = lobe._sample(u1, u2, wo, tangent=True) if tangent else lobe._sample(u1, u2, wo)
     ok = (inverse_pdf > 0.0) & (wi[:, 2] > 0.0)
     if not np.any(ok):
         return np.zeros(3)

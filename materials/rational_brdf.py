@@ -54,6 +54,9 @@ HALF_PI = 0.5 * math.pi
 DEFAULT_THETA_MAX_DEG = 80.0  # the paper discards data beyond 80 deg (Fig. 8)
 GRAZING_START_DEG = 60.0  # intervals widen beyond this angle (section 3.2)
 BISECTION_STEPS = 44  # inverting a monotone inverse CDF to 2^-44 of its variable's range
+# lobe-N's lattice anchored in the tangent frame up to the first view angle from the normal, to
+# the view azimuth from the second, blended between (RationalLobe.tangent_anchor_weight)
+TANGENT_ANCHOR_DEG = (8.0, 20.0)
 
 
 @dataclass
@@ -423,9 +426,24 @@ class RationalLobe(Component):
     def sample_wi(self, u1, u2, wo):
         return self._sample(u1, u2, wo)[0]
 
-    def _sample(self, u1, u2, wo):
+    def tangent_anchor_weight(self, wo) -> float:
+        """How much of lobe-N's estimate comes from the lattice anchored in the tangent frame
+        (:meth:`_sample` with ``tangent``): 1 up to TANGENT_ANCHOR_DEG[0] from the normal, where
+        the lobe is nearly symmetric about the normal and a lattice turning with the view azimuth
+        drew a pinwheel (issue 44: 26 dB), 0 from TANGENT_ANCHOR_DEG[1] on (the lattice anchored
+        to the view keeps its mirror-symmetric placement about the lobe, more accurate there),
+        linear between (both estimates blended: continuous, twice the samples on that ring)."""
+        theta_v = math.degrees(math.acos(min(max(float(np.asarray(wo).reshape(3)[2]), 0.0), 1.0)))
+        low, high = TANGENT_ANCHOR_DEG
+        return min(max((high - theta_v) / (high - low), 0.0), 1.0)
+
+    def _sample(self, u1, u2, wo, tangent: bool = False):
         """(wi, 1 / pdf) for uniform numbers: theta_l = r_theta(theta_v, u1); u2 < 1/2 picks
-        phi_v + dphi with tau = 2 u2, else phi_v - dphi with tau = 2 u2 - 1 (Eq. 7-9)."""
+        phi_v + dphi with tau = 2 u2, else phi_v - dphi with tau = 2 u2 - 1 (Eq. 7-9).
+        ``tangent``: u2 runs once around the circle instead (tau = 2 - 2 u2 on the second side,
+        both sides meeting at dphi = pi), turned by -phi_v / 2 pi (mod 1), so a deterministic
+        lattice keeps its azimuths in the tangent frame instead of turning with the view azimuth;
+        uniform u2 stays uniform, the density is the same."""
         u1, u2 = np.asarray(u1, np.float64), np.asarray(u2, np.float64)
         shape = np.broadcast_shapes(u1.shape, u2.shape, wo.shape[:-1])
         mu = np.broadcast_to(u1, shape).reshape(-1)
@@ -435,8 +453,10 @@ class RationalLobe(Component):
         phi_v = np.arctan2(wo[:, 1], wo[:, 0])
         x_theta = np.stack([theta_v, mu], 1)
         theta_l = np.clip(self.sampling.theta(x_theta), 0.0, HALF_PI)
+        if tangent:
+            u2 = np.mod(u2 - phi_v / (2.0 * math.pi), 1.0)
         sign = np.where(u2 < 0.5, 1.0, -1.0)
-        tau = np.where(u2 < 0.5, 2.0 * u2, 2.0 * u2 - 1.0)
+        tau = np.where(u2 < 0.5, 2.0 * u2, (2.0 - 2.0 * u2) if tangent else (2.0 * u2 - 1.0))
         x_phi = np.stack([theta_v, theta_l, tau], 1)
         dphi = np.clip(self.sampling.phi(x_phi), 0.0, math.pi)
         phi = phi_v + sign * dphi

@@ -280,7 +280,7 @@ vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
 // its density from the sample's own derivatives instead of inverting its CDFs.
 vec3 lobe_sample_and_pdf(Lobe l, vec2 u, vec3 wo, out float pdf) {
 #if defined(HAS_RATIONAL)
-    if (l.type == LOBE_RATIONAL) return rational_sample(u, wo, pdf);  // inverse CDFs (Eq. 7-9)
+    if (l.type == LOBE_RATIONAL) return rational_sample(u, wo, false, pdf);  // inverse CDFs (Eq. 7-9)
 #endif
     vec3 wi = lobe_sample(l, u, wo);
     pdf = lobe_sample_pdf(l, wi, wo);

@@ -103,13 +103,13 @@ vec2 lobe_pattern_xi(Lobe l, int lobe_index, int i, int n) {
 // Rational sampler so that samples are distributed by its density p; each is filtered over its
 // solid angle 1 / (N p) and weighted by f cos / p (importance quadrature; self-normalised and
 // scaled to the albedo with LOBE_NORMALIZE).
-vec3 integrate_sampled_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
+vec3 sampled_estimate(Lobe l, int lobe_index, vec3 wo, mat3 tbn, bool tangent) {
     int n = u_samples;
     vec3 sum = vec3(0.0);
     vec3 weight_sum = vec3(0.0);
     for (int i = 0; i < n; ++i) {
         float p;
-        vec3 wi = rational_sample(u_pattern[lobe_index * MAX_PATTERN + i], wo, p);
+        vec3 wi = rational_sample(u_pattern[lobe_index * MAX_PATTERN + i], wo, tangent, p);
         if (p <= 0.0 || wi.z <= 0.0) continue;
         vec3 weight = lobe_eval(l, wi, wo) * (wi.z / p);
         sum += incident(tbn * wi, 1.0 / (float(n) * p)) * weight;
@@ -123,6 +123,18 @@ vec3 integrate_sampled_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
 #else
     return sum / float(n);
 #endif
+}
+
+// Near the normal the lattice is anchored in the tangent frame (a lattice turning with the view
+// azimuth drew a pinwheel there), from TANGENT_ANCHOR_HIGH_DEG on to the view; blended between
+// (materials/rational_brdf.py RationalLobe.tangent_anchor_weight).
+vec3 integrate_sampled_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
+    float theta_v = degrees(acos(clamp(wo.z, 0.0, 1.0)));
+    float tangent = clamp((TANGENT_ANCHOR_HIGH_DEG - theta_v) / (TANGENT_ANCHOR_HIGH_DEG - TANGENT_ANCHOR_LOW_DEG), 0.0, 1.0);
+    vec3 out_value = vec3(0.0);
+    if (tangent > 0.0) out_value += tangent * sampled_estimate(l, lobe_index, wo, tbn, true);
+    if (tangent < 1.0) out_value += (1.0 - tangent) * sampled_estimate(l, lobe_index, wo, tbn, false);
+    return out_value;
 }
 #endif
 

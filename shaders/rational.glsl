@@ -94,13 +94,17 @@ vec3 rational_brdf(vec3 wi, vec3 wo, float theta_max) {
 // Sample wi from (u.x = mu, u.y: the side and tau), materials/rational_brdf.py RationalLobe._sample;
 // pdf = 1 / (2 dtheta/dmu dphi/dtau sin theta_l) read from the derivatives at (mu, tau) (Eq. 7),
 // 0 where they are not positive.
-vec3 rational_sample(vec2 u, vec3 wo, out float pdf) {
+vec3 rational_sample(vec2 u, vec3 wo, bool tangent, out float pdf) {
     float theta_v = acos(clamp(wo.z, 0.0, 1.0));
     float phi_v = atan(wo.y, wo.x);
     vec2 theta = rational_theta(theta_v, u.x);
     float theta_l = clamp(theta.x, 0.0, 0.5 * PI);
-    bool plus = u.y < 0.5;
-    float tau = plus ? 2.0 * u.y : 2.0 * u.y - 1.0;
+    // tangent: u.y runs once around the circle (both sides meet at dphi = pi), turned by the view
+    // azimuth, so lobe-N's lattice keeps its azimuths in the tangent frame (materials/rational_brdf.py
+    // _sample: a lattice turning with phi_v drew a pinwheel near the normal).
+    float around = tangent ? fract(u.y - phi_v / (2.0 * PI)) : u.y;
+    bool plus = around < 0.5;
+    float tau = plus ? 2.0 * around : (tangent ? 2.0 - 2.0 * around : 2.0 * around - 1.0);
     vec2 phi = rational_phi(theta_v, theta_l, tau);
     float dphi = clamp(phi.x, 0.0, PI);
     float jacobian = 2.0 * theta.y * phi.y * sin(theta_l);

@@ -45,6 +45,7 @@ from lobeview.materials.patterns import (
 from lobeview.materials.prefilter import ANISO_DFG_COS, ANISO_DFG_PHI, ANISO_DFG_ROUGHNESS, ANISO_DFG_STRENGTH
 from lobeview.materials.rational import MAX_TERMS as RATIONAL_MAX_TERMS
 from lobeview.materials.rational import graded_exponents
+from lobeview.materials.rational_brdf import TANGENT_ANCHOR_DEG
 from lobeview.materials.rsibr import (
     RSIBR_ALBEDO_SIZE,
     RSIBR_FADE,
@@ -256,6 +257,9 @@ SHADER_CONSTANTS: dict = {
     "RATIONAL_BINDING": RATIONAL_BINDING,
     "RATIONAL_STRIDE": RATIONAL_STRIDE,
     "RATIONAL_MAX_DEGREE": RATIONAL_MAX_DEGREE,
+    # lobe-N's lattice anchored in the tangent frame near the normal (materials/rational_brdf.py)
+    "TANGENT_ANCHOR_LOW_DEG": TANGENT_ANCHOR_DEG[0],
+    "TANGENT_ANCHOR_HIGH_DEG": TANGENT_ANCHOR_DEG[1],
     "RATIONAL_NEWTON_STEPS": 14,  # inverting an inverse CDF (rational_invert): steps in all,
     "RATIONAL_BISECTION_STEPS": 6,  # the first ones bisection, then safeguarded Newton
 }
