@@ -21,20 +21,31 @@ from lobeview.viewer.mip_chain import upload_cube
 from lobeview.viewer.object_records import LOBE_RECORDS, RECORD_SIZE
 from lobeview.viewer.scene_shading import per_pixel_lobes
 
-SAMPLE_CUBES = """#version 450 core
+
+def _sampling_shader(single: str, array: str, query: str, lookup: str, layered: str) -> str:
+    """A compute shader that reads each query from a texture (uniform u_single, unit 0) and from
+    the same texels' layer of an array (unit 5), side by side."""
+    return f"""#version 450 core
 layout(local_size_x = 64) in;
-uniform samplerCube u_cube;
-layout(binding = 5) uniform samplerCubeArray u_array;
+uniform {single} u_single;
+layout(binding = 5) uniform {array} u_array;
 uniform float u_layer;
-layout(std430, binding = 0) writeonly buffer Out { vec4 samples[]; };
-layout(std430, binding = 1) readonly buffer Queries { vec4 queries[]; };
-void main() {
+layout(std430, binding = 0) writeonly buffer Out {{ vec4 samples[]; }};
+layout(std430, binding = 1) readonly buffer Queries {{ {query} queries[]; }};
+void main() {{
     uint i = gl_GlobalInvocationID.x;
-    vec4 q = queries[i];
-    samples[2u * i] = textureLod(u_cube, q.xyz, q.w);
-    samples[2u * i + 1u] = textureLod(u_array, vec4(q.xyz, u_layer), q.w);
-}
+    samples[2u * i] = {lookup};
+    samples[2u * i + 1u] = {layered};
+}}
 """
+
+
+# q = (direction, LOD)
+SAMPLE_CUBES = _sampling_shader(
+    "samplerCube", "samplerCubeArray", "vec4",
+    "textureLod(u_single, queries[i].xyz, queries[i].w)",
+    "textureLod(u_array, vec4(queries[i].xyz, u_layer), queries[i].w)",
+)  # fmt: skip
 
 
 def _gl(ctx):
@@ -62,7 +73,7 @@ def test_cube_map_arrays_read_like_cube_maps(ctx):
         assert arrays.copies == 5 and sorted(arrays.classes) == [8, 16]
         assert arrays.gpu_bytes == sum(6 * 16 * sum((s >> k) ** 2 for k in range(s.bit_length())) * c
                                        for s, c in ((16, 3), (8, 2)))  # fmt: skip
-        shader["u_cube"] = 0
+        shader["u_single"] = 0
         for index, cube in cubes.items():
             size, layer = placed[index]
             assert size == cube.size[0]
@@ -91,19 +102,10 @@ def test_cube_map_arrays_read_like_cube_maps(ctx):
         out.release()
 
 
-SAMPLE_TABLES = """#version 450 core
-layout(local_size_x = 64) in;
-uniform sampler2D u_table;
-layout(binding = 5) uniform sampler2DArray u_array;
-uniform float u_layer;
-layout(std430, binding = 0) writeonly buffer Out { vec4 samples[]; };
-layout(std430, binding = 1) readonly buffer Queries { vec2 queries[]; };
-void main() {
-    uint i = gl_GlobalInvocationID.x;
-    samples[2u * i] = textureLod(u_table, queries[i], 0.0);
-    samples[2u * i + 1u] = textureLod(u_array, vec3(queries[i], u_layer), 0.0);
-}
-"""
+SAMPLE_TABLES = _sampling_shader(
+    "sampler2D", "sampler2DArray", "vec2",
+    "textureLod(u_single, queries[i], 0.0)", "textureLod(u_array, vec3(queries[i], u_layer), 0.0)",
+)  # fmt: skip
 
 
 def test_albedo_table_array_reads_like_the_tables(ctx):
@@ -128,7 +130,7 @@ def test_albedo_table_array_reads_like_the_tables(ctx):
         copy = ctx.texture((32, 136), 3, tables[1].read(), dtype="f4")
         assert array.layer_of(copy) == 1 and array.texture.size[2] == 3  # content-addressed
         copy.release()
-        shader["u_table"] = 0
+        shader["u_single"] = 0
         for table, layer in zip(tables, layers, strict=True):
             table.use(0)
             array.bind(5)
