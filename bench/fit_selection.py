@@ -134,7 +134,7 @@ def markdown(rows: list[dict], valleys: list[dict], elapsed: float) -> str:
         lines.append(
             f"| {v['material']} | {v['fit']} | {v['ks']:.4g} | {v['r0']:.4g} | {v['r0_interval'][0]:.3g}-"
             f"{v['r0_interval'][1]:.3g} | {v['ks_interval'][0]:.3g}-{v['ks_interval'][1]:.3g} "
-            f"| {v['ks_r0_interval'][0]:.3g}-{v['ks_r0_interval'][1]:.3g} | {'yes' if v['degenerate'] else 'no'} "
+            f"| {v['product_interval'][0]:.3g}-{v['product_interval'][1]:.3g} | {'yes' if v['degenerate'] else 'no'} "
             f"| {'; '.join(v['at_bounds']) or '-'} |"
         )
     return "\n".join(lines) + "\n"

@@ -121,7 +121,7 @@ class Valley:
     label: str
     r0: tuple[float, float]
     k: tuple[float, float]
-    product: tuple[float, float]  # k r0 over the valley
+    product: tuple[float, float]  # k r0 over the valley (k (1 - r0) for a transmission lobe)
     r0_range: tuple[float, float]  # the range searched
     at_bounds: list[str]  # "r0 = 1 (its upper bound)", ...
     fit: tuple[float, float]  # the fit's own (k, r0)
@@ -133,6 +133,15 @@ class Valley:
         return not (self.r0[0] - 1e-9 <= self.fit[1] <= self.r0[1] + 1e-9)
 
     @property
+    def scale(self) -> str:
+        return "kt" if self.label.startswith("transmission") else "ks"
+
+    @property
+    def determined(self) -> str:
+        """The product the data fixes along the valley."""
+        return "kt (1 - r0)" if self.scale == "kt" else "ks r0"
+
+    @property
     def degenerate(self) -> bool:
         lo, hi = self.r0_range
         return self.r0[1] - self.r0[0] >= VALLEY_DEGENERATE_WIDTH * (hi - lo)
@@ -141,17 +150,18 @@ class Valley:
         out = []
         if self.degenerate:
             out.append(
-                f"{self.label}: ks and r0 are not determined separately by the data: any r0 in "
-                f"[{self.r0[0]:.3g}, {self.r0[1]:.3g}] with ks in [{self.k[0]:.3g}, {self.k[1]:.3g}] fits within "
-                f"{100 * VALLEY_TOLERANCE:.0f} % of the best error; only ks r0 ~ {self.product[0]:.3g}-"
+                f"{self.label}: {self.scale} and r0 are not determined separately by the data: any r0 in "
+                f"[{self.r0[0]:.3g}, {self.r0[1]:.3g}] with {self.scale} in [{self.k[0]:.3g}, {self.k[1]:.3g}] "
+                "fits within "
+                f"{100 * VALLEY_TOLERANCE:.0f} % of the best error; only {self.determined} ~ {self.product[0]:.3g}-"
                 f"{self.product[1]:.3g} is (measure closer to grazing angles, or fix r0 with --fix r0=VALUE)"
             )
         if self.off_valley:
             k, r0, ratio = self.best
             out.append(
-                f"{self.label}: the fit's r0 = {self.fit[1]:.3g} (ks {self.fit[0]:.3g}) is off the valley's floor: "
-                f"r0 = {r0:.3g} with ks = {k:.3g} fits better ({100 * (1 - ratio):.1f} % lower error; the search "
-                "stopped short: keep the polish step or refine the grid)"
+                f"{self.label}: the fit's r0 = {self.fit[1]:.3g} ({self.scale} {self.fit[0]:.3g}) is off the valley's "
+                f"floor: r0 = {r0:.3g} with {self.scale} = {k:.3g} fits better ({100 * (1 - ratio):.1f} % lower "
+                "error; the search stopped short: keep the polish step or refine the grid)"
             )
         out += [
             f"{self.label}: {bound}: the best fit may lie beyond the range searched (--range, where the model allows)"
@@ -164,7 +174,8 @@ class Valley:
             "lobe": self.label,
             "r0_interval": list(self.r0),
             "ks_interval": list(self.k),
-            "ks_r0_interval": list(self.product),
+            "determined": self.determined,
+            "product_interval": list(self.product),
             "degenerate": self.degenerate,
             "off_valley": self.off_valley,
             "at_bounds": list(self.at_bounds),
@@ -199,7 +210,9 @@ def lobe_valley(
     while hi < len(r0_values) - 1 and within[hi + 1]:
         hi += 1
     run = slice(lo, hi + 1)
-    products = ks[run] * r0_values[run]
+    # what the data fixes along the valley: k r0 for a reflection lobe, k (1 - r0) for a
+    # transmission lobe (its Fresnel factor is 1 - F)
+    products = ks[run] * ((1.0 - r0_values[run]) if geometry.transmission else r0_values[run])
     at_bounds = []
     for name, value in params.items():
         if name in fixed or name not in bounds:

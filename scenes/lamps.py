@@ -31,32 +31,13 @@ import math
 import numpy as np
 
 from lobeview.materials.cap_lights import CapLight
+from lobeview.scenes.baker import range_window, spot_factor  # the bake's own definitions
 
 LAMP_RADIUS = 0.05  # scene units (metres in glTF): a point or spot lamp's sphere for its reflections
 DIRECTIONAL_ANGULAR_RADIUS = math.radians(0.265)  # the sun's
 MAX_LAMPS = 16  # lamps with live reflections per scene (more: the brightest, the rest baked only)
 VISIBILITY_POINTS = 16  # vertices per object whose rays to each lamp decide its visibility
 SHADOW_OFFSET = 1e-4  # of the scene's extent: ray origins leave the surface along the normal
-
-
-def range_window(light, distance: np.ndarray) -> np.ndarray:
-    """scenes/baker.py lamp_irradiance's range falloff clamp(1 - (d / range)^4, 0, 1) (1 without a range)."""
-    distance = np.asarray(distance, dtype=np.float64)
-    if light.range is None:
-        return np.ones_like(distance)
-    return np.clip(1.0 - (distance / light.range) ** 4, 0.0, 1.0)
-
-
-def spot_factor(light, cos_axis: np.ndarray) -> np.ndarray:
-    """lamp_irradiance's spot cone: the squared linear ramp between the cones' cosines; 1 for
-    point and directional lamps. ``cos_axis``: cosine between the lamp's direction and the
-    direction from the lamp to the shading point."""
-    cos_axis = np.asarray(cos_axis, dtype=np.float64)
-    if light.type != "spot":
-        return np.ones_like(cos_axis)
-    cos_outer, cos_inner = math.cos(light.outer_cone), math.cos(light.inner_cone)
-    scale = 1.0 / max(1e-3, cos_inner - cos_outer)
-    return np.clip((cos_axis - cos_outer) * scale, 0.0, 1.0) ** 2
 
 
 def lamp_cap(light, point, radius: float = LAMP_RADIUS) -> CapLight | None:

@@ -13,6 +13,7 @@ import numpy as np
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import Method
 from lobeview.materials.gltf import specular_f0_unclamped
+from lobeview.scenes.baker import spot_ramp
 from lobeview.scenes.lamps import DIRECTIONAL_ANGULAR_RADIUS, LAMP_RADIUS, MAX_LAMPS, lamp_visibility, live_lamps
 from lobeview.scenes.scene import (
     CLAMP_TO_EDGE,
@@ -348,7 +349,7 @@ def lamp_uniforms(lamps: list) -> dict[str, np.ndarray]:
         position[k, 3] = LAMP_KINDS[lamp.type]
         colour[k, :3] = np.asarray(lamp.colour, dtype=np.float64) * float(lamp.intensity)
         colour[k, 3] = 0.0 if lamp.range is None else float(lamp.range)
-        cos_outer, cos_inner = np.cos(lamp.outer_cone), np.cos(lamp.inner_cone)
+        cos_outer, scale = spot_ramp(lamp)
         spot[k] = (*direction, cos_outer)
-        shape[k] = (1.0 / max(1e-3, cos_inner - cos_outer), np.sin(DIRECTIONAL_ANGULAR_RADIUS), LAMP_RADIUS, 0.0)
+        shape[k] = (scale, np.sin(DIRECTIONAL_ANGULAR_RADIUS), LAMP_RADIUS, 0.0)
     return {"u_lamp_position": position, "u_lamp_colour": colour, "u_lamp_spot": spot, "u_lamp_shape": shape}
