@@ -129,6 +129,13 @@ def test_albedo_table_array_reads_like_the_tables(ctx):
         assert layers == [0, 1, 2] and array.texture.size == (32, 136, 3)
         copy = ctx.texture((32, 136), 3, tables[1].read(), dtype="f4")
         assert array.layer_of(copy) == 1 and array.texture.size[2] == 3  # content-addressed
+        reads = []
+        original_read = type(tables[0]).read
+        type(tables[0]).read = lambda self, *a, **k: reads.append(self) or original_read(self, *a, **k)
+        try:
+            assert [array.layer_of(table) for table in tables] == [0, 1, 2] and reads == []  # known: no read-back
+        finally:
+            type(tables[0]).read = original_read
         copy.release()
         shader["u_single"] = 0
         for table, layer in zip(tables, layers, strict=True):

@@ -53,6 +53,7 @@ class AlbedoTableArray:
         self.ctx = ctx
         self.texture: moderngl.TextureArray | None = None
         self._layers: dict[bytes, int] = {}  # a table's texels -> its layer
+        self._known: dict[int, tuple[moderngl.Texture, int]] = {}  # id -> (texture held, its layer)
         self._tables: list[bytes] = []
         self._size: tuple[int, int] | None = None
 
@@ -61,7 +62,12 @@ class AlbedoTableArray:
         return len(self._tables) >= MAX_ALBEDO_LAYERS
 
     def layer_of(self, table: moderngl.Texture) -> int:
-        """The layer holding ``table``'s texels (added when new; the array is made again)."""
+        """The layer holding ``table``'s texels (added when new; the array is made again). A
+        texture seen before is not read back again (every object of a material shares its table,
+        and records are made again on each cube update); held, so its id cannot alias."""
+        known = self._known.get(id(table))
+        if known is not None and known[0] is table:
+            return known[1]
         if table.components != 3 or table.dtype != "f4":
             raise RuntimeError(f"albedo table of {table.components} x {table.dtype} texels, not 3 x f4")
         if self._size is not None and table.size != self._size:
@@ -73,6 +79,7 @@ class AlbedoTableArray:
             self._tables.append(texels)
             self._size = table.size
             self._upload()
+        self._known[id(table)] = (table, layer)
         return layer
 
     def _upload(self) -> None:
@@ -91,6 +98,7 @@ class AlbedoTableArray:
     def clear(self) -> None:
         self.release()
         self._layers.clear()
+        self._known.clear()
         self._tables.clear()
         self._size = None
 
