@@ -147,6 +147,9 @@ def material_widgets(imgui, desc: dict) -> tuple[bool, dict]:
         # Fitted coefficients, not parameters to slide: refit (the panel's fit) to change them.
         counts = [f"{len(fn['numerator'])}/{len(fn['denominator'])}" for fn in d["brdf"]]
         imgui.text(f"Rational BRDF, theta_max {d['theta_max']:g} deg, coefficients {' '.join(counts)}")
+    elif d["model"] == "measured":
+        # A measured table, rendered as it is: nothing to slide (fit it to get parameters).
+        imgui.text(f"measured table {d['file']}")
     else:
         c, d["base_color"] = _scalar_or_rgb_slider(imgui, "base colour", d["base_color"], "base_color")
         changed_any |= c

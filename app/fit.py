@@ -262,6 +262,10 @@ def parameter_lines(desc: dict) -> list[str]:
 
 def cmd_fit(args) -> int:
     t0 = time.perf_counter()
+    if args.render:  # refused before the fit, not after it
+        from .fit_render import check_renderable
+
+        check_renderable(args.data)
     desc, measurement, plotted = fit_description(args)
     Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
     print("\n" + "\n".join(parameter_lines(desc)))
@@ -291,6 +295,10 @@ def cmd_fit(args) -> int:
         what = {"thesis": f"{len(desc.get('lobes', []))} lobe(s)", "gltf": "glTF metallic-roughness"}
         title = f"{measurement.name}: {what.get(desc['model'], 'Rational BRDF')}, {metric} {fit['error']:.4g}"
         print(f"wrote {plot_fit(plotted, {label: desc}, args.plot, title=title)}")
+    if args.render:
+        from .fit_render import render_comparison
+
+        render_comparison(args.data, desc, args.render, args.render_env)
     return 0
 
 
@@ -414,6 +422,14 @@ def add_fit_arguments(p) -> None:
         help="fit every H-th theta_h, D-th theta_d, P-th phi_d MERL cell (default 2,3,6: ~31k tuples)",
     )
     p.add_argument("--plot", default=None, metavar="PNG", help="draw measured vs fitted slices to PNG")
+    p.add_argument(
+        "--render",
+        default=None,
+        metavar="PNG",
+        help="render the measurement as it is (MERL table or virtual:) and the fit on the preview sphere "
+        "(reference) with their difference to PNG",
+    )
+    p.add_argument("--render-env", default="builtin:studio", help="environment of --render (default builtin:studio)")
     p.add_argument("--quiet", action="store_true", help="no per-iteration progress")
     _add_goniometer_arguments(p)
 

@@ -246,7 +246,12 @@ def read_material_edits(path: str | Path) -> dict:
         raise OptionError(str(exc)) from None
     if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
         raise OptionError(f"--materials {path}: expected an object of material name -> description")
-    return data
+    from lobeview.materials.spec import MaterialError, resolve_material_files
+
+    try:  # a measured table is named relative to the file's folder (and may not leave it)
+        return {name: resolve_material_files(desc, Path(path).parent) for name, desc in data.items()}
+    except MaterialError as exc:
+        raise OptionError(f"--materials {path}: {exc}") from None
 
 
 def apply_material_edits(scene, edits: dict) -> list[str]:

@@ -43,7 +43,7 @@ def _albedo(desc: dict) -> list[float]:
     return [float(bsdf.albedo(direction_from_angles_deg(t, 0.0), order=96)[0] @ LUMINANCE) for t in ALBEDO_THETAS]
 
 
-def compare(name: str, quick: bool, say) -> list[str]:
+def compare(name: str, quick: bool, say, lobes: int = 1) -> list[str]:
     truth = load_material(name)
     table = meas.merl_table_from_bsdf(build_bsdf(truth))
     tuples = meas.merl_measurement(table, name=name)
@@ -51,9 +51,10 @@ def compare(name: str, quick: bool, say) -> list[str]:
     rows = []
     t0 = time.perf_counter()
     grid, iterations = (6, 4) if quick else (8, 6)
-    kurt = fit_thesis(tuples, FitOptions(lobes=1, grid=grid, iterations=iterations, isotropic=True))
+    kurt = fit_thesis(tuples, FitOptions(lobes=lobes, grid=grid, iterations=iterations, isotropic=True))
     kurt_desc = kurt.material(name=f"{name} kurt", data="virtual-merl")
-    rows.append(("Kurt, 1 lobe (thesis 3.4.1)", kurt_desc, time.perf_counter() - t0, "5 + kd"))
+    plural = "lobe" if lobes == 1 else "lobes"
+    rows.append((f"Kurt, {lobes} {plural} (thesis 3.4.1)", kurt_desc, time.perf_counter() - t0, f"{5 * lobes} + kd"))
     say(f"{name}: Kurt fit in {rows[-1][2]:.1f} s")
     t0 = time.perf_counter()
     gltf = fit_gltf(tuples, GltfFitOptions(grid=grid, iterations=iterations, isotropic=True))

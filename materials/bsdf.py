@@ -216,6 +216,9 @@ class BSDF:
         wos = as_dirs(wos).reshape(-1, 3)
         totals = {"reflection": np.zeros((len(wos), 3)), "transmission": np.zeros((len(wos), 3))}
         for comp in self.components:
+            if hasattr(comp, "albedo_many"):  # its own rule (a tabulated measured BRDF)
+                totals[comp.hemisphere] += comp.albedo_many(wos)
+                continue
             # A sampler whose map is only roughly proportional to f cos (the Rational BRDF's
             # inverse CDFs) needs a finer rule: its own minimum order, integrand given.
             own = hasattr(comp, "primary_integrand")

@@ -383,6 +383,9 @@ class RationalLobe(Component):
     #: lobe-N places its pattern through this lobe's inverse CDFs (materials/patterns.py step 6):
     #: no microfacet distribution has the shape of a fitted p / q (a proxy missed its broad part)
     sampled_pattern = True
+    #: the functions live in a per-material storage buffer (viewer/material_gpu.py pack_rational):
+    #: programs without HAS_RATIONAL (the RSIBR bake) cannot evaluate this lobe
+    material_buffers = True
 
     def __init__(self, functions: list, theta_max_deg: float, sampling: SamplingFit, alpha: float | None = None):
         self.functions = list(functions)

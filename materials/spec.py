@@ -20,6 +20,10 @@ rational    {"model": "rational", "theta_max": 80,               (Rational BRDF,
              "sampling": {"theta": fn, "phi": fn},                 written by lobeview fit
              "proxy_alpha": a}  (optional)                         --model rational)
              with each fn {"form", "lower", "upper", "numerator", "denominator"}
+measured    {"model": "measured", "file": "gold.binary",      (a MERL table rendered as it is,
+             "proxy_alpha": a}  (optional)                         materials/measured.py; also
+                                                                   --material measured:FILE)
+             "file" is relative to the material JSON's folder and may not leave it.
 
 Every parameter has a documented range (:data:`RANGES`). Out-of-range or non-finite values are
 rejected with a :class:`MaterialError` that names the parameter, the value and the range; no
@@ -41,7 +45,7 @@ from .gltf import gltf_bsdf
 from .microfacet import ALPHA_MAX, ALPHA_MIN
 from .thesis import thesis_bsdf
 
-MODELS = ("thesis", "microfacet", "gltf", "rational")
+MODELS = ("thesis", "microfacet", "gltf", "rational", "measured")
 
 #: (low, high) inclusive range of every parameter, by name.
 RANGES: dict[str, tuple[float, float]] = {
@@ -178,6 +182,13 @@ def validate(desc: Any) -> dict:
         out["scale"] = _scalar_or_rgb(desc.get("scale", 1.0), "scale", "scale")
     elif model == "rational":
         out.update(_validate_rational(desc, common))
+    elif model == "measured":
+        _check_keys(desc, common | {"file", "proxy_alpha"}, {"file"}, "measured material")
+        if not isinstance(desc["file"], str) or not desc["file"]:
+            raise MaterialError(f"file: expected the path of a MERL .binary file, got {desc['file']!r:.80}")
+        out["file"] = desc["file"]
+        if "proxy_alpha" in desc:
+            out["proxy_alpha"] = _number(desc["proxy_alpha"], "proxy_alpha", "proxy_alpha")
     else:
         _check_keys(
             desc, common | {"base_color", "metallic", "roughness", *GLTF_EXTENSION_KEYS}, set(), "glTF material"
@@ -306,17 +317,31 @@ def build_bsdf(desc: dict) -> BSDF:
         from .rational_brdf import rational_bsdf
 
         return rational_bsdf(d, name=name)
+    if d["model"] == "measured":
+        from .measured import measured_bsdf  # local: reads a 35 MB table
+
+        return measured_bsdf(d, name=name)
     bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"], **{k: d[k] for k in GLTF_EXTENSION_KEYS if k in d})
     bsdf.name = name
     return bsdf
 
 
+#: ``--material measured:FILE``: a MERL table rendered as it is (materials/measured.py)
+MEASURED_PREFIX = "measured:"
+
+
 def load_material(source: str) -> dict:
-    """A preset name, a path to a JSON file, or an inline JSON object -> validated description."""
+    """A preset name, a path to a JSON file, an inline JSON object, or ``measured:FILE`` ->
+    validated description."""
     from .presets import PRESETS  # local import: presets import this module
 
     if source in PRESETS:
         return validate(PRESETS[source])
+    if source.startswith(MEASURED_PREFIX):
+        target = Path(source[len(MEASURED_PREFIX) :])
+        if not target.is_file():
+            raise MaterialError(f"{source!r}: no such file {str(target)!r} (expected a MERL .binary file)")
+        return validate({"model": "measured", "name": target.stem, "file": str(target.resolve())})
     from lobeview.core.jsonio import JSONInputError, parse_json_text, read_json_file
 
     text = source.strip()
@@ -334,6 +359,21 @@ def load_material(source: str) -> dict:
     except JSONInputError as exc:
         raise MaterialError(str(exc)) from None
     try:
-        return validate(desc)
+        return resolve_material_files(validate(desc), path.parent)
     except MaterialError as exc:
         raise MaterialError(f"{path}: {exc}") from None
+
+
+def resolve_material_files(desc: dict, folder: Path) -> dict:
+    """A validated description read from a JSON file in ``folder`` with the files it names
+    (a measured material's table) resolved there: a file may lie only in that folder or below
+    it (the scene-file trust boundary, core/trust.py), symbolic links included."""
+    if desc.get("model") != "measured":
+        return desc
+    from lobeview.core.trust import UntrustedReferenceError, resolve_reference
+
+    try:
+        resolved = resolve_reference(folder, desc["file"], "measured table")
+    except (UntrustedReferenceError, FileNotFoundError) as exc:
+        raise MaterialError(str(exc)) from None
+    return {**desc, "file": str(resolved)}

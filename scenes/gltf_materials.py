@@ -14,7 +14,7 @@ import numpy as np
 
 from lobeview.core.errors import quoted
 from lobeview.core.trust import UntrustedReferenceError, read_reference
-from lobeview.materials.spec import MaterialError, validate
+from lobeview.materials.spec import MaterialError, resolve_material_files, validate
 
 from .gltf_common import FALLBACKS, GltfError, _index, _warn
 from .hdrio import sanitize_radiance
@@ -287,7 +287,8 @@ def _custom_material(reader, custom) -> dict:
     from lobeview.materials.presets import PRESETS
 
     if isinstance(custom, dict):
-        return validate(custom)
+        # A measured table is named relative to the scene's folder, like every scene reference.
+        return resolve_material_files(validate(custom), reader.path.parent)
     if not isinstance(custom, str):
         raise MaterialError(f"extras.lobeview must be a preset name, a material object or a JSON file, not {custom!r}")
     if custom in PRESETS:
@@ -300,7 +301,7 @@ def _custom_material(reader, custom) -> dict:
     except UntrustedReferenceError as exc:
         raise MaterialError(str(exc)) from None
     try:
-        return validate(json.loads(text))
+        return resolve_material_files(validate(json.loads(text)), reader.path.parent)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise MaterialError(f"material file {custom!r} is not valid JSON: {exc}") from None
 

@@ -87,10 +87,33 @@ vec3 half_vector_from_xi(Lobe l, float xi1, float xi2) {
     return vec3(sin_t * cos(phi), sin_t * sin(phi), cos_t);
 }
 
+vec3 cosine_hemisphere(vec2 u) {
+    // Malley's method on Shirley's concentric disk (same map as materials/vec.py).
+    float a = 2.0 * u.x - 1.0;
+    float b = 2.0 * u.y - 1.0;
+    float r, phi;
+    if (a == 0.0 && b == 0.0) {
+        r = 0.0;
+        phi = 0.0;
+    } else if (abs(a) > abs(b)) {
+        r = a;
+        phi = 0.25 * PI * (b / a);
+    } else {
+        r = b;
+        phi = 0.5 * PI - 0.25 * PI * (a / b);
+    }
+    vec2 d = r * vec2(cos(phi), sin(phi));
+    return vec3(d, sqrt(max(1.0 - dot(d, d), 0.0)));
+}
+
 #if defined(HAS_RATIONAL)
 // Only programs drawing a Rational BRDF compile it: llvmpipe runs untaken branches' loops under
 // the execution mask, which made every other material's reference 8x slower.
 #include "rational.glsl"
+#endif
+#if defined(HAS_MEASURED)
+// A measured BRDF's table and tabulated sampler (materials/measured.py), likewise only where drawn.
+#include "measured.glsl"
 #endif
 
 // GGX visible normals (Heitz 2018).
@@ -223,6 +246,9 @@ vec3 lobe_eval(Lobe l, vec3 wi, vec3 wo) {
     // The Rational BRDF (l.k.r: its fitted domain's theta_max, radians).
     if (l.type == LOBE_RATIONAL) return rational_brdf(wi, wo, l.k.r);
 #endif
+#if defined(HAS_MEASURED)
+    if (l.type == LOBE_MEASURED) return measured_brdf(wi, wo);
+#endif
     vec3 wr = reflected_wi(l, wi);
     if (wo.z <= COS_EPS || wr.z <= COS_EPS) return vec3(0.0);
     vec3 h = normalize(wr + wo);
@@ -260,6 +286,9 @@ float lobe_sample_pdf(Lobe l, vec3 wi, vec3 wo) {
 #if defined(HAS_RATIONAL)
     if (l.type == LOBE_RATIONAL) return rational_sample_pdf(wi, wo);
 #endif
+#if defined(HAS_MEASURED)
+    if (l.type == LOBE_MEASURED) return measured_sample_pdf(wi, wo);
+#endif
     if (!lobe_uses_vndf(l)) return lobe_half_pdf(l, wi, wo);
     vec3 wr = reflected_wi(l, wi);  // a transmission lobe's samples are mirrored reflections
     if (wo.z <= COS_EPS || wr.z <= COS_EPS) return 0.0;
@@ -281,6 +310,9 @@ vec3 lobe_sample(Lobe l, vec2 u, vec3 wo) {
 vec3 lobe_sample_and_pdf(Lobe l, vec2 u, vec3 wo, out float pdf) {
 #if defined(HAS_RATIONAL)
     if (l.type == LOBE_RATIONAL) return rational_sample(u, wo, false, pdf);  // inverse CDFs (Eq. 7-9)
+#endif
+#if defined(HAS_MEASURED)
+    if (l.type == LOBE_MEASURED) return measured_sample(u, wo, pdf);  // tabulated CDFs
 #endif
     vec3 wi = lobe_sample(l, u, wo);
     pdf = lobe_sample_pdf(l, wi, wo);

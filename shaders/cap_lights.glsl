@@ -46,6 +46,9 @@ ivec2 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o) {
 #if defined(HAS_RATIONAL)
     if (l.type == LOBE_RATIONAL) return ivec2(CAP_POINTS, CAP_LOBE_POINTS);
 #endif
+#if defined(HAS_MEASURED)
+    if (l.type == LOBE_MEASURED) return ivec2(CAP_POINTS, CAP_LOBE_POINTS);
+#endif
     float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
     float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
     int cap_points = int(min(float(CAP_POINTS), max(1.0, ceil(CAP_SPREAD * ratio))));

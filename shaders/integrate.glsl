@@ -62,25 +62,6 @@ vec3 diffuse_eval(vec3 wi, vec3 wo) {
     return (u_kd * diffuse_weight(abs(dot(wo, normalize(wi + wo))), wo.z) + sheen_term(wo.z)) / PI;
 }
 
-vec3 cosine_hemisphere(vec2 u) {
-    // Malley's method on Shirley's concentric disk (same map as materials/vec.py).
-    float a = 2.0 * u.x - 1.0;
-    float b = 2.0 * u.y - 1.0;
-    float r, phi;
-    if (a == 0.0 && b == 0.0) {
-        r = 0.0;
-        phi = 0.0;
-    } else if (abs(a) > abs(b)) {
-        r = a;
-        phi = 0.25 * PI * (b / a);
-    } else {
-        r = b;
-        phi = 0.5 * PI - 0.25 * PI * (a / b);
-    }
-    vec2 d = r * vec2(cos(phi), sin(phi));
-    return vec3(d, sqrt(max(1.0 - dot(d, d), 0.0)));
-}
-
 #if defined(METHOD_LOBE)
 
 // Pattern coordinates (xi1, xi2) of sample i of n (materials/patterns.py choose_pattern and

@@ -5,6 +5,7 @@ LOBE_LAYOUT on both sides (one writer), and --cache is honoured by every cached 
 
 from __future__ import annotations
 
+import functools
 import re
 import warnings
 from importlib import resources
@@ -176,6 +177,20 @@ def _rational_desc():
     return json.loads((Path(__file__).parent / "data" / "gold-ggx-rational.json").read_text())
 
 
+@functools.lru_cache(maxsize=1)
+def _measured_source() -> str:
+    """``measured:FILE`` of a MERL table of gold-ggx written once per test session."""
+    import tempfile
+    from pathlib import Path
+
+    from lobeview.materials.measurement import merl_table_from_bsdf, write_merl
+    from lobeview.materials.spec import build_bsdf, load_material
+
+    path = Path(tempfile.mkdtemp(prefix="lobeview-measured-")) / "gold.binary"
+    write_merl(merl_table_from_bsdf(build_bsdf(load_material("gold-ggx"))), path)
+    return f"measured:{path}"
+
+
 LOBE_TYPE_MATERIALS = {
     "kurt reflection": lambda: "alanod-2000gs-1lobe",
     "kurt transmission": lambda: "white-foil",
@@ -187,6 +202,7 @@ LOBE_TYPE_MATERIALS = {
     "gltf transmission": lambda: {"model": "gltf", "base_color": [0.9, 0.9, 0.9], "roughness": 0.2,
                                   "transmission": 0.8, "anisotropy": 0.5},
     "rational": _rational_desc,
+    "measured": _measured_source,
 }  # fmt: skip
 
 
@@ -195,6 +211,7 @@ def _expected_fields(comp) -> dict:
     the packer): the fields every lobe type defines."""
     from lobeview.materials.conductor import MicrofacetReflection
     from lobeview.materials.gltf import COAT_F0, GltfClearcoat, GltfSpecular, GltfTransmission
+    from lobeview.materials.measured import MeasuredLobe
     from lobeview.materials.rational_brdf import RationalLobe
     from lobeview.materials.thesis import KurtLobe
     from lobeview.viewer.interface import DISTRIBUTIONS, FRESNEL_TYPES
@@ -215,6 +232,9 @@ def _expected_fields(comp) -> dict:
     elif isinstance(comp, RationalLobe):
         kind = "rational"
         out.update(k=[np.radians(comp.theta_max_deg), 0.0, 0.0])
+    elif isinstance(comp, MeasuredLobe):
+        kind = "measured"  # the proxy's shape only: the table is in its own buffers
+        out.update(k=[0.0, 0.0, 0.0])
     else:
         assert isinstance(comp, MicrofacetReflection)
         kind = "microfacet"

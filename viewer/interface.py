@@ -28,6 +28,10 @@ from lobeview.core.methods import MAX_LOBES, MAX_PATTERN, PREFILTER_LOOKUPS, Met
 from lobeview.materials.banks import BANKS_AZIMUTHS
 from lobeview.materials.gltf import SHEEN_TABLE_SIZE
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
+from lobeview.materials.measured import DEFENSIVE_COSINE
+from lobeview.materials.measured import PHI_CELLS as MEASURED_PHI_CELLS
+from lobeview.materials.measured import T_CELLS as MEASURED_T_CELLS
+from lobeview.materials.measured import THETA_O_BINS as MEASURED_THETA_O_BINS
 from lobeview.materials.microfacet import ALPHA_MIN
 from lobeview.materials.patterns import (
     ALBEDO_MU,
@@ -74,6 +78,7 @@ LOBE_TYPES = {
     "gltf clearcoat": 4,
     "gltf transmission": 5,
     "rational": 6,  # the Rational BRDF (shaders/rational.glsl); its functions in a storage buffer
+    "measured": 7,  # a measured table (shaders/measured.glsl): a 3D texture and a CDF storage buffer
 }
 DISTRIBUTIONS = {"beckmann": 0, "ggx": 1}
 FRESNEL_TYPES = {"none": 0, "schlick": 1, "conductor": 2}
@@ -183,6 +188,7 @@ RATIONAL_FUNCTIONS = 5  # BRDF R, G, B; inverse CDFs of theta_l (Eq. 8) and dphi
 RATIONAL_STRIDE = 3 + 2 * RATIONAL_MAX_TERMS  # vec4s per function: header, lower, upper, terms
 RATIONAL_MAX_DEGREE = int(graded_exponents(2, RATIONAL_MAX_TERMS).max())  # 2D has the highest degrees
 RATIONAL_BINDING = 1  # shader storage binding point (compute shaders use 0)
+MEASURED_BINDING = 3  # a measured BRDF's sampler CDFs (object records use 2)
 
 # -- prefiltered lookups -------------------------------------------------------------------------
 #: u_lobe_map_mode codes: how each lobe is looked up by the prefiltered methods
@@ -262,6 +268,12 @@ SHADER_CONSTANTS: dict = {
     "TANGENT_ANCHOR_HIGH_DEG": TANGENT_ANCHOR_DEG[1],
     "RATIONAL_NEWTON_STEPS": 14,  # inverting an inverse CDF (rational_invert): steps in all,
     "RATIONAL_BISECTION_STEPS": 6,  # the first ones bisection, then safeguarded Newton
+    # shaders/measured.glsl: a measured BRDF's tabulated sampler (materials/measured.py)
+    "MEASURED_BINDING": MEASURED_BINDING,
+    "MEASURED_THETA_O_BINS": MEASURED_THETA_O_BINS,
+    "MEASURED_T_CELLS": MEASURED_T_CELLS,
+    "MEASURED_PHI_CELLS": MEASURED_PHI_CELLS,
+    "MEASURED_DEFENSIVE_COSINE": float(DEFENSIVE_COSINE),
 }
 
 # -- texture units of the shading programs ---------------------------------------------------------
@@ -297,6 +309,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     # multi-drawn normalised lobe-N: every material's albedo table, one layer each
     # (viewer/lobe_batches.py AlbedoTableArray; layout(binding) as for the cube-map arrays)
     "u_albedo_array": 44,
+    "u_measured_table": 45,  # a measured BRDF's table (shaders/measured.glsl)
 }
 
 

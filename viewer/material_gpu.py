@@ -25,6 +25,7 @@ from lobeview.materials.gltf import (
     GltfSpecular,
     GltfTransmission,
 )
+from lobeview.materials.measured import MeasuredLobe
 from lobeview.materials.patterns import (
     ALBEDO_MU,
     ALBEDO_PHI,
@@ -64,6 +65,8 @@ class PackedMaterial:
     sheen_table: tuple = (0.0,) * SHEEN_TABLE_SIZE
     # The Rational BRDF's storage buffer (pack_rational), None without a rational lobe.
     rational: np.ndarray | None = None
+    # A measured BRDF (materials/measured.py): its lobe, whose table and CDFs the shader reads.
+    measured: MeasuredLobe | None = None
 
     @property
     def has_diffuse(self) -> bool:
@@ -74,6 +77,16 @@ class PackedMaterial:
     def has_rational(self) -> bool:
         """Whether the program needs shaders/rational.glsl (the HAS_RATIONAL variant)."""
         return self.rational is not None
+
+    @property
+    def has_measured(self) -> bool:
+        """Whether the program needs shaders/measured.glsl (the HAS_MEASURED variant)."""
+        return self.measured is not None
+
+    @property
+    def draws_alone(self) -> bool:
+        """A Rational or measured BRDF: its buffers are bound per object, outside the multi-draws."""
+        return self.rational is not None or self.measured is not None
 
     @property
     def lobes_key(self) -> tuple:
@@ -119,6 +132,12 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
             if any(isinstance(c, RationalLobe) for c in components):
                 raise ValueError("a material has at most one rational lobe")
             row = pack_lobe("rational", **shape, k=(np.radians(comp.theta_max_deg), 0.0, 0.0))
+        elif isinstance(comp, MeasuredLobe):
+            # The proxy distribution places lobe-N's cap lights and prefiltered lookups; the
+            # table and its CDFs are the material's (one measured lobe per material).
+            if any(isinstance(c, MeasuredLobe) for c in components):
+                raise ValueError("a material has at most one measured lobe")
+            row = pack_lobe("measured", **shape)
         elif isinstance(comp, MicrofacetReflection):
             fr = comp.fresnel
             row = pack_lobe(
@@ -143,9 +162,10 @@ def pack_material(bsdf: BSDF) -> PackedMaterial:
                      sheen_color=tuple(map(float, layers.sheen_color)),
                      sheen_table=tuple(map(float, layers.sheen_table)))  # fmt: skip
     rational = next((pack_rational(c) for c in components if isinstance(c, RationalLobe)), None)
+    measured = next((c for c in components if isinstance(c, MeasuredLobe)), None)
     return PackedMaterial(
         kd.astype(np.float32), gltf_diffuse, lobes, len(rows), dists, components, float(bsdf.tangent_rotation),
-        rational=rational, **extra
+        rational=rational, measured=measured, **extra
     )  # fmt: skip
 
 
@@ -189,7 +209,7 @@ def pack_material_row_key(comp) -> tuple:
         if isinstance(v, BaseLayers):
             v = (v.coat, *v.sheen_color, v.sheen_roughness)
         values.append(None if v is None else tuple(np.atleast_1d(np.asarray(v, float)).tolist()))
-    if isinstance(comp, RationalLobe):
+    if isinstance(comp, (RationalLobe, MeasuredLobe)):
         values.append(comp.cache_key)
     fresnel = getattr(comp, "fresnel", None)
     if fresnel is not None:

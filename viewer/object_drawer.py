@@ -180,9 +180,11 @@ class ObjectDrawer:
         mirror: bool = False,
         rational: bool = False,
         records: bool = False,
+        measured: bool = False,
     ):
         defines = {**method_defines(method), "SPECULAR": True} if specular else {"METHOD_LOBE": True}
         defines["HAS_RATIONAL"] = rational  # a Rational BRDF's functions (shaders/rational.glsl)
+        defines["HAS_MEASURED"] = measured  # a measured BRDF's table (shaders/measured.glsl)
         if records:  # per-object uniforms from the records of a multi-draw (viewer/object_records.py)
             defines["OBJECT_RECORDS"] = True
         if specular and mirror:
@@ -318,8 +320,9 @@ class ObjectDrawer:
             obj_method = self.object_method(obj.index, method)
             proxy = self.scene.objects[obj.index].reflection_proxy if use_specular and mirror is None else None
             program = self.program(
-                obj_method, use_specular, proxy is not None, mirror is not None, obj.material.has_rational
-            )
+                obj_method, use_specular, proxy is not None, mirror is not None, obj.material.has_rational,
+                measured=obj.material.has_measured,
+            )  # fmt: skip
             set_uniform(program, "u_view_projection", view_proj_values)
             set_uniform(program, "u_camera_position", eye_values)
             self.shading.set_pass_state(program, obj_method, lod_bias, seed)
@@ -342,7 +345,7 @@ class ObjectDrawer:
 
     def _batch_masks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(batchable, transmissive, single-sided) per object: which objects the multi-draw may
-        draw (opaque or masked, no Rational BRDF: its storage buffer is bound per object),
+        draw (opaque or masked, no Rational or measured BRDF: their buffers are bound per object),
         which a diffuse pass leaves out, which lose their back faces in the camera pass."""
         key = (id(self.analysis), self.shading.record_generation)
         if self._masks_key != key:
@@ -350,7 +353,7 @@ class ObjectDrawer:
             mats = [self.material_of(i) for i in range(n)]
             batchable = np.array(
                 [
-                    m.alpha_mode.upper() != "BLEND" and not o.material.has_rational
+                    m.alpha_mode.upper() != "BLEND" and not o.material.draws_alone
                     for m, o in zip(mats, self.objects, strict=True)
                 ],
                 dtype=bool,

@@ -52,8 +52,11 @@ class PreviewRenderer(RendererBase):
         self.vbo = ctx.buffer(mesh.interleaved().tobytes())
         self.ibo = ctx.buffer(np.ascontiguousarray(mesh.indices, dtype=np.uint32).tobytes())
 
-    def _program(self, method: Method, has_diffuse: bool, has_rational: bool = False):
-        defines = {**method_defines(method), "HAS_DIFFUSE": has_diffuse, "HAS_RATIONAL": has_rational}
+    def _program(self, method: Method, has_diffuse: bool, has_rational: bool = False, has_measured: bool = False):
+        defines = {
+            **method_defines(method), "HAS_DIFFUSE": has_diffuse, "HAS_RATIONAL": has_rational,
+            "HAS_MEASURED": has_measured,
+        }  # fmt: skip
         program = self.programs.program("mesh.vert", "preview.frag", defines)
         key = id(program)
         if key not in self._vaos:
@@ -82,7 +85,7 @@ class PreviewRenderer(RendererBase):
         method = Method.parse(method) if isinstance(method, str) else method
         material = pack_material(bsdf)
         method, offsets = self.pass_plan(method, spp, pixel_filter, material.has_rational)
-        program, vao = self._program(method, material.has_diffuse, material.has_rational)
+        program, vao = self._program(method, material.has_diffuse, material.has_rational, material.has_measured)
         width, height = self.size
         model = np.eye(4) if model is None else np.asarray(model, dtype=np.float64)
         normal_matrix = np.linalg.inv(model[:3, :3]).T

@@ -46,8 +46,15 @@ _ALBEDO_TABLES = BoundedCache(64)  # rsibr_cache_key -> albedo_table of the bake
 
 
 def rsibr_eligible(component) -> bool:
-    """Whether a lobe can be baked into the maps: a reflection lobe with a microfacet distribution."""
-    return getattr(component, "distribution", None) is not None and not getattr(component, "transmission", False)
+    """Whether a lobe can be baked into the maps: a reflection lobe with a microfacet distribution
+    whose value the bake shader computes from the packed lobe alone (a Rational or measured
+    BRDF's data live in per-material buffers that shaders/rsibr_bake.comp does not bind: its
+    distribution is a proxy, not the lobe)."""
+    return (
+        getattr(component, "distribution", None) is not None
+        and not getattr(component, "transmission", False)
+        and not getattr(component, "material_buffers", False)
+    )
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,7 @@ KNOWN_DEFINES = {
     "LOBE_EQ424",
     "HAS_DIFFUSE",
     "HAS_RATIONAL",
+    "HAS_MEASURED",
     "SPECULAR",
     "PARALLAX",
     "MIRROR",

@@ -19,6 +19,7 @@ from lobeview.scenes.bright_sources import MAX_LIGHTS as MAX_CAP_LIGHTS
 from .cubemap import RadianceCube
 from .interface import (
     LOBE_MAP_MODES,
+    MEASURED_BINDING,
     RATIONAL_BINDING,
     bind_sampler,
     bind_storage,
@@ -106,6 +107,7 @@ class ShadingBinder:
         if has_uniform(program, "u_sheen_albedo"):
             write_uniform(program, "u_sheen_albedo", np.asarray(material.sheen_table, dtype=np.float32))
         self._bind_rational(program, material)
+        self._bind_measured(program, material)
         if method.kind == "lobe" and method.normalize and has_uniform(program, "u_albedo"):
 
             def albedo_texture():
@@ -133,6 +135,25 @@ class ShadingBinder:
             return self.ctx.buffer(data.tobytes()), None
 
         bind_storage(program, self.material_texture(("rational", material.lobes_key), make)[0], RATIONAL_BINDING)
+
+    def _bind_measured(self, program, material: PackedMaterial) -> None:
+        """A measured BRDF's table (3D texture) and sampler CDFs (storage buffer) for the
+        HAS_MEASURED programs (shaders/measured.glsl)."""
+        lobe = material.measured
+        if lobe is None:
+            return
+
+        def table():
+            # (theta_h, theta_d, phi_d, RGB) -> texture (width phi_d, height theta_d, depth theta_h)
+            tex = self.ctx.texture3d(lobe.table.shape[2::-1], 3, np.ascontiguousarray(lobe.table).tobytes(), dtype="f4")
+            tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            return tex, None
+
+        def cdf():
+            return self.ctx.buffer(lobe.sampler.pack().tobytes()), None
+
+        bind_sampler(program, "u_measured_table", self.material_texture(("measured table", lobe.cache_key), table)[0])
+        bind_storage(program, self.material_texture(("measured cdf", lobe.cache_key), cdf)[0], MEASURED_BINDING)
 
     def material_texture(self, key: tuple, make) -> tuple:
         """(texture, derived data) of a material, made by ``make()`` on first use and cached by
