@@ -16,7 +16,8 @@ was. What changes is only what the lightmap needs:
   name are embedded (the output may live anywhere, the input's folder stays untouched);
 - primitives without a material get an explicit one with the values lobeview renders them with
   (it carries the lightmap), and ``extras.lobeview`` material file names are replaced by the
-  material they name.
+  material they name; a measured material's MERL table is copied beside the output as
+  ``<output stem>_<table name>`` (returned among the files written) and named by it.
 
 Everything read from the input goes through the loader's trust checks again (folder rule, sizes).
 """
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import copy
 import json
+import shutil
 import struct
 import tempfile
 from pathlib import Path
@@ -226,8 +228,13 @@ def write_baked_gltf(
         extensions = material.setdefault("extensions", {})
         extensions["MOZ_lightmap"] = {"index": lightmap_texture, "texCoord": 1, "intensity": 1.0}
         extras = material.get("extras")
-        if isinstance(extras, dict) and isinstance(extras.get("lobeview"), str) and index < len(scene.materials):
-            extras["lobeview"] = scene.materials[index].desc  # a file or preset name: the material itself
+        if isinstance(extras, dict) and "lobeview" in extras and index < len(scene.materials):
+            desc = scene.materials[index].desc
+            if desc.get("model") == "measured":
+                # The table travels with the output (a scene names files only in its own folder).
+                extras["lobeview"] = {**desc, "file": _copy_table(Path(desc["file"]), out, written)}
+            elif isinstance(extras["lobeview"], str):
+                extras["lobeview"] = desc  # a file or preset name: the material itself
     used = doc.setdefault("extensionsUsed", [])
     if "MOZ_lightmap" not in used:
         used.append("MOZ_lightmap")
@@ -239,6 +246,17 @@ def write_baked_gltf(
     doc["asset"]["generator"] = f"{generator} + lobeview bake" if generator else "lobeview bake"
     _write_glb(out, doc, bytes(chunk.blob))
     return written
+
+
+def _copy_table(table: Path, out: Path, written: list) -> str:
+    """Copy a measured material's table beside the baked scene ``out`` (once per table) and
+    return the name the output's material names it by."""
+    name = f"{out.stem}_{table.name}"
+    target = out.parent / name
+    if target not in written:
+        shutil.copyfile(table, target)
+        written.append(target)
+    return name
 
 
 def _append_default_material(doc: dict, scene: Scene) -> int:

@@ -17,6 +17,7 @@ from lobeview.scenes.baked_gltf import source_json, write_baked_gltf
 from lobeview.scenes.baker import bake_lightmap, lightmap_uv_overlap
 from lobeview.scenes.demo import unwrap_lightmap_uvs
 from lobeview.scenes.envmap import EnvironmentMap
+from lobeview.scenes.gltf_common import GltfError
 from lobeview.scenes.gltf_loader import _parse, _Reader, load_gltf
 
 ASSETS = Path(__file__).resolve().parents[2] / "shared" / "assets" / "gltf"
@@ -377,3 +378,33 @@ def test_unwrap_keeps_a_small_object_exact_beside_a_large_one(xatlas_meshes):
     assert np.abs(shape_error).max() < 1e-6 * 0.02
     bead_uv = scene.objects[1].uv1[scene.objects[1].mesh.indices]
     assert np.ptp(bead_uv.reshape(-1, 2), axis=0).min() > 0
+
+
+def test_a_measured_material_travels_with_the_baked_scene(tmp_path):
+    """A measured material (a MERL table named by the material file, in the scene's folder) is
+    resolved inside that folder; the bake copies the table beside its output and names it there,
+    so the baked scene loads the same material from its own folder."""
+    from lobeview.materials.measurement import merl_table_from_bsdf, read_merl, write_merl
+    from lobeview.materials.spec import build_bsdf, load_material
+
+    source_folder = tmp_path / "in"
+    source_folder.mkdir()
+    source = _rich_gltf(source_folder)
+    write_merl(merl_table_from_bsdf(build_bsdf(load_material("plastic"))), source_folder / "plastic.binary")
+    (source_folder / "paint.json").write_text(json.dumps({"model": "measured", "file": "plastic.binary"}))
+    scene = unwrap_lightmap_uvs(load_gltf(source), 64)
+    painted = next(m for m in scene.materials if m.name == "painted")
+    assert painted.desc["file"] == str((source_folder / "plastic.binary").resolve())
+    lightmap = np.random.default_rng(5).random((64, 64, 3)).astype(np.float32)
+    out = tmp_path / "elsewhere" / "baked.glb"
+    out.parent.mkdir()
+    written = write_baked_gltf(source, scene, lightmap, out)
+    assert written == [out, out.parent / "baked_plastic.binary"]
+    baked = next(m for m in load_gltf(out).materials if m.name == "painted")
+    assert baked.desc["model"] == "measured" and Path(baked.desc["file"]).parent == out.parent.resolve()
+    np.testing.assert_array_equal(read_merl(baked.desc["file"]), read_merl(source_folder / "plastic.binary"))
+    # A table outside the scene's folder is refused with the folder rule's message.
+    outside = {"model": "measured", "file": "../elsewhere/baked_plastic.binary"}
+    (source_folder / "paint.json").write_text(json.dumps(outside))
+    with pytest.raises(GltfError, match="outside the scene's folder"):
+        load_gltf(source)
