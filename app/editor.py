@@ -54,8 +54,10 @@ class MaterialEditor:
         return True
 
     def save(self, path: Path) -> None:
+        from lobeview.materials.spec import relative_material_files
+
         scene = self.renderer.scene
-        data = {m.name: m.desc for m in scene.materials}
+        data = {m.name: relative_material_files(m.desc, Path(path).parent) for m in scene.materials}
         path.write_text(json.dumps(data, indent=2, sort_keys=True))
 
     def load(self, path: Path) -> list[str]:

@@ -364,6 +364,17 @@ def load_material(source: str) -> dict:
         raise MaterialError(f"{path}: {exc}") from None
 
 
+def relative_material_files(desc: dict, folder: Path) -> dict:
+    """The description as a JSON file in ``folder`` names its files: a measured table inside
+    that folder by its relative path (what :func:`resolve_material_files` reads back); one
+    outside keeps its absolute path, which loading refuses (copy the table beside the file)."""
+    if desc.get("model") != "measured":
+        return desc
+    table = Path(desc["file"]).resolve()
+    base = Path(folder).resolve()
+    return {**desc, "file": table.relative_to(base).as_posix()} if table.is_relative_to(base) else desc
+
+
 def resolve_material_files(desc: dict, folder: Path) -> dict:
     """A validated description read from a JSON file in ``folder`` with the files it names
     (a measured material's table) resolved there: a file may lie only in that folder or below

@@ -15,7 +15,13 @@ import pytest
 from lobeview.bench.chi2 import SphereDomain, chi2_test
 from lobeview.materials.measured import DEFENSIVE_COSINE, MeasuredError, MeasuredLobe, measured_lobe, split_diffuse
 from lobeview.materials.measurement import merl_lookup, merl_table_from_bsdf, read_merl, write_merl
-from lobeview.materials.spec import MaterialError, build_bsdf, load_material
+from lobeview.materials.spec import (
+    MaterialError,
+    build_bsdf,
+    load_material,
+    relative_material_files,
+    resolve_material_files,
+)
 from lobeview.materials.vec import direction_from_angles_deg, reflect
 
 GOLD = {
@@ -209,6 +215,11 @@ def test_material_sources_and_the_trust_boundary(tables, tmp_path):
         load_material(f"measured:{tmp_path / 'none.binary'}")
     with pytest.raises(MaterialError, match="file"):
         load_material('{"model": "measured"}')
+    # The viewer's save names a table inside its folder relatively: read back to the same table.
+    saved = relative_material_files(desc, folder)
+    assert saved["file"] == "gold.binary"
+    assert resolve_material_files(saved, folder)["file"] == desc["file"]
+    assert relative_material_files(desc, tmp_path)["file"] == desc["file"]  # outside: kept (refused on load)
 
 
 def test_unusable_tables_are_refused():
