@@ -4,23 +4,28 @@ error or a warned fallback with finite output, never a traceback, crash, hang, r
 or a file outside the scene's folder opened.
 
     python -m lobeview.bench.fuzz --cases 2000 --seed 1        # long run, report in bench/results
-    python -m lobeview.bench.fuzz --cases 100 --quick          # what CI runs (tests/test_fuzz.py)
+    python -m lobeview.bench.fuzz --cases 200 --quick          # what CI runs (tests/test_fuzz.py)
 
 Sources (written fresh into the work folder, so a run needs nothing but lobeview): a baked
 MOZ_lightmap .glb with an EXR lightmap, cameras, a preset material in extras; a .gltf with an
 external interleaved (strided) buffer, a PNG texture, a data-URI texture and a node hierarchy;
-EXR and Radiance environment maps; a material JSON; a material-edits JSON; and, when
+EXR and Radiance environment maps; a material JSON; a material-edits JSON; a goniophotometer CSV;
+a measured material naming its MERL table by file (a short stand-in table: its path and size
+checks are fuzzed, a 35 MB table per case is not); a camera path; a viewer script; and, when
 ../shared/assets is present, the Khronos CornellBox.glb and Suzanne.gltf.
 
 Mutations (:data:`OPERATORS`): byte flips, truncation, inserted junk, structured JSON edits of
 the glTF (hostile values at a random field, deleted fields, node cycles and shared children),
 hostile URIs (absolute, ``..``, percent-encoded, ``file://``, devices, /proc, a symlink out),
 header tampering (GLB lengths, PNG IHDR, Radiance resolution), mutated companion files (the
-.bin/.png/.exr a scene references), and NaN/Inf/negative texels in valid HDR files.
+.bin/.png/.exr a scene references), NaN/Inf/negative texels in valid HDR files, and CSV edits
+(hostile cells, duplicated or dropped columns, short and long rows, huge weights, a BOM).
 
 Targets: ``load`` (load_gltf + scene analysis), ``env`` (environment map), ``material``
 (``lobeview material show``), ``edits`` (``--materials`` on a scene), ``shot`` (the full
-renderer through the CLI, a 24x16 image) and ``bake`` (the CLI baker at 16^2 texels, long mode).
+renderer through the CLI, a 24x16 image), ``bake`` (the CLI baker at 16^2 texels, long mode), ``fit``
+(``lobeview fit`` on the CSV, a small grid), ``path`` (``view --path``'s reader, sampled) and
+``script`` (``view --script``'s reader).
 
 Outcome classes: ``ok``, ``warned`` (a documented fallback, output finite), ``error`` (a clean
 lobeview error), and the failures ``traceback``, ``crash`` (signal), ``hang`` (past the time
@@ -53,7 +58,10 @@ from .fuzz_worker import CANARY, SYSTEM_FILES
 
 FAILURES = ("traceback", "crash", "hang", "memory", "escape", "nonfinite")
 CLASSES = ("ok", "warned", "error") + FAILURES
-TIME_LIMIT_S = {"load": 60, "env": 60, "material": 60, "edits": 60, "shot": 300, "bake": 300}
+TIME_LIMIT_S = {
+    "load": 60, "env": 60, "material": 60, "edits": 60, "shot": 300, "bake": 300,
+    "fit": 60, "path": 60, "script": 60,
+}  # fmt: skip
 CANARY_TEXT = "lobeview fuzz canary: this file lies outside every scene folder\n"
 
 HOSTILE_VALUES = [
@@ -234,6 +242,7 @@ def write_sources(folder: Path) -> dict[str, str]:
     (folder / "edits.json").write_text(
         json.dumps({"glossy": {"model": "gltf", "base_color": [0.1, 0.5, 0.9], "roughness": 0.1}}, indent=1)
     )
+    _measurement_sources(folder)
     sources = {
         "textured.gltf": "textured.gltf",
         "lit.glb": "lit.glb",
@@ -241,6 +250,10 @@ def write_sources(folder: Path) -> dict[str, str]:
         "env.hdr": "env.hdr",
         "material.json": "material.json",
         "edits.json": "edits.json",
+        "measurement.csv": "measurement.csv",
+        "measured.json": "measured.json",
+        "path.json": "path.json",
+        "script.json": "script.json",
     }
     shared = Path(__file__).resolve().parents[1].parent / "shared" / "assets" / "gltf"
     for name in ("CornellBox/CornellBox.glb", "Suzanne/Suzanne.gltf"):
@@ -250,6 +263,64 @@ def write_sources(folder: Path) -> dict[str, str]:
                 shutil.copy(f, folder / f.name)
             sources[src.name] = src.name
     return sources
+
+
+def _measurement_sources(folder: Path) -> None:
+    """The inputs beside glTF (issue 43 item 6): a goniophotometer CSV (a coarse virtual
+    measurement, ~200 rows), a measured material naming a MERL table by file (a short stand-in:
+    a real table is 35 MB per case; its path and size checks are what is fuzzed), a camera path
+    and a viewer script."""
+    from lobeview.materials.measurement import write_csv
+    from lobeview.materials.presets import PRESETS
+    from lobeview.materials.virtual import virtual_measurement
+
+    m = virtual_measurement(PRESETS["plastic"], theta_i_deg=(0, 30, 60), phi_i_deg=(0,), theta_step_deg=15.0,
+                            phi_step_deg=45.0)  # fmt: skip
+    write_csv(m, folder / "measurement.csv", comment="fuzz source: virtual plastic")
+    (folder / "table.binary").write_bytes(b"\x5a\x00\x00\x00" * 64)
+    (folder / "measured.json").write_text(json.dumps({"model": "measured", "file": "table.binary"}))
+    keys = [{"t": float(t), "position": [float(t), 1.5, 4.0], "target": [0.0, 1.0, 0.0]} for t in range(3)]
+    (folder / "path.json").write_text(json.dumps({"fov_y": 55.0, "keys": keys}, indent=1))
+    steps = [{"frame": 2, "action": "method", "value": "lobe-7"}, {"frame": 4, "action": "quit"}]
+    (folder / "script.json").write_text(json.dumps(steps, indent=1))
+
+
+#: values a goniophotometer CSV cell is replaced by (the reader refuses or masks each, by line)
+HOSTILE_CELLS = ["nan", "inf", "-inf", "1e308", "-1e308", "1e-320", "-0", "", "abc", "9" * 400, "0x10", "1,2"]
+
+
+def _mutate_csv(path: Path, rng) -> str:
+    """A structured edit of the CSV: a hostile cell, a duplicated or dropped column, a short or
+    long row, a huge weight, a BOM, or a header at the end."""
+    lines = path.read_text().splitlines()
+    data = [i for i, line in enumerate(lines) if line and not line.startswith("#")]
+    header, rows = data[0], data[1:]
+    kind = ["cell", "cell", "duplicate", "drop", "short", "long", "weight", "bom", "header"][int(rng.integers(9))]
+    row = rows[int(rng.integers(len(rows)))]
+    cells = lines[row].split(",")
+    column = int(rng.integers(len(cells)))
+    if kind == "cell":
+        cells[column] = HOSTILE_CELLS[int(rng.integers(len(HOSTILE_CELLS)))]
+        lines[row] = ",".join(cells)
+    elif kind in ("duplicate", "drop"):
+        for i in [header, *rows]:
+            parts = lines[i].split(",")
+            parts = parts + [parts[column]] if kind == "duplicate" else parts[:column] + parts[column + 1 :]
+            lines[i] = ",".join(parts)
+    elif kind == "short":
+        lines[row] = ",".join(cells[:-1])
+    elif kind == "long":
+        lines[row] = ",".join([*cells, "1"])
+    elif kind == "weight":
+        lines[header] += ",weight"
+        for i in rows:
+            lines[i] += ",1e300" if i == row else ",0.01"
+    elif kind == "bom":
+        lines[0] = "\ufeff" + lines[0]
+    else:
+        lines.append(lines[header])
+    path.write_text("\n".join(lines) + "\n")
+    return f"csv {kind} at line {row + 1}, column {column}"
 
 
 # -- mutations -----------------------------------------------------------------------------------
@@ -346,7 +417,7 @@ def _mutate_json(doc, rng, case_dir: Path, kind: str | None = None) -> str:
         doc["nodes"][a].setdefault("children", []).append(b)
         return f"nodes[{a}].children += [{b}]"
     if kind == "uri":
-        holders = [p for p in paths if p[-1] == "uri"]
+        holders = [p for p in paths if p[-1] in ("uri", "file")]  # "file": a measured material's table
         if holders:
             where = holders[int(rng.integers(len(holders)))]
             uris = hostile_uris(case_dir)
@@ -453,13 +524,19 @@ def make_case(index: int, seed: int, sources: dict[str, str], source_dir: Path, 
     elif suffix in (".exr", ".hdr"):
         operators = ["flip", "truncate", "insert", "zero", "header", "texels", "texels"]
         targets = ["env"] * 4 + ["shot"]
+    elif suffix == ".csv":
+        operators = ["csv", "csv", "csv", "flip", "truncate", "insert"]
+        targets = ["fit"]
     else:
         operators = ["json", "json", "json", "flip", "truncate", "insert"]
-        targets = ["material"] if source == "material.json" else ["edits"]
+        targets = {"material.json": ["material"], "measured.json": ["material"], "path.json": ["path"],
+                   "script.json": ["script"]}.get(source, ["edits"])  # fmt: skip
     operator = operators[int(rng.integers(len(operators)))]
     target = targets[int(rng.integers(len(targets)))]
     if operator in ("flip", "truncate", "insert", "zero"):
         detail = _apply_bytes(path, rng, operator)
+    elif operator == "csv":
+        detail = _mutate_csv(path, rng)
     elif operator == "json":
         try:
             doc, binary = _read_doc(path)

@@ -27,6 +27,17 @@ def _finite(array) -> bool:
     return bool(np.all(np.isfinite(a)))
 
 
+def _numbers(value) -> list[float]:
+    """Every number in a JSON value (the fitted material's parameters and provenance)."""
+    if isinstance(value, bool):
+        return []
+    if isinstance(value, (int, float)):
+        return [float(value)]
+    if isinstance(value, dict):
+        value = list(value.values())
+    return [x for item in value for x in _numbers(item)] if isinstance(value, list) else []
+
+
 def _run_program(argv: list[str]) -> int:
     """``lobeview ARGV`` run as the program it is (``python -m lobeview``), in this process so that
     the audit hook sees every file it opens; its exit status."""
@@ -73,6 +84,24 @@ def _run_target(case: dict, work: Path) -> tuple[str, str]:
                 for image in (*images, mat.lightmap.image if mat.lightmap else None):
                     if image is not None and not (_finite(image) and np.min(image) >= 0):
                         return "nonfinite", f"material {mat.name} has a NaN/Inf/negative image"
+        elif target == "path":
+            from lobeview.scenes.camera_path import CameraPath, CameraPathError
+
+            try:
+                path = CameraPath.load(entry)
+            except CameraPathError as exc:
+                return "error", str(exc)
+            for t in np.linspace(0.0, path.duration, 17):
+                camera = path.camera_at(float(t))
+                if not _finite([*camera.position, *camera.target, camera.fov_y]):
+                    return "nonfinite", f"camera path gives a non-finite camera at t = {t}"
+        elif target == "script":
+            from lobeview.app.script import ScriptError, load_script
+
+            try:
+                load_script(entry)
+            except ScriptError as exc:
+                return "error", str(exc)
         elif target == "env":
             from lobeview.scenes.builtin_env import load_environment
             from lobeview.scenes.hdrio import HDRImageError
@@ -105,6 +134,20 @@ def _run_target(case: dict, work: Path) -> tuple[str, str]:
                     if entry.suffix in (".exr", ".hdr")
                     else [str(entry), "--env", "builtin:studio"]
                 ),
+                "fit": [
+                    "fit",
+                    str(entry),
+                    "--quiet",
+                    "--grid",
+                    "3",
+                    "--iterations",
+                    "1",
+                    "--alternations",
+                    "1",
+                    "--no-polish",
+                    "-o",
+                    str(case_dir / "fit.json"),
+                ],  # fmt: skip
                 "bake": [
                     "bake",
                     str(entry),
@@ -120,11 +163,18 @@ def _run_target(case: dict, work: Path) -> tuple[str, str]:
                     str(case_dir / "baked" / "out.glb"),
                 ],
             }[target]
+            if target == "bake":
+                (case_dir / "baked").mkdir(exist_ok=True)  # bake refuses an --out folder that does not exist
             with contextlib.redirect_stdout(io.StringIO()):
                 rc = _run_program(argv)
             if rc != 0:
                 text = stderr.getvalue().strip().splitlines()
                 return ("error" if text and "lobeview: error" in text[-1] else "traceback"), (text[-1] if text else "")
+            fitted = case_dir / "fit.json"
+            if target == "fit" and fitted.exists():
+                values = _numbers(json.loads(fitted.read_text()))
+                if not _finite(values):
+                    return "nonfinite", "the fitted material holds NaN/Inf"
             if out.exists():
                 radiance = np.load(out)
                 if not (_finite(radiance) and radiance.min() >= 0):

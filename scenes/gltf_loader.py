@@ -622,11 +622,23 @@ def _primitive(
     flip = np.linalg.det(world[:3, :3]) < 0
     if flip:  # mirrored transform: keep counter-clockwise front faces
         tris = tris[:, ::-1]
-    uv0 = reader.accessor(attrs.TEXCOORD_0)[:, :2] if attrs.TEXCOORD_0 is not None else np.zeros((count, 2))
-    uv1 = reader.accessor(attrs.TEXCOORD_1)[:, :2] if attrs.TEXCOORD_1 is not None else None
+
+    def attribute(index: int, semantic: str) -> np.ndarray:
+        # Every attribute of a primitive has POSITION's count (glTF 2.0, 3.7.2.1): a shorter one
+        # would be indexed past its end (fuzzer case: a NORMAL of count 1 crashed the baker).
+        values = reader.accessor(index)
+        if len(values) != count:
+            raise GltfError(
+                f"{path}: primitive {name!r}: {semantic} has {len(values)} elements, POSITION {count} "
+                "(every attribute of a primitive has the same count)"
+            )
+        return values
+
+    uv0 = attribute(attrs.TEXCOORD_0, "TEXCOORD_0")[:, :2] if attrs.TEXCOORD_0 is not None else np.zeros((count, 2))
+    uv1 = attribute(attrs.TEXCOORD_1, "TEXCOORD_1")[:, :2] if attrs.TEXCOORD_1 is not None else None
     tri32 = tris.astype(np.uint32)
     if attrs.NORMAL is not None:
-        normals = reader.accessor(attrs.NORMAL)[:, :3] @ normal_matrix.T
+        normals = attribute(attrs.NORMAL, "NORMAL")[:, :3] @ normal_matrix.T
         lengths = np.linalg.norm(normals, axis=1, keepdims=True)
         bad = ~np.isfinite(lengths[:, 0]) | (lengths[:, 0] < 1e-12)
         normals = np.where(bad[:, None], 0.0, normals / np.where(bad, 1.0, lengths[:, 0])[:, None])
@@ -640,7 +652,7 @@ def _primitive(
     else:
         normals = vertex_normals(world_pos.astype(np.float32), tri32)
     if attrs.TANGENT is not None:
-        t = reader.accessor(attrs.TANGENT)
+        t = attribute(attrs.TANGENT, "TANGENT")
         # A mirroring transform swaps the bitangent's side: w changes sign with det(world).
         handedness = np.where(t[:, 3:4] < 0, -1.0, 1.0) * (-1.0 if flip else 1.0)
         tangents = np.concatenate([t[:, :3] @ world[:3, :3].T, handedness], axis=1)

@@ -1,4 +1,4 @@
-"""The fuzzer's quick subset (issue 17): 100 deterministic mutations of every kind of input,
+"""The fuzzer's quick subset (issue 17): 200 deterministic mutations of every kind of input,
 each run in a sandboxed worker; every outcome must be a clean error, a warned fallback or a
 clean load, never a traceback, crash, hang, runaway allocation, file opened outside the scene's
 folder or NaN output. The long run (2000+ cases, bake included) is
@@ -16,14 +16,14 @@ from lobeview.bench import fuzz
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
     work = tmp_path_factory.mktemp("fuzz")
-    outcomes = fuzz.run_fuzz(100, seed=20261124, work=work, long_mode=False, progress=None)
+    outcomes = fuzz.run_fuzz(200, seed=20261124, work=work, long_mode=False, progress=None)
     return work, outcomes
 
 
 def test_quick_fuzz_subset_keeps_the_promise(quick_run):
     _, outcomes = quick_run
     summary = fuzz.summarise(outcomes)
-    assert summary["cases"] == 100
+    assert summary["cases"] == 200
     assert summary["failures"] == 0, json.dumps(summary["failed_cases"], indent=1)
 
 
@@ -32,8 +32,8 @@ def test_the_mutations_reach_every_target_and_outcome(quick_run):
     would pass the test above without testing anything."""
     _, outcomes = quick_run
     summary = fuzz.summarise(outcomes)
-    assert set(summary["by_target"]) >= {"load", "env", "material", "edits", "shot"}
-    assert {"json", "uri", "flip", "truncate", "header"} <= set(summary["by_operator"])
+    assert set(summary["by_target"]) >= {"load", "env", "material", "edits", "shot", "fit", "path", "script"}
+    assert {"json", "uri", "flip", "truncate", "header", "csv"} <= set(summary["by_operator"])
     classes = summary["classes"]
     assert classes["error"] >= 20 and classes["ok"] + classes["warned"] >= 20
     hostile = [o for o in outcomes if o.operator == "uri"]

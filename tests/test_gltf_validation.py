@@ -218,3 +218,25 @@ def test_object_and_node_counts_are_bounded(tmp_path):
         load_gltf(_many_nodes(tmp_path, 200_000))
     assert time.perf_counter() - started < 30  # refused from the count, not after visiting them
     assert main(["shot", str(_many_nodes(tmp_path, 6)), "--max-objects", "0", "--out", str(tmp_path / "x.png")]) == 2
+
+
+@pytest.mark.parametrize("semantic", ["NORMAL", "TEXCOORD_0"])
+def test_an_attribute_shorter_than_position_stops_the_load(tmp_path, semantic):
+    """The long fuzz run (seed 12) found a NORMAL accessor of count 1 beside 24 positions: the
+    loader kept it, the baker indexed past its end (IndexError). Every attribute of a primitive
+    has POSITION's count (glTF 2.0 3.7.2.1)."""
+    import json
+    from pathlib import Path
+
+    from lobeview.scenes.gltf_common import GltfError
+
+    path = Path(_textured_gltf(tmp_path, {}, []))
+    gltf = json.loads(path.read_text())
+    attributes = gltf["meshes"][0]["primitives"][0]["attributes"]
+    if semantic not in attributes:  # a NORMAL made from POSITION's data (VEC3 floats)
+        gltf["accessors"].append(dict(gltf["accessors"][attributes["POSITION"]]))
+        attributes[semantic] = len(gltf["accessors"]) - 1
+    gltf["accessors"][attributes[semantic]]["count"] = 1
+    path.write_text(json.dumps(gltf))
+    with pytest.raises(GltfError, match=f"{semantic} has 1 elements, POSITION"):
+        load_gltf(path)
