@@ -24,7 +24,7 @@ import numpy as np
 
 from lobeview.materials import measurement as meas
 from lobeview.materials.fit import FitError, FitOptions, fit_thesis, material_error, measured_albedo
-from lobeview.materials.fit_selection import KD_EXACT_SHARE, KD_MIN_GAIN
+from lobeview.materials.fit_selection import KD_EXACT_SHARE, KD_MIN_GAIN, fit_verdict
 from lobeview.materials.lobe_fit import LUMINANCE, is_isotropic
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.materials.virtual import virtual_measurement
@@ -267,6 +267,9 @@ def cmd_fit(args) -> int:
 
         check_renderable(args.data)
     desc, measurement, plotted = fit_description(args)
+    metric_name = "l1" if args.model == "rational" else args.metric
+    verdict = fit_verdict(measurement, desc["fit"]["error"], metric_name)
+    desc["fit"]["verdict"] = verdict
     Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
     print("\n" + "\n".join(parameter_lines(desc)))
     fit = desc["fit"]
@@ -286,6 +289,11 @@ def cmd_fit(args) -> int:
         )
     for line in fit.get("warnings") or []:
         print(f"warning: {line}")
+    # shown with --quiet too: whether the fit can be trusted at all
+    print(f"verdict: {verdict['level']} ({100 * verdict['unexplained']:.1f} % of the data's Eq. 3.7 mass unexplained)")
+    for line in verdict["messages"]:
+        if verdict["level"] != "good":
+            print(f"warning: {line}")
     _print_albedo(measurement, desc)
     print(f"wrote {args.output} ({time.perf_counter() - t0:.1f} s)")
     if args.plot:

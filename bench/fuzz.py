@@ -126,6 +126,7 @@ class Outcome:
     message: str = ""
     seconds: float = 0.0
     opened_outside: list = field(default_factory=list)
+    peak_mib: float = 0.0  # the worker's peak resident set during the case (VmHWM after a reset)
 
 
 # -- sources -------------------------------------------------------------------------------------
@@ -656,6 +657,7 @@ def run_fuzz(
                 outcome=record["outcome"],
                 message=record["message"],
                 seconds=record["seconds"],
+                peak_mib=record.get("peak_mib", 0.0),
             )
             position = c.index + 1
             current = None
@@ -690,6 +692,15 @@ def summarise(outcomes: list[Outcome]) -> dict:
         "by_target": {k: dict(v) for k, v in sorted(by_target.items())},
         "by_operator": {k: dict(v) for k, v in sorted(by_operator.items())},
         "failed_cases": [asdict(o) for o in outcomes if o.outcome in FAILURES],
+        # issue 43: every hostile input under 2 GB and 60 s; the worst case per target
+        "cost_by_target": {
+            target: {
+                "max_seconds": round(max(o.seconds for o in outcomes if o.target == target), 2),
+                "max_peak_mib": round(max(o.peak_mib for o in outcomes if o.target == target), 1),
+                "slowest": max((o for o in outcomes if o.target == target), key=lambda o: o.seconds).detail[:120],
+            }
+            for target in sorted(by_target)
+        },
         "examples": _examples(outcomes),
     }
 

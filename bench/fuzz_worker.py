@@ -187,6 +187,28 @@ def _run_target(case: dict, work: Path) -> tuple[str, str]:
     return ("warned" if messages else "ok"), (messages[0][:300] if messages else "")
 
 
+def _reset_peak_memory() -> None:
+    """Reset this process's peak resident set (Linux: 5 > /proc/self/clear_refs), so that the
+    next case's peak is its own (the interpreter and what earlier cases left resident included)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as fh:
+            fh.write("5")
+    except OSError:
+        pass
+
+
+def _peak_memory_mib() -> float:
+    """Peak resident set since the last reset, MiB (VmHWM; 0 where /proc is not available)."""
+    try:
+        with open("/proc/self/status") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return 0.0
+
+
 def worker(work: Path, start: int) -> int:
     """Run cases from ``start``; one JSON line per case on stdout (flushed before the next)."""
     import resource
@@ -209,6 +231,7 @@ def worker(work: Path, start: int) -> int:
     out = sys.stdout
     sys.stdout = sys.stderr  # nothing but results on the pipe
     for case in cases[start:]:
+        _reset_peak_memory()  # before the audited window: the worker's own /proc reads are not the case's
         opened.clear()
         t0 = time.perf_counter()
         print(json.dumps({"start": case["index"]}), file=out, flush=True)
@@ -228,7 +251,9 @@ def worker(work: Path, start: int) -> int:
         escaped = sorted({p for p in opened if not p.startswith("/proc/self/fd")})
         if escaped:
             outcome, message = "escape", f"opened {escaped}"
-        result = {"index": case["index"], "outcome": outcome, "message": message, "seconds": time.perf_counter() - t0}
+        seconds = time.perf_counter() - t0
+        result = {"index": case["index"], "outcome": outcome, "message": message, "seconds": seconds,
+                  "peak_mib": _peak_memory_mib()}  # fmt: skip
         print(json.dumps(result), file=out, flush=True)
     return 0
 

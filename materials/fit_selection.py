@@ -234,3 +234,40 @@ def lobe_valley(
         (float(params["k"]), float(params["r0"])),
         (float(ks[centre]), float(r0_values[centre]), best / max(own_error, 1e-300)),
     )
+
+
+#: The fit's overall verdict (issue 43 item 4: a fit that cannot be trusted says so): the share of
+#: the data's Eq. 3.7 mass (the error of a black model) that the fit leaves unexplained.
+VERDICT_GOOD = 0.05
+VERDICT_POOR = 0.2
+#: one tuple carrying more than this share of the metric's weight makes the fit that tuple's
+VERDICT_HEAVY_TUPLE = 0.1
+
+
+def fit_verdict(m, error: float, metric: str = "l1") -> dict:
+    """{"level": good|fair|poor, "unexplained": share, "messages": [...]}: the fit's error against
+    the data's own mass (Eq. 3.7 of a black model on the same tuples and weights), and the data's
+    own warnings (a tuple that dominates the weights). Printed by ``lobeview fit`` and stored in
+    the material's ``fit.verdict``."""
+    from .fit import eq37_error, metric_weights
+
+    weights = metric_weights(m)
+    mass = eq37_error(m.luminance, np.zeros_like(m.luminance), weights, metric)
+    unexplained = float(error / mass) if mass > 0 else 0.0
+    level = "good" if unexplained <= VERDICT_GOOD else "fair" if unexplained <= VERDICT_POOR else "poor"
+    messages = []
+    if level == "poor":
+        messages.append(
+            f"the fit leaves {100 * unexplained:.0f} % of the data's Eq. 3.7 mass unexplained: this model does not "
+            "represent the material (try more lobes, --model microfacet or --model rational, and look at --plot)"
+        )
+    elif level == "fair":
+        messages.append(f"the fit leaves {100 * unexplained:.1f} % of the data's Eq. 3.7 mass unexplained")
+    heaviest = float(weights.max() / weights.sum()) if weights.sum() > 0 else 0.0
+    if heaviest > VERDICT_HEAVY_TUPLE:
+        messages.append(
+            f"one tuple carries {100 * heaviest:.0f} % of the metric's weight (its 'weight' column): the fit follows "
+            "that tuple; check the weights"
+        )
+        level = "poor"
+    return {"level": level, "unexplained": unexplained, "messages": messages}

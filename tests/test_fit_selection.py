@@ -111,3 +111,25 @@ def test_degenerate_ks_and_r0_are_reported():
     fixed = fit_thesis(_virtual("plastic", **NEAR_NORMAL), FitOptions(grid=6, fixed={"r0": 0.04}))
     assert fixed.valleys == [] and not fixed.warnings
     assert fixed.lobes[0].params["k"] == pytest.approx(1.0, rel=0.02)
+
+
+def test_fit_verdict_says_when_a_fit_cannot_be_trusted():
+    """issue 43 item 4: the share of the data's Eq. 3.7 mass a fit leaves unexplained decides the
+    verdict; a tuple that dominates the weights makes any fit that tuple's."""
+    import dataclasses
+
+    from lobeview.materials.fit import eq37_error, metric_weights
+    from lobeview.materials.fit_selection import VERDICT_GOOD, VERDICT_POOR, fit_verdict
+    from lobeview.materials.spec import load_material
+    from lobeview.materials.virtual import virtual_measurement
+
+    m = virtual_measurement(load_material("plastic"), theta_i_deg=(0, 30, 60), phi_i_deg=(0,))
+    mass = eq37_error(m.luminance, np.zeros_like(m.luminance), metric_weights(m))
+    assert fit_verdict(m, 0.0)["level"] == "good"
+    assert fit_verdict(m, 0.5 * (VERDICT_GOOD + VERDICT_POOR) * mass)["level"] == "fair"
+    poor = fit_verdict(m, 0.34 * mass)
+    assert poor["level"] == "poor" and "34 % of the data's Eq. 3.7 mass unexplained" in poor["messages"][0]
+    weight = np.full_like(m.weight, 1e-6)  # weights are solid angles (<= 4 pi): the others made tiny
+    weight[np.argmax(m.wi[:, 2])] = 1.0
+    heavy = fit_verdict(dataclasses.replace(m, weight=weight), 0.0)
+    assert heavy["level"] == "poor" and "one tuple carries" in heavy["messages"][-1]
