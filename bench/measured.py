@@ -98,7 +98,7 @@ def _render_material(
     top = [_label(ldr(truth.radiance), f"{name}: measured")]
     bottom = [_label(np.zeros_like(top[0][14:]), "|error| x4 vs measured")]
     for label, desc in fits:
-        short = label.split()[0]  # Kurt, glTF, Rational
+        short = label.split()[0].rstrip(",")  # Kurt, glTF, Rational
         if desc is None:  # a model that cannot take these data: an empty, labelled column
             top.append(_label(np.zeros_like(top[0][14:]), f"{short}: {label.split(': ')[-1]}"))
             bottom.append(_label(np.zeros_like(top[0][14:]), ""))
