@@ -155,3 +155,19 @@ def chi2_test(
             np.savetxt(fh, expected, fmt="%10.2f")
         message += f"; tables written to {path}"
     return Chi2Result(passed, p_value, dof, mass_pdf, mass_obs, message)
+
+
+def bsdf_chi2_test(bsdf, wo: np.ndarray, n: int, domain: SphereDomain, dump_dir: Path | None, name: str, seed: int):
+    """:func:`chi2_test` of ``bsdf.sample`` against ``bsdf.pdf`` for the view ``wo`` (a failed
+    sample, pdf 0, counts as lost mass)."""
+    rng = np.random.default_rng(seed)
+
+    def sample_fn(count):
+        u = rng.random((2, count))
+        s = bsdf.sample(u[0], u[1], wo)
+        return s.wi, s.pdf > 0
+
+    def pdf_fn(dirs):
+        return bsdf.pdf(dirs, np.broadcast_to(wo, dirs.shape))
+
+    return chi2_test(sample_fn, pdf_fn, n, domain, dump_dir, name)

@@ -237,11 +237,11 @@ def main(argv=None) -> int:
     )
     args = parser.parse_args(argv)
     lines = run(args.quick, args.env, Path(args.out), Path(args.figures), print)
-    out = Path(args.out) / f"measured-{time.strftime('%Y%m%d-%H%M%S')}{'-quick' if args.quick else ''}.md"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    print("\n".join(lines))
-    print(f"wrote {out}")
+    from lobeview.bench.report import write_markdown_report
+
+    write_markdown_report(
+        Path(args.out), f"measured-{time.strftime('%Y%m%d-%H%M%S')}{'-quick' if args.quick else ''}.md", lines
+    )
     return 0
 
 

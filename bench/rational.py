@@ -190,11 +190,9 @@ def main(argv=None) -> int:
 
         env = args.env or (str(DEFAULT_ENV) if DEFAULT_ENV.exists() else "builtin:studio")
         lines += rendered_section(fits, args.quick, env, print)
-    out = Path(args.out) / f"rational-{stamp}{'-quick' if args.quick else ''}.md"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text("\n".join(lines) + "\n", encoding="utf-8")
-    print("\n".join(lines))
-    print(f"wrote {out}")
+    from lobeview.bench.report import write_markdown_report
+
+    write_markdown_report(Path(args.out), f"rational-{stamp}{'-quick' if args.quick else ''}.md", lines)
     return 0
 
 

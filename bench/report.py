@@ -120,6 +120,17 @@ def write_plots(base: Path, cells, sweep, references) -> list[Path]:
     return paths
 
 
+def write_markdown_report(folder: Path, name: str, lines: list[str]) -> Path:
+    """Write a bench's Markdown ``lines`` to folder/name (the folder made if missing), print them
+    and the path; returns the path."""
+    path = Path(folder) / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    print("\n".join(lines))
+    print(f"wrote {path}")
+    return path
+
+
 def write_image_rows(out: Path, name: str, rows: list[np.ndarray]) -> Path:
     """A figure of image rows (each (H, W, 3) in [0, 1], stacked top to bottom) as out/name,
     8-bit PNG; the folder is made if missing."""

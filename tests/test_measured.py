@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lobeview.bench.chi2 import SphereDomain, chi2_test
+from lobeview.bench.chi2 import SphereDomain, bsdf_chi2_test
 from lobeview.materials.measured import DEFENSIVE_COSINE, MeasuredError, MeasuredLobe, measured_lobe, split_diffuse
 from lobeview.materials.measurement import merl_lookup, merl_table_from_bsdf, read_merl, write_merl
 from lobeview.materials.spec import (
@@ -92,21 +92,11 @@ def test_sampler_matches_its_density_chi_square(tables, tmp_path, name, theta, c
     whole sphere and a cap around the specular direction."""
     bsdf = build_bsdf(load_material(f"measured:{tables[name]}"))  # Lambert floor + lobe
     wo = _view(theta)
-    rng = np.random.default_rng(7)
-
-    def sample_fn(n):
-        u = rng.random((2, n))
-        s = bsdf.sample(u[0], u[1], wo)
-        return s.wi, s.pdf > 0
-
-    def pdf_fn(dirs):
-        return bsdf.pdf(dirs, np.broadcast_to(wo, dirs.shape))
-
     if cap is None:
         domain = SphereDomain()
     else:
         domain = SphereDomain(res_a=25, res_b=41, centre=reflect(wo, np.array([0.0, 0.0, 1.0])), cap_angle=cap)
-    result = chi2_test(sample_fn, pdf_fn, 300_000, domain, tmp_path, f"measured-{name}-{theta}")
+    result = bsdf_chi2_test(bsdf, wo, 300_000, domain, tmp_path, f"measured-{name}-{theta}", seed=7)
     assert result.passed, result.message
     if cap is None:
         assert result.mass_pdf == pytest.approx(result.mass_observed, abs=0.006), result.message

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lobeview.bench.chi2 import SphereDomain, chi2_test
+from lobeview.bench.chi2 import SphereDomain, bsdf_chi2_test, chi2_test
 from lobeview.materials.bsdf import BSDF
 from lobeview.materials.conductor import MicrofacetReflection
 from lobeview.materials.fresnel import Fresnel
@@ -142,21 +142,11 @@ def test_sampler_matches_pdf_chi_square(case, tmp_path):
     name, factory, theta, phi, cap = case
     bsdf = factory()
     wo = direction_from_angles_deg(theta, phi)
-    rng = np.random.default_rng(12345)
-
-    def sample_fn(n):
-        u = rng.random((2, n))
-        s = bsdf.sample(u[0], u[1], wo)
-        return s.wi, s.pdf > 0
-
-    def pdf_fn(dirs):
-        return bsdf.pdf(dirs, np.broadcast_to(wo, dirs.shape))
-
     if cap is None:
         domain = SphereDomain()
     else:
         domain = SphereDomain(res_a=25, res_b=41, centre=_lobe_centre(bsdf, wo), cap_angle=cap)
-    result = chi2_test(sample_fn, pdf_fn, N_SAMPLES, domain, tmp_path, name)
+    result = bsdf_chi2_test(bsdf, wo, N_SAMPLES, domain, tmp_path, name, seed=12345)
     assert result.passed, result.message
     if cap is None:
         # The pdf integrates to the fraction of samples that did not fail (1 - lost mass).
