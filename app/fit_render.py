@@ -43,10 +43,11 @@ def measurement_bsdf(data: str):
             if prefix == "virtual:":
                 return build_bsdf(load_material(material)), f"virtual:{Path(material).stem}"
             # The table itself, through the measured material (its nearest-cell steps included).
-            folder = Path(tempfile.mkdtemp(prefix="lobeview-render-"))
-            path = folder / f"{Path(material).stem}.binary"
-            meas.write_merl(meas.merl_table_from_bsdf(build_bsdf(load_material(material))), path)
-            return build_bsdf(load_material(f"{MEASURED_PREFIX}{path}")), f"table of {Path(material).stem}"
+            # The lobe holds the table once built: the 35 MB file goes with the folder.
+            with tempfile.TemporaryDirectory(prefix="lobeview-render-") as folder:
+                path = Path(folder) / f"{Path(material).stem}.binary"
+                meas.write_merl(meas.merl_table_from_bsdf(build_bsdf(load_material(material))), path)
+                return build_bsdf(load_material(f"{MEASURED_PREFIX}{path}")), f"table of {Path(material).stem}"
     check_renderable(data)
     return build_bsdf(load_material(f"{MEASURED_PREFIX}{data}")), Path(data).name
 

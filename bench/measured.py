@@ -179,7 +179,6 @@ def run(quick: bool, env_path: str, out: Path, figures: Path, say) -> list[str]:
     ]
     fit_sections = []
     figure_rows = []
-    folder = Path(tempfile.mkdtemp(prefix="lobeview-measured-"))
 
     def render_of(bsdf):
         return lambda method, spp=1, seed=0: renderer.render(camera, bsdf, method, spp=spp, seed=seed, background=False)
@@ -187,9 +186,10 @@ def run(quick: bool, env_path: str, out: Path, figures: Path, say) -> list[str]:
     for name, lobes in MATERIALS:
         section, fits = compare(name, quick, say, lobes=lobes)
         fit_sections += section
-        path = folder / f"{name}.binary"
-        meas.write_merl(meas.merl_table_from_bsdf(build_bsdf(load_material(name))), path)
-        measured = build_bsdf(load_material(f"measured:{path}"))
+        with tempfile.TemporaryDirectory(prefix="lobeview-measured-") as folder:  # the lobe holds the table
+            path = Path(folder) / f"{name}.binary"
+            meas.write_merl(meas.merl_table_from_bsdf(build_bsdf(load_material(name))), path)
+            measured = build_bsdf(load_material(f"measured:{path}"))
         analytic = build_bsdf(load_material(name))
         rows, images = _render_material(
             name, measured, _measured_label(name, measured), analytic, fits, render_of, spp, say

@@ -180,13 +180,17 @@ def _rational_desc():
 @functools.lru_cache(maxsize=1)
 def _measured_source() -> str:
     """``measured:FILE`` of a MERL table of gold-ggx written once per test session."""
+    import atexit
+    import shutil
     import tempfile
     from pathlib import Path
 
     from lobeview.materials.measurement import merl_table_from_bsdf, write_merl
     from lobeview.materials.spec import build_bsdf, load_material
 
-    path = Path(tempfile.mkdtemp(prefix="lobeview-measured-")) / "gold.binary"
+    folder = tempfile.mkdtemp(prefix="lobeview-measured-")
+    atexit.register(shutil.rmtree, folder, True)  # 35 MB: not left behind in /tmp
+    path = Path(folder) / "gold.binary"
     write_merl(merl_table_from_bsdf(build_bsdf(load_material("gold-ggx"))), path)
     return f"measured:{path}"
 
