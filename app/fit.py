@@ -268,7 +268,7 @@ def cmd_fit(args) -> int:
         check_renderable(args.data)
     desc, measurement, plotted = fit_description(args)
     metric_name = "l1" if args.model == "rational" else args.metric
-    verdict = fit_verdict(measurement, desc["fit"]["error"], metric_name)
+    verdict = fit_verdict(measurement, desc["fit"]["error"], metric_name, desc["model"])
     desc["fit"]["verdict"] = verdict
     Path(args.output).write_text(json.dumps(desc, indent=2) + "\n", encoding="utf-8")
     print("\n" + "\n".join(parameter_lines(desc)))

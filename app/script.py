@@ -35,27 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.core.methods import Method
+from lobeview.core.viewer_script import ACTIONS, ScriptError, load_script  # noqa: F401 (the script format)
 
-ACTIONS = (
-    "press",
-    "release",
-    "move",
-    "look",
-    "select",
-    "set",
-    "method",
-    "screenshot",
-    "save_materials",
-    "load_materials",
-    "undo",
-    "click",
-    "fit",
-    "stats",
-    "refine",
-    "refinement",
-    "path",
-    "quit",
-)
 # Actions after which the image is unchanged (no reset of the refinement).
 _KEEP_IMAGE = ("screenshot", "save_materials", "stats", "refine", "refinement")
 
@@ -90,33 +71,6 @@ def resident_mib() -> float:
     except OSError:
         pass
     return 0.0
-
-
-class ScriptError(ValueError):
-    pass
-
-
-def load_script(path: str | Path) -> list[dict]:
-    """Read and check a script: a clear message for a bad step before the window opens."""
-    from lobeview.core.jsonio import JSONInputError, read_json_file
-
-    try:
-        steps = read_json_file(path, "--script")
-    except JSONInputError as exc:
-        raise ScriptError(str(exc)) from None
-    if not isinstance(steps, list) or not all(isinstance(s, dict) for s in steps):
-        raise ScriptError(f"--script {path}: expected a list of steps {{'frame': N, 'action': ...}}")
-    for k, step in enumerate(steps):
-        if step.get("action") not in ACTIONS:
-            raise ScriptError(f"--script {path}: step {k}: action must be one of {', '.join(ACTIONS)}")
-        if not isinstance(step.get("frame", 0), int):
-            raise ScriptError(f"--script {path}: step {k}: frame must be an integer")
-        if step["action"] == "method":
-            try:
-                Method.parse(str(step.get("value")))
-            except ValueError as exc:
-                raise ScriptError(f"--script {path}: step {k}: {exc}") from None
-    return sorted(steps, key=lambda s: s.get("frame", 0))
 
 
 def run_due_steps(window, steps: list[dict]) -> None:

@@ -96,7 +96,7 @@ def _run_target(case: dict, work: Path) -> tuple[str, str]:
                 if not _finite([*camera.position, *camera.target, camera.fov_y]):
                     return "nonfinite", f"camera path gives a non-finite camera at t = {t}"
         elif target == "script":
-            from lobeview.app.script import ScriptError, load_script
+            from lobeview.core.viewer_script import ScriptError, load_script
 
             try:
                 load_script(entry)

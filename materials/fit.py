@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .fit_selection import DiffuseChoice, Valley, lobe_valley
+from .fit_selection import DiffuseChoice, FitError, Valley, eq37_error, lobe_valley, metric_weights
 from .fit_selection import penalty as _penalty
 from .lobe_fit import LUMINANCE
 from .measurement import Measurement, angles_deg, renderer_pair, sample_frame_eval
@@ -68,10 +68,6 @@ LOG_PARAMS = ("mx", "my")
 # float32 elements of one chunk of candidate x tuple values: 1 MB stays in cache; measured 2-3x
 # faster than 64 MB chunks (bench/results/fit.md)
 CHUNK_ELEMENTS = 1 << 18
-
-
-class FitError(ValueError):
-    """Options or data that cannot be fitted (named parameter, range, empty hemisphere...)."""
 
 
 # -- the model's value for many candidates -----------------------------------------------------------
@@ -207,20 +203,6 @@ class FitResult:
 
 
 # -- the metric ------------------------------------------------------------------------------------
-
-
-def metric_weights(m: Measurement) -> np.ndarray:
-    """w |cos theta_i| / sum w of Eq. 3.7, shape (N,)."""
-    total = float(m.weight.sum())
-    if total <= 0:
-        raise FitError(f"{m.name}: all weights are zero")
-    return m.weight * np.abs(m.wi[:, 2]) / total
-
-
-def eq37_error(measured: np.ndarray, model: np.ndarray, weights: np.ndarray, metric: str = "l1") -> float:
-    """Thesis Eq. 3.7 (or its squared variant) for one channel."""
-    diff = np.asarray(measured, dtype=np.float64) - np.asarray(model, dtype=np.float64)
-    return float(np.sum(weights * _penalty(diff, metric)))
 
 
 def _weighted_quantile(values: np.ndarray, weights: np.ndarray, q) -> np.ndarray:

@@ -38,6 +38,24 @@ VALLEY_R0_VALUES = 41
 VALLEY_DEGENERATE_WIDTH = 0.2
 
 
+class FitError(ValueError):
+    """Options or data that cannot be fitted (named parameter, range, empty hemisphere...)."""
+
+
+def metric_weights(m) -> np.ndarray:
+    """w |cos theta_i| / sum w of Eq. 3.7, shape (N,)."""
+    total = float(m.weight.sum())
+    if total <= 0:
+        raise FitError(f"{m.name}: all weights are zero")
+    return m.weight * np.abs(m.wi[:, 2]) / total
+
+
+def eq37_error(measured: np.ndarray, model: np.ndarray, weights: np.ndarray, metric: str = "l1") -> float:
+    """Thesis Eq. 3.7 (or its squared variant) for one channel."""
+    diff = np.asarray(measured, dtype=np.float64) - np.asarray(model, dtype=np.float64)
+    return float(np.sum(weights * penalty(diff, metric)))
+
+
 def penalty(diff: np.ndarray, metric: str) -> np.ndarray:
     """|d| for Eq. 3.7's L1 metric, d^2 for the squared variant (materials/fit.py)."""
     return np.abs(diff) if metric == "l1" else diff * diff
@@ -244,13 +262,19 @@ VERDICT_POOR = 0.2
 VERDICT_HEAVY_TUPLE = 0.1
 
 
-def fit_verdict(m, error: float, metric: str = "l1") -> dict:
+#: what to try when a model leaves too much unexplained, by the fitted description's model
+VERDICT_ALTERNATIVES = {
+    "thesis": "more lobes (--lobes), --model microfacet or --model rational",
+    "gltf": "--model thesis with more lobes or --model rational",
+    "rational": "a smaller --eps or --model thesis with more lobes",
+}
+
+
+def fit_verdict(m, error: float, metric: str = "l1", model: str = "thesis") -> dict:
     """{"level": good|fair|poor, "unexplained": share, "messages": [...]}: the fit's error against
     the data's own mass (Eq. 3.7 of a black model on the same tuples and weights), and the data's
     own warnings (a tuple that dominates the weights). Printed by ``lobeview fit`` and stored in
     the material's ``fit.verdict``."""
-    from .fit import eq37_error, metric_weights
-
     weights = metric_weights(m)
     mass = eq37_error(m.luminance, np.zeros_like(m.luminance), weights, metric)
     unexplained = float(error / mass) if mass > 0 else 0.0
@@ -259,7 +283,7 @@ def fit_verdict(m, error: float, metric: str = "l1") -> dict:
     if level == "poor":
         messages.append(
             f"the fit leaves {100 * unexplained:.0f} % of the data's Eq. 3.7 mass unexplained: this model does not "
-            "represent the material (try more lobes, --model microfacet or --model rational, and look at --plot)"
+            f"represent the material (try {VERDICT_ALTERNATIVES.get(model, 'another model')}, and look at --plot)"
         )
     elif level == "fair":
         messages.append(f"the fit leaves {100 * unexplained:.1f} % of the data's Eq. 3.7 mass unexplained")

@@ -222,6 +222,43 @@ def _cdf_phi(x, variable=None):
 
 FORMS: dict[str, Callable] = {"plain": _plain, "cdf_theta": _cdf_theta, "cdf_phi": _cdf_phi}
 
+#: Points per axis at which a rational function's denominator is checked (2 variables: 65^2,
+#: 3 variables: 21^3, edges included), when a material is read and when the fit verifies itself
+DENOMINATOR_CHECK_POINTS = {2: 65, 3: 21}
+#: ... and, for an inverse CDF, along every axis near both ends, where the form's factor vanishes
+#: at the end itself: a fitted sampler had its pole 0.003 rad from theta_l = 0 at tau = 0.01
+#: (issue 44), between the grid's points
+EDGE_CHECK_OFFSETS = (1e-3, 2.5e-3, 5e-3, 1e-2, 2e-2)
+MIN_DENOMINATOR_RATIO = 1e-6  # smallest |q| against the largest over the domain
+
+
+def denominator_check_points(fn_form: str, lower, upper) -> np.ndarray:
+    """The points at which a function of ``fn_form`` on [lower, upper] must keep its
+    denominator's sign: the DENOMINATOR_CHECK_POINTS grid plus, for an inverse CDF, every axis at
+    EDGE_CHECK_OFFSETS from both ends; points where the form fixes the value (its factor is 0:
+    an inverse CDF's ends, theta_v or theta_l = 0) are left out."""
+    lower, upper = np.asarray(lower, np.float64), np.asarray(upper, np.float64)
+    dimension = len(lower)
+    axes = [np.linspace(lo, hi, DENOMINATOR_CHECK_POINTS[dimension]) for lo, hi in zip(lower, upper, strict=True)]
+    if fn_form != "plain":  # every axis: the form's factor also vanishes at theta_v = 0, theta_l = 0
+        for i, (lo, hi) in enumerate(zip(lower, upper, strict=True)):
+            offsets = np.asarray(EDGE_CHECK_OFFSETS) * (hi - lo)
+            axes[i] = np.unique(np.concatenate([axes[i], lo + offsets, hi - offsets]))
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dimension)
+    factor = np.broadcast_to(FORMS[fn_form](grid)[1], (len(grid),))
+    return grid[factor != 0.0]
+
+
+def pole_points(fn: RationalFunction, points: np.ndarray) -> np.ndarray:
+    """Mask of ``points`` where ``fn``'s denominator is not safely away from zero with the sign it
+    has over most of them (|q| < MIN_DENOMINATOR_RATIO max|q|, or the minority sign): a pole."""
+    _, q = fn.parts(points)
+    largest = float(np.max(np.abs(q))) if q.size else 0.0
+    if not np.all(np.isfinite(q)) or largest == 0.0:
+        return np.ones(len(points), dtype=bool)
+    sign = 1.0 if np.sum(q > 0) >= np.sum(q < 0) else -1.0
+    return sign * q < MIN_DENOMINATOR_RATIO * largest
+
 
 # -- the interval problem ---------------------------------------------------------------------------
 

@@ -47,7 +47,16 @@ from .bsdf import BSDF, Component
 from .lobe_fit import LUMINANCE
 from .measurement import MERL_DIMS, Measurement, merl_cell_angles
 from .microfacet import ALPHA_MAX, ALPHA_MIN, MicrofacetDistribution, reflection_jacobian
-from .rational import FORMS, IntervalData, RationalFitError, RationalFunction, SolveStats, fit_rational
+from .rational import (
+    FORMS,
+    IntervalData,
+    RationalFitError,
+    RationalFunction,
+    SolveStats,
+    denominator_check_points,
+    fit_rational,
+    pole_points,
+)
 from .vec import COS_EPSILON, normalize
 
 HALF_PI = 0.5 * math.pi
@@ -298,15 +307,18 @@ def _fit_inverse_cdf(
     )
     if progress:
         progress(f"inverse CDF ({form}): {len(values)} points, eps {eps}")
-    interior = FORMS[form](dense)[1] > 0  # the form's own factor: 0 where it fixes the value
+    # Verified where a reader checks the material (denominator_check_points: the reader's grid
+    # and the uniform variable near both ends, where the dense grid alone let poles through within
+    # 1/64 of tau = 0, issue 44) and on the dense grid; the form's factor is 0 at the ends.
+    checks = np.concatenate([dense, denominator_check_points(form, data.domain_lower, data.domain_upper)])
+    checks = checks[FORMS[form](checks)[1] > 0]
 
     def verify(fn: RationalFunction):
-        _, q = fn.parts(dense)
-        bad = ((fn.derivative(dense, variable) <= 0) | (q <= 0)) & interior
+        bad = (fn.derivative(checks, variable) <= 0) | pole_points(fn, checks)
         if not bad.any():
             return None
-        v = tabulate(dense[bad])
-        return dense[bad], v - eps * (1 + v), v + eps * (1 + v)
+        v = tabulate(checks[bad])
+        return checks[bad], v - eps * (1 + v), v + eps * (1 + v)
 
     return fit_rational(data, max_coefficients, widen=2.0, progress=progress, verify=verify)
 

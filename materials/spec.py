@@ -228,38 +228,33 @@ def _rational_function(value: Any, where: str, kind: str) -> dict:
     return fn.to_dict()
 
 
-#: Points per axis at which a rational function's denominator is checked when it is read
-#: (2 variables: 65^2, 3 variables: 21^3, edges included)
-DENOMINATOR_CHECK_POINTS = {2: 65, 3: 21}
-MIN_DENOMINATOR_RATIO = 1e-6  # smallest |q| against the largest over the domain
-
-
 def _check_denominator(fn, where: str) -> None:
     """A denominator that is zero or changes sign inside the domain is a pole: the BRDF or its
     sampler becomes infinite there (issue 43: a zero denominator gave a NaN albedo and a black
-    object, a pole an albedo of 455, both accepted). Checked on a grid, as the fit's own pole
-    check does (materials/rational_brdf.py), where the function's factor on p / q is not zero."""
+    object, a pole an albedo of 455, both accepted). Checked on the points the fit verifies
+    itself on (materials/rational.py denominator_check_points: a grid, and an inverse CDF's
+    uniform variable near both ends), where the form's factor on p / q is not zero."""
     import numpy as np
 
-    from .rational import FORMS
+    from .rational import denominator_check_points, pole_points
 
-    steps = DENOMINATOR_CHECK_POINTS[fn.dimension]
-    axes = [np.linspace(lo, hi, steps) for lo, hi in zip(fn.lower, fn.upper, strict=True)]
-    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, fn.dimension)
-    # Where the form's factor b(x) vanishes (an inverse CDF's ends, mu or tau = 0 or 1) the value
-    # is a(x) whatever q is: those points are not checked. (The fitter's own samplers change the
-    # denominator's sign within 1/64 of mu = 0 there; issue 44 owns that.)
-    factor = np.broadcast_to(FORMS[fn.form](grid)[1], (len(grid),))
-    grid = grid[factor != 0.0]
-    _, q = fn.parts(grid)
-    largest = float(np.max(np.abs(q))) if q.size else 0.0
-    if not np.all(np.isfinite(q)) or largest == 0.0:
+    points = denominator_check_points(fn.form, fn.lower, fn.upper)
+    poles = pole_points(fn, points)
+    if poles.all():
         raise MaterialError(f"{where}: the denominator is zero (or not finite) over the domain")
-    if np.any(q > 0) and np.any(q < 0) or float(np.min(np.abs(q))) < MIN_DENOMINATOR_RATIO * largest:
+    if poles.any():
         raise MaterialError(
-            f"{where}: the denominator reaches zero inside the domain (a pole: the function is infinite there); "
-            "refit the material"
+            f"{where}: the denominator reaches zero inside the domain (a pole: the function is infinite there, "
+            f"e.g. at {np.round(points[np.argmax(poles)], 4).tolist()}); refit the material"
         )
+    if fn.form != "plain":  # an inverse CDF increases in its uniform variable, or the sampler folds
+        falling = fn.derivative(points, fn.dimension - 1) <= 0
+        if falling.any():
+            raise MaterialError(
+                f"{where}: the inverse CDF decreases in its uniform variable (at "
+                f"{np.round(points[np.argmax(falling)], 4).tolist()}): samples fold over and their density is "
+                "wrong; refit the material"
+            )
 
 
 def _validate_rational(desc: dict, common: set) -> dict:

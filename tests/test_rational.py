@@ -392,3 +392,34 @@ def test_reference_on_a_rational_material_has_no_truncated_pixels():
     luminance = default.radiance[mask] @ np.array([0.2126, 0.7152, 0.0722])
     assert np.all(np.isfinite(default.radiance)) and (luminance > 0).all()
     assert default.radiance[mask].mean() == pytest.approx(small.radiance[mask].mean(), rel=0.03)
+
+
+@pytest.mark.parametrize(
+    ("name", "message"),
+    [
+        ("plastic-rational-edge-pole.json", "sampling.phi: the denominator reaches zero"),
+        ("red-plastic-rational-folding.json", "sampling.phi: the inverse CDF decreases"),
+    ],
+)
+def test_samplers_with_poles_or_folds_near_the_edges_are_refused(name, message):
+    """Fits made before the edge checks (issue 44): a pole 0.003 rad from theta_l = 0 at tau 0.01,
+    between the 21^3 grid's points, and a phi sampler decreasing near tau = 0; both were read."""
+    with pytest.raises(MaterialError, match=message):
+        load_material(str(Path(__file__).parent / "data" / name))
+
+
+def test_sampling_fit_verifies_itself_where_the_reader_checks(plastic_fit):
+    """The plastic fit's samplers at the default grid (a pole near theta_l = 0 before) pass the
+    reader's checks and keep their denominators' sign and their monotonicity on a finer grid
+    near every edge than either checks."""
+    _, _, fit = plastic_fit
+    sampling = fit_sampling(fit.functions, fit.theta_max_deg)
+    validate(rational_description(fit, sampling, "plastic rational"))  # the reader's checks
+    fn = sampling.phi
+    edge = np.concatenate([np.linspace(0.0, 0.05, 26), np.linspace(0.95, 1.0, 26)])
+    axes = [np.linspace(0.0, np.pi / 2, 24), np.linspace(0.0, 0.05, 12), edge]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    grid = grid[(grid[:, 1] > 0) & (grid[:, 0] > 0) & (grid[:, 2] > 0) & (grid[:, 2] < 1)]
+    _, q = fn.parts(grid)
+    assert (q > 0).all() or (q < 0).all()
+    assert (fn.derivative(grid, 2) > 0).mean() > 0.999
