@@ -34,6 +34,7 @@ Same counts as the linear scan on the bench's fits, 2.9x faster on a MERL gold t
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -64,6 +65,35 @@ def _exponents_of_degree(dimension: int, degree: int) -> list[tuple[int, ...]]:
     if dimension == 1:
         return [(degree,)]
     return [(i, *rest) for i in range(degree, -1, -1) for rest in _exponents_of_degree(dimension - 1, degree - i)]
+
+
+@functools.lru_cache(maxsize=64)
+def symmetric_expansion(dimension: int, count: int, pair: tuple[int, int]) -> np.ndarray:
+    """(K, count) matrix E from the coefficients of ``count`` symmetric basis functions to those of
+    the first K graded monomials (E @ c): seed 002's symmetry by grouping (section 2.2), a basis
+    function is a monomial plus its image under swapping the variables ``pair`` (itself where the
+    swap maps it to itself), taken in graded order of their first monomial; K covers every
+    monomial used (the ones between stay 0), so the file format and shaders are unchanged."""
+    i, j = pair
+    index: dict[tuple, int] = {}
+    groups: list[tuple[int, ...]] = []
+    degree = 0
+    while len(groups) < count:
+        exponents = _exponents_of_degree(dimension, degree)  # a swap keeps the degree
+        for e in exponents:
+            index[e] = len(index)
+        for e in exponents:
+            swapped = list(e)
+            swapped[i], swapped[j] = e[j], e[i]
+            group = tuple(sorted({index[e], index[tuple(swapped)]}))
+            if group not in groups:
+                groups.append(group)
+        degree += 1
+    groups = groups[:count]
+    out = np.zeros((max(max(g) for g in groups) + 1, count))
+    for column, group in enumerate(groups):
+        out[list(group), column] = 1.0
+    return out
 
 
 def monomials(x_unit: np.ndarray, exponents: np.ndarray) -> np.ndarray:
@@ -295,6 +325,15 @@ class IntervalData:
     form: str = "plain"
     monotone_in: int | None = None
     check: np.ndarray | None = None
+    # (i, j): the function is symmetric in variables i and j (seed 002 section 2.2: the inverse
+    # CDF of dphi in theta_v and theta_l), fitted in the grouped basis of symmetric_expansion
+    symmetric: tuple[int, int] | None = None
+
+    def expansion(self, count: int) -> np.ndarray:
+        """(K, count): coefficients of ``count`` basis functions -> of the first K monomials."""
+        if self.symmetric is None:
+            return np.eye(count)
+        return symmetric_expansion(self.x.shape[1], count, tuple(self.symmetric))
 
     def __post_init__(self):
         self.x = np.asarray(self.x, dtype=np.float64)
@@ -321,12 +360,13 @@ class _Rows:
 
 def _constraint_rows(data: IntervalData, n_num: int, n_den: int) -> _Rows:
     d = data.x.shape[1]
-    ex_p, ex_q = graded_exponents(d, n_num), graded_exponents(d, n_den)
+    e_p, e_q = data.expansion(n_num), data.expansion(n_den)
+    ex_p, ex_q = graded_exponents(d, len(e_p)), graded_exponents(d, len(e_q))
     lo, hi = np.asarray(data.domain_lower), np.asarray(data.domain_upper)
 
     def rows_at(x, s_lo, s_hi):
         u = unit_map(x, lo, hi)
-        bp, bq = monomials(u, ex_p), monomials(u, ex_q)
+        bp, bq = monomials(u, ex_p) @ e_p, monomials(u, ex_q) @ e_q
         interval = np.zeros((len(x), 2, n_num + n_den))
         # s = p/q in [s_lo, s_hi]: p - s_lo q >= 0 and s_hi q - p >= 0.
         interval[:, 0] = np.hstack([bp, -s_lo[:, None] * bq])
@@ -335,8 +375,8 @@ def _constraint_rows(data: IntervalData, n_num: int, n_den: int) -> _Rows:
             return interval, np.zeros((len(x), 0, n_num + n_den))
         v = data.monotone_in
         slope = 2.0 / (hi[v] - lo[v])
-        dbp = monomial_derivatives(u, ex_p, v) * slope
-        dbq = monomial_derivatives(u, ex_q, v) * slope
+        dbp = monomial_derivatives(u, ex_p, v) @ e_p * slope
+        dbq = monomial_derivatives(u, ex_q, v) @ e_q * slope
         _, b, da, db = FORMS[data.form](x, v)
         # r = a + b s, s = p/q, q > 0: q dr/dx = a' q + b' p + b p' - b s q' (linear in s), so
         # dr/dx >= 0 for every s in [s_lo, s_hi] iff it holds at both ends (Eq. 4, generalised).
@@ -354,7 +394,7 @@ def _constraint_rows(data: IntervalData, n_num: int, n_den: int) -> _Rows:
     interval[b <= 0] = 0.0
     if len(data.check):
         # Check points carry no interval: only q > 0 there (no pole between the data).
-        positive = np.hstack([np.zeros((len(data.check), n_num)), monomials(unit_map(data.check, lo, hi), ex_q)])
+        positive = np.hstack([np.zeros((len(data.check), n_num)), monomials(unit_map(data.check, lo, hi), ex_q) @ e_q])
     else:
         positive = np.zeros((0, n_num + n_den))
     return _Rows(interval, mono, positive)
@@ -515,8 +555,9 @@ def fit_rational(
             best = _best_split(data, total, stats)  # the smallest count found: its best-conditioned split
         while best is not None:
             n_num, n_den, cond, c = best
+            numerator, denominator = data.expansion(n_num) @ c[:n_num], data.expansion(n_den) @ c[n_num:]
             fn = RationalFunction(
-                tuple(c[:n_num]), tuple(c[n_num:]), tuple(data.domain_lower), tuple(data.domain_upper), data.form
+                tuple(numerator), tuple(denominator), tuple(data.domain_lower), tuple(data.domain_upper), data.form
             )
             extra = verify(fn) if verify is not None else None
             if extra is None:

@@ -304,6 +304,8 @@ def _fit_inverse_cdf(
         (HALF_PI,) * variable + (1.0,),
         form=form,
         monotone_in=variable,
+        # the inverse CDF of dphi is symmetric in theta_v and theta_l (reciprocity, seed 002 2.2)
+        symmetric=(0, 1) if form == "cdf_phi" else None,
     )
     if progress:
         progress(f"inverse CDF ({form}): {len(values)} points, eps {eps}")
