@@ -291,9 +291,8 @@ def cmd_fit(args) -> int:
         print(f"warning: {line}")
     # shown with --quiet too: whether the fit can be trusted at all
     print(f"verdict: {verdict['level']} ({100 * verdict['unexplained']:.1f} % of the data's Eq. 3.7 mass unexplained)")
-    for line in verdict["messages"]:
-        if verdict["level"] != "good":
-            print(f"warning: {line}")
+    for line in verdict["messages"]:  # none for a good fit
+        print(f"warning: {line}")
     _print_albedo(measurement, desc)
     print(f"wrote {args.output} ({time.perf_counter() - t0:.1f} s)")
     if args.plot:

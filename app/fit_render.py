@@ -56,6 +56,7 @@ def render_comparison(data: str, desc: dict, out: str, env_spec: str = "builtin:
     """Write the figure (measurement | fit | |error| x4) to ``out``; returns the relRMSE."""
     from PIL import Image, ImageDraw
 
+    from lobeview.bench.metrics import exposure_for
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.scenes.meshes import uv_sphere
     from lobeview.viewer.camera import Camera
@@ -78,7 +79,7 @@ def render_comparison(data: str, desc: dict, out: str, env_spec: str = "builtin:
     mask = truth.mask
     a, b = fitted.radiance, truth.radiance
     rel = float(np.sqrt(((a[mask] - b[mask]) ** 2).mean() / max((b[mask] ** 2).mean(), 1e-30)))
-    exposure = _exposure(b, mask)
+    exposure = exposure_for(b, mask)
     scale = max(float(np.percentile(b[mask], 99)), 1e-6)
     error = np.clip(4.0 * np.abs(a - b).mean(axis=-1, keepdims=True) / scale, 0.0, 1.0) * mask[..., None]
     tiles = [np.clip(tonemap(b, "aces", exposure), 0, 1), np.clip(tonemap(a, "aces", exposure), 0, 1),
@@ -94,9 +95,3 @@ def render_comparison(data: str, desc: dict, out: str, env_spec: str = "builtin:
     canvas.save(out)
     say(f"rendered against the measurement: relRMSE {100 * rel:.2f} % (sphere pixels, linear); wrote {out}")
     return rel
-
-
-def _exposure(radiance: np.ndarray, mask: np.ndarray) -> float:
-    from lobeview.bench.metrics import exposure_for
-
-    return exposure_for(radiance, mask)

@@ -42,7 +42,7 @@ import numpy as np
 from .bsdf import BSDF, Component, Lambert
 from .lobe_fit import LUMINANCE
 from .measurement import MERL_DIMS, merl_cell_angles, merl_lookup, read_merl
-from .microfacet import ALPHA_MAX, ALPHA_MIN, MicrofacetDistribution, reflection_jacobian
+from .microfacet import ALPHA_MAX, MicrofacetDistribution, fit_peak_shape, reflection_jacobian
 from .vec import COS_EPSILON, cosine_hemisphere, normalize, reflect
 
 THETA_O_BINS = 32  # view elevations tabulated (bin centres over [0, pi/2))
@@ -86,25 +86,20 @@ class TabulatedSampler:
         rows = self.cell_cdf[:, :, -1]
         self.row_cdf = np.concatenate([np.zeros((k, 1)), np.cumsum(rows, axis=1)], axis=1)
         self.row_cdf[:, -1] = 1.0
-        self.empty_bins = int(empty.sum())
 
     def sample(self, u1: np.ndarray, u2: np.ndarray, wo: np.ndarray) -> np.ndarray:
         """Directions wi (n, 3) from the cell tables for views wo (n, 3); u in [0, 1)."""
         k0, w = _theta_o_position(wo[:, 2])
         rows = (1.0 - w)[:, None] * self.row_cdf[k0] + w[:, None] * self.row_cdf[k0 + 1]
-        target = u1 * rows[:, -1]
-        i = _search(rows, target)
-        low, high = np.take_along_axis(rows, i[:, None], 1)[:, 0], np.take_along_axis(rows, i[:, None] + 1, 1)[:, 0]
-        t = (i + np.clip((target - low) / np.maximum(high - low, 1e-300), 0.0, 1.0)) / T_CELLS
+        i, t = _invert(rows, u1 * rows[:, -1])
+        t = t / T_CELLS
         cum = (1.0 - w)[:, None] * self.cell_cdf[k0, i] + w[:, None] * self.cell_cdf[k0 + 1, i]
         # u2 turned by -phi_v / 2 pi (mod 1): still uniform, but a deterministic point set (fis-N's)
         # keeps its azimuths in the tangent frame where the rows are nearly uniform (near the
         # normal), instead of turning with the view azimuth there (a pinwheel).
         phi_v = np.arctan2(wo[:, 1], wo[:, 0])
-        target = np.mod(u2 - phi_v / (2.0 * math.pi), 1.0) * cum[:, -1]
-        j = _search(cum, target)
-        low, high = np.take_along_axis(cum, j[:, None], 1)[:, 0], np.take_along_axis(cum, j[:, None] + 1, 1)[:, 0]
-        phi = (j + np.clip((target - low) / np.maximum(high - low, 1e-300), 0.0, 1.0)) * (2.0 * math.pi / PHI_CELLS)
+        _, phi = _invert(cum, np.mod(u2 - phi_v / (2.0 * math.pi), 1.0) * cum[:, -1])
+        phi = phi * (2.0 * math.pi / PHI_CELLS)
         h = _half_vector(t, phi + phi_v)
         return reflect(wo, h)
 
@@ -118,8 +113,7 @@ class TabulatedSampler:
         i = np.clip((t * T_CELLS).astype(int), 0, T_CELLS - 1)
         j = np.clip((phi / (2.0 * math.pi) * PHI_CELLS).astype(int), 0, PHI_CELLS - 1)
         p = (1.0 - w) * self.cell_probability[k0, i, j] + w * self.cell_probability[k0 + 1, i, j]
-        wo_h = np.sum(wo * h, axis=-1)
-        jacobian = (1.0 / T_CELLS) * (2.0 * math.pi / PHI_CELLS) * math.pi * t * np.sin(theta_h) * 4.0 * wo_h
+        jacobian = _cell_jacobian(t, theta_h, np.sum(wo * h, axis=-1)) * (1.0 / T_CELLS) * (2.0 * math.pi / PHI_CELLS)
         ok = (wi[:, 2] > COS_EPSILON) & (wo[:, 2] > COS_EPSILON) & (jacobian > 0) & (h[:, 2] > 0)
         return np.where(ok, p / np.where(ok, jacobian, 1.0), 0.0)
 
@@ -141,6 +135,20 @@ def _search(cdf: np.ndarray, target: np.ndarray) -> np.ndarray:
         lo = np.where(active & below, mid, lo)
         hi = np.where(active & ~below, mid, hi)
     return lo
+
+
+def _invert(cdf: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(cell, continuous position in cells) of ``target`` in each row's piecewise-linear ``cdf``:
+    the cell of :func:`_search`, then uniform inside it."""
+    cell = _search(cdf, target)
+    low = np.take_along_axis(cdf, cell[:, None], 1)[:, 0]
+    high = np.take_along_axis(cdf, cell[:, None] + 1, 1)[:, 0]
+    return cell, cell + np.clip((target - low) / np.maximum(high - low, 1e-300), 0.0, 1.0)
+
+
+def _cell_jacobian(t: np.ndarray, theta_h: np.ndarray, wo_h: np.ndarray) -> np.ndarray:
+    """|d omega_i / d(t, phi)| = 4 (wo.h) sin theta_h (pi t) (module docstring)."""
+    return 4.0 * wo_h * np.sin(theta_h) * math.pi * t
 
 
 def _half_vector(t: np.ndarray, phi: np.ndarray) -> np.ndarray:
@@ -167,7 +175,7 @@ def _cell_masses(evaluate, theta_o: float) -> np.ndarray:
     value = np.zeros((len(h), f.shape[1]))
     value[ok] = f * wi[ok, 2:3]
     theta_h = tt.reshape(-1) * tt.reshape(-1) * HALF_PI
-    jacobian = 4.0 * np.maximum(wo_h, 0.0) * np.sin(theta_h) * math.pi * tt.reshape(-1)
+    jacobian = _cell_jacobian(tt.reshape(-1), theta_h, np.maximum(wo_h, 0.0))
     cell_area = (1.0 / T_CELLS) * (2.0 * math.pi / PHI_CELLS) / SUBSAMPLES**2
     mass = (value * (jacobian * cell_area)[:, None]).reshape(T_CELLS, SUBSAMPLES, PHI_CELLS, SUBSAMPLES, -1)
     return mass.sum(axis=(1, 3))
@@ -189,26 +197,15 @@ def peak_distribution(table: np.ndarray) -> MicrofacetDistribution:
     span = lum.max() - lum.min()
     if not np.isfinite(span) or span <= 1e-6 * max(lum.max(), 1e-30) or lum[0] <= lum.min():
         return flat
-    shape = (lum - lum.min()) / (lum[0] - lum.min())
-    alphas = np.geomspace(max(ALPHA_MIN, 1e-3), ALPHA_MAX, 200)[:, None]
-    tan2, cos4 = (np.tan(theta_h) ** 2)[None, :], (np.cos(theta_h) ** 4)[None, :]
-    models = {
-        "beckmann": np.exp(-tan2 / alphas**2) / cos4,
-        "ggx": alphas**4 / (cos4 * (alphas**2 + tan2) ** 2),
-    }
-    best = None
-    for kind, model in models.items():
-        err = ((model - shape[None, :]) ** 2 * np.sin(theta_h)[None, :]).sum(axis=1)
-        i = int(np.argmin(err))
-        if best is None or err[i] < best[0]:
-            best = (float(err[i]), kind, float(alphas[i, 0]))
-    return MicrofacetDistribution(best[1], best[2], best[2])
+    kind, alpha = fit_peak_shape(theta_h, (lum - lum.min()) / (lum[0] - lum.min()), ("beckmann", "ggx"))
+    return MicrofacetDistribution(kind, alpha, alpha)
 
 
 class MeasuredLobe(Component):
     """A measured isotropic BRDF as one reflection component: ``eval`` is the table's nearest
     cell (unmeasured cells 0), ``sample_wi`` / ``pdf`` the tabulated sampler with its cosine
-    share, ``distribution`` the Beckmann proxy of :func:`peak_alpha`."""
+    share, ``distribution`` the proxy of :func:`peak_distribution` (or a Beckmann lobe of the
+    given ``alpha``)."""
 
     name = "measured"
     transmission = False
@@ -229,8 +226,6 @@ class MeasuredLobe(Component):
         if (table[finite] < 0).any():
             raise MeasuredError(f"{source or 'measured table'}: negative BRDF values")
         self.table = np.where(finite, table, 0.0).astype(np.float32)
-        self.unmeasured_cells = int((~finite.all(axis=-1)).sum())
-        self.source = source
         self.distribution = (
             peak_distribution(table) if alpha is None else MicrofacetDistribution("beckmann", alpha, alpha)
         )

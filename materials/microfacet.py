@@ -175,3 +175,23 @@ class MicrofacetDistribution:
 def reflection_jacobian(wo: np.ndarray, wm: np.ndarray) -> np.ndarray:
     """d(omega_m)/d(omega_i) for wi = reflect(wo, wm): 1 / (4 |wo.wm|) (Walter et al. 2007)."""
     return 1.0 / (4.0 * np.maximum(np.abs(dot(wo, wm)), 1e-300))
+
+
+def fit_peak_shape(theta_h: np.ndarray, shape: np.ndarray, kinds=("beckmann",)) -> tuple[str, float]:
+    """(kind, alpha) of the isotropic distribution among ``kinds`` whose D(theta_h) / D(0) best
+    matches ``shape`` (a peak normalised to 1 at theta_h[0] = 0; least squares, sin theta_h
+    weighted) over 200 alphas log-spaced in [1e-3, ALPHA_MAX]: the proxy that places lobe-N's
+    pattern for a lobe given only by its values (a Rational BRDF, a measured table)."""
+    alphas = np.geomspace(max(ALPHA_MIN, 1e-3), ALPHA_MAX, 200)[:, None]
+    tan2, cos4 = (np.tan(theta_h) ** 2)[None, :], (np.cos(theta_h) ** 4)[None, :]
+    models = {
+        "beckmann": lambda: np.exp(-tan2 / alphas**2) / cos4,
+        "ggx": lambda: alphas**4 / (cos4 * (alphas**2 + tan2) ** 2),
+    }
+    best = None
+    for kind in kinds:
+        err = ((models[kind]() - shape[None, :]) ** 2 * np.sin(theta_h)[None, :]).sum(axis=1)
+        i = int(np.argmin(err))
+        if best is None or err[i] < best[0]:
+            best = (float(err[i]), kind, float(alphas[i, 0]))
+    return best[1], best[2]

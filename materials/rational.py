@@ -290,6 +290,16 @@ def pole_points(fn: RationalFunction, points: np.ndarray) -> np.ndarray:
     return sign * q < MIN_DENOMINATOR_RATIO * largest
 
 
+def function_defects(fn: RationalFunction, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(poles, falling) masks of ``points``: :func:`pole_points`, and for an inverse CDF where it
+    does not increase in its uniform (last) variable (its samples would fold over). What the
+    reader refuses (materials/spec.py) and the fit's verification refits (rational_brdf.py)."""
+    poles = pole_points(fn, points)
+    if fn.form == "plain":
+        return poles, np.zeros(len(points), dtype=bool)
+    return poles, fn.derivative(points, fn.dimension - 1) <= 0
+
+
 # -- the interval problem ---------------------------------------------------------------------------
 
 

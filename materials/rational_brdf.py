@@ -46,7 +46,7 @@ import numpy as np
 from .bsdf import BSDF, Component
 from .lobe_fit import LUMINANCE
 from .measurement import MERL_DIMS, Measurement, merl_cell_angles
-from .microfacet import ALPHA_MAX, ALPHA_MIN, MicrofacetDistribution, reflection_jacobian
+from .microfacet import ALPHA_MAX, MicrofacetDistribution, fit_peak_shape, reflection_jacobian
 from .rational import (
     FORMS,
     IntervalData,
@@ -55,7 +55,7 @@ from .rational import (
     SolveStats,
     denominator_check_points,
     fit_rational,
-    pole_points,
+    function_defects,
 )
 from .vec import COS_EPSILON, normalize
 
@@ -316,7 +316,8 @@ def _fit_inverse_cdf(
     checks = checks[FORMS[form](checks)[1] > 0]
 
     def verify(fn: RationalFunction):
-        bad = (fn.derivative(checks, variable) <= 0) | pole_points(fn, checks)
+        poles, falling = function_defects(fn, checks)
+        bad = poles | falling
         if not bad.any():
             return None
         v = tabulate(checks[bad])
@@ -380,12 +381,7 @@ def proxy_alpha(functions: list, theta_max_deg: float) -> float:
     if not np.isfinite(span) or span <= 1e-6 * max(lum.max(), 1e-30):
         return ALPHA_MAX
     shape = (lum - lum.min()) / (lum[0] - lum.min()) if lum[0] > lum.min() else (lum - lum.min()) / span
-    alphas = np.geomspace(max(ALPHA_MIN, 1e-3), ALPHA_MAX, 200)
-    tan2 = np.tan(theta_h) ** 2
-    cos4 = np.cos(theta_h) ** 4
-    model = np.exp(-tan2[None, :] / alphas[:, None] ** 2) / cos4[None, :]
-    err = ((model - shape[None, :]) ** 2 * np.sin(theta_h)[None, :]).sum(axis=1)
-    return float(alphas[int(np.argmin(err))])
+    return fit_peak_shape(theta_h, shape)[1]
 
 
 class RationalLobe(Component):

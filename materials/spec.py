@@ -236,10 +236,10 @@ def _check_denominator(fn, where: str) -> None:
     uniform variable near both ends), where the form's factor on p / q is not zero."""
     import numpy as np
 
-    from .rational import denominator_check_points, pole_points
+    from .rational import denominator_check_points, function_defects
 
     points = denominator_check_points(fn.form, fn.lower, fn.upper)
-    poles = pole_points(fn, points)
+    poles, falling = function_defects(fn, points)
     if poles.all():
         raise MaterialError(f"{where}: the denominator is zero (or not finite) over the domain")
     if poles.any():
@@ -247,14 +247,12 @@ def _check_denominator(fn, where: str) -> None:
             f"{where}: the denominator reaches zero inside the domain (a pole: the function is infinite there, "
             f"e.g. at {np.round(points[np.argmax(poles)], 4).tolist()}); refit the material"
         )
-    if fn.form != "plain":  # an inverse CDF increases in its uniform variable, or the sampler folds
-        falling = fn.derivative(points, fn.dimension - 1) <= 0
-        if falling.any():
-            raise MaterialError(
-                f"{where}: the inverse CDF decreases in its uniform variable (at "
-                f"{np.round(points[np.argmax(falling)], 4).tolist()}): samples fold over and their density is "
-                "wrong; refit the material"
-            )
+    if falling.any():  # an inverse CDF increases in its uniform variable, or the sampler folds
+        raise MaterialError(
+            f"{where}: the inverse CDF decreases in its uniform variable (at "
+            f"{np.round(points[np.argmax(falling)], 4).tolist()}): samples fold over and their density is "
+            "wrong; refit the material"
+        )
 
 
 def _validate_rational(desc: dict, common: set) -> dict:
