@@ -51,6 +51,7 @@ PHI_CELLS = 64  # half-vector cells in azimuth relative to the view, over [0, 2 
 SUBSAMPLES = 3  # midpoint rule per cell and axis when the masses are tabulated
 DEFENSIVE_COSINE = 0.05  # share of cosine-weighted samples (positive density wherever f cos may be)
 FLOOR_DOMAIN_DEG = 80.0  # split_diffuse: the table's floor is taken where MERL's data are reliable
+FLOOR_MIN_RATIO = 1e-6  # split_diffuse: a smaller floor (against the channel's peak) is no diffuse term
 HALF_PI = 0.5 * math.pi
 
 
@@ -323,6 +324,11 @@ def split_diffuse(table: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     values = table[inside]  # (cells, phi_d, 3)
     floor = np.nanmin(np.where(np.isfinite(values), values, np.inf), axis=(0, 1))
     floor = np.where(np.isfinite(floor), np.maximum(floor, 0.0), 0.0)
+    # A floor below FLOOR_MIN_RATIO of the channel's peak is no diffuse term: a Beckmann tail's
+    # minimum (1e-45 on a Beckmann 0.5 table) made a Lambert term that drew nothing but cost an
+    # irradiance lookup and a share of the samples.
+    peak = np.nanmax(np.where(np.isfinite(table), table, 0.0), axis=(0, 1, 2))
+    floor = np.where(floor > FLOOR_MIN_RATIO * peak, floor, 0.0)
     kd = np.minimum(floor * math.pi, 1.0)
     return kd, np.where(np.isfinite(table), np.maximum(table - kd / math.pi, 0.0), np.nan)
 

@@ -81,6 +81,10 @@ def test_floor_split_recovers_a_diffuse_term(tables):
     gold_table = read_merl(tables["gold"])
     kd, _ = split_diffuse(gold_table)
     assert (kd / math.pi <= np.nanmin(gold_table[:80, :80], axis=(0, 1, 2)) + 1e-12).all() and kd.max() < 0.05
+    # A Beckmann tail's floor (~1e-45) is no diffuse term: no Lambert component at all.
+    beckmann = {"model": "microfacet", "distribution": "beckmann", "alpha": 0.5, "fresnel": "none"}
+    kd, residual = split_diffuse(merl_table_from_bsdf(build_bsdf(beckmann)))
+    assert (kd == 0).all() and np.nanmin(residual) >= 0
 
 
 @pytest.mark.parametrize(
