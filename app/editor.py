@@ -17,8 +17,9 @@ UNDO_DEPTH = 50
 class MaterialEditor:
     """Edits of material descriptions with validation and an undo stack (last UNDO_DEPTH edits)."""
 
-    def __init__(self, renderer, original: dict | None = None):
+    def __init__(self, renderer, original: dict | None = None, limits=None):
         self.renderer = renderer
+        self.limits = limits  # core/trust.py Limits of the files a materials file may name
         self.undo: list[tuple[int, dict]] = []
         # What the scene file says (``original``: name -> description, when edits were applied
         # before the renderer was built), to tell which materials were edited (edits(), F12).
@@ -66,7 +67,7 @@ class MaterialEditor:
         from lobeview.app.options import read_material_edits
         from lobeview.materials.spec import validate
 
-        data = {name: validate(desc) for name, desc in read_material_edits(path).items()}
+        data = {name: validate(desc) for name, desc in read_material_edits(path, self.limits).items()}
         scene = self.renderer.scene
         changed = []
         for i, obj in enumerate(scene.objects):

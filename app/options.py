@@ -236,7 +236,7 @@ def camera_from_args(args, default) -> Camera:
 
 
 # -- scene set-up ---------------------------------------------------------------------------------
-def read_material_edits(path: str | Path) -> dict:
+def read_material_edits(path: str | Path, limits=None) -> dict:
     """A materials file (material name -> description), as the viewer's save and F12 write it."""
     from lobeview.core.jsonio import JSONInputError, read_json_file
 
@@ -249,7 +249,7 @@ def read_material_edits(path: str | Path) -> dict:
     from lobeview.materials.spec import MaterialError, resolve_material_files
 
     try:  # a measured table is named relative to the file's folder (and may not leave it)
-        return {name: resolve_material_files(desc, Path(path).parent) for name, desc in data.items()}
+        return {name: resolve_material_files(desc, Path(path).parent, limits) for name, desc in data.items()}
     except MaterialError as exc:
         raise OptionError(f"--materials {path}: {exc}") from None
 

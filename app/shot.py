@@ -235,7 +235,7 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
 
 
 def _run_scene(args, out, method, size, stages, t0, create_context, describe) -> int:
-    edits = read_material_edits(args.materials) if args.materials is not None else None
+    edits = read_material_edits(args.materials, args.limits) if args.materials is not None else None
     path, scene, env, cache = load_scene_and_environment(args.scene, args.env, args.cache, args.limits)
     if edits is not None:
         changed = apply_material_edits(scene, edits)

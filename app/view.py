@@ -132,7 +132,7 @@ def run(args) -> int:
             "--method must be a real-time method (lobe-N, fis-N, mc-N, prefiltered[-MODE]); refinement is automatic"
         )
     # Everything that can be wrong with the files is checked before the scene is loaded.
-    edits = read_material_edits(args.materials) if args.materials is not None else None
+    edits = read_material_edits(args.materials, args.limits) if args.materials is not None else None
     script = []
     if args.script:
         from lobeview.app.script import load_script

@@ -144,7 +144,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.selected: int | None = next(
             (i for i, o in enumerate(self.renderer.analysis.objects) if o.needs_cube_map), None
         )
-        self.editor = MaterialEditor(self.renderer, session.original_materials)
+        self.editor = MaterialEditor(self.renderer, session.original_materials, self.args.limits)
         self.message = ""
         self.refinement = Refinement()
         self.frame_ms = 0.0  # smoothed interval between frames (what the fps shows)

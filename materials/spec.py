@@ -368,16 +368,18 @@ def relative_material_files(desc: dict, folder: Path) -> dict:
     return {**desc, "file": table.relative_to(base).as_posix()} if table.is_relative_to(base) else desc
 
 
-def resolve_material_files(desc: dict, folder: Path) -> dict:
+def resolve_material_files(desc: dict, folder: Path, limits=None) -> dict:
     """A validated description read from a JSON file in ``folder`` with the files it names
     (a measured material's table) resolved there: a file may lie only in that folder or below
-    it (the scene-file trust boundary, core/trust.py), symbolic links included."""
+    it (the scene-file trust boundary, core/trust.py), symbolic links included, unless
+    ``limits`` (core/trust.py Limits; default DEFAULT_LIMITS) allow outside references (the
+    --allow-outside-references the refusal names)."""
     if desc.get("model") != "measured":
         return desc
-    from lobeview.core.trust import UntrustedReferenceError, resolve_reference
+    from lobeview.core.trust import DEFAULT_LIMITS, UntrustedReferenceError, resolve_reference
 
     try:
-        resolved = resolve_reference(folder, desc["file"], "measured table")
+        resolved = resolve_reference(folder, desc["file"], "measured table", limits or DEFAULT_LIMITS)
     except (UntrustedReferenceError, FileNotFoundError) as exc:
         raise MaterialError(str(exc)) from None
     return {**desc, "file": str(resolved)}

@@ -288,7 +288,7 @@ def _custom_material(reader, custom) -> dict:
 
     if isinstance(custom, dict):
         # A measured table is named relative to the scene's folder, like every scene reference.
-        return resolve_material_files(validate(custom), reader.path.parent)
+        return resolve_material_files(validate(custom), reader.path.parent, reader.limits)
     if not isinstance(custom, str):
         raise MaterialError(f"extras.lobeview must be a preset name, a material object or a JSON file, not {custom!r}")
     if custom in PRESETS:
@@ -301,7 +301,7 @@ def _custom_material(reader, custom) -> dict:
     except UntrustedReferenceError as exc:
         raise MaterialError(str(exc)) from None
     try:
-        return resolve_material_files(validate(json.loads(text)), reader.path.parent)
+        return resolve_material_files(validate(json.loads(text)), reader.path.parent, reader.limits)
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise MaterialError(f"material file {custom!r} is not valid JSON: {exc}") from None
 

@@ -202,6 +202,16 @@ def test_material_sources_and_the_trust_boundary(tables, tmp_path):
     (tmp_path / "outside.json").write_text(json.dumps({"model": "measured", "file": f"../{folder.name}/gold.binary"}))
     with pytest.raises(MaterialError, match="outside"):
         load_material(str(tmp_path / "outside.json"))
+    # ... unless the user opts in, as the refusal says (--allow-outside-references: its Limits).
+    from lobeview.app.options import OptionError, read_material_edits
+    from lobeview.core.trust import Limits
+
+    edits = tmp_path / "edits.json"
+    edits.write_text(json.dumps({"box": {"model": "measured", "file": f"../{folder.name}/gold.binary"}}))
+    with pytest.raises(OptionError, match="allow-outside-references"):
+        read_material_edits(edits)
+    opted_in = read_material_edits(edits, Limits(allow_outside=True))
+    assert Path(opted_in["box"]["file"]).resolve() == tables["gold"].resolve()
     (tmp_path / "missing.json").write_text(json.dumps({"model": "measured", "file": "none.binary"}))
     with pytest.raises(MaterialError, match="no such file"):
         load_material(str(tmp_path / "missing.json"))
