@@ -297,7 +297,8 @@ def function_defects(fn: RationalFunction, points: np.ndarray) -> tuple[np.ndarr
     poles = pole_points(fn, points)
     if fn.form == "plain":
         return poles, np.zeros(len(points), dtype=bool)
-    return poles, fn.derivative(points, fn.dimension - 1) <= 0
+    with np.errstate(divide="ignore", invalid="ignore"):  # at a pole (reported as one) q is 0
+        return poles, fn.derivative(points, fn.dimension - 1) <= 0
 
 
 # -- the interval problem ---------------------------------------------------------------------------
