@@ -1,8 +1,10 @@
-"""A built-in scene's lightmap bake in a separate process (issue 42 item 2: a first frame in
-seconds). On first use the demo and the apartment are baked on the CPU (half a minute for the
-demo, about two for the 12-room apartment); the window does not wait: it opens on the scene
-without lightmaps (diffuse light from the environment, nothing occluded) while a worker process
-builds and caches the baked .glb, then swaps it in (app/window.py).
+"""A scene's lightmap bake in a separate process (issue 42 item 2: a first frame in seconds;
+issue 40 item 3: a user's glTF baked on first use). On first use the demo and the apartment are
+baked on the CPU (half a minute for the demo, about two for the 12-room apartment), and so is a
+glTF file without lightmaps (scenes/gltf_bake.py: Suzanne 13 s, into the cache, keyed by
+content); the window does not wait: it opens on the scene without lightmaps (diffuse light from
+the environment, nothing occluded) while a worker process builds and caches the baked .glb, then
+swaps it in (app/finishing.py).
 
 A process, not a thread: the baker's numpy loops would hold the interpreter's lock against the
 window's frames. The worker reports its progress lines through a queue; its result is the cached
@@ -20,11 +22,23 @@ from pathlib import Path
 PROGRESS_INTERVAL_S = 0.25  # the worker sends at most this many progress lines a second
 
 
-def bake_worker(scene_arg: str | None, cache: str, messages) -> None:
-    """The worker process: build (bake) the built-in scene into the cache, telling ``messages``
-    ("progress", text, fraction), then ("done", path) or ("error", text)."""
-    from lobeview.core import progress
+def _build_builtin(scene_arg: str | None, cache: str) -> Path:
     from lobeview.scenes.setup import build_builtin_scene
+
+    return build_builtin_scene(scene_arg, Path(cache))
+
+
+def _bake_gltf_file(source: str, environment_spec: str, out: str, limits) -> Path:
+    from lobeview.scenes.gltf_bake import bake_gltf
+
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    return bake_gltf(Path(source), environment_spec, Path(out), limits, say=lambda _: None)[0]
+
+
+def bake_worker(build, arguments: tuple, messages) -> None:
+    """The worker process: ``build(*arguments)`` (bakes and returns the written scene's path),
+    telling ``messages`` ("progress", text, fraction), then ("done", path) or ("error", text)."""
+    from lobeview.core import progress
 
     last = [0.0]
 
@@ -36,26 +50,41 @@ def bake_worker(scene_arg: str | None, cache: str, messages) -> None:
 
     try:
         with progress.listening(listener):
-            path = build_builtin_scene(scene_arg, Path(cache))
+            path = build(*arguments)
         messages.put(("done", str(path)))
     except BaseException as exc:  # noqa: BLE001 - any failure is the window's message, not a crash
         messages.put(("error", f"{type(exc).__name__}: {exc}"))
 
 
 class BackgroundBake:
-    """The worker for ``scene_arg`` (a built-in scene) baking into ``cache``."""
+    """A worker running ``build(*arguments)`` (a module-level function: the spawned process
+    imports it); made by :meth:`for_builtin` or :meth:`for_gltf`. ``label``: what the window's
+    title calls the result (None: the written file's name)."""
 
-    def __init__(self, scene_arg: str | None, cache: Path):
+    def __init__(self, build, arguments: tuple, label: str | None = None):
+        self.label = label
         context = multiprocessing.get_context("spawn")  # no fork of a process that holds a GL context
         self._messages = context.Queue()
         self.process = context.Process(
-            target=bake_worker, args=(scene_arg, str(cache), self._messages), name="lobeview bake", daemon=True
+            target=bake_worker, args=(build, arguments, self._messages), name="lobeview bake", daemon=True
         )
         self.process.start()
         self.status = "lightmaps: starting the bake"
         self.fraction: float | None = None
         self.path: Path | None = None
         self.error: str | None = None
+
+    @classmethod
+    def for_builtin(cls, scene_arg: str | None, cache: Path) -> BackgroundBake:
+        """The built-in scene ``scene_arg`` built and baked into ``cache``."""
+        return cls(_build_builtin, (scene_arg, str(cache)))
+
+    @classmethod
+    def for_gltf(cls, source: Path, environment_spec: str, out: Path, limits) -> BackgroundBake:
+        """The first-use bake of the glTF file ``source`` under ``environment_spec`` into ``out``
+        (scenes/gltf_bake.py first_use_bake_file), with the trust ``limits`` of its load."""
+        arguments = (str(source), environment_spec, str(out), limits)
+        return cls(_bake_gltf_file, arguments, label=f"{Path(source).name} (baked)")
 
     @property
     def finished(self) -> bool:

@@ -48,56 +48,18 @@ def add_arguments(p) -> None:
     add_trust_arguments(p)
 
 
-# More than this fraction of the file's TEXCOORD_1 texels claimed twice: not a shared atlas.
-MAX_UV_OVERLAP = 0.05
-
-
 def run(args) -> int:
-    from lobeview.scenes.baked_gltf import write_baked_gltf
-    from lobeview.scenes.baker import bake_lightmap, lightmap_uv_overlap
-    from lobeview.scenes.builtin_env import load_environment
-    from lobeview.scenes.demo import unwrap_lightmap_uvs
-    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.gltf_bake import BakeSettings, bake_gltf
 
-    for name in ("resolution", "rays", "bounces"):
-        if getattr(args, name) < 1:
-            raise ValueError(f"--{name} must be at least 1")
-    if args.env_samples < 0 or args.light_samples < 0:
-        raise ValueError("--env-samples and --light-samples must not be negative")
-    if not 16 <= args.resolution <= 8192:
-        raise ValueError("--resolution must be in [16, 8192]")
+    settings = BakeSettings(args.resolution, args.rays, args.bounces, args.light_samples, args.env_samples)
+    settings.check()
     check_environment_option(args.env)
     limits = trust_limits(args)
     t0 = time.perf_counter()
     source = Path(args.scene)
     out = Path(args.out) if args.out else Path.cwd() / (source.stem + "_baked.glb")
     _check_writable(out)
-    scene = load_gltf(source, limits)
-    missing = [obj.name for obj in scene.objects if obj.uv1 is None]
-    overlap = 0.0 if missing else lightmap_uv_overlap(scene, args.resolution)
-    if missing or overlap > MAX_UV_OVERLAP:
-        reason = (
-            f"{len(missing)} of {len(scene.objects)} objects have no TEXCOORD_1"
-            if missing
-            else f"the file's TEXCOORD_1 claims {overlap:.0%} of its texels twice (per-object or stacked "
-            "lightmap UVs, not one shared atlas)"
-        )
-        _check_texcoord1_free(scene, source)
-        print(
-            f"{reason}: unwrapping all {len(scene.objects)} objects into one {args.resolution}^2 atlas "
-            "(xatlas); the output's TEXCOORD_1 is the new atlas"
-        )
-        scene = unwrap_lightmap_uvs(scene, args.resolution)
-    lightmap = bake_lightmap(
-        scene,
-        load_environment(args.env),
-        args.resolution,
-        args.rays,
-        args.bounces,
-        light_samples=args.light_samples,
-        env_samples=args.env_samples,
-    )
-    written = write_baked_gltf(source, scene, lightmap, out, limits, external_lightmap=args.external_lightmap)
+    written = bake_gltf(source, args.env, out, limits, settings, external_lightmap=args.external_lightmap)
     print(f"wrote {' and '.join(str(p) for p in written)} in {time.perf_counter() - t0:.1f} s")
     return 0
 
@@ -115,15 +77,3 @@ def _check_writable(out: Path) -> None:
     except OSError as exc:
         reason = exc.strerror or exc
         raise ValueError(f"cannot write to {folder} ({reason}); name a writable place with --out") from None
-
-
-def _check_texcoord1_free(scene, source: Path) -> None:
-    """A new atlas replaces TEXCOORD_1: refuse when a material's textures read that set."""
-    for material in scene.materials:
-        for slot_name, slot in material.textures.items():
-            if slot.tex_coord == 1:
-                raise ValueError(
-                    f"{source}: material {material.name!r} reads its {slot_name} texture through TEXCOORD_1, "
-                    "which the lightmap atlas would replace; give every object its own non-overlapping "
-                    "TEXCOORD_1 lightmap coordinates, or move that texture to TEXCOORD_0"
-                )

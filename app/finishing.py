@@ -65,8 +65,8 @@ class SceneFinishing:
         window.renderer, window.scene = renderer, scene
         window.editor.renderer = renderer  # its undo stack holds object indices: the same objects
         session.scene, session.scene_path = scene, bake.path
-        window.wnd.title = f"lobeview - {bake.path.name}"
-        window.message = f"lightmaps baked: {bake.path.name} (cached for the next start)"
+        window.wnd.title = f"lobeview - {bake.label or bake.path.name}"
+        window.message = f"lightmaps baked: {bake.path} (cached for the next start)"
         window.dirty = True
 
     def continue_cube_build(self, window, camera, t_frame: float) -> None:

@@ -75,8 +75,15 @@ def add_arguments(p) -> None:
     p.add_argument(
         "--no-background-bake",
         action="store_true",
-        help="a built-in scene's first-use bake runs before the window shows the scene (default: the window "
-        "opens on the scene without lightmaps and swaps them in when the bake, in a worker process, ends)",
+        help="the first-use bake (a built-in scene, or a glTF without lightmaps) runs before the window shows "
+        "the scene (default: the window opens on the scene without lightmaps and swaps them in when the bake, "
+        "in a worker process, ends)",
+    )
+    p.add_argument(
+        "--no-first-use-bake",
+        action="store_true",
+        help="show a glTF file without lightmaps as it is (environment irradiance, no occlusion) instead of "
+        "baking it once under --env into the cache (`lobeview bake`'s defaults; cached by content)",
     )
 
 
@@ -96,6 +103,48 @@ def builtin_camera_path(scene_arg: str | None, scene_path: Path):
         "--path builtin: only the built-in scenes (builtin:demo, builtin:apartment[-ROOMS]) have a recorded "
         "path; give a path file (JSON) for this scene"
     )
+
+
+def first_use_bake_applies(args, script) -> bool:
+    """A glTF file (not a built-in scene) in an interactive window: a --script or a --path renders
+    the file as it is (their frames are compared or measured), --no-first-use-bake too."""
+    return not (is_builtin(args.scene) or args.no_first_use_bake or script or args.path is not None)
+
+
+def first_use_bake(args, scene_path: Path, scene, cache: Path):
+    """(scene path, scene, background bake or None) for a glTF file: the file as loaded when it
+    has lightmaps; else its bake under the view's environment from the cache (scenes/gltf_bake.py,
+    keyed by content), or baked now with --no-background-bake, or (the default) the file as it
+    is while a worker process bakes it (swapped in when done: app/finishing.py)."""
+    from lobeview.core import progress
+    from lobeview.scenes.gltf_bake import bake_gltf, first_use_bake_file, has_lightmaps
+    from lobeview.scenes.gltf_loader import load_gltf
+
+    if has_lightmaps(scene) or not scene.objects:
+        return scene_path, scene, None
+    env_spec = args.env or default_environment(args.scene)
+    try:
+        baked = first_use_bake_file(scene_path, env_spec, cache, args.limits)
+    except (OSError, ValueError) as exc:  # an unreadable reference: the load already warned, show the file
+        print(f"lobeview: no first-use bake of {scene_path.name} ({exc})", file=sys.stderr)
+        return scene_path, scene, None
+    if not baked.exists():
+        if not args.no_background_bake:
+            from lobeview.app.background_bake import BackgroundBake
+
+            print(f"lobeview: {scene_path.name} has no lightmaps: baking them in the background into {baked}",
+                  file=sys.stderr)  # fmt: skip
+            return scene_path, scene, BackgroundBake.for_gltf(scene_path, env_spec, baked, args.limits)
+        progress.report(f"baking the lightmaps of {scene_path.name} (first use)", None)
+        baked.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            bake_gltf(scene_path, env_spec, baked, args.limits, say=lambda _: None)
+        except Exception as exc:  # noqa: BLE001 - the viewer shows the file as it is, and says why
+            print(f"lobeview: the first-use bake of {scene_path.name} failed ({type(exc).__name__}: {exc}); "
+                  "showing it without lightmaps", file=sys.stderr)  # fmt: skip
+            return scene_path, scene, None
+    print(f"lobeview: {scene_path.name}: lightmaps from the first-use bake {baked}", file=sys.stderr)
+    return baked, load_gltf(baked, args.limits), None
 
 
 def _no_display_hint() -> str:
@@ -162,13 +211,15 @@ def run(args) -> int:
             cache = cache_dir(args.cache)
             unbaked = unbaked_builtin_scene(args.scene, cache)
             if unbaked is not None:
-                background = BackgroundBake(args.scene, cache)
+                background = BackgroundBake.for_builtin(args.scene, cache)
                 scene, scene_path = unbaked, Path(f"{args.scene or 'builtin:demo'} (lightmaps baking)")
                 environment = load_environment(args.env or default_environment(args.scene))
         if background is None:
             scene_path, scene, environment, cache = load_scene_and_environment(
                 args.scene, args.env, args.cache, args.limits
             )
+            if first_use_bake_applies(args, script):
+                scene_path, scene, background = first_use_bake(args, scene_path, scene, cache)
         apply_reflection_proxy(scene, args.reflection_proxy)
         original, loaded = None, None
         if edits is not None:

@@ -22,7 +22,7 @@ def _wait(bake: BackgroundBake, seconds: float) -> None:
 
 
 def test_a_failing_bake_reports_its_error(tmp_path):
-    bake = BackgroundBake("builtin:nothing", tmp_path)
+    bake = BackgroundBake.for_builtin("builtin:nothing", tmp_path)
     _wait(bake, 120)
     assert bake.path is None and "unknown built-in scene" in bake.error
     bake.cancel()
