@@ -27,7 +27,8 @@ the base (diffuse and specular) scaled by 1 - clearcoat F_c(N_c.V). The coat has
 N_c: its clearcoatNormalTexture, or the vertex normal (the base's normal map does not reach it);
 one pixel's N_c.V is :class:`BaseLayers` ``coat_cos`` (shaders/scene.frag coat_tbn).
 
-KHR_materials_transmission (thin-walled: KHR_materials_volume's thickness 0) moves the fraction
+KHR_materials_transmission (thin-walled here: a KHR_materials_volume thickness turns the lobe onto
+the path through the volume in the scene renderer, materials/volume.py) moves the fraction
 ``transmission`` of the dielectric's diffuse into a GGX transmission lobe with the same alpha,
 tinted by the base colour: (1 - metallic) transmission baseColor (1 - specular max(F_d)) V D,
 evaluated like thesis Eq. 3.5 with the incident direction mirrored through the surface (a thin

@@ -14,7 +14,9 @@ gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness
              "anisotropy": s, "anisotropy_rotation": radians,      (optional, KHR_materials_*:
              "ior": 1.5, "specular": 1, "specular_color": [r, g, b],  anisotropy, ior, specular,
              "clearcoat": c, "clearcoat_roughness": r,               clearcoat, transmission)
-             "transmission": t, "sheen_color": [r, g, b], "sheen_roughness": r}
+             "transmission": t, "sheen_color": [r, g, b], "sheen_roughness": r,
+             "thickness": d, "attenuation_color": [r, g, b],       (KHR_materials_volume: a thick
+             "attenuation_distance": x}                            transmitting volume, materials/volume.py)
 rational    {"model": "rational", "theta_max": 80,               (Rational BRDF, seed 002;
              "brdf": [fn_r, fn_g, fn_b] | [fn],                    materials/rational_brdf.py,
              "sampling": {"theta": fn, "phi": fn},                 written by lobeview fit
@@ -74,12 +76,19 @@ RANGES: dict[str, tuple[float, float]] = {
     "transmission": (0.0, 1.0),
     "sheen_color": (0.0, 1.0),
     "sheen_roughness": (0.0, 1.0),
+    "thickness": (0.0, 1e6),  # KHR_materials_volume thicknessFactor, mesh units (0: thin-walled)
+    "attenuation_color": (0.0, 1.0),
+    "attenuation_distance": (1e-9, 1e30),  # world units; absent: no attenuation (the spec's infinity)
     "theta_max": (10.0, 90.0),  # rational: the fitted (theta_h, theta_d) domain, degrees
     "proxy_alpha": (ALPHA_MIN, ALPHA_MAX),
 }
 #: Optional glTF-model parameters (KHR_materials_* factors), kept in a description only when given.
 GLTF_EXTENSION_KEYS = ("anisotropy", "anisotropy_rotation", "ior", "specular", "specular_color", "clearcoat",
-                       "clearcoat_roughness", "transmission", "sheen_color", "sheen_roughness")  # fmt: skip
+                       "clearcoat_roughness", "transmission", "sheen_color", "sheen_roughness", "thickness",
+                       "attenuation_color", "attenuation_distance")  # fmt: skip
+#: KHR_materials_volume's keys: not the BSDF's (a surface's scattering is the same), the scene
+#: renderer's (the path through the volume behind it: materials/volume.py).
+VOLUME_KEYS = ("thickness", "attenuation_color", "attenuation_distance")
 
 
 class MaterialError(ValueError):
@@ -199,7 +208,7 @@ def validate(desc: Any) -> dict:
         for key in GLTF_EXTENSION_KEYS:
             if key not in desc:
                 continue
-            if key in ("specular_color", "sheen_color"):
+            if key in ("specular_color", "sheen_color", "attenuation_color"):
                 out[key] = _scalar_or_rgb(desc[key], key, key)
             elif key == "ior" and not isinstance(desc[key], bool) and desc[key] == 0:
                 out[key] = 0.0
@@ -314,7 +323,7 @@ def build_bsdf(desc: dict) -> BSDF:
         from .measured import measured_bsdf  # local: reads a 35 MB table
 
         return measured_bsdf(d, name=name)
-    bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"], **{k: d[k] for k in GLTF_EXTENSION_KEYS if k in d})
+    bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"], **{k: d[k] for k in GLTF_EXTENSION_KEYS if k in d and k not in VOLUME_KEYS})
     bsdf.name = name
     return bsdf
 

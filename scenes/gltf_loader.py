@@ -679,4 +679,6 @@ def _primitive(
         material,
         None if uv1 is None else uv1.astype(np.float32),
         origin=(origin[0], origin[1], origin[2], bool(flip)),
+        # KHR_materials_volume's thickness is in mesh units: the node's scale makes it world units.
+        volume_scale=float(abs(np.linalg.det(world[:3, :3])) ** (1.0 / 3.0)),
     )

@@ -50,8 +50,8 @@ GLTF_MODEL_EXTENSIONS = {
         "sheenColorFactor": ("sheen_color", [0.0, 0.0, 0.0], (0.0, 1.0)),
         "sheenRoughnessFactor": ("sheen_roughness", 0.0, (0.0, 1.0)),
     },
-    # Read for what it says about the wall: lobeview's transmission is thin-walled, so a volume
-    # (thickness > 0, attenuation) is said to be ignored, not silently dropped.
+    # KHR_materials_volume: read by _volume (a thickness of 0 is thin-walled, attenuationDistance
+    # is infinite unless given).
     "KHR_materials_volume": {},
 }
 # Material extensions read here (the rest are warned as ignored).
@@ -77,7 +77,7 @@ EXTENSION_SLOTS = {
 # Extension textures that are read but not honoured (warned: the factor applies uniformly).
 EXTENSION_TEXTURES_UNUSED = {
     "KHR_materials_sheen": ("sheenRoughnessTexture",),  # the E_s table is per material roughness
-    "KHR_materials_volume": ("thicknessTexture",),  # transmission is thin-walled
+    "KHR_materials_volume": ("thicknessTexture",),  # the thickness factor applies uniformly
 }
 
 
@@ -188,21 +188,39 @@ def _model_extensions(mat, where: str, scene_warnings: list) -> dict:
                 scene_warnings,
                 f"{where}: {extension} {', '.join(unused)} not used yet; its factor applies uniformly",
             )
-    volume = (mat.extensions or {}).get("KHR_materials_volume")
-    if isinstance(volume, dict):
-        thick = volume.get("thicknessFactor", 0.0)
-        if not (isinstance(thick, (int, float)) and thick == 0) or "attenuationColor" in volume:
-            _warn(
-                scene_warnings,
-                f"{where}: KHR_materials_volume (thickness {thick}) is rendered thin-walled: no refraction "
-                "through the volume, no attenuation",
-            )
+    out.update(_volume(mat, where, scene_warnings))
     if "anisotropy_rotation" in out:
         out["anisotropy_rotation"] = float(np.remainder(out["anisotropy_rotation"] + np.pi, 2 * np.pi) - np.pi)
     ior = out.get("ior")
     if ior is not None and not (ior == 0.0 or 1.0 <= ior <= 10.0):
         _warn(scene_warnings, f"{where}: KHR_materials_ior ior {ior} is neither 0 nor in [1, 10]; 1.5 used")
         out["ior"] = 1.5
+    return out
+
+
+def _volume(mat, where: str, scene_warnings: list) -> dict:
+    """KHR_materials_volume as the gltf model's thickness / attenuation keys (materials/volume.py):
+    thicknessFactor (mesh units, 0: thin-walled, then nothing is kept), attenuationColor and a
+    finite attenuationDistance (absent: the spec's infinity, no attenuation)."""
+    volume = (mat.extensions or {}).get("KHR_materials_volume")
+    if not isinstance(volume, dict):
+        return {}
+    label = f"{where}: KHR_materials_volume"
+    thickness = _checked_number(volume.get("thicknessFactor", 0.0), 0.0, (0.0, 1e6), f"{label}.thicknessFactor",
+                                scene_warnings)  # fmt: skip
+    if thickness <= 0.0:
+        return {}
+    out = {"thickness": thickness}
+    colour = _checked_number(volume.get("attenuationColor"), [1.0, 1.0, 1.0], (0.0, 1.0),
+                             f"{label}.attenuationColor", scene_warnings)  # fmt: skip
+    distance = volume.get("attenuationDistance")
+    if distance is not None:
+        checked = _checked_number(distance, 0.0, None, f"{label}.attenuationDistance", scene_warnings)
+        if 1e-9 <= checked <= 1e30:
+            out["attenuation_distance"], out["attenuation_color"] = checked, colour
+        else:
+            _warn(scene_warnings, f"{label}.attenuationDistance {quoted(distance)} is not in (0, 1e30]; "
+                  "no attenuation")  # fmt: skip
     return out
 
 

@@ -169,6 +169,9 @@ class SceneObject:
     # After a lightmap unwrap: the loaded vertex each vertex of ``mesh`` copies (xatlas splits
     # vertices along chart seams). None: the vertices are the file's, one to one.
     vertex_map: np.ndarray | None = None
+    # Mesh units to world units (the cube root of the node transform's |determinant|): a
+    # KHR_materials_volume thickness is given in the mesh's units (materials/volume.py).
+    volume_scale: float = 1.0
 
 
 @dataclass

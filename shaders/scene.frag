@@ -9,6 +9,7 @@
 #include "integrate.glsl"
 #include "material_maps.glsl"
 #include "lamps.glsl"
+#include "volume.glsl"
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -226,8 +227,25 @@ void main() {
             radiance += lamps_radiance(l, coat_wo, coat_tbn, v_position);
             continue;
         }
-        radiance += integrate_lobe(l, i, wo, tbn) + scene_cap_lights(l, wo, tbn);
-        radiance += lamps_radiance(l, wo, tbn, v_position);
+        // KHR_materials_volume (shaders/volume.glsl): a transmission lobe of a volume turned to
+        // where the light leaves it, read from the exit point, attenuated on the way.
+        mat3 lobe_tbn = tbn;
+        vec3 through = vec3(1.0);
+        bool thick = l.type == LOBE_GLTF_TRANSMISSION && u_volume.x > 0.0;
+        if (thick) {
+            VolumePath path = volume_path(view, tbn[2], u_volume.z, u_volume.x, u_volume.y);
+            lobe_tbn = bend_rotation(-view, path.exit_direction) * tbn;
+            through = volume_attenuation(path.path_length)
+                      * volume_exit_transmittance(wo.z, l.dielectric_f0, l.specular_weight);
+#if defined(PARALLAX) || defined(MIRROR)
+            g_shading_position = v_position + path.exit_offset;
+#endif
+        }
+        radiance += through * (integrate_lobe(l, i, wo, lobe_tbn) + scene_cap_lights(l, wo, lobe_tbn)
+                               + lamps_radiance(l, wo, lobe_tbn, v_position));
+#if defined(PARALLAX) || defined(MIRROR)
+        g_shading_position = v_position;
+#endif
     }
 #endif
     bool bad = any(isnan(radiance)) || any(isinf(radiance));

@@ -543,7 +543,7 @@ def test_loader_maps_ior_specular_and_clearcoat(tmp_path):
     assert isinstance(bsdf.components[2], GltfClearcoat) and bsdf.components[2].clearcoat == 1.0
 
 
-def test_loader_maps_transmission_and_says_volumes_are_thin(tmp_path):
+def test_loader_maps_transmission_and_its_volume(tmp_path):
     material = {
         "pbrMetallicRoughness": {"metallicFactor": 0.0, "roughnessFactor": 0.1},
         "extensions": {
@@ -551,10 +551,11 @@ def test_loader_maps_transmission_and_says_volumes_are_thin(tmp_path):
             "KHR_materials_volume": {"thicknessFactor": 0.02, "attenuationColor": [0.9, 1.0, 0.9]},
         },
     }
-    with pytest.warns(UserWarning, match="rendered thin-walled"):
-        scene = load_gltf(_textured_gltf(tmp_path, material, [np.zeros((2, 2, 4), np.uint8)]))
+    scene = load_gltf(_textured_gltf(tmp_path, material, [np.zeros((2, 2, 4), np.uint8)]))
     desc = scene.materials[0].desc
     assert desc["transmission"] == 0.95
+    # The volume: its thickness kept (tests/test_volume.py), the colour only with a distance.
+    assert desc["thickness"] == 0.02 and "attenuation_color" not in desc
     from lobeview.materials.gltf import GltfTransmission
     from lobeview.materials.spec import build_bsdf
     from lobeview.scenes.analysis import analyse

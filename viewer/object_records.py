@@ -86,6 +86,8 @@ LOBE_RECORD_FIELDS = (
     RecordField("u_cube_centre", "vec3"),
     RecordField("u_proxy_box_min", "vec3"),
     RecordField("u_proxy_box_max", "vec3"),
+    RecordField("u_volume", "vec4"),  # KHR_materials_volume (shaders/volume.glsl)
+    RecordField("u_volume_attenuation", "vec3"),
     RecordField("u_lobes", "vec4", MAX_LOBES * LOBE_ROWS),
     RecordField("u_pattern", "vec2", MAX_LOBES * MAX_PATTERN),
     RecordField("u_cap_light_axis", "vec4", MAX_CAP_LIGHTS),

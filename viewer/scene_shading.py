@@ -253,6 +253,9 @@ class SceneShading(ShadingBinder):
             set_uniform(program, "u_lightmap_texcoord", -1)
         bind_sampler(program, "u_irradiance", self.environment_irradiance)
         self._bind_material(program, mat)
+        volume, attenuation_colour = volume_uniforms(mat.desc, self.scene.objects[obj.index])
+        set_uniform(program, "u_volume", volume)
+        set_uniform(program, "u_volume_attenuation", attenuation_colour)
         if proxy is not None:
             self._bind_proxy(program, proxy, probe_centre)
 
@@ -353,3 +356,17 @@ def lamp_uniforms(lamps: list) -> dict[str, np.ndarray]:
         spot[k] = (*direction, cos_outer)
         shape[k] = (scale, np.sin(DIRECTIONAL_ANGULAR_RADIUS), LAMP_RADIUS, 0.0)
     return {"u_lamp_position": position, "u_lamp_colour": colour, "u_lamp_spot": spot, "u_lamp_shape": shape}
+
+
+def volume_uniforms(desc: dict, scene_object) -> tuple[tuple, tuple]:
+    """shaders/volume.glsl's u_volume (thickness in world units, the object's middle bounding-box
+    extent, ior, 1 / attenuation distance) and u_volume_attenuation for a material ``desc`` on
+    ``scene_object``; a thickness of 0 (thin-walled, or not a glTF volume) disables the path."""
+    thickness = float(desc.get("thickness", 0.0)) * float(scene_object.volume_scale) if desc["model"] == "gltf" else 0.0
+    if thickness <= 0.0:
+        return (0.0, 1.0, 1.5, 0.0), (1.0, 1.0, 1.0)
+    positions = scene_object.mesh.positions
+    extent = float(np.sort(np.ptp(positions, axis=0))[1]) if len(positions) else 0.0
+    distance = desc.get("attenuation_distance")
+    colour = tuple(float(c) for c in np.broadcast_to(desc.get("attenuation_color", 1.0), 3))
+    return (thickness, extent, float(desc.get("ior", 1.5)), 1.0 / float(distance) if distance else 0.0), colour
