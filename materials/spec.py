@@ -89,6 +89,8 @@ GLTF_EXTENSION_KEYS = ("anisotropy", "anisotropy_rotation", "ior", "specular", "
 #: KHR_materials_volume's keys: not the BSDF's (a surface's scattering is the same), the scene
 #: renderer's (the path through the volume behind it: materials/volume.py).
 VOLUME_KEYS = ("thickness", "attenuation_color", "attenuation_distance")
+#: The optional keys that are gltf_bsdf's keyword arguments.
+GLTF_BSDF_KEYS = tuple(k for k in GLTF_EXTENSION_KEYS if k not in VOLUME_KEYS)
 
 
 class MaterialError(ValueError):
@@ -323,7 +325,7 @@ def build_bsdf(desc: dict) -> BSDF:
         from .measured import measured_bsdf  # local: reads a 35 MB table
 
         return measured_bsdf(d, name=name)
-    bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"], **{k: d[k] for k in GLTF_EXTENSION_KEYS if k in d and k not in VOLUME_KEYS})
+    bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"], **{k: d[k] for k in GLTF_BSDF_KEYS if k in d})
     bsdf.name = name
     return bsdf
 

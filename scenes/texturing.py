@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lobeview.materials.spec import GLTF_EXTENSION_KEYS, VOLUME_KEYS
+from lobeview.materials.spec import GLTF_BSDF_KEYS
 
 from .scene import CLAMP_TO_EDGE, MIRRORED_REPEAT, NEAREST, SceneMaterial, TextureSlot
 
@@ -110,7 +110,7 @@ def extension_texels(material: SceneMaterial, texel, count: int) -> dict:
     roughness x G; specular colour x RGB (sRGB) and specular x A; transmission x R; sheen colour x
     RGB (sRGB). ``texel(slot, absent)`` samples a slot."""
     desc = material.desc
-    out = {k: np.repeat(np.asarray(desc[k], np.float64)[None], count, axis=0) for k in GLTF_EXTENSION_KEYS if k in desc and k not in VOLUME_KEYS}
+    out = {k: np.repeat(np.asarray(desc[k], np.float64)[None], count, axis=0) for k in GLTF_BSDF_KEYS if k in desc}
     if material.texture("anisotropy") is not None:
         values = texel("anisotropy")
         direction = 2.0 * values[:, :2] - 1.0
