@@ -23,8 +23,12 @@ around where the light really comes from, read from the exit point (reflection p
 roughness is kept (a rough surface's two refractions widen the real lobe; not modelled). The
 light is attenuated along the path (Beer-Lambert, the extension's attenuationColor^(s /
 attenuationDistance)) and by the exit interface (1 - specular max F(theta), the same Fresnel the
-lobe takes at the entry, equal there by the symmetry of both models). Light reflected inside the
-volume is not followed."""
+lobe takes at the entry, equal there by the symmetry of both models). Inside a plate the light
+bounces between the faces (both at that angle) and leaves parallel to the single passes: summed
+(incoherently) it adds (1 - F)^2 a^2 / (1 - F^2 a^2) to the front face's reflection F and divides
+the transmission by 1 - F^2 a^2 (a: one crossing's attenuation; :func:`slab_gains`), weighted by
+the plate's share. Light reflected inside the ball is not followed (it leaves in other
+directions; the ball loses ~4 % of its light against a path tracer)."""
 
 from __future__ import annotations
 
@@ -40,11 +44,14 @@ MIN_COS_VIEW = 1e-4  # N.V floor (normal maps turn some normals away from the vi
 @dataclass
 class VolumePath:
     """Per point: the direction the light leaves the volume towards (unit, world), the exit point
-    relative to the entry point, and the length of the path inside."""
+    relative to the entry point, the length of the path inside, the plate model's share and the
+    plate's crossing length (for :func:`slab_gains`)."""
 
     exit_direction: np.ndarray
     exit_offset: np.ndarray
     length: np.ndarray
+    slab_weight: np.ndarray
+    slab_length: np.ndarray
 
 
 def _dot(a, b):
@@ -89,7 +96,7 @@ def volume_path(view, normal, ior, thickness, extent) -> VolumePath:
     w = sphere_weight(thickness, extent)[..., None]
     direction = _normalize((1.0 - w) * (-view) + w * sphere_exit)
     length = (1.0 - w) * slab_length + w * chord
-    return VolumePath(direction, length * inside, length[..., 0])
+    return VolumePath(direction, length * inside, length[..., 0], 1.0 - w[..., 0], slab_length[..., 0])
 
 
 def bend_rotation(source, target) -> np.ndarray:
@@ -122,3 +129,14 @@ def exit_transmittance(cos_view, dielectric_f0, specular_weight) -> np.ndarray:
     f0 = np.max(np.asarray(dielectric_f0, dtype=np.float64))
     fresnel = f0 + (1.0 - f0) * (1.0 - cos_view) ** 5
     return 1.0 - float(specular_weight) * fresnel
+
+
+def slab_gains(fresnel, crossing) -> tuple[np.ndarray, np.ndarray]:
+    """A plate's interreflections, summed incoherently: (gain on the front reflection F, gain on
+    the single-pass transmission (1 - F)^2 a) for the faces' reflectance ``fresnel`` F and one
+    crossing's attenuation ``crossing`` a (per channel): 1 + (1 - F)^2 a^2 / (1 - F^2 a^2) and
+    1 / (1 - F^2 a^2), the geometric series of the bounces."""
+    f = np.asarray(fresnel, dtype=np.float64)[..., None]
+    a = np.asarray(crossing, dtype=np.float64)
+    denominator = 1.0 - f * f * a * a
+    return 1.0 + (1.0 - f) ** 2 * a * a / denominator, 1.0 / denominator

@@ -18,6 +18,8 @@ struct VolumePath {
     vec3 exit_direction;  // unit, world
     vec3 exit_offset;     // exit point - entry point
     float path_length;
+    float slab_weight;    // the plate model's share
+    float slab_length;    // the plate's crossing length (slab_gains)
 };
 
 VolumePath volume_path(vec3 view, vec3 n, float ior, float thickness, float extent) {
@@ -37,6 +39,8 @@ VolumePath volume_path(vec3 view, vec3 n, float ior, float thickness, float exte
     path.exit_direction = normalize(mix(-view, sphere_exit, w));
     path.path_length = mix(slab_length, chord, w);
     path.exit_offset = path.path_length * inside;
+    path.slab_weight = 1.0 - w;
+    path.slab_length = slab_length;
     return path;
 }
 
@@ -53,6 +57,14 @@ mat3 bend_rotation(vec3 source, vec3 target) {
 vec3 volume_attenuation(float path_length) {
     if (u_volume.w <= 0.0) return vec3(1.0);
     return exp(log(max(u_volume_attenuation, vec3(1e-30))) * (path_length * u_volume.w));
+}
+
+// A plate's interreflections (materials/volume.py slab_gains): the gains on the front reflection
+// F and on the single-pass transmission, for the faces' reflectance f and one crossing's a.
+void slab_gains(float f, vec3 a, out vec3 reflection_gain, out vec3 transmission_gain) {
+    vec3 denominator = 1.0 - f * f * a * a;
+    reflection_gain = 1.0 + (1.0 - f) * (1.0 - f) * a * a / denominator;
+    transmission_gain = 1.0 / denominator;
 }
 
 float volume_exit_transmittance(float cos_view, vec3 dielectric_f0, float specular_weight) {

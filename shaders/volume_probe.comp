@@ -2,12 +2,13 @@
 // Probe of shaders/volume.glsl for tests (tests/test_volume.py): per invocation, read (view,
 // thickness), (normal, extent), (ior, path length, 0, 0) and write the exit direction, the exit
 // offset, the path length, the rotation of -view onto the exit direction applied to a test
-// vector, the attenuation over the given length and the exit transmittance.
+// vector, the attenuation over the given length, the exit transmittance, the plate's share and
+// crossing length and its interreflection gains.
 layout(local_size_x = 64) in;
 #include "volume.glsl"
 
 layout(std430, binding = 2) readonly buffer ProbeIn { vec4 probe_in[]; };    // 3 per item
-layout(std430, binding = 3) writeonly buffer ProbeOut { vec4 probe_out[]; }; // 4 per item
+layout(std430, binding = 3) writeonly buffer ProbeOut { vec4 probe_out[]; }; // 6 per item
 uniform int u_count;
 
 void main() {
@@ -21,8 +22,13 @@ void main() {
     float given_length = probe_in[3 * i + 2].y;
     VolumePath path = volume_path(view, n, ior, thickness, extent);
     mat3 bend = bend_rotation(-view, path.exit_direction);
-    probe_out[4 * i] = vec4(path.exit_direction, path.path_length);
-    probe_out[4 * i + 1] = vec4(path.exit_offset, volume_exit_transmittance(dot(view, n), vec3(0.04, 0.05, 0.03), 0.9));
-    probe_out[4 * i + 2] = vec4(bend * n, 0.0);
-    probe_out[4 * i + 3] = vec4(volume_attenuation(given_length), 0.0);
+    float exit_t = volume_exit_transmittance(dot(view, n), vec3(0.04, 0.05, 0.03), 0.9);
+    vec3 reflection_gain, transmission_gain;
+    slab_gains(1.0 - exit_t, volume_attenuation(path.slab_length), reflection_gain, transmission_gain);
+    probe_out[6 * i] = vec4(path.exit_direction, path.path_length);
+    probe_out[6 * i + 1] = vec4(path.exit_offset, exit_t);
+    probe_out[6 * i + 2] = vec4(bend * n, path.slab_weight);
+    probe_out[6 * i + 3] = vec4(volume_attenuation(given_length), path.slab_length);
+    probe_out[6 * i + 4] = vec4(reflection_gain, 0.0);
+    probe_out[6 * i + 5] = vec4(transmission_gain, 0.0);
 }

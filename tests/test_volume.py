@@ -15,6 +15,7 @@ from lobeview.materials.volume import (
     attenuation,
     bend_rotation,
     exit_transmittance,
+    slab_gains,
     sphere_weight,
     volume_path,
 )
@@ -118,6 +119,17 @@ def test_bend_rotation_and_attenuation():
     assert exit_transmittance(1.0, [0.04] * 3, 1.0) == pytest.approx(0.96)
 
 
+def test_slab_gains_sum_the_bounces_between_the_faces():
+    """Against the bounces summed one by one: a plate reflects F, then (1 - F)^2 a^(2k) F^(2k - 1)
+    after k round trips inside; it transmits (1 - F)^2 a (F a)^(2k)."""
+    for f, a in ((0.04, 1.0), (0.3, 0.8), (0.9, 0.5), (0.04, 0.0)):
+        reflected = f + sum((1 - f) ** 2 * a ** (2 * k) * f ** (2 * k - 1) for k in range(1, 400))
+        transmitted = sum((1 - f) ** 2 * a * (f * a) ** (2 * k) for k in range(400))
+        reflection_gain, transmission_gain = slab_gains(f, np.full(3, a))
+        np.testing.assert_allclose(f * reflection_gain, reflected, rtol=1e-12)
+        np.testing.assert_allclose((1 - f) ** 2 * a * transmission_gain, transmitted, rtol=1e-12, atol=1e-300)
+
+
 def test_glsl_volume_path_equals_numpy():
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.shaders import ProgramCache
@@ -140,16 +152,22 @@ def test_glsl_volume_path_equals_numpy():
         program = ProgramCache(ctx).compute("volume_probe.comp")
         inputs = ctx.buffer(probe.tobytes())
         inputs.bind_to_storage_buffer(2)
-        outputs = ctx.buffer(reserve=n * 64)
+        outputs = ctx.buffer(reserve=n * 96)
         outputs.bind_to_storage_buffer(3)
         program["u_count"] = n
         program["u_volume"] = (0.0, 1.0, 1.5, 1.0 / 0.7)
         program["u_volume_attenuation"] = (0.9, 0.5, 0.2)
         program.run((n + 63) // 64)
-        out = np.frombuffer(outputs.read(), np.float32).reshape(n, 4, 4)
+        out = np.frombuffer(outputs.read(), np.float32).reshape(n, 6, 4)
     finally:
         ctx.release()
     path = volume_path(views, normals, ior, thickness, extent)
+    np.testing.assert_allclose(out[:, 2, 3], path.slab_weight, atol=1e-5)
+    np.testing.assert_allclose(out[:, 3, 3], path.slab_length, rtol=1e-4)
+    exit_t = np.array([exit_transmittance(c, [0.04, 0.05, 0.03], 0.9) for c in np.sum(views * normals, axis=1)])
+    reflection_gain, transmission_gain = slab_gains(1 - exit_t, attenuation(path.slab_length, [0.9, 0.5, 0.2], 0.7))
+    np.testing.assert_allclose(out[:, 4, :3], reflection_gain, rtol=1e-4)
+    np.testing.assert_allclose(out[:, 5, :3], transmission_gain, rtol=1e-4)
     np.testing.assert_allclose(out[:, 0, :3], path.exit_direction, atol=2e-5)
     np.testing.assert_allclose(out[:, 0, 3], path.length, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(out[:, 1, :3], path.exit_offset, atol=2e-5)
