@@ -318,3 +318,11 @@ def test_a_glass_ball_renders_as_a_ray_tracer_sees_it(tmp_path, method):
         errors[thickness] = np.sqrt(np.mean((image[mask] - truth[mask]) ** 2)) / np.sqrt(np.mean(truth[mask] ** 2))
     assert errors[1.0] < 0.02, errors
     assert errors[0.0] > 3 * errors[1.0], errors
+
+
+def test_a_thickness_beyond_the_object_is_its_diagonal(tmp_path):
+    from lobeview.viewer.scene_shading import volume_uniforms
+
+    scene, _ = _load_with_warnings(_volume_gltf(tmp_path, {"thicknessFactor": 1e6}, scale=1.0))
+    (thickness, extent, _, _), _ = volume_uniforms(scene.materials[0].desc, scene.objects[0])
+    assert thickness == pytest.approx(np.sqrt(2.0)) and extent == pytest.approx(1.0)  # the unit quad

@@ -366,7 +366,11 @@ def volume_uniforms(desc: dict, scene_object) -> tuple[tuple, tuple]:
     if thickness <= 0.0:
         return (0.0, 1.0, 1.5, 0.0), (1.0, 1.0, 1.0)
     positions = scene_object.mesh.positions
-    extent = float(np.sort(np.ptp(positions, axis=0))[1]) if len(positions) else 0.0
+    sides = np.sort(np.ptp(positions, axis=0)) if len(positions) else np.zeros(3)
+    # A thickness beyond the object's diagonal describes no volume the object can hold: taken as
+    # the diagonal (the ball model's path and exit point then stay at the object's scale).
+    thickness = min(thickness, float(np.linalg.norm(sides))) if np.any(sides > 0) else thickness
+    extent = float(sides[1])
     distance = desc.get("attenuation_distance")
     colour = tuple(float(c) for c in np.broadcast_to(desc.get("attenuation_color", 1.0), 3))
     return (thickness, extent, float(desc.get("ior", 1.5)), 1.0 / float(distance) if distance else 0.0), colour
