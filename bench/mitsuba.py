@@ -81,6 +81,18 @@ def material(case: str) -> dict:
             "fresnel": {"type": "none"}, "scale": 1.0}  # fmt: skip
 
 
+def perspective_sensor(mi, camera, size: int, spp: int) -> dict:
+    """Mitsuba's sensor for lobeview's ``camera`` (eye, target, up, vertical field of view in
+    degrees): a square film of ``size`` pixels with a box filter, ``spp`` independent samples."""
+    position, target, up, fov = camera
+    return {
+        "type": "perspective", "fov": fov, "fov_axis": "y",
+        "to_world": mi.ScalarTransform4f().look_at(origin=list(position), target=list(target), up=list(up)),
+        "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "sampler": {"type": "independent", "sample_count": spp},
+    }  # fmt: skip
+
+
 def render_mitsuba(case: str, size: int, spp: int, envmap_file: Path) -> np.ndarray:
     try:
         import mitsuba as mi
@@ -88,19 +100,12 @@ def render_mitsuba(case: str, size: int, spp: int, envmap_file: Path) -> np.ndar
         raise SystemExit("bench.mitsuba needs Mitsuba 3: pip install mitsuba==3.9.1") from None
     mi.set_variant("scalar_rgb")  # llvm_ad_rgb's JIT fails on Debian 12's LLVM 15 (fminimum)
     distribution, au, av = parse_case(case)
-    position, target, up, fov = CAMERA
     bsdf = {"type": "roughconductor", "distribution": distribution, "material": "none"}
     bsdf.update({"alpha": au} if au == av else {"alpha_u": au, "alpha_v": av})
     scene = mi.load_dict({
         "type": "scene",
         "integrator": {"type": "path", "max_depth": 2},  # the sphere is convex: one bounce
-        "sensor": {
-            "type": "perspective", "fov": fov, "fov_axis": "y",
-            "to_world": mi.ScalarTransform4f().look_at(origin=list(position), target=list(target), up=list(up)),
-            "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
-                     "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": spp},
-        },
+        "sensor": perspective_sensor(mi, CAMERA, size, spp),
         "env": {"type": "envmap", "filename": str(envmap_file)},
         # Pole along +y, as lobeview's uv_sphere: the tangent (anisotropy) frames then agree.
         "sphere": {"type": "sphere", "radius": 1.0, "bsdf": bsdf,

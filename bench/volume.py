@@ -111,8 +111,9 @@ def render_mitsuba(case: str, envmap: Path, size: int, spp: int, work: Path) -> 
         import mitsuba as mi
     except ImportError:
         raise SystemExit("bench.volume needs Mitsuba 3: pip install mitsuba==3.9.1") from None
+    from .mitsuba import perspective_sensor
+
     mi.set_variant("scalar_rgb")  # llvm_ad_rgb's JIT fails on Debian 12's LLVM 15
-    position, target, up, fov = CAMERA
     bsdf = {"type": "dielectric", "int_ior": IOR, "ext_ior": 1.0}
     if case == "plate":
         shape = {"type": "obj", "filename": str(_write_obj(_mesh(case)[0], work / "plate.obj")), "face_normals": True}
@@ -128,13 +129,7 @@ def render_mitsuba(case: str, envmap: Path, size: int, spp: int, work: Path) -> 
     scene = mi.load_dict({
         "type": "scene",
         "integrator": {"type": "volpath", "max_depth": 24},
-        "sensor": {
-            "type": "perspective", "fov": fov, "fov_axis": "y",
-            "to_world": mi.ScalarTransform4f().look_at(origin=list(position), target=list(target), up=list(up)),
-            "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"},
-                     "pixel_format": "rgb"},
-            "sampler": {"type": "independent", "sample_count": spp},
-        },
+        "sensor": perspective_sensor(mi, CAMERA, size, spp),
         "env": {"type": "envmap", "filename": str(envmap)},
         "glass": shape,
     })  # fmt: skip
