@@ -143,8 +143,14 @@ def first_use_bake(args, scene_path: Path, scene, cache: Path):
             print(f"lobeview: the first-use bake of {scene_path.name} failed ({type(exc).__name__}: {exc}); "
                   "showing it without lightmaps", file=sys.stderr)  # fmt: skip
             return scene_path, scene, None
+    try:
+        baked_scene = load_gltf(baked, args.limits)
+    except Exception as exc:  # noqa: BLE001 - a damaged cache file: the file as it is, and why
+        print(f"lobeview: the first-use bake {baked} could not be loaded ({type(exc).__name__}: {exc}); showing "
+              f"{scene_path.name} without lightmaps (delete that file to bake again)", file=sys.stderr)  # fmt: skip
+        return scene_path, scene, None
     print(f"lobeview: {scene_path.name}: lightmaps from the first-use bake {baked}", file=sys.stderr)
-    return baked, load_gltf(baked, args.limits), None
+    return baked, baked_scene, None
 
 
 def _no_display_hint() -> str:

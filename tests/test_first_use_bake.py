@@ -144,6 +144,13 @@ def test_first_use_bake_bakes_once_and_then_reads_the_cache(tmp_path, capsys):
     assert again == path and background is None
     assert time.perf_counter() - t0 < bake_seconds
     assert "lightmaps from the first-use bake" in capsys.readouterr().err
+    # A damaged cache file: the file as it is, with the reason and the way out.
+    path.write_bytes(path.read_bytes()[:100])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        shown_path, shown, background = first_use_bake(_args(scene=str(source)), source, scene, cache)
+    assert shown_path == source and shown is scene and background is None
+    assert "could not be loaded" in capsys.readouterr().err
 
 
 def test_what_is_not_baked_on_first_use(tmp_path, capsys):
