@@ -142,6 +142,9 @@ class BSDF:
         # Radians by which the surface's tangent frame turns about the normal before this BSDF's
         # local frame (x = tangent) applies: KHR_materials_anisotropy's rotation.
         self.tangent_rotation = float(tangent_rotation)
+        # KHR_materials_volume of a glTF material (thickness, attenuation, ior; materials/spec.py
+        # build_bsdf), None for a surface without a volume behind it.
+        self.volume: dict | None = None
         weights = np.array([max(c.selection_weight, 0.0) for c in self.components], dtype=float)
         total = weights.sum()
         self.selection_probabilities = weights / total if total > 0 else np.zeros_like(weights)

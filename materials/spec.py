@@ -46,6 +46,7 @@ from .fresnel import Fresnel
 from .gltf import gltf_bsdf
 from .microfacet import ALPHA_MAX, ALPHA_MIN
 from .thesis import thesis_bsdf
+from .volume import VOLUME_KEYS, volume_of
 
 MODELS = ("thesis", "microfacet", "gltf", "rational", "measured")
 
@@ -86,9 +87,8 @@ RANGES: dict[str, tuple[float, float]] = {
 GLTF_EXTENSION_KEYS = ("anisotropy", "anisotropy_rotation", "ior", "specular", "specular_color", "clearcoat",
                        "clearcoat_roughness", "transmission", "sheen_color", "sheen_roughness", "thickness",
                        "attenuation_color", "attenuation_distance")  # fmt: skip
-#: KHR_materials_volume's keys: not the BSDF's (a surface's scattering is the same), the scene
-#: renderer's (the path through the volume behind it: materials/volume.py).
-VOLUME_KEYS = ("thickness", "attenuation_color", "attenuation_distance")
+#: KHR_materials_volume's keys (VOLUME_KEYS, materials/volume.py) are not the BSDF's (a surface's
+#: scattering is the same) but the renderers' (the path through the volume behind it).
 #: The optional keys that are gltf_bsdf's keyword arguments.
 GLTF_BSDF_KEYS = tuple(k for k in GLTF_EXTENSION_KEYS if k not in VOLUME_KEYS)
 
@@ -327,6 +327,9 @@ def build_bsdf(desc: dict) -> BSDF:
         return measured_bsdf(d, name=name)
     bsdf = gltf_bsdf(d["base_color"], d["metallic"], d["roughness"], **{k: d[k] for k in GLTF_BSDF_KEYS if k in d})
     bsdf.name = name
+    # KHR_materials_volume: not the surface's scattering but the object's (materials/volume.py);
+    # carried for the object preview, which renders a BSDF (viewer/preview.py).
+    bsdf.volume = volume_of(d)
     return bsdf
 
 

@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: The gltf model's KHR_materials_volume keys (materials/spec.py): the object's, not the BSDF's.
+VOLUME_KEYS = ("thickness", "attenuation_color", "attenuation_distance")
 # Thickness / middle extent: the slab model up to the first, the sphere model from the second.
 SPHERE_RATIO_LOW, SPHERE_RATIO_HIGH = 0.25, 0.75
 MIN_COS_VIEW = 1e-4  # N.V floor (normal maps turn some normals away from the viewer)
@@ -52,6 +54,14 @@ class VolumePath:
     length: np.ndarray
     slab_weight: np.ndarray
     slab_length: np.ndarray
+
+
+def volume_of(desc: dict) -> dict | None:
+    """A material description's volume (a gltf material with a thickness > 0): its thickness (mesh
+    units), ior, and attenuation colour and distance where given; None: thin-walled."""
+    if desc.get("model") != "gltf" or not desc.get("thickness", 0.0) > 0.0:
+        return None
+    return {k: desc[k] for k in VOLUME_KEYS if k in desc} | {"ior": desc.get("ior", 1.5)}
 
 
 def _dot(a, b):

@@ -56,6 +56,7 @@ vec2 sobol_point(int index) { return sobol_point4(index).xy; }
 #include "env_sampling.glsl"
 
 #include "incident.glsl"
+#include "volume.glsl"
 
 vec3 diffuse_eval(vec3 wi, vec3 wo) {
     if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
@@ -291,14 +292,27 @@ vec3 shade(vec3 wo, mat3 tbn) {
     // prefiltered-rsibr: the lobes baked into the reflection-space maps in one blended lookup
     if (u_rsibr_lobes != 0) result += rsibr_radiance(wo, tbn);
 #endif
+    // KHR_materials_volume (volume.glsl): the preview's object as a volume (u_volume set by
+    // viewer/preview.py from the material's thickness; 0: thin-walled).
+    VolumeShading volume = volume_shading(tbn * wo, tbn, u_dielectric_f0, u_specular_weight);
     for (int i = 0; i < u_lobe_count; ++i) {
 #if defined(METHOD_PREFILTERED)
         if (rsibr_lobe(i)) continue;
 #endif
-        result += integrate_lobe(get_lobe(i), i, wo, tbn);
+        Lobe l = get_lobe(i);
+        mat3 lobe_tbn;
+        vec3 through;
+        volume_lobe(volume, l, tbn, vec3(0.0), lobe_tbn, through);  // the preview has no proxy: no position
+        result += through * integrate_lobe(l, i, wo, lobe_tbn);
     }
     // The bright sources the cube no longer holds, for every lobe (RSIBR's included: its maps
     // are baked from the same cube).
-    for (int i = 0; i < u_lobe_count && u_cap_light_count > 0; ++i) result += cap_lights_radiance(get_lobe(i), wo, tbn);
+    for (int i = 0; i < u_lobe_count && u_cap_light_count > 0; ++i) {
+        Lobe l = get_lobe(i);
+        mat3 lobe_tbn;
+        vec3 through;
+        volume_lobe(volume, l, tbn, vec3(0.0), lobe_tbn, through);
+        result += through * cap_lights_radiance(l, wo, lobe_tbn);
+    }
     return result;
 }

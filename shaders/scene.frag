@@ -9,7 +9,6 @@
 #include "integrate.glsl"
 #include "material_maps.glsl"
 #include "lamps.glsl"
-#include "volume.glsl"
 
 in vec3 v_position;
 in vec3 v_normal;
@@ -197,24 +196,9 @@ void main() {
     if (u_rsibr_lobes != 0) radiance += rsibr_radiance(wo, tbn);
 #endif
     // KHR_materials_volume (shaders/volume.glsl, materials/volume.py): the path through the
-    // volume behind this pixel, the turned frame of its transmission lobe, what the volume lets
-    // through (attenuation, the exit's Fresnel, a plate's interreflections) and the plate's gain
-    // on the reflection.
-    VolumePath volume_path_here;
-    bool volume = u_gltf_model == 1 && u_volume.x > 0.0;
-    mat3 volume_tbn = tbn;
-    vec3 volume_transmitted = vec3(1.0), volume_reflected = vec3(1.0);
-    if (volume) {
-        volume_path_here = volume_path(view, tbn[2], u_volume.z, u_volume.x, u_volume.y);
-        volume_tbn = bend_rotation(-view, volume_path_here.exit_direction) * tbn;
-        float exit_t = volume_exit_transmittance(wo.z, dielectric_f0, specular_weight);
-        vec3 reflection_gain, transmission_gain;
-        slab_gains(1.0 - exit_t, volume_attenuation(volume_path_here.slab_length), reflection_gain, transmission_gain);
-        float plate = volume_path_here.slab_weight;
-        volume_transmitted = volume_attenuation(volume_path_here.path_length) * exit_t
-                             * mix(vec3(1.0), transmission_gain, plate);
-        volume_reflected = mix(vec3(1.0), reflection_gain, plate);
-    }
+    // volume behind this pixel, for its transmission and reflection lobes.
+    VolumeShading volume = volume_shading(view, tbn, dielectric_f0, specular_weight);
+    volume.enabled = volume.enabled && u_gltf_model == 1;
     for (int i = 0; i < u_lobe_count; ++i) {
 #if defined(METHOD_PREFILTERED)
         if (rsibr_lobe(i)) {
@@ -250,14 +234,7 @@ void main() {
         // read from the exit point, attenuated on the way; a plate's interreflections.
         mat3 lobe_tbn = tbn;
         vec3 through = vec3(1.0);
-        if (volume && l.type == LOBE_GLTF_TRANSMISSION) {
-            lobe_tbn = volume_tbn;
-            through = volume_transmitted;
-#if defined(PARALLAX) || defined(MIRROR)
-            g_shading_position = v_position + volume_path_here.exit_offset;
-#endif
-        }
-        if (volume && l.type == LOBE_GLTF_SPECULAR) through = volume_reflected;
+        volume_lobe(volume, l, tbn, v_position, lobe_tbn, through);
         radiance += through * (integrate_lobe(l, i, wo, lobe_tbn) + scene_cap_lights(l, wo, lobe_tbn)
                                + lamps_radiance(l, wo, lobe_tbn, v_position));
 #if defined(PARALLAX) || defined(MIRROR)

@@ -1,7 +1,8 @@
 // Thick transmission (KHR_materials_volume): the GLSL twin of materials/volume.py, which says
 // what the models are. A glTF transmission lobe of a volume is turned by the rotation taking -V
 // to the direction the light leaves the volume towards, read from the exit point, and attenuated
-// along the path and by the exit interface (shaders/scene.frag).
+// along the path and by the exit interface (shaders/scene.frag, and shade() in integrate.glsl
+// for the object preview). Included by integrate.glsl after incident.glsl.
 
 #if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
 // x: thickness in world units (0: thin-walled), y: the object's middle bounding-box extent,
@@ -71,4 +72,51 @@ float volume_exit_transmittance(float cos_view, vec3 dielectric_f0, float specul
     float c = clamp(cos_view, VOLUME_MIN_COS_VIEW, 1.0);
     float f0 = max(dielectric_f0.r, max(dielectric_f0.g, dielectric_f0.b));
     return 1.0 - specular_weight * (f0 + (1.0 - f0) * pow(1.0 - c, 5.0));
+}
+
+// What a volume does to this pixel's lobes (scene.frag and the preview's shade() alike): the turned
+// frame of its transmission lobe, what the volume lets through (attenuation, the exit's Fresnel,
+// a plate's interreflections), the plate's gain on the reflection, the exit point's offset.
+struct VolumeShading {
+    bool enabled;
+    mat3 tbn;
+    vec3 transmitted;
+    vec3 reflected;
+    vec3 exit_offset;
+};
+
+VolumeShading volume_shading(vec3 view, mat3 tbn, vec3 dielectric_f0, float specular_weight) {
+    VolumeShading v;
+    v.enabled = u_volume.x > 0.0;
+    v.tbn = tbn;
+    v.transmitted = vec3(1.0);
+    v.reflected = vec3(1.0);
+    v.exit_offset = vec3(0.0);
+    if (!v.enabled) return v;
+    VolumePath path = volume_path(view, tbn[2], u_volume.z, u_volume.x, u_volume.y);
+    v.tbn = bend_rotation(-view, path.exit_direction) * tbn;
+    float exit_t = volume_exit_transmittance(dot(view, tbn[2]), dielectric_f0, specular_weight);
+    vec3 reflection_gain, transmission_gain;
+    slab_gains(1.0 - exit_t, volume_attenuation(path.slab_length), reflection_gain, transmission_gain);
+    v.transmitted = volume_attenuation(path.path_length) * exit_t * mix(vec3(1.0), transmission_gain, path.slab_weight);
+    v.reflected = mix(vec3(1.0), reflection_gain, path.slab_weight);
+    v.exit_offset = path.exit_offset;
+    return v;
+}
+
+// Lobe l's frame and factor under the volume (tbn and 1 for lobes it does not change); a
+// transmission lobe's incident lookups start at the exit point (the caller resets the position).
+void volume_lobe(VolumeShading v, Lobe l, mat3 tbn, vec3 position, out mat3 lobe_tbn, out vec3 through) {
+    lobe_tbn = tbn;
+    through = vec3(1.0);
+    if (!v.enabled) return;
+    if (l.type == LOBE_GLTF_TRANSMISSION) {
+        lobe_tbn = v.tbn;
+        through = v.transmitted;
+#if defined(PARALLAX) || defined(MIRROR)
+        g_shading_position = position + v.exit_offset;
+#endif
+    } else if (l.type == LOBE_GLTF_SPECULAR) {
+        through = v.reflected;
+    }
 }

@@ -5,6 +5,7 @@
 // vector, the attenuation over the given length, the exit transmittance, the plate's share and
 // crossing length and its interreflection gains.
 layout(local_size_x = 64) in;
+#include "bsdf.glsl"
 #include "volume.glsl"
 
 layout(std430, binding = 2) readonly buffer ProbeIn { vec4 probe_in[]; };    // 3 per item

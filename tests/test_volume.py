@@ -17,6 +17,7 @@ from lobeview.materials.volume import (
     exit_transmittance,
     slab_gains,
     sphere_weight,
+    volume_of,
     volume_path,
 )
 
@@ -220,10 +221,13 @@ def test_the_loader_reads_the_volume(tmp_path):
     scene, _ = _load_with_warnings(_volume_gltf(tmp_path / "c", {"thicknessFactor": 0}))
     assert "thickness" not in scene.materials[0].desc
     # The uniforms: thickness in world units (x the node's scale), the middle extent (the quad's 2 x 2).
-    from lobeview.viewer.scene_shading import volume_uniforms
+    from lobeview.viewer.shading import volume_uniforms
 
     scene, _ = _load_with_warnings(_volume_gltf(tmp_path / "d", volume))
-    (thickness, extent, ior, inverse_distance), colour = volume_uniforms(scene.materials[0].desc, scene.objects[0])
+    obj = scene.objects[0]
+    (thickness, extent, ior, inverse_distance), colour = volume_uniforms(
+        volume_of(scene.materials[0].desc), obj.mesh.positions, obj.volume_scale
+    )
     assert (thickness, extent, ior, inverse_distance) == pytest.approx((1.0, 2.0, 1.5, 0.5))
     assert colour == pytest.approx((0.9, 0.8, 0.7))
 
@@ -257,16 +261,17 @@ def _glass_ball_scene(folder, thickness: float):
 BALL_CAMERA = ((0.3, 0.4, 2.6), 30.0)  # position, vertical field of view (degrees); looking at the origin
 
 
-def _traced_ball(size: int, sky) -> tuple[np.ndarray, np.ndarray]:
-    """A glass ball (radius 0.5, ior 1.5) ray traced in numpy: Schlick reflection (f0 0.04) plus
-    the ray refracted in and out of the real sphere, (1 - F)^2 of it; and the pixels well inside
-    the silhouette (the mask)."""
-    eye = np.array(BALL_CAMERA[0])
+def _traced_ball(size: int, sky, camera=BALL_CAMERA, radius: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """A glass ball (``radius``, ior 1.5, at the origin) ray traced in numpy from ``camera``
+    (position, vertical fov; looking at the origin): Schlick reflection (f0 0.04) plus the ray
+    refracted in and out of the real sphere, (1 - F)^2 of it; and the pixels well inside the
+    silhouette (the mask)."""
+    eye = np.array(camera[0], dtype=np.float64)
     forward = -eye / np.linalg.norm(eye)
     right = np.cross(forward, [0.0, 1.0, 0.0])
     right /= np.linalg.norm(right)
     up = np.cross(right, forward)
-    half = np.tan(np.radians(BALL_CAMERA[1]) / 2)
+    half = np.tan(np.radians(camera[1]) / 2)
     image, mask = np.zeros((size, size, 3)), np.zeros((size, size), bool)
     for row in range(size):
         for col in range(size):
@@ -274,18 +279,18 @@ def _traced_ball(size: int, sky) -> tuple[np.ndarray, np.ndarray]:
             d = forward + x * right + y * up
             d /= np.linalg.norm(d)
             b = np.dot(eye, d)
-            disc = b * b - (np.dot(eye, eye) - 0.25)
+            disc = b * b - (np.dot(eye, eye) - radius * radius)
             if disc <= 0:
                 continue
             p = eye + (-b - np.sqrt(disc)) * d
-            n = p / 0.5
+            n = p / radius
             cos_i = -np.dot(d, n)
             mask[row, col] = cos_i > 0.35  # leave the rim, where a pixel spans much of the ball
             fresnel = 0.04 + 0.96 * (1 - cos_i) ** 5
             reflected = d + 2 * cos_i * n
             inside = _refract(d, n, 1 / 1.5)
-            q = _sphere_exit(p, inside, np.zeros(3), 0.5)
-            out = _refract(inside, -q / 0.5, 1.5)
+            q = _sphere_exit(p, inside, np.zeros(3), radius)
+            out = _refract(inside, -q / radius, 1.5)
             image[row, col] = fresnel * sky(reflected) + (1 - fresnel) ** 2 * sky(out)
     return image, mask
 
@@ -321,8 +326,38 @@ def test_a_glass_ball_renders_as_a_ray_tracer_sees_it(tmp_path, method):
 
 
 def test_a_thickness_beyond_the_object_is_its_diagonal(tmp_path):
-    from lobeview.viewer.scene_shading import volume_uniforms
+    from lobeview.viewer.shading import volume_uniforms
 
     scene, _ = _load_with_warnings(_volume_gltf(tmp_path, {"thicknessFactor": 1e6}, scale=1.0))
-    (thickness, extent, _, _), _ = volume_uniforms(scene.materials[0].desc, scene.objects[0])
+    obj = scene.objects[0]
+    (thickness, extent, _, _), _ = volume_uniforms(volume_of(scene.materials[0].desc), obj.mesh.positions)
     assert thickness == pytest.approx(np.sqrt(2.0)) and extent == pytest.approx(1.0)  # the unit quad
+
+
+def test_the_object_preview_renders_the_volume_too():
+    """`shot --object sphere --material` with a thickness: the preview's unit sphere as a glass
+    ball (thickness 2, its diameter) against the numpy ray tracer, and thin-walled without it."""
+    from lobeview.materials.spec import build_bsdf, validate
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.preview import PreviewRenderer
+
+    size, camera = 40, ((0.0, 0.5, 4.0), 35.0)
+    env = EnvironmentMap.from_function(_smooth_sky, height=256)
+    truth, mask = _traced_ball(size, env.lookup, camera, radius=1.0)
+    glass = {"model": "gltf", "base_color": [1, 1, 1], "metallic": 0, "roughness": 0.0, "transmission": 1.0}
+    ctx = create_headless_context()
+    errors = {}
+    try:
+        renderer = PreviewRenderer(ctx, env, uv_sphere(rings=96, segments=192), size=(size, size), face_size=128)
+        view = Camera(camera[0], (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), camera[1])
+        for thickness in (2.0, 0.0):
+            desc = validate({**glass, "thickness": thickness} if thickness else glass)
+            image = renderer.render(view, build_bsdf(desc), "lobe-7").radiance
+            errors[thickness] = np.sqrt(np.mean((image[mask] - truth[mask]) ** 2)) / np.sqrt(np.mean(truth[mask] ** 2))
+        renderer.release()
+    finally:
+        ctx.release()
+    assert errors[2.0] < 0.02 and errors[0.0] > 3 * errors[2.0], errors

@@ -24,6 +24,7 @@ from .interface import bind_sampler, method_defines, set_uniform
 from .material_gpu import pack_material
 from .mip_chain import DEFAULT_MIP_FILTER
 from .render_base import RendererBase, RenderResult
+from .shading import volume_uniforms
 
 __all__ = ["PREVIEW_CAMERA", "PreviewRenderer", "RenderResult"]
 # The camera of `lobeview shot --object` (position, target, up, vertical fov) for a unit-sized object.
@@ -50,6 +51,7 @@ class PreviewRenderer(RendererBase):
         self.setup_seconds = time.perf_counter() - t0
         self.mesh = mesh
         self.vbo = ctx.buffer(mesh.interleaved().tobytes())
+        self.positions = np.asarray(mesh.positions, dtype=np.float64)
         self.ibo = ctx.buffer(np.ascontiguousarray(mesh.indices, dtype=np.uint32).tobytes())
 
     def _program(self, method: Method, has_diffuse: bool, has_rational: bool = False, has_measured: bool = False):
@@ -95,6 +97,13 @@ class PreviewRenderer(RendererBase):
         set_uniform(program, "u_normal_matrix", tuple(normal_matrix.T.astype("f4").ravel()))
         set_uniform(program, "u_camera_position", tuple(float(x) for x in camera.position))
         self.shading.set_material(program, material, method, lod_bias, seed)
+        # KHR_materials_volume: the previewed object as the volume (its vertices under ``model``).
+        positions = self.positions @ model[:3, :3].T
+        volume, attenuation_colour = volume_uniforms(
+            getattr(bsdf, "volume", None), positions, abs(np.linalg.det(model[:3, :3])) ** (1.0 / 3.0)
+        )
+        set_uniform(program, "u_volume", volume)
+        set_uniform(program, "u_volume_attenuation", attenuation_colour)
         self.shading.bind_cube(program, self.cubes, method, material)
         bind_sampler(program, "u_irradiance", self.cubes.irradiance)
 

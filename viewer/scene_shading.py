@@ -13,6 +13,7 @@ import numpy as np
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import Method
 from lobeview.materials.gltf import specular_f0_unclamped
+from lobeview.materials.volume import volume_of
 from lobeview.scenes.baker import spot_ramp
 from lobeview.scenes.lamps import DIRECTIONAL_ANGULAR_RADIUS, LAMP_RADIUS, MAX_LAMPS, lamp_visibility, live_lamps
 from lobeview.scenes.scene import (
@@ -39,7 +40,7 @@ from .interface import (
     write_uniform,
 )
 from .shaders import ProgramCache
-from .shading import ShadingBinder
+from .shading import ShadingBinder, volume_uniforms
 
 LAMP_KINDS = {"point": 0, "spot": 1, "directional": 2}  # shaders/lamps.glsl LAMP_*
 
@@ -253,7 +254,10 @@ class SceneShading(ShadingBinder):
             set_uniform(program, "u_lightmap_texcoord", -1)
         bind_sampler(program, "u_irradiance", self.environment_irradiance)
         self._bind_material(program, mat)
-        volume, attenuation_colour = volume_uniforms(mat.desc, self.scene.objects[obj.index])
+        scene_object = self.scene.objects[obj.index]
+        volume, attenuation_colour = volume_uniforms(
+            volume_of(mat.desc), scene_object.mesh.positions, scene_object.volume_scale
+        )
         set_uniform(program, "u_volume", volume)
         set_uniform(program, "u_volume_attenuation", attenuation_colour)
         if proxy is not None:
@@ -356,21 +360,3 @@ def lamp_uniforms(lamps: list) -> dict[str, np.ndarray]:
         spot[k] = (*direction, cos_outer)
         shape[k] = (scale, np.sin(DIRECTIONAL_ANGULAR_RADIUS), LAMP_RADIUS, 0.0)
     return {"u_lamp_position": position, "u_lamp_colour": colour, "u_lamp_spot": spot, "u_lamp_shape": shape}
-
-
-def volume_uniforms(desc: dict, scene_object) -> tuple[tuple, tuple]:
-    """shaders/volume.glsl's u_volume (thickness in world units, the object's middle bounding-box
-    extent, ior, 1 / attenuation distance) and u_volume_attenuation for a material ``desc`` on
-    ``scene_object``; a thickness of 0 (thin-walled, or not a glTF volume) disables the path."""
-    thickness = float(desc.get("thickness", 0.0)) * float(scene_object.volume_scale) if desc["model"] == "gltf" else 0.0
-    if thickness <= 0.0:
-        return (0.0, 1.0, 1.5, 0.0), (1.0, 1.0, 1.0)
-    positions = scene_object.mesh.positions
-    sides = np.sort(np.ptp(positions, axis=0)) if len(positions) else np.zeros(3)
-    # A thickness beyond the object's diagonal describes no volume the object can hold: taken as
-    # the diagonal (the ball model's path and exit point then stay at the object's scale).
-    thickness = min(thickness, float(np.linalg.norm(sides))) if np.any(sides > 0) else thickness
-    extent = float(sides[1])
-    distance = desc.get("attenuation_distance")
-    colour = tuple(float(c) for c in np.broadcast_to(desc.get("attenuation_color", 1.0), 3))
-    return (thickness, extent, float(desc.get("ior", 1.5)), 1.0 / float(distance) if distance else 0.0), colour

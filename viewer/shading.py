@@ -296,3 +296,21 @@ class ShadingBinder:
         for tex in self._dummy_textures.values():
             tex.release()
         self.sobol.release()
+
+
+def volume_uniforms(volume: dict | None, positions: np.ndarray, scale: float = 1.0) -> tuple[tuple, tuple]:
+    """shaders/volume.glsl's u_volume (thickness in world units, the object's middle bounding-box
+    side, ior, 1 / attenuation distance) and u_volume_attenuation for a ``volume``
+    (materials/volume.py volume_of; None: thin-walled, the path disabled) on an object whose world
+    vertices are ``positions``, its mesh units ``scale`` world units."""
+    thickness = float(volume["thickness"]) * float(scale) if volume is not None else 0.0
+    if thickness <= 0.0:
+        return (0.0, 1.0, 1.5, 0.0), (1.0, 1.0, 1.0)
+    sides = np.sort(np.ptp(positions, axis=0)) if len(positions) else np.zeros(3)
+    # A thickness beyond the object's diagonal describes no volume the object can hold: taken as
+    # the diagonal (the ball model's path and exit point then stay at the object's scale).
+    thickness = min(thickness, float(np.linalg.norm(sides))) if np.any(sides > 0) else thickness
+    distance = volume.get("attenuation_distance")
+    colour = tuple(float(c) for c in np.broadcast_to(volume.get("attenuation_color", 1.0), 3))
+    inverse_distance = 1.0 / float(distance) if distance else 0.0
+    return (thickness, float(sides[1]), float(volume["ior"]), inverse_distance), colour
