@@ -12,6 +12,33 @@ uniform vec4 u_cap_light_axis[MAX_CAP_LIGHTS];      // xyz: direction (world), w
 uniform vec3 u_cap_light_radiance[MAX_CAP_LIGHTS];
 #endif
 
+// Footprint-aware lights (materials/cap_lights.py footprint_alpha2, issue 39 item 3): what one
+// pixel's footprint adds to a lobe's alpha^2 for the lights, set by the fragment shader from the
+// derivatives of its reflected direction (0: point-sampled lights, as the numpy twin tests).
+#define FOOTPRINT_DIVISOR 12.0
+#define MAX_FOOTPRINT_ALPHA2 0.1
+float g_footprint_alpha2 = 0.0;
+uniform int u_point_sampled_lights;  // 1: no footprint (tests against the per-pixel numpy twin)
+
+float footprint_alpha2(vec3 dr_dx, vec3 dr_dy) {
+    return min((dot(dr_dx, dr_dx) + dot(dr_dy, dr_dy)) / FOOTPRINT_DIVISOR, MAX_FOOTPRINT_ALPHA2);
+}
+
+// The lobe as the lights see it: its alphas widened by the pixel's footprint (the tabulated
+// lobes, Rational and measured, keep theirs: their shape is not an alpha).
+Lobe footprint_lobe(Lobe l) {
+    if (g_footprint_alpha2 <= 0.0) return l;
+#if defined(HAS_RATIONAL)
+    if (l.type == LOBE_RATIONAL) return l;
+#endif
+#if defined(HAS_MEASURED)
+    if (l.type == LOBE_MEASURED) return l;
+#endif
+    l.ax = sqrt(l.ax * l.ax + g_footprint_alpha2);
+    l.ay = sqrt(l.ay * l.ay + g_footprint_alpha2);
+    return l;
+}
+
 // materials/patterns.py lattice_xi: ((i + 1/2) / n, frac(1/4 + i / golden ratio))
 vec2 cap_lattice_point(int i, int n) {
     return vec2((float(i) + 0.5) / float(n), fract(0.25 + float(i) * 0.6180339887498949));
@@ -57,7 +84,8 @@ ivec2 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o) {
 
 // The integral of f cos over the cap (axis, cos_radius) of unit radiance; one_minus_cos =
 // 1 - cos_radius, passed in because a distant lamp's tiny cap needs it without cancellation.
-vec3 cap_integral(Lobe l, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float one_minus_cos) {
+vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float one_minus_cos) {
+    Lobe l = footprint_lobe(lobe);
     ivec2 counts = cap_point_counts(l, cos_radius, wo.z);
     float cap_density = float(counts.x) / (2.0 * PI * one_minus_cos);
     vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);

@@ -80,10 +80,13 @@ class PreviewRenderer(RendererBase):
         model: np.ndarray | None = None,
         seed: int = 0,
         pixel_filter: str = "box",
+        footprint_lights: bool = True,
     ) -> RenderResult:
         """``pixel_filter`` (reference only): 'box', the pixel's integral (each pass at another
         sub-pixel position), or 'point', the pixel centre (what the G-buffer holds). The
-        G-buffer is always pass 0's, at the pixel centre."""
+        G-buffer is always pass 0's, at the pixel centre. ``footprint_lights``: the bright
+        sources integrated against each lobe widened by the pixel's footprint
+        (shaders/cap_lights.glsl); False: at the pixel centre's lobe (the numpy twin's)."""
         method = Method.parse(method) if isinstance(method, str) else method
         material = pack_material(bsdf)
         method, offsets = self.pass_plan(method, spp, pixel_filter, material.has_rational)
@@ -96,6 +99,7 @@ class PreviewRenderer(RendererBase):
         set_uniform(program, "u_model", tuple(model.T.astype("f4").ravel()))
         set_uniform(program, "u_normal_matrix", tuple(normal_matrix.T.astype("f4").ravel()))
         set_uniform(program, "u_camera_position", tuple(float(x) for x in camera.position))
+        set_uniform(program, "u_point_sampled_lights", 0 if footprint_lights else 1)
         self.shading.set_material(program, material, method, lod_bias, seed)
         # KHR_materials_volume: the previewed object as the volume (its vertices under ``model``).
         positions = self.positions @ model[:3, :3].T
