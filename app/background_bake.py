@@ -29,10 +29,9 @@ def _build_builtin(scene_arg: str | None, cache: str) -> Path:
 
 
 def _bake_gltf_file(source: str, environment_spec: str, out: str, limits) -> Path:
-    from lobeview.scenes.gltf_bake import bake_gltf
+    from lobeview.scenes.gltf_bake import bake_first_use
 
-    Path(out).parent.mkdir(parents=True, exist_ok=True)
-    return bake_gltf(Path(source), environment_spec, Path(out), limits, say=lambda _: None)[0]
+    return bake_first_use(Path(source), environment_spec, Path(out), limits)
 
 
 def bake_worker(build, arguments: tuple, messages) -> None:

@@ -117,7 +117,7 @@ def first_use_bake(args, scene_path: Path, scene, cache: Path):
     keyed by content), or baked now with --no-background-bake, or (the default) the file as it
     is while a worker process bakes it (swapped in when done: app/finishing.py)."""
     from lobeview.core import progress
-    from lobeview.scenes.gltf_bake import bake_gltf, first_use_bake_file, has_lightmaps
+    from lobeview.scenes.gltf_bake import bake_first_use, first_use_bake_file, has_lightmaps
     from lobeview.scenes.gltf_loader import load_gltf
 
     if has_lightmaps(scene) or not scene.objects:
@@ -136,9 +136,8 @@ def first_use_bake(args, scene_path: Path, scene, cache: Path):
                   file=sys.stderr)  # fmt: skip
             return scene_path, scene, BackgroundBake.for_gltf(scene_path, env_spec, baked, args.limits)
         progress.report(f"baking the lightmaps of {scene_path.name} (first use)", None)
-        baked.parent.mkdir(parents=True, exist_ok=True)
         try:
-            bake_gltf(scene_path, env_spec, baked, args.limits, say=lambda _: None)
+            bake_first_use(scene_path, env_spec, baked, args.limits)
         except Exception as exc:  # noqa: BLE001 - the viewer shows the file as it is, and says why
             print(f"lobeview: the first-use bake of {scene_path.name} failed ({type(exc).__name__}: {exc}); "
                   "showing it without lightmaps", file=sys.stderr)  # fmt: skip

@@ -87,9 +87,8 @@ RANGES: dict[str, tuple[float, float]] = {
 GLTF_EXTENSION_KEYS = ("anisotropy", "anisotropy_rotation", "ior", "specular", "specular_color", "clearcoat",
                        "clearcoat_roughness", "transmission", "sheen_color", "sheen_roughness", "thickness",
                        "attenuation_color", "attenuation_distance")  # fmt: skip
-#: KHR_materials_volume's keys (VOLUME_KEYS, materials/volume.py) are not the BSDF's (a surface's
-#: scattering is the same) but the renderers' (the path through the volume behind it).
-#: The optional keys that are gltf_bsdf's keyword arguments.
+#: The optional keys that are gltf_bsdf's keyword arguments: not KHR_materials_volume's
+#: (VOLUME_KEYS, materials/volume.py), which are the renderers' (the path behind the surface).
 GLTF_BSDF_KEYS = tuple(k for k in GLTF_EXTENSION_KEYS if k not in VOLUME_KEYS)
 
 

@@ -150,3 +150,23 @@ def slab_gains(fresnel, crossing) -> tuple[np.ndarray, np.ndarray]:
     a = np.asarray(crossing, dtype=np.float64)
     denominator = 1.0 - f * f * a * a
     return 1.0 + (1.0 - f) ** 2 * a * a / denominator, 1.0 / denominator
+
+
+def volume_factors(
+    path: VolumePath,
+    cos_view,
+    dielectric_f0,
+    specular_weight,
+    attenuation_color=(1.0, 1.0, 1.0),
+    attenuation_distance=None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(what the volume lets through to the turned transmission lobe, the gain on the reflection
+    lobe), per channel: the path's attenuation x the exit's transmittance x the plate's
+    transmission gain, and the plate's reflection gain, each weighted by the plate's share
+    (shaders/volume.glsl volume_shading)."""
+    exit_t = np.asarray(exit_transmittance(cos_view, dielectric_f0, specular_weight), dtype=np.float64)
+    crossing = attenuation(path.slab_length, attenuation_color, attenuation_distance)
+    reflection_gain, transmission_gain = slab_gains(1.0 - exit_t, crossing)
+    plate = np.asarray(path.slab_weight, dtype=np.float64)[..., None]
+    transmitted = attenuation(path.length, attenuation_color, attenuation_distance) * exit_t[..., None]
+    return transmitted * (1.0 + plate * (transmission_gain - 1.0)), 1.0 + plate * (reflection_gain - 1.0)

@@ -50,7 +50,11 @@ LIGHTMAP_MIME = "image/x-exr"
 
 def source_json(path: Path, limits: Limits = DEFAULT_LIMITS) -> dict:
     """The input's glTF JSON exactly as written (every field, extensions and extras included)."""
-    data = read_reference(path.parent, path.name, f"{path}: scene file", limits)
+    return parse_source_json(path, read_reference(path.parent, path.name, f"{path}: scene file", limits))
+
+
+def parse_source_json(path: Path, data: bytes) -> dict:
+    """:func:`source_json` of the file ``path`` whose bytes ``data`` were read already."""
     if path.suffix.lower() == ".glb":
         if len(data) < 20 or data[:4] != _GLB_MAGIC:
             raise GltfError(f"{path}: not a GLB file (bad magic) or truncated")

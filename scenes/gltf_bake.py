@@ -125,11 +125,8 @@ def check_texcoord1_free(scene, source: Path) -> None:
                 )
 
 
-def referenced_uris(source: Path, limits: Limits = DEFAULT_LIMITS) -> list[str]:
-    """The files ``source`` names (buffers and images; data: URIs excluded), in file order."""
-    from lobeview.scenes.baked_gltf import source_json
-
-    doc = source_json(source, limits)
+def referenced_uris(doc: dict) -> list[str]:
+    """The files a glTF JSON ``doc`` names (buffers and images; data: URIs excluded), in file order."""
     uris = []
     for key in ("buffers", "images"):
         for item in doc.get(key) or []:
@@ -145,11 +142,14 @@ def first_use_bake_key(
     """A digest of everything the bake of ``source`` reads: the file, each file it references
     (through the trust boundary, so a reference outside its folder is refused here as in the
     load), the environment (a built-in by name, a file by its bytes) and the settings."""
+    from lobeview.scenes.baked_gltf import parse_source_json
+
     source = Path(source)
     digest = hashlib.sha256()
     digest.update(f"lobeview first-use bake v{FIRST_USE_BAKE_VERSION} {sorted(asdict(settings).items())}".encode())
-    digest.update(read_reference(source.parent, source.name, f"{source}: scene file", limits))
-    for uri in referenced_uris(source, limits):
+    data = read_reference(source.parent, source.name, f"{source}: scene file", limits)
+    digest.update(data)
+    for uri in referenced_uris(parse_source_json(source, data)):
         digest.update(uri.encode())
         digest.update(hashlib.sha256(read_reference(source.parent, uri, f"{source}: {uri}", limits)).digest())
     if environment_spec.startswith("builtin:"):
@@ -169,3 +169,11 @@ def first_use_bake_file(
     """Where the first-use bake of ``source`` under ``environment_spec`` lives (or will)."""
     key = first_use_bake_key(source, environment_spec, limits, settings)
     return Path(cache) / "baked" / f"{Path(source).stem}-{key}.glb"
+
+
+def bake_first_use(source: Path, environment_spec: str, out: Path, limits: Limits = DEFAULT_LIMITS) -> Path:
+    """The first-use bake itself (the window's worker, or before the first frame): into the cache
+    file ``out`` (first_use_bake_file; its folder made), with bake's defaults, silently (the
+    unwrap's message is for `lobeview bake`'s user)."""
+    Path(out).parent.mkdir(parents=True, exist_ok=True)
+    return bake_gltf(Path(source), environment_spec, Path(out), limits, say=lambda _: None)[0]

@@ -14,7 +14,7 @@ import numpy as np
 
 from lobeview.core.errors import quoted
 from lobeview.core.trust import UntrustedReferenceError, read_reference
-from lobeview.materials.spec import MaterialError, resolve_material_files, validate
+from lobeview.materials.spec import RANGES, MaterialError, resolve_material_files, validate
 
 from .gltf_common import FALLBACKS, GltfError, _index, _warn
 from .hdrio import sanitize_radiance
@@ -206,17 +206,18 @@ def _volume(mat, where: str, scene_warnings: list) -> dict:
     if not isinstance(volume, dict):
         return {}
     label = f"{where}: KHR_materials_volume"
-    thickness = _checked_number(volume.get("thicknessFactor", 0.0), 0.0, (0.0, 1e6), f"{label}.thicknessFactor",
-                                scene_warnings)  # fmt: skip
+    thickness = _checked_number(volume.get("thicknessFactor", 0.0), 0.0, RANGES["thickness"],
+                                f"{label}.thicknessFactor", scene_warnings)  # fmt: skip
     if thickness <= 0.0:
         return {}
     out = {"thickness": thickness}
-    colour = _checked_number(volume.get("attenuationColor"), [1.0, 1.0, 1.0], (0.0, 1.0),
+    colour = _checked_number(volume.get("attenuationColor"), [1.0, 1.0, 1.0], RANGES["attenuation_color"],
                              f"{label}.attenuationColor", scene_warnings)  # fmt: skip
     distance = volume.get("attenuationDistance")
     if distance is not None:
         checked = _checked_number(distance, 0.0, None, f"{label}.attenuationDistance", scene_warnings)
-        if 1e-9 <= checked <= 1e30:
+        low, high = RANGES["attenuation_distance"]
+        if low <= checked <= high:
             out["attenuation_distance"], out["attenuation_color"] = checked, colour
         else:
             _warn(scene_warnings, f"{label}.attenuationDistance {quoted(distance)} is not in (0, 1e30]; "

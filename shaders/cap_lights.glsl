@@ -24,6 +24,18 @@ float footprint_alpha2(vec3 dr_dx, vec3 dr_dy) {
     return min((dot(dr_dx, dr_dx) + dot(dr_dy, dr_dy)) / FOOTPRINT_DIVISOR, MAX_FOOTPRINT_ALPHA2);
 }
 
+// The direction whose screen derivatives give the footprint: the view's reflection about the
+// interpolated normal (vertex data and per-pass uniforms only: a quad's helper invocations read
+// them too). The fragment shader passes its dFdx / dFdy, in uniform control flow, to
+// set_light_footprint (derivatives do not exist in the compute shaders that include this file).
+vec3 light_footprint_direction(vec3 position, vec3 camera, vec3 interpolated_normal) {
+    return reflect(normalize(position - camera), normalize(interpolated_normal));
+}
+
+void set_light_footprint(vec3 dr_dx, vec3 dr_dy) {
+    g_footprint_alpha2 = u_point_sampled_lights == 1 ? 0.0 : footprint_alpha2(dr_dx, dr_dy);
+}
+
 // The lobe as the lights see it: its alphas widened by the pixel's footprint (the tabulated
 // lobes, Rational and measured, keep theirs: their shape is not an alpha).
 Lobe footprint_lobe(Lobe l) {

@@ -16,9 +16,8 @@ layout(location = 3) out vec4 out_tangent;
 
 void main() {
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));
-    // The pixel's footprint for the lights (cap_lights.glsl), in uniform control flow.
-    vec3 footprint_r = reflect(normalize(v_position - u_camera_position), normalize(v_normal));
-    g_footprint_alpha2 = u_point_sampled_lights == 1 ? 0.0 : footprint_alpha2(dFdx(footprint_r), dFdy(footprint_r));
+    vec3 footprint_r = light_footprint_direction(v_position, u_camera_position, v_normal);  // cap_lights.glsl
+    set_light_footprint(dFdx(footprint_r), dFdy(footprint_r));
     mat3 tbn = rotate_tangent(shading_frame(v_normal, v_tangent, geometric_normal), u_tangent_rotation);
     vec3 wo = view_in_frame(tbn, normalize(u_camera_position - v_position));
     vec3 radiance = shade(wo, tbn);

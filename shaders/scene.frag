@@ -86,11 +86,8 @@ void main() {
 #endif
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));
 #if defined(SPECULAR)
-    // The pixel's footprint for the lights (cap_lights.glsl): from the reflection of the view about
-    // the interpolated normal (vertex data and a per-pass uniform only: a quad's helper
-    // invocations read them too), in uniform control flow.
-    vec3 footprint_r = reflect(normalize(v_position - u_camera_position), normalize(v_normal));
-    g_footprint_alpha2 = u_point_sampled_lights == 1 ? 0.0 : footprint_alpha2(dFdx(footprint_r), dFdy(footprint_r));
+    vec3 footprint_r = light_footprint_direction(v_position, u_camera_position, v_normal);  // cap_lights.glsl
+    set_light_footprint(dFdx(footprint_r), dFdy(footprint_r));
 #endif
     // Every texture is read before the alpha test: derivatives need the whole 2x2 quad.
     vec4 base_texel = sample_map(MAP_BASE_COLOR, v_uv0, v_uv1, vec4(1.0));

@@ -3,13 +3,14 @@
 // thickness), (normal, extent), (ior, path length, 0, 0) and write the exit direction, the exit
 // offset, the path length, the rotation of -view onto the exit direction applied to a test
 // vector, the attenuation over the given length, the exit transmittance, the plate's share and
-// crossing length and its interreflection gains.
+// crossing length and its interreflection gains; and volume_shading's factors for the volume of
+// u_volume (one per run) seen along (view, normal).
 layout(local_size_x = 64) in;
 #include "bsdf.glsl"
 #include "volume.glsl"
 
 layout(std430, binding = 2) readonly buffer ProbeIn { vec4 probe_in[]; };    // 3 per item
-layout(std430, binding = 3) writeonly buffer ProbeOut { vec4 probe_out[]; }; // 6 per item
+layout(std430, binding = 3) writeonly buffer ProbeOut { vec4 probe_out[]; }; // 8 per item
 uniform int u_count;
 
 void main() {
@@ -26,10 +27,15 @@ void main() {
     float exit_t = volume_exit_transmittance(dot(view, n), vec3(0.04, 0.05, 0.03), 0.9);
     vec3 reflection_gain, transmission_gain;
     slab_gains(1.0 - exit_t, volume_attenuation(path.slab_length), reflection_gain, transmission_gain);
-    probe_out[6 * i] = vec4(path.exit_direction, path.path_length);
-    probe_out[6 * i + 1] = vec4(path.exit_offset, exit_t);
-    probe_out[6 * i + 2] = vec4(bend * n, path.slab_weight);
-    probe_out[6 * i + 3] = vec4(volume_attenuation(given_length), path.slab_length);
-    probe_out[6 * i + 4] = vec4(reflection_gain, 0.0);
-    probe_out[6 * i + 5] = vec4(transmission_gain, 0.0);
+    probe_out[8 * i] = vec4(path.exit_direction, path.path_length);
+    probe_out[8 * i + 1] = vec4(path.exit_offset, exit_t);
+    probe_out[8 * i + 2] = vec4(bend * n, path.slab_weight);
+    probe_out[8 * i + 3] = vec4(volume_attenuation(given_length), path.slab_length);
+    probe_out[8 * i + 4] = vec4(reflection_gain, 0.0);
+    probe_out[8 * i + 5] = vec4(transmission_gain, 0.0);
+    vec3 helper = abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0);
+    vec3 t = normalize(cross(helper, n));
+    VolumeShading shading = volume_shading(view, mat3(t, cross(n, t), n), vec3(0.04, 0.05, 0.03), 0.9);
+    probe_out[8 * i + 6] = vec4(shading.transmitted, shading.enabled ? 1.0 : 0.0);
+    probe_out[8 * i + 7] = vec4(shading.reflected, 0.0);
 }

@@ -17,6 +17,7 @@ from lobeview.materials.volume import (
     exit_transmittance,
     slab_gains,
     sphere_weight,
+    volume_factors,
     volume_of,
     volume_path,
 )
@@ -148,20 +149,41 @@ def test_glsl_volume_path_equals_numpy():
     probe[:, 0, :3], probe[:, 0, 3] = views, thickness
     probe[:, 1, :3], probe[:, 1, 3] = normals, extent
     probe[:, 2, 0], probe[:, 2, 1] = ior, given
+    # u_volume: (thickness, middle extent, ior, 1 / attenuation distance) of volume_shading's runs:
+    # none (the path's pieces are per item), a plate, between plate and ball, a ball.
+    volumes = [
+        (0.0, 1.0, 1.5, 1.0 / 0.7),
+        (0.05, 1.0, 1.5, 1.0 / 0.7),
+        (0.5, 1.0, 1.33, 1.0 / 0.7),
+        (1.0, 1.0, 2.4, 0.0),
+    ]
     ctx = create_headless_context()
     try:
         program = ProgramCache(ctx).compute("volume_probe.comp")
         inputs = ctx.buffer(probe.tobytes())
         inputs.bind_to_storage_buffer(2)
-        outputs = ctx.buffer(reserve=n * 96)
+        outputs = ctx.buffer(reserve=n * 128)
         outputs.bind_to_storage_buffer(3)
         program["u_count"] = n
-        program["u_volume"] = (0.0, 1.0, 1.5, 1.0 / 0.7)
         program["u_volume_attenuation"] = (0.9, 0.5, 0.2)
-        program.run((n + 63) // 64)
-        out = np.frombuffer(outputs.read(), np.float32).reshape(n, 6, 4)
+        runs = []
+        for volume in volumes:
+            program["u_volume"] = volume
+            program.run((n + 63) // 64)
+            runs.append(np.frombuffer(outputs.read(), np.float32).reshape(n, 8, 4).copy())
     finally:
         ctx.release()
+    out = runs[0]
+    cos_view = np.sum(views * normals, axis=1)
+    # volume_shading: the combination of the pieces, against materials/volume.py volume_factors.
+    assert np.all(out[:, 6, 3] == 0) and np.all(out[:, 6:8, :3] == 1)  # no volume: factors 1
+    for (thick, side, index, inverse_distance), run in zip(volumes[1:], runs[1:], strict=True):
+        assert np.all(run[:, 6, 3] == 1)
+        distance = 1.0 / inverse_distance if inverse_distance else None
+        transmitted, reflected = volume_factors(volume_path(views, normals, index, thick, side), cos_view,
+                                                [0.04, 0.05, 0.03], 0.9, [0.9, 0.5, 0.2], distance)  # fmt: skip
+        np.testing.assert_allclose(run[:, 6, :3], transmitted, rtol=2e-4)
+        np.testing.assert_allclose(run[:, 7, :3], reflected, rtol=2e-4)
     path = volume_path(views, normals, ior, thickness, extent)
     np.testing.assert_allclose(out[:, 2, 3], path.slab_weight, atol=1e-5)
     np.testing.assert_allclose(out[:, 3, 3], path.slab_length, rtol=1e-4)
@@ -172,7 +194,6 @@ def test_glsl_volume_path_equals_numpy():
     np.testing.assert_allclose(out[:, 0, :3], path.exit_direction, atol=2e-5)
     np.testing.assert_allclose(out[:, 0, 3], path.length, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(out[:, 1, :3], path.exit_offset, atol=2e-5)
-    cos_view = np.sum(views * normals, axis=1)
     np.testing.assert_allclose(out[:, 1, 3], [exit_transmittance(c, [0.04, 0.05, 0.03], 0.9) for c in cos_view],
                                atol=1e-5)  # fmt: skip
     bends = bend_rotation(-views, path.exit_direction)
