@@ -192,8 +192,10 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         f"# Thick glass against Mitsuba 3 ({stamp})",
         "",
-        f"`python -m lobeview.bench.volume --size {args.size} --spp {args.spp} --env {Path(args.env).name} "
-        f"--clamp {args.clamp:g}`",
+        # the command as it pastes: --env only where it is not the default (../shared's garden)
+        f"`python -m lobeview.bench.volume --size {args.size} --spp {args.spp}"
+        f"{'' if args.env == p.get_default('env') else f' --env {args.env}'} --clamp {args.clamp:g}"
+        f"{'' if args.cases == list(CASES) else ' --cases ' + ' '.join(repr(c) for c in args.cases)}`",
         "",
         f"{args.size}x{args.size} px, box filter (lobeview 4x4 points per pixel), Mitsuba 3 volpath {args.spp} spp "
         f"(scalar_rgb), lobeview's reference {max(1, args.spp // 16)} passes per point; Mesa llvmpipe. Glass: ior "
