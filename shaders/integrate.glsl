@@ -55,38 +55,6 @@ vec2 sobol_point(int index) { return sobol_point4(index).xy; }
 
 #include "env_sampling.glsl"
 
-// The pixel's geometry for a box-filtered reference (set by the fragment shaders, which take the
-// derivatives: a compute shader includes this file too): the shading point, its normal, their
-// changes per pixel (x right, y up) and the camera.
-vec3 g_pixel_position = vec3(0.0);
-vec3 g_pixel_dp_dx = vec3(0.0);
-vec3 g_pixel_dp_dy = vec3(0.0);
-vec3 g_pixel_normal = vec3(0.0, 0.0, 1.0);
-vec3 g_pixel_dn_dx = vec3(0.0);
-vec3 g_pixel_dn_dy = vec3(0.0);
-vec3 g_pixel_camera = vec3(0.0);
-
-void set_pixel_geometry(vec3 position, vec3 dp_dx, vec3 dp_dy, vec3 normal, vec3 dn_dx, vec3 dn_dy, vec3 camera) {
-    g_pixel_position = position;
-    g_pixel_dp_dx = dp_dx;
-    g_pixel_dp_dy = dp_dy;
-    g_pixel_normal = normal;
-    g_pixel_dn_dx = dn_dx;
-    g_pixel_dn_dy = dn_dy;
-    g_pixel_camera = camera;
-}
-
-// The rotation taking unit vector a to unit vector b about their common normal (Rodrigues:
-// I + K + K^2 / (1 + a.b), K the cross-product matrix of a x b); the identity for b = -a, which a
-// move within one pixel never makes.
-mat3 rotation_between(vec3 a, vec3 b) {
-    vec3 v = cross(a, b);
-    float c = dot(a, b);
-    if (c <= -0.999) return mat3(1.0);
-    mat3 k = mat3(0.0, v.z, -v.y, -v.z, 0.0, v.x, v.y, -v.x, 0.0);
-    return mat3(1.0) + k + k * k / (1.0 + c);
-}
-
 #include "incident.glsl"
 #include "volume.glsl"
 
@@ -220,45 +188,12 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
 #elif defined(METHOD_PREFILTERED)
 #include "prefiltered.glsl"
 #elif defined(ENV_SAMPLING)
-// A box-filtered reference (viewer/camera.py pixel_offset) shades each pass at one sub-pixel
-// position, and a pass's samples at that position alone converged to a quadrature of the pixel
-// at its passes' positions: a glint smaller than their spacing (a sun on a near-mirror: 1 % of a
-// pixel) kept 35-44 % of its energy at any spp. So each sample is shaded at its own point,
-// uniform over the pixel (an R2 sequence of the sample's index, Roberts 2018, rotated per pixel):
-// the pass's frame and view moved there to first order by the screen derivatives of the
-// position and the interpolated normal. The pass's position still decides what the pixel covers.
-uniform vec3 u_pixel_jitter;  // xy: this pass's sub-pixel position (pixels, x right, y up); z = 1: spread
-const vec2 R2_STEP = vec2(0.7548776662466927, 0.5698402909980532);
-
-void pixel_sample_frame(int index, int lobe_index, mat3 tbn, vec3 wo, out mat3 sample_tbn, out vec3 sample_wo) {
-    sample_tbn = tbn;
-    sample_wo = wo;
-    if (u_pixel_jitter.z <= 0.0) return;
-    vec2 target = fract(R2_STEP * float(index) + pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index + 4 * MAX_LOBES)) - 0.5;
-    // viewer/camera.py jittered: the frame moved by +jitter shows at this pixel's centre the point
-    // that lay at -jitter, so the target is target + jitter pixels away from the pass's point.
-    vec2 d = target + u_pixel_jitter.xy;
-    vec3 normal = normalize(g_pixel_normal + g_pixel_dn_dx * d.x + g_pixel_dn_dy * d.y);
-    vec3 point = g_pixel_position + g_pixel_dp_dx * d.x + g_pixel_dp_dy * d.y;
-    vec3 view = normalize(g_pixel_camera - g_pixel_position);
-    vec3 moved_view = normalize(g_pixel_camera - point);
-    sample_tbn = rotation_between(g_pixel_normal, normal) * tbn;
-    sample_wo = transpose(sample_tbn) * (rotation_between(view, moved_view) * (tbn * wo));
-    if (sample_wo.z <= 0.0 || any(isnan(sample_wo))) {  // past the silhouette: the pass's own point
-        sample_tbn = tbn;
-        sample_wo = wo;
-    }
-}
-
-vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo_pass, mat3 tbn_pass) {
+vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     vec3 sum = vec3(0.0);
     vec2 rotation = pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index);
     vec2 rotation_env = pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index + 2 * MAX_LOBES);
     for (int i = 0; i < u_samples; ++i) {
         vec4 q = sobol_point4(u_sample_offset + i);
-        mat3 tbn;
-        vec3 wo;
-        pixel_sample_frame(u_sample_offset + i, lobe_index, tbn_pass, wo_pass, tbn, wo);
         // BSDF sample, MIS-weighted against the environment sampler.
         float p_bsdf;
         vec3 wi = lobe_sample_and_pdf(l, fract(q.xy + rotation), wo, p_bsdf);

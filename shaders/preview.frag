@@ -16,9 +16,6 @@ layout(location = 3) out vec4 out_tangent;
 
 void main() {
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));
-    vec3 pixel_normal = normalize(v_normal);
-    set_pixel_geometry(v_position, dFdx(v_position), dFdy(v_position), pixel_normal, dFdx(pixel_normal),
-                       dFdy(pixel_normal), u_camera_position);  // integrate.glsl (the reference)
     vec3 footprint_r = light_footprint_direction(v_position, u_camera_position, v_normal);  // cap_lights.glsl
     set_light_footprint(dFdx(footprint_r), dFdy(footprint_r));
     mat3 tbn = rotate_tangent(shading_frame(v_normal, v_tangent, geometric_normal), u_tangent_rotation);

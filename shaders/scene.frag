@@ -86,9 +86,6 @@ void main() {
 #endif
     vec3 geometric_normal = normalize(cross(dFdx(v_position), dFdy(v_position)));
 #if defined(SPECULAR)
-    vec3 pixel_normal = normalize(v_normal);
-    set_pixel_geometry(v_position, dFdx(v_position), dFdy(v_position), pixel_normal, dFdx(pixel_normal),
-                       dFdy(pixel_normal), u_camera_position);  // integrate.glsl (the reference)
     vec3 footprint_r = light_footprint_direction(v_position, u_camera_position, v_normal);  // cap_lights.glsl
     set_light_footprint(dFdx(footprint_r), dFdy(footprint_r));
 #endif

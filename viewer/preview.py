@@ -81,16 +81,12 @@ class PreviewRenderer(RendererBase):
         seed: int = 0,
         pixel_filter: str = "box",
         footprint_lights: bool = True,
-        spread_samples: bool = True,
     ) -> RenderResult:
         """``pixel_filter`` (reference only): 'box', the pixel's integral (each pass at another
         sub-pixel position), or 'point', the pixel centre (what the G-buffer holds). The
         G-buffer is always pass 0's, at the pixel centre. ``footprint_lights``: the bright
         sources integrated against each lobe widened by the pixel's footprint
-        (shaders/cap_lights.glsl); False: at the pixel centre's lobe (the numpy twin's).
-        ``spread_samples`` (box-filtered reference): each sample shaded at its own point of the
-        pixel (shaders/integrate.glsl pixel_sample_frame); False: a pass's samples at its
-        position (before 2026-11-27: a sub-pixel glint kept 35-44 % of its energy)."""
+        (shaders/cap_lights.glsl); False: at the pixel centre's lobe (the numpy twin's)."""
         method = Method.parse(method) if isinstance(method, str) else method
         material = pack_material(bsdf)
         method, offsets = self.pass_plan(method, spp, pixel_filter, material.has_rational)
@@ -124,10 +120,6 @@ class PreviewRenderer(RendererBase):
             pass_view_proj = jittered(view_proj, offset, self.size)
             set_uniform(program, "u_view_projection", tuple(pass_view_proj.T.astype("f4").ravel()))
             set_uniform(program, "u_sample_offset", p * method.samples)
-            # A box-filtered reference spreads each pass's samples over the pixel (shaders/
-            # integrate.glsl pixel_sample_frame); every other pass shades its position.
-            spread = spread_samples and method.kind == "reference" and pixel_filter == "box"
-            set_uniform(program, "u_pixel_jitter", (*offset, 1.0) if spread else (0.0, 0.0, 0.0))
             t0 = time.perf_counter()
             self.frame.begin()
             if background:  # behind the object in every pass: silhouettes are filtered too

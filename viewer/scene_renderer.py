@@ -258,18 +258,15 @@ class SceneRenderer(RendererBase):
 
     # -- frames -------------------------------------------------------------------------------------
     def draw_frame(
-        self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0, jitter=None
+        self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0, jitter=(0.0, 0.0)
     ) -> None:
         """One pass into the renderer's own float targets (radiance in ``targets[0]``), no read
         back: what the interactive viewer calls every frame. ``jitter``: this pass's sub-pixel
-        position in pixels for a box-filtered reference (viewer/camera.py pixel_offset; its
-        samples are then spread over the pixel: shaders/integrate.glsl pixel_sample_frame), None
-        for the pixel centre; the mirror passes keep the unjittered camera (they are looked up
-        by world position)."""
+        position in pixels (a box-filtered reference, viewer/camera.py pixel_offset); the mirror
+        passes keep the unjittered camera (they are looked up by world position)."""
         camera = camera.fitted_to(self.bounds)  # any scene scale, mm to km (viewer/camera.py)
         width, height = self.size
-        view_proj = jittered(camera.view_projection(width / height), jitter or (0.0, 0.0), self.size)
-        self.drawer.shading.pixel_jitter = None  # the mirror passes shade their own texels
+        view_proj = jittered(camera.view_projection(width / height), jitter, self.size)
         self.draw_counts.new_frame()
         calls_before = self.drawer.draw_calls.total()
         # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
@@ -293,13 +290,7 @@ class SceneRenderer(RendererBase):
             counts.drawn, counts.culled = drawer.draw_depth(view_proj)
             self.frame.fbo.use()
             self.ctx.depth_func = "<="
-        drawer.shading.pixel_jitter = None if jitter is None or method.kind != "reference" else tuple(jitter)
-        try:
-            drawer.draw(
-                view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors, cull=True
-            )
-        finally:
-            drawer.shading.pixel_jitter = None
+        drawer.draw(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors, cull=True)
         self.ctx.depth_func = "<"
         self.probes.residency.evict(self.objects)
         self.frame_draw_calls = tuple(int(x) for x in np.subtract(self.drawer.draw_calls.total(), calls_before))
@@ -390,8 +381,7 @@ class SceneRenderer(RendererBase):
             t0 = time.perf_counter()
             _ = self.ctx.error  # reset the flag: only errors of this frame's passes count below
             with timer or contextlib.nullcontext():
-                box = method.kind == "reference" and pixel_filter == "box"
-                self.draw_frame(camera, method, p * method.samples, lod_bias, seed, jitter=offset if box else None)
+                self.draw_frame(camera, method, p * method.samples, lod_bias, seed, jitter=offset)
             self.ctx.finish()
             self.raise_on_gl_error(method)
             t_shade += time.perf_counter() - t0

@@ -64,7 +64,6 @@ class ShadingBinder:
         self.programs = programs
         self.mip_filter = mip_filter
         self.table_cache_root = table_cache_root
-        self.pixel_jitter: tuple[float, float] | None = None  # set per pass by a box-filtered reference
         sobol = sobol_points()
         self.sobol = ctx.texture((SOBOL_SIDE, SOBOL_SIDE), 4, sobol.tobytes(), dtype="f4")
         self.sobol.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -89,10 +88,6 @@ class ShadingBinder:
         )
         set_uniform(program, "u_sobol_count", self.sobol_count)
         set_uniform(program, "u_seed", int(seed))
-        # A box-filtered reference pass: its sub-pixel position, its samples spread over the
-        # pixel (shaders/integrate.glsl pixel_sample_frame); None: shaded at the pass's position.
-        jitter = self.pixel_jitter
-        set_uniform(program, "u_pixel_jitter", (0.0, 0.0, 0.0) if jitter is None else (*jitter, 1.0))
 
     def set_material_state(self, program, material: PackedMaterial, method: Method, planar=False) -> None:
         """The material's lobes, patterns (for ``method`` and a ``planar`` reflector), colours and
