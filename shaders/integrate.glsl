@@ -158,28 +158,68 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     vec3 core = vec3(num_unit.r > 0.0 ? num.r / num_unit.r : 0.0, num_unit.g > 0.0 ? num.g / num_unit.g : 0.0,
                      num_unit.b > 0.0 ? num.b / num_unit.b : 0.0);
     if (l.dist != DIST_GGX) return core * target;
-    // GGX's tail beyond the pattern's core (patterns.py step 7): its share of the albedo read by
-    // GGX_TAIL_SAMPLES lookups on the tail's median cone, each over a quarter of its annulus
-    // (not clamped at 80 deg: ggx_tail_solid_angle); their mean weighted by a fade near the
-    // horizon, the core's radiance filling in below a total weight of 1 (ggx_tail_radiance:
-    // continuous in wo).
+    // GGX's tail beyond the pattern's core (patterns.py step 7, ggx_tail_terms and
+    // ggx_tail_integral): per quarter of the tail, its share of the albedo by quadrature over
+    // GGX_TAIL_POINTS microfacet normals (each GGX_TAIL_FRACTION / (GGX_TAIL_SAMPLES
+    // GGX_TAIL_POINTS) of the projected mass, times f cos / p; zero at and below the horizon),
+    // and one lookup at the f cos-weighted mean direction of its points above the horizon over
+    // their share of its reflected annulus (not clamped at 80 deg: ggx_tail_solid_angle); the
+    // core's radiance over the rest of the albedo. Exact under uniform light, continuous in wo.
     float a = sqrt(l.ax * l.ay);
     float inner = 2.0 * atan(sqrt(-log(XI_BORDER)) * a);
     float outer = 2.0 * atan(GGX_TAIL_OUTER_TAN * a);
     float tail_area = 2.0 * PI * (cos(inner) - cos(outer)) / float(GGX_TAIL_SAMPLES);
-    float tail_theta = atan(GGX_TAIL_MEDIAN_TAN * a);
-    vec3 tail = vec3(0.0);
-    float weights = 0.0;
+    float a2 = a * a;
+    vec3 quarter_share[GGX_TAIL_SAMPLES];
+    vec3 direction_sum[GGX_TAIL_SAMPLES];
+    float visible_mass[GGX_TAIL_SAMPLES];
     for (int k = 0; k < GGX_TAIL_SAMPLES; ++k) {
-        vec3 h = spherical_dir(tail_theta, 2.0 * PI * (float(k) + 0.5) / float(GGX_TAIL_SAMPLES));
-        vec3 wr = 2.0 * dot(wo, h) * h - wo;
-        if (wr.z <= 0.0) continue;
-        float s = smoothstep(0.0, GGX_TAIL_FADE, wr.z);
-        tail += s * incident(tbn * reflected_wi(l, wr), tail_area);
-        weights += s;
+        quarter_share[k] = vec3(0.0);
+        direction_sum[k] = vec3(0.0);
+        visible_mass[k] = 0.0;
     }
-    tail = (tail + max(0.0, 1.0 - weights) * core) / max(1.0, weights);
-    return target * ((1.0 - GGX_TAIL_FRACTION) * core + GGX_TAIL_FRACTION * tail);
+    for (int r = 0; r < GGX_TAIL_RADIAL; ++r) {
+        // band r of ggx_tail_quadrature: the mass beyond its edges is GGX_TAIL_FRACTION (1 - s)^2
+        float s_in = 1.0 - float(r) / float(GGX_TAIL_RADIAL);
+        float s_out = 1.0 - float(r + 1) / float(GGX_TAIL_RADIAL);
+        float beyond_in = GGX_TAIL_FRACTION * s_in * s_in;
+        float beyond_out = GGX_TAIL_FRACTION * s_out * s_out;
+        float q = 1.0 - 0.5 * (beyond_in + beyond_out);
+        float tan_theta = a * sqrt(q / (1.0 - q));
+        float cos_theta = inversesqrt(1.0 + tan_theta * tan_theta);
+        float sin_theta = tan_theta * cos_theta;
+        float d_placed_denominator = cos_theta * cos_theta * (a2 - 1.0) + 1.0;
+        float d_placed = a2 / (PI * d_placed_denominator * d_placed_denominator);  // GGX D, alpha a
+        float mass = (beyond_in - beyond_out) / float(GGX_TAIL_SAMPLES * GGX_TAIL_AZIMUTHAL);
+        for (int k = 0; k < GGX_TAIL_SAMPLES; ++k) {
+            for (int j = 0; j < GGX_TAIL_AZIMUTHAL; ++j) {
+                float phi = 2.0 * PI * (float(k) + (float(j) + 0.5) / float(GGX_TAIL_AZIMUTHAL)) / float(GGX_TAIL_SAMPLES);
+                vec3 h = vec3(sin_theta * cos(phi), sin_theta * sin(phi), cos_theta);
+                float wo_h = dot(wo, h);
+                vec3 wr = 2.0 * wo_h * h - wo;
+                if (wr.z <= 0.0) continue;
+                vec3 wi = reflected_wi(l, wr);
+                float p = d_placed * cos_theta / (4.0 * max(wo_h, 1e-12));
+                vec3 share = mass * lobe_eval(l, wi, wo) * (abs(wi.z) / p);
+                visible_mass[k] += mass;
+                quarter_share[k] += share;
+                direction_sum[k] += (share.r + share.g + share.b) * wi;
+            }
+        }
+    }
+    vec3 tail_sum = vec3(0.0);
+    vec3 carried = vec3(0.0);
+    float quarter_mass = GGX_TAIL_FRACTION / float(GGX_TAIL_SAMPLES);
+    for (int k = 0; k < GGX_TAIL_SAMPLES; ++k) {
+        if (quarter_share[k].r + quarter_share[k].g + quarter_share[k].b <= 0.0) continue;
+        vec3 direction = normalize(direction_sum[k]);
+        tail_sum += quarter_share[k] * incident(tbn * direction, tail_area * visible_mass[k] / quarter_mass);
+        carried += quarter_share[k];
+    }
+    vec3 value = max(target - carried, vec3(0.0)) * core + tail_sum;
+    return vec3(carried.r > target.r ? value.r * target.r / carried.r : value.r,
+                carried.g > target.g ? value.g * target.g / carried.g : value.g,
+                carried.b > target.b ? value.b * target.b / carried.b : value.b);
 #else
     return vec3(den.r > 0.0 ? num.r / den.r : 0.0, den.g > 0.0 ? num.g / den.g : 0.0,
                 den.b > 0.0 ? num.b / den.b : 0.0);
