@@ -281,7 +281,7 @@ def mirror_scissor(
     reflector: PlanarReflector, camera: MirrorCamera, spread: tuple[float, float] | None, lod_bias: float
 ) -> tuple[int, int, int, int] | None:
     """The buffer region (x, y, width, height; OpenGL rows) that lobe-N's lookups of the
-    reflector's pixels can read, from its lobes' ``spread`` (materials/patterns.py lobe_spread:
+    reflector's pixels can read, from its lobes' ``spread`` (materials/lobe_spread.py:
     largest angle off the mirror direction, largest lookup solid angle); None: the whole buffer
     (no bound: unknown spread, the region reaches the buffer's edges or too far off-axis)."""
     if spread is None:

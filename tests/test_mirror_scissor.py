@@ -1,4 +1,4 @@
-"""Scissored mirror passes (issue 18; scenes/planar_mirror.py mirror_scissor, materials/patterns.py
+"""Scissored mirror passes (issue 18; scenes/planar_mirror.py mirror_scissor, materials/lobe_spread.py
 lobe_spread): the screen rectangle of a reflector's box against projected points (also when it
 reaches behind the eye), the lobes' spread against the lookups lobe_samples makes, and on the GPU a
 frame whose passes are scissored equal to the frame without, with pixels actually saved, while a
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 
 from lobeview.core.methods import Method
+from lobeview.materials.lobe_spread import lobe_spread
 from lobeview.materials.patterns import (
     choose_pattern,
     ggx_tail_lookups,
     lobe_directions,
     lobe_sample_area,
     lobe_samples,
-    lobe_spread,
     specular_lobes,
 )
 from lobeview.materials.presets import PRESETS

@@ -13,7 +13,8 @@ import moderngl
 import numpy as np
 
 from lobeview.core.methods import Method
-from lobeview.materials.patterns import lobe_spread, specular_lobes
+from lobeview.materials.lobe_spread import lobe_spread
+from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf
 
 from .camera import Camera, outside_frustum, perspective
@@ -99,7 +100,7 @@ class MirrorPasses:
         self.drawer = drawer
         self.probes = probes
         self.environment = drawer.environment
-        self._spreads: dict = {}  # (reflector, N, normalize, pattern) -> materials.patterns.lobe_spread
+        self._spreads: dict = {}  # (reflector, N, normalize, pattern) -> materials.lobe_spread.lobe_spread
         self.targets: dict[tuple[int, str], MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
