@@ -160,8 +160,8 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     if (l.dist != DIST_GGX) return core * target;
     // GGX's tail beyond the pattern's core (patterns.py step 7, ggx_tail_terms and
     // ggx_tail_integral): per quarter of the tail, its share of the albedo by quadrature over
-    // GGX_TAIL_POINTS microfacet normals (each GGX_TAIL_FRACTION / (GGX_TAIL_SAMPLES
-    // GGX_TAIL_POINTS) of the projected mass, times f cos / p; zero at and below the horizon),
+    // GGX_TAIL_RADIAL bands x GGX_TAIL_AZIMUTHAL microfacet normals (each its band's share of the
+    // projected mass, ggx_tail_quadrature, times f cos / p; zero at and below the horizon),
     // and one lookup at the f cos-weighted mean direction of its points above the horizon over
     // their share of its reflected annulus (not clamped at 80 deg: ggx_tail_solid_angle); the
     // core's radiance over the rest of the albedo. Exact under uniform light, continuous in wo.
