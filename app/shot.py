@@ -92,7 +92,9 @@ def add_arguments(p) -> None:
         "--lod-bias",
         type=float,
         default=None,
-        help="MIP level bias (default: -0.5 for fis-N and lobe-N, measured by lobeview bench)",
+        help="MIP level bias (default: the method's measured best, -1 for lobe-N on the tent-filtered "
+        "MIP chain, -0.5 on the box chain and for fis-N; lobe-N's lobes wider than alpha 0.3 read up "
+        "to 1.5 levels coarser on top of it, docs/guide.md)",
     )
     add_scene_arguments(p)
     a("--tonemap", default="aces", choices=TONEMAPS, help="PNG tonemap (default aces)")

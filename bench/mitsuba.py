@@ -34,7 +34,8 @@ from pathlib import Path
 
 import numpy as np
 
-CASES = ("ggx:0.05", "ggx:0.15", "ggx:0.3", "ggx:0.5", "beckmann:0.15", "beckmann:0.5", "ggx:0.05x0.3")
+CASES = ("ggx:0.05", "ggx:0.15", "ggx:0.3", "ggx:0.5", "ggx:1.0", "beckmann:0.15", "beckmann:0.5", "beckmann:0.8",
+         "ggx:0.05x0.3")  # fmt: skip
 METHODS = ("lobe-7+norm", "lobe-15+norm", "fis-40", "prefiltered", "prefiltered-rsibr")
 ENV_HEIGHT = 512
 CAMERA = ((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0)
@@ -188,11 +189,14 @@ def run(
     cache: Path | None = None,
     bright_sources=False,
     supersample: int = 1,
+    lod_bias: float | None = None,
 ) -> dict:
     """``supersample``: the real-time methods render at that many times the size and are averaged
     down (issue 45's protocol: 768 x 768 averaged to 192 x 192), so that they and the two
     box-filtered references integrate the same pixel footprints; 1 shades the pixel centres
-    (a sharp reflection's edges then count as the method's error)."""
+    (a sharp reflection's edges then count as the method's error). ``lod_bias``: the real-time
+    methods' MIP level bias (None: each method's default; lobe-N's wide lobes add their levels
+    on top, materials/patterns.py wide_lobe_footprint_scale)."""
     from lobeview.materials.spec import build_bsdf, validate
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.meshes import uv_sphere
@@ -232,7 +236,7 @@ def run(
         row = {"case": case, "mitsuba seconds": round(mitsuba_seconds, 1),
                "reference": relative_rmse(reference.radiance, truth, reference.mask), "sun": {}}  # fmt: skip
         for method in methods:
-            frame = fine_renderer.render(camera, bsdf, method, spp=1).radiance
+            frame = fine_renderer.render(camera, bsdf, method, spp=1, lod_bias=lod_bias).radiance
             frame = frame.reshape(size, supersample, size, supersample, 3).mean(axis=(1, 3))
             row[method] = relative_rmse(frame, truth, reference.mask)
             row["sun"][method] = sun_ratios(frame, truth, size)
@@ -245,7 +249,7 @@ def run(
         fine_renderer.release()
     ctx.release()
     return {"rows": rows, "methods": list(methods), "size": size, "spp": spp, "mitsuba": mitsuba_version,
-            "bright_sources": bool(bright_sources), "supersample": supersample,
+            "bright_sources": bool(bright_sources), "supersample": supersample, "lod_bias": lod_bias,
             "device": "Mesa llvmpipe (lobeview), Mitsuba scalar_rgb on the CPU"}  # fmt: skip
 
 
@@ -267,7 +271,8 @@ def markdown(results: dict, stamp: str, command: str) -> str:
             "separated into cap lights (every method but the reference)."
             if results.get("bright_sources")
             else "left in the cube."
-        ),
+        )
+        + ("" if results.get("lod_bias") is None else f" LOD bias of the real-time methods: {results['lod_bias']:+g}."),
         "",
         *_table(results["rows"], methods, lambda row, m: f"{100 * row[m]:.1f}"),
     ]
@@ -299,6 +304,8 @@ def main(argv=None) -> int:
                         "size, averaged down (default 4, issue 45's protocol; 1: pixel centres)")  # fmt: skip
     parser.add_argument("--bright-sources", action="store_true", help="separate the sun into a cap light "
                         "(scenes/bright_sources.py) for every lobeview method but the reference")  # fmt: skip
+    parser.add_argument("--lod-bias", type=float, help="MIP level bias of the real-time methods (default: each "
+                        "method's; lobe-N's lobes wider than alpha 0.3 add up to 1.5 levels on top)")  # fmt: skip
     parser.add_argument("--no-cache", action="store_true", help="render Mitsuba's images again (default: reuse the "
                         "ones of an earlier run of the same scene from the lobeview cache folder)")  # fmt: skip
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
@@ -321,6 +328,7 @@ def main(argv=None) -> int:
             cache=cache,
             bright_sources=args.bright_sources,
             supersample=args.supersample,
+            lod_bias=args.lod_bias,
         )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

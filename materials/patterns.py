@@ -38,7 +38,9 @@ Steps, with the thesis equations:
      overstates wide lobes, see lobe_sample_area); its area divided by N is one sample's solid
      angle, projected to the cube (x d^2 / cos(beta) = 1 / max|w|^3 for a unit cube of
      half-size 1) and converted to texels (face area 4 holds face_size^2 texels);
-     lod = log4(texels).
+     lod = log4(texels). Lobes wider than alpha 0.3 read up to 1.5 levels coarser
+     (:func:`wide_lobe_footprint_scale`, measured against Mitsuba: GGX 1.0 lobe-7+norm 29.8 ->
+     12.8 %).
   5. Quadrature (Eq. 4.25):  L = sum L_i cos_i^2 f_i^2 / p_i  /  sum f_i cos_i , with f the lobe
      BSDF, p its importance pdf (Eq. 4.9), samples below the horizon discarded. Eq. 4.24
      (sum L_i cos_i^2 f_i / sum p_i cos_i) is available for comparison.
@@ -108,6 +110,11 @@ MULTI_RING_SAMPLES_PER_RING = 3  # thesis 4.5.3 / Fig. 4.34: rings of three samp
 # Widest lobe extent the footprint follows (lobe_sample_area): the thesis' tan form blows up at
 # 90 deg; the solid-angle form does not, and keeps the clamp so footprints stay below a hemisphere.
 MAX_ELLIPSE_ANGLE = np.radians(80.0)
+# Step 4's footprint grows for wide lobes (wide_lobe_footprint_scale): a few samples of a lobe
+# wider than alpha 0.3 read levels up to WIDE_LOBE_MAX_LEVELS coarser (measured, issue 45).
+WIDE_LOBE_ALPHA = 0.3
+WIDE_LOBE_LEVELS_PER_ALPHA = 2.5
+WIDE_LOBE_MAX_LEVELS = 1.5
 PATTERN_KINDS = ("ring", "multi_ring", "line_x", "line_y", "spiral", "double_ring")
 # lobe-N takes the double ring instead of the ring from this N on (step 3; the ring at N = 8-10
 # is within a few tenths of lobe-7, a double ring with an outer ring of 1-4 samples was worse).
@@ -276,7 +283,19 @@ def lobe_sample_area(
     area = np.pi * u * v / n
     if uses_line_pattern(distribution.alpha_x, distribution.alpha_y):  # not narrower than the lobe's width
         area = max(area, np.pi * LINE_MIN_FOOTPRINT_FRACTION * min(u, v) ** 2)
-    return float(area)
+    return float(area * wide_lobe_footprint_scale(distribution))
+
+
+def wide_lobe_footprint_scale(distribution: MicrofacetDistribution) -> float:
+    """How much wider than its share of the lobe one lookup of a wide lobe filters: 4^levels,
+    levels = WIDE_LOBE_LEVELS_PER_ALPHA (alpha - WIDE_LOBE_ALPHA) clamped to [0,
+    WIDE_LOBE_MAX_LEVELS], alpha = sqrt(alpha_x alpha_y); the GGX tail's lookups too. The best LOD
+    bias against Mitsuba (issue 45's sky, lobe-7+norm and lobe-15+norm) is -1 up to alpha 0.3 and
+    grows beyond: -0.5 at 0.5, about +0.25 at 0.8, +0.5 at 1 (a few samples alias a wide lobe's sources
+    unless each reads a coarser level; docs/measurements.md "Wide lobes")."""
+    alpha = np.sqrt(distribution.alpha_x * distribution.alpha_y)
+    levels = np.clip((alpha - WIDE_LOBE_ALPHA) * WIDE_LOBE_LEVELS_PER_ALPHA, 0.0, WIDE_LOBE_MAX_LEVELS)
+    return float(4.0**levels)
 
 
 def cube_map_lod(world_dirs: np.ndarray, sample_area: float | np.ndarray, face_size: int) -> np.ndarray:
@@ -475,7 +494,8 @@ def ggx_tail_solid_angle(distribution: MicrofacetDistribution) -> float:
     alpha = np.sqrt(distribution.alpha_x * distribution.alpha_y)
     inner = 2.0 * np.arctan(np.sqrt(-np.log(XI_BORDER)) * alpha)
     outer = 2.0 * np.arctan(GGX_TAIL_OUTER_TAN * alpha)
-    return float(2.0 * np.pi * (np.cos(inner) - np.cos(outer)) / GGX_TAIL_SAMPLES)
+    annulus = 2.0 * np.pi * (np.cos(inner) - np.cos(outer))
+    return float(annulus / GGX_TAIL_SAMPLES * wide_lobe_footprint_scale(distribution))
 
 
 def ggx_tail_quadrature(distribution: MicrofacetDistribution) -> tuple[np.ndarray, np.ndarray]:

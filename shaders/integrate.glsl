@@ -168,7 +168,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     float a = sqrt(l.ax * l.ay);
     float inner = 2.0 * atan(sqrt(-log(XI_BORDER)) * a);
     float outer = 2.0 * atan(GGX_TAIL_OUTER_TAN * a);
-    float tail_area = 2.0 * PI * (cos(inner) - cos(outer)) / float(GGX_TAIL_SAMPLES);
+    float tail_area = 2.0 * PI * (cos(inner) - cos(outer)) / float(GGX_TAIL_SAMPLES) * wide_lobe_footprint_scale(l);
     float a2 = a * a;
     vec3 quarter_share[GGX_TAIL_SAMPLES];
     vec3 direction_sum[GGX_TAIL_SAMPLES];

@@ -22,6 +22,12 @@ bool uses_line_pattern(Lobe l) {
     return max(l.ax, l.ay) >= ANISOTROPY_LINE_RATIO * min(l.ax, l.ay);
 }
 
+// Wide lobes' lookups filter up to WIDE_LOBE_MAX_LEVELS coarser (patterns.py wide_lobe_footprint_scale).
+float wide_lobe_footprint_scale(Lobe l) {
+    float levels = clamp((sqrt(l.ax * l.ay) - WIDE_LOBE_ALPHA) * WIDE_LOBE_LEVELS_PER_ALPHA, 0.0, WIDE_LOBE_MAX_LEVELS);
+    return exp2(2.0 * levels);
+}
+
 // Eq. 4.14-4.15 divided by n: solid angle of one sample, the ellipse with the equal-area
 // radii 2 sin(angle / 2) instead of the thesis' tan(angle); on the line pattern at least a disc
 // of half the short semi-axis (patterns.py lobe_sample_area, LINE_MIN_FOOTPRINT_FRACTION).
@@ -39,7 +45,7 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
         float across = 2.0 * sin(0.5 * min(au, av));
         area = max(area, PI * across * across * LINE_MIN_FOOTPRINT_FRACTION);
     }
-    return area;
+    return area * wide_lobe_footprint_scale(l);
 }
 
 #if defined(LOBE_NORMALIZE)

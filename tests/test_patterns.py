@@ -23,6 +23,7 @@ from lobeview.materials.patterns import (
     pattern_xi,
     specular_lobes,
     theta_thresh,
+    wide_lobe_footprint_scale,
 )
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import build_bsdf
@@ -175,10 +176,43 @@ def test_sample_footprint_is_the_lobe_solid_angle(alpha):
     i = np.arange(count) + 0.5
     z = 1 - 2 * i / count  # Fibonacci sphere: equal-area points
     counted = 4 * np.pi * np.count_nonzero(z >= np.cos(half_angle)) / count
-    assert 7 * lobe_sample_area(dist, wo, 7) == pytest.approx(counted, rel=2e-3, abs=1e-5)
+    widening = wide_lobe_footprint_scale(dist)  # 1 up to alpha 0.3 (test below)
+    assert 7 * lobe_sample_area(dist, wo, 7) / widening == pytest.approx(counted, rel=2e-3, abs=1e-5)
     thesis = np.pi * np.tan(min(half_angle, MAX_ELLIPSE_ANGLE)) ** 2
     # tan^2 a / (2 sin(a / 2))^2 = cos^2(a / 2) / cos^2 a
     assert thesis / counted == pytest.approx((np.cos(half_angle / 2) / np.cos(half_angle)) ** 2, rel=3e-3)
+
+
+def test_wide_lobes_lookups_filter_coarser():
+    """wide_lobe_footprint_scale: nothing up to alpha 0.3, then WIDE_LOBE_LEVELS_PER_ALPHA MIP
+    levels per unit of alpha (a factor 4 in solid angle per level), continuous and never
+    decreasing, at most WIDE_LOBE_MAX_LEVELS; anisotropic lobes by sqrt(alpha_x alpha_y); the
+    pattern's footprint carries it (the GGX tail's: the annulus test below)."""
+    from lobeview.materials.patterns import (
+        WIDE_LOBE_ALPHA,
+        WIDE_LOBE_LEVELS_PER_ALPHA,
+        WIDE_LOBE_MAX_LEVELS,
+    )
+
+    def levels(ax, ay=None):
+        scale = wide_lobe_footprint_scale(MicrofacetDistribution("ggx", ax, ax if ay is None else ay))
+        return np.log(scale) / np.log(4)
+
+    alphas = np.linspace(0.01, 1.0, 400)
+    curve = np.array([levels(a) for a in alphas])
+    assert np.all(curve[alphas <= WIDE_LOBE_ALPHA] == 0.0)
+    assert np.all(np.diff(curve) >= 0.0) and np.max(np.diff(curve)) < 0.02  # continuous, monotone
+    assert levels(0.5) == pytest.approx(0.2 * WIDE_LOBE_LEVELS_PER_ALPHA)  # -0.5 at alpha 0.5 (measured best)
+    assert curve.max() == pytest.approx(WIDE_LOBE_MAX_LEVELS)
+    assert levels(0.1, 0.9) == pytest.approx(levels(0.3)) == 0.0  # sqrt(0.1 * 0.9) = 0.3
+    assert levels(0.25, 1.0) == pytest.approx(levels(0.5))
+    wo = direction_from_angles_deg(20)
+    for kind in ("ggx", "beckmann"):
+        narrow, wide = MicrofacetDistribution(kind, 0.5, 0.5), MicrofacetDistribution(kind, 0.8, 0.8)
+        # theta_thresh passes the 80-deg clamp at alpha ~0.42: both cores are clamped alike
+        assert lobe_sample_area(wide, wo, 7) / lobe_sample_area(narrow, wo, 7) == pytest.approx(
+            4.0 ** (levels(0.8) - levels(0.5)), rel=1e-9
+        )
 
 
 # Measured worst relative error over n = 5, 11, 19 and theta <= 50 deg, rounded up: lobes with
@@ -443,7 +477,8 @@ def test_ggx_tail_footprint_is_the_reflected_annulus_at_every_roughness(alpha):
     annulus = 2 * np.pi * 0.5 * (hi - lo) * np.sum(weights * 4 * np.cos(theta) * np.sin(theta))
     footprint = ggx_tail_solid_angle(MicrofacetDistribution("ggx", alpha, alpha))
     assert footprint > 0.0
-    assert GGX_TAIL_SAMPLES * footprint == pytest.approx(annulus, rel=1e-9)
+    widening = wide_lobe_footprint_scale(MicrofacetDistribution("ggx", alpha, alpha))  # wide lobes: coarser
+    assert GGX_TAIL_SAMPLES * footprint == pytest.approx(annulus * widening, rel=1e-9)
 
 
 @pytest.mark.parametrize("alpha", [0.15, 0.5])

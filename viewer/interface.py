@@ -44,6 +44,9 @@ from lobeview.materials.patterns import (
     GGX_TAIL_SAMPLES,
     LINE_MIN_FOOTPRINT_FRACTION,
     MAX_ELLIPSE_ANGLE,
+    WIDE_LOBE_ALPHA,
+    WIDE_LOBE_LEVELS_PER_ALPHA,
+    WIDE_LOBE_MAX_LEVELS,
     XI_BORDER,
 )
 from lobeview.materials.prefilter import ANISO_DFG_COS, ANISO_DFG_PHI, ANISO_DFG_ROUGHNESS, ANISO_DFG_STRENGTH
@@ -250,6 +253,9 @@ SHADER_CONSTANTS: dict = {
     "ALBEDO_MU": ALBEDO_MU,
     "XI_BORDER": float(XI_BORDER),  # Eq. 4.10
     "MAX_ELLIPSE_ANGLE": float(MAX_ELLIPSE_ANGLE),  # Eq. 4.15 clamp
+    "WIDE_LOBE_ALPHA": float(WIDE_LOBE_ALPHA),  # materials/patterns.py wide_lobe_footprint_scale
+    "WIDE_LOBE_LEVELS_PER_ALPHA": float(WIDE_LOBE_LEVELS_PER_ALPHA),
+    "WIDE_LOBE_MAX_LEVELS": float(WIDE_LOBE_MAX_LEVELS),
     "GGX_TAIL_FRACTION": float(GGX_TAIL_FRACTION),  # materials/patterns.py step 7
     "GGX_TAIL_OUTER_TAN": float(GGX_TAIL_OUTER_TAN),
     "GGX_TAIL_SAMPLES": GGX_TAIL_SAMPLES,
