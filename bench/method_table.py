@@ -12,7 +12,7 @@ and in bins of n.v, so the rule can ask about a view. The lights:
   a built-in studio sky when absent, which the table then says).
 
 As the viewer renders: bright sources separated into cap lights (the default), cube faces sized by
-the lobes' width (the scene analysis' rule, materials/patterns.py lobe_width_face_size; the
+the lobes' width (the scene analysis' rule, materials/lobe_spread.py lobe_width_face_size; the
 reference reads a full-size cube), real-time methods rendered at ``supersample`` times the size and
 averaged down so that they and the box-filtered reference cover the same pixel footprints.
 
@@ -128,7 +128,8 @@ def reference_noise(renders: list[np.ndarray]) -> np.ndarray:
 
 def run(cases, envs, methods, size: int, spp: int, supersample: int, say=print) -> dict:
     from lobeview.core.methods import Method
-    from lobeview.materials.patterns import finest_sample_solid_angle, lobe_width_face_size, specular_lobes
+    from lobeview.materials.lobe_spread import finest_sample_solid_angle, lobe_width_face_size
+    from lobeview.materials.patterns import specular_lobes
     from lobeview.materials.spec import build_bsdf, validate
     from lobeview.scenes.meshes import uv_sphere
     from lobeview.viewer.camera import Camera

@@ -1,12 +1,16 @@
 """How far lobe-N's lookups reach from a lobe's centre direction (issue 18: the margin of a
 scissored mirror pass, viewer/mirror_pass.py): the pattern's samples and, with the energy
-normalisation, the GGX tail's lookups (materials/patterns.py step 7) over a grid of views."""
+normalisation, the GGX tail's lookups (materials/patterns.py step 7) over a grid of views; and
+how fine a cube map those lookups read (the lobe-width face size, issue 18)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from lobeview.core.methods import MAX_PATTERN
+
 from .patterns import (
+    LOBE_LOD_BIAS,
     choose_pattern,
     ggx_tail_lookups,
     ggx_tail_solid_angle,
@@ -53,3 +57,57 @@ def lobe_spread(lobes: list, n: int, normalize: bool, planar: bool = True) -> tu
                     widest = max(widest, float(np.arccos(cosines.min())))
                 largest = max(largest, lobe_sample_area(dist, wo, n))
     return widest, largest
+
+
+# Cube-map face size from the lobes' width (issue 18): the finest MIP level the lobe-N lookups of
+# an object read decides how many texels its cube map needs. A reflected lobe's cross-section
+# shrinks towards grazing views (0.26x its area at 75 deg, 0.017x at 89 deg); views up to
+# FOOTPRINT_MAX_VIEW_ANGLE count, so that the rim beyond it (under 7 % of a sphere's projected
+# area) may read level 0 magnified (measured: tests/test_cube_sizes.py, bench/walkthrough.py).
+FOOTPRINT_MAX_VIEW_ANGLE = np.radians(75.0)
+FOOTPRINT_VIEW_STEPS = 6
+MIN_CUBE_FACE = 16  # smallest face a lobe-width rule gives (6 x 16^2 texels)
+
+
+def finest_sample_solid_angle(
+    lobes: list, n: int = MAX_PATTERN, max_view_angle: float = FOOTPRINT_MAX_VIEW_ANGLE
+) -> float | None:
+    """Smallest solid angle (sr) one of ``n`` lobe-N samples covers (:func:`lobe_sample_area`,
+    what the shaders' MIP level is computed from) over ``lobes`` and view directions from the
+    normal to ``max_view_angle``, both tangent azimuths; more samples than MAX_PATTERN are never
+    taken. None when a lobe has no pattern footprint (the Rational BRDF's sampled
+    pattern filters by 1 / (N p), which has no lower bound here): such objects keep the full
+    face size."""
+    finest = np.inf
+    for lobe in lobes:
+        if getattr(lobe, "sampled_pattern", False) or not hasattr(lobe, "distribution"):
+            return None
+        for theta in np.linspace(0.0, max_view_angle, FOOTPRINT_VIEW_STEPS):
+            for phi in (0.0, np.pi / 2.0):
+                wo = spherical_direction(np.array(theta), np.array(phi))
+                finest = min(finest, lobe_sample_area(lobe.distribution, wo, n))
+    return float(finest) if np.isfinite(finest) else None
+
+
+def lobe_width_face_size(
+    sample_solid_angle: float | None,
+    full_size: int,
+    lod_bias: float = LOBE_LOD_BIAS,
+    margin_levels: float = 0.0,
+    min_size: int = MIN_CUBE_FACE,
+) -> int:
+    """The smallest power-of-two cube face (between ``min_size`` and ``full_size``) on which no
+    lookup of footprint ``sample_solid_angle`` reads below MIP level ``margin_levels``: with
+    Eq. 4.17's lod = log4(Omega S^2 / 4 / max|w|^3) + bias >= log4(Omega S^2 / 4) + bias, level 0
+    of a face S = full / 2^k stands in for level k of the full face, so such lookups read the
+    same filtered radiance (up to how the smaller face was rasterised, see viewer/cube_bake.py).
+    ``full_size`` when the footprint is unknown (None)."""
+    full_size = int(full_size)
+    if sample_solid_angle is None or not sample_solid_angle > 0:
+        return full_size
+    # lod(S) >= margin  <=>  S >= 2 / sqrt(Omega) * 2^(margin - bias)
+    needed = 2.0 / np.sqrt(sample_solid_angle) * 2.0 ** (margin_levels - lod_bias)
+    size = max(int(min_size), 1)
+    while size < needed and size < full_size:
+        size *= 2
+    return min(size, full_size)

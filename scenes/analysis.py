@@ -8,8 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from lobeview.materials.bsdf import diffuse_albedo
+from lobeview.materials.lobe_spread import finest_sample_solid_angle, lobe_width_face_size
 from lobeview.materials.method_choice import LobeShape, MethodChoice, choose_method
-from lobeview.materials.patterns import finest_sample_solid_angle, lobe_width_face_size, specular_lobes
+from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf
 
 from .planar_mirror import reflector_decision
@@ -31,7 +32,7 @@ class ObjectNeeds:
     reflection_proxy: str = "-"  # the cube-map lookup correction (scenes/reflection_proxy.py)
     mirror: str = "-"  # planar reflector decision (scenes/planar_mirror.py)
     reflector: object | None = None  # scenes.planar_mirror.PlanarReflector when it gets a mirror pass
-    # Cube-map face size from the lobes' width (materials/patterns.py lobe_width_face_size): the
+    # Cube-map face size from the lobes' width (materials/lobe_spread.py lobe_width_face_size): the
     # smallest lobe-N sample footprint (sr) of the narrowest lobes the material can have, None
     # when unknown (full size), and the face size that gives at the analysis' full size.
     sample_solid_angle: float | None = None

@@ -2,7 +2,7 @@
 
 An object's cube map is rendered from its bounding-box centre without the object itself
 (viewer/cube_bake.py). Objects whose lobes are wide enough that the lobe-width rule gives them a
-small face (materials/patterns.py ``lobe_width_face_size`` <= SHARED_PROBE_MAX_FACE out of the
+small face (materials/lobe_spread.py ``lobe_width_face_size`` <= SHARED_PROBE_MAX_FACE out of the
 default 256, whatever the chosen full size) gain little from a cube map of
 their own when another such object stands close by: a group of them shares one cube map, rendered
 from the centre of the group's bounding box and without any member, and every member looks it up

@@ -1,4 +1,4 @@
-"""Cube-map face size from the lobes' width (issue 18; materials/patterns.py lobe_width_face_size,
+"""Cube-map face size from the lobes' width (issue 18; materials/lobe_spread.py lobe_width_face_size,
 scenes/analysis.py, viewer/cube_bake.py): the rule is checked against the MIP levels of the
 actual lobe-N samples (independent of the footprint minimum it is computed from), glTF roughness
 textures make a face as large as their smoothest texel needs, the GPU cubes have the sizes the
@@ -15,14 +15,13 @@ import pytest
 
 from lobeview.app.options import lobe_width_cubes
 from lobeview.core.methods import MAX_PATTERN, Method
-from lobeview.materials.patterns import (
+from lobeview.materials.lobe_spread import (
     FOOTPRINT_MAX_VIEW_ANGLE,
     MIN_CUBE_FACE,
     finest_sample_solid_angle,
-    lobe_samples,
     lobe_width_face_size,
-    specular_lobes,
 )
+from lobeview.materials.patterns import lobe_samples, specular_lobes
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import build_bsdf, validate
 from lobeview.materials.vec import spherical_direction

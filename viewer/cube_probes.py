@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from lobeview.core.methods import Method
-from lobeview.materials.patterns import lobe_width_face_size
+from lobeview.materials.lobe_spread import lobe_width_face_size
 from lobeview.scenes.analysis import DEFAULT_CUBE_FACE
 from lobeview.scenes.probe_groups import SHARED_PROBE_MAX_FACE, group_probes
 
