@@ -216,6 +216,27 @@ def run(cases, envs, methods, size: int, spp: int, supersample: int, say=print) 
     }
 
 
+def updated_table(table: dict, update: dict) -> dict:
+    """``table`` with the rows of ``update`` (measured with every method of ``table``) in place of
+    its rows of the same light and lobe shape; ``update``'s date and command join its "updates"."""
+    if list(update["methods"]) != list(table["methods"]):
+        raise SystemExit(f"--update measures every method of the table: {', '.join(table['methods'])}")
+    key = lambda row: (row["env"], row["kind"], row["alpha_min"], row["ratio"])  # noqa: E731
+    new_rows = {key(row): row for row in update["rows"]}
+    kept = [row for row in table["rows"] if key(row) not in new_rows]
+    rows = kept + list(new_rows.values())
+    rows.sort(
+        key=lambda row: (
+            list(table["envs"]).index(row["env"]),
+            KINDS.index(row["kind"]),
+            row["ratio"],
+            row["alpha_min"],
+        )
+    )
+    entry = {"date": update["date"], "command": update["command"], "rows": len(new_rows), "minutes": update["minutes"]}
+    return {**table, "rows": rows, "updates": [*table.get("updates", []), entry]}
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(prog="python -m lobeview.bench.method_table", description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", nargs="+", help="KIND:ALPHA or KIND:ALPHAxRATIO (default: the full grid)")
@@ -230,12 +251,20 @@ def main(argv=None) -> int:
     )
     p.add_argument("--supersample", type=int, default=2, help="real-time methods at this many times the size")
     p.add_argument("--out", default=str(TABLE_PATH), help=f"the table (default {TABLE_PATH})")
+    p.add_argument(
+        "--update",
+        action="store_true",
+        help="replace only the measured rows of the table at --out (same lights, every candidate method), "
+        "after a change that moves some lobe shapes; the table lists its updates",
+    )
     args = p.parse_args(argv)
     cases = [parse_case(c) for c in args.cases] if args.cases else default_cases()
     say = lambda text: print(text, file=sys.stderr, flush=True)  # noqa: E731
     say(f"[method table] {len(cases)} lobe shapes x {len(args.envs)} lights x {len(args.methods)} methods")
     table = run(cases, args.envs, args.methods, args.size, args.spp, args.supersample, say)
     table["command"] = "python -m lobeview.bench.method_table " + " ".join(argv if argv is not None else sys.argv[1:])
+    if args.update:
+        table = updated_table(json.loads(Path(args.out).read_text()), table)
     Path(args.out).write_text(json.dumps(table, indent=1) + "\n")
     say(f"[method table] wrote {args.out} ({table['minutes']} min)")
     return 0

@@ -157,6 +157,29 @@ def test_the_bench_measures_a_table_row(tmp_path):
     assert pick.method == "prefiltered"  # the cheaper one, within a target of 100 %
 
 
+def test_an_update_replaces_only_its_rows():
+    """bench/method_table.py --update: the rows measured again replace theirs (same light and lobe
+    shape), the others stay, the table keeps its order and lists the update; an update without
+    every method of the table is refused."""
+    from lobeview.bench.method_table import updated_table
+
+    def row(env, kind, alpha, error):
+        return {"env": env, "kind": kind, "alpha_min": alpha, "ratio": 1.0, "overall": {"lobe-7+norm": error}}
+
+    rows = [row("sky", "ggx", 0.2, 0.1), row("sky", "ggx", 0.5, 0.2), row("interior", "ggx", 0.5, 0.3)]
+    table = {"envs": {"sky": "", "interior": ""}, "methods": ["lobe-7+norm"], "rows": rows}
+    update = {"methods": ["lobe-7+norm"], "date": "d", "command": "c", "minutes": 1.0,
+              "rows": [row("interior", "ggx", 0.5, 0.03), row("sky", "ggx", 0.5, 0.02)]}  # fmt: skip
+    merged = updated_table(table, update)
+    assert [(r["env"], r["alpha_min"], r["overall"]["lobe-7+norm"]) for r in merged["rows"]] == [
+        ("sky", 0.2, 0.1), ("sky", 0.5, 0.02), ("interior", 0.5, 0.03)
+    ]  # fmt: skip
+    assert merged["updates"] == [{"date": "d", "command": "c", "rows": 2, "minutes": 1.0}]
+    assert len(table["rows"]) == 3 and table["rows"][1]["overall"]["lobe-7+norm"] == 0.2  # not changed in place
+    with pytest.raises(SystemExit, match="every method"):
+        updated_table(table, {**update, "methods": ["prefiltered"]})
+
+
 def test_the_analysis_the_renderer_and_the_command_line_use_the_rule(ctx):
     """A textured glTF quad (roughness 0.24-0.9 from its texture, factor 1): the analysis picks for
     the lobes at both ends of the texture's range, the renderer shades the object with the pick,

@@ -217,9 +217,9 @@ def test_a_member_edited_to_narrower_lobes_resizes_the_shared_probe(ctx):
             settings=RenderSettings(cube_face_size=64, shared_probes=True),
         )
     assert [g.members for g in renderer.probes.groups] == [(1, 2, 3)]
-    # alpha 0.81 reads 1.3 MIP levels coarser than its share of the lobe (materials/patterns.py
-    # wide_lobe_footprint_scale): the smallest face, 16^2 (32^2 before that rule)
-    assert renderer.objects[1].cube.face_size == 16
+    # 32^2: the face follows the lobe's width, not lobe-N's wider filter for wide lobes (16^2 with
+    # it: materials/lobe_spread.py finest_sample_solid_angle)
+    assert renderer.objects[1].cube.face_size == 32
     renderer.update_material(2, load_material("plastic"))  # a member, not the owner: still wide enough
     assert [g.members for g in renderer.probes.groups] == [(1, 2, 3)]
     assert renderer.objects[1].cube.face_size == 64 and renderer.objects[2].cube is None
