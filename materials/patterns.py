@@ -273,7 +273,9 @@ def lobe_sample_area(
     (courtyard.exr); GGX gold loses 0.4-1.2 dB, which the overstated footprint had made up for
     the GGX tail beyond the pattern's core (theta_thresh). On the line pattern of a strongly
     anisotropic lobe, at least a disc of LINE_MIN_FOOTPRINT_FRACTION of the short axis' radius
-    squared (the lobe's width)."""
+    squared (the lobe's width). Times :func:`wide_lobe_footprint_scale` (1 up to alpha 0.3): the
+    footprint a lookup filters over, not the lobe's share alone (finest_sample_solid_angle, which
+    sizes cube faces by the lobe's width, divides it out again)."""
     phis = np.array([0.0, np.pi / 2.0])
     h_border = spherical_direction(theta_thresh(distribution, phis, xi_border), phis)
     w_centre = reflect(wo, np.array([0.0, 0.0, 1.0]))
