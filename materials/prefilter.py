@@ -305,6 +305,12 @@ SPLIT_SUM_LINE_NODES = 9
 SPLIT_SUM_LINE_RATIO = 1.05
 
 
+def split_sum_is_line(alpha_x: float, alpha_y: float) -> bool:
+    """Whether split-sum reads a lobe along the quantile line (anisotropic by more than
+    SPLIT_SUM_LINE_RATIO), and, for GGX, takes its albedo from the anisotropic table."""
+    return max(alpha_x, alpha_y) > SPLIT_SUM_LINE_RATIO * min(alpha_x, alpha_y)
+
+
 def split_sum_line_quantiles(kind: str, count: int = SPLIT_SUM_LINE_NODES) -> np.ndarray:
     """The slopes (in units of the scale) of the line's nodes for distribution ``kind``."""
     from scipy.special import erfinv
@@ -322,7 +328,7 @@ def split_sum_line(wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float) ->
     node's slope s along the wider axis is the half vector normalize(-s e, 1), reflected."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
     a_min, a_max = min(alpha_x, alpha_y), max(alpha_x, alpha_y)
-    if a_max <= SPLIT_SUM_LINE_RATIO * a_min:
+    if not split_sum_is_line(alpha_x, alpha_y):
         return np.array([[-wo[0], -wo[1], wo[2]]]), np.ones(1), float(np.sqrt(alpha_x * alpha_y))
     slopes = split_sum_line_quantiles(kind) * np.sqrt(a_max * a_max - a_min * a_min)
     major = np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
@@ -414,6 +420,27 @@ def anisotropic_dfg_lookup(table: np.ndarray, cos_theta_o: float, azimuth: float
                 row = table[r0 + dr, s0 + ds, p0 + dp]
                 out += wr * ws * wp * (row[x0] * (1 - fx) + row[x0 + 1] * fx)
     return out
+
+
+def anisotropic_ggx_dfg_lookup(table: np.ndarray, wo: np.ndarray, alpha_x: float, alpha_y: float) -> np.ndarray:
+    """(A, B) of an anisotropic GGX lobe of any alphas from :func:`anisotropic_dfg_table` (the twin
+    of shaders/patterns.glsl anisotropic_ggx_dfg): its wider axis is the table's x, roughness
+    sqrt(alpha_min), strength^2 = (alpha_max - alpha_min) / (1 - alpha_min) clamped at 1."""
+    a_min, a_max = min(alpha_x, alpha_y), max(alpha_x, alpha_y)
+    strength = np.sqrt(np.clip((a_max - a_min) / max(1.0 - a_min, 1e-6), 0.0, 1.0))
+    along, across = (wo[0], wo[1]) if alpha_x >= alpha_y else (wo[1], wo[0])
+    return anisotropic_dfg_lookup(table, wo[2], np.arctan2(across, along), np.sqrt(a_min), strength)
+
+
+def split_sum_dfg(tables: dict, kind: str, wo: np.ndarray, alpha_x: float, alpha_y: float) -> np.ndarray:
+    """The (A, B) shaders/prefiltered.glsl's split-sum scales a lobe's lookups by: ``tables``
+    {"ggx": dfg_table, "beckmann": dfg_table, "anisotropic": anisotropic_dfg_table}. A GGX lobe
+    on the quantile line (:func:`split_sum_is_line`) from the anisotropic table: the isotropic
+    one at the geometric-mean alpha was 5-9 % too bright over most views of GGX 0.05 x 0.3
+    (Mitsuba sky, prefiltered 13.0 % rel-RMSE); Beckmann has no anisotropic table."""
+    if kind == "ggx" and split_sum_is_line(alpha_x, alpha_y):
+        return anisotropic_ggx_dfg_lookup(tables["anisotropic"], wo, alpha_x, alpha_y)
+    return dfg_lookup(tables[kind], wo[2], np.sqrt(np.sqrt(alpha_x * alpha_y)))
 
 
 def dfg_lookup(table: np.ndarray, cos_theta_o, roughness) -> np.ndarray:

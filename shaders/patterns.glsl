@@ -48,6 +48,35 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
     return area * wide_lobe_footprint_scale(l);
 }
 
+// (A, B) of anisotropic GGX lobes (materials/prefilter.py anisotropic_dfg_table: glTF's
+// alpha_x = mix(alpha, 1, strength^2) along local x, alpha_y = alpha): normalised lobe-N's per-pixel
+// glTF albedo below and prefiltered.glsl's split-sum of every anisotropic GGX lobe.
+uniform sampler3D u_dfg_anisotropic;    // rg: GGX (A, B); x = cos, y = azimuth, z = roughness, strength
+
+// Twin of materials/prefilter.py anisotropic_dfg_lookup: hardware-linear in sqrt(cos) (texel centres),
+// azimuth and strength (nodes, the strength inside one roughness block), by hand in roughness.
+vec2 anisotropic_dfg(float cos_o, vec2 azimuth, float roughness, float strength) {
+    float folded = atan(abs(azimuth.y), abs(azimuth.x)) / (0.5 * PI);
+    float y = (folded * float(ANISO_DFG_PHI - 1) + 0.5) / float(ANISO_DFG_PHI);
+    float r = clamp(roughness, 0.0, 1.0) * float(ANISO_DFG_ROUGHNESS - 1);
+    float r0 = min(floor(r), float(ANISO_DFG_ROUGHNESS - 2));
+    float s = clamp(strength, 0.0, 1.0) * float(ANISO_DFG_STRENGTH - 1) + 0.5;
+    float depth = float(ANISO_DFG_ROUGHNESS * ANISO_DFG_STRENGTH);
+    float x = sqrt(max(cos_o, 0.0));  // the table is uniform in sqrt(cos theta_o)
+    vec2 low = textureLod(u_dfg_anisotropic, vec3(x, y, (r0 * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
+    vec2 high = textureLod(u_dfg_anisotropic, vec3(x, y, ((r0 + 1.0) * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
+    return mix(low, high, r - r0);
+}
+
+// The table's (A, B) for an anisotropic GGX lobe of any alphas: its wider axis is the table's x,
+// strength^2 = (alpha_max - alpha_min) / (1 - alpha_min), clamped at 1 (alpha_max >= 1).
+vec2 anisotropic_ggx_dfg(Lobe l, vec3 wo) {
+    float a_min = min(l.ax, l.ay);
+    float a_max = max(l.ax, l.ay);
+    float strength = sqrt(clamp((a_max - a_min) / max(1.0 - a_min, 1e-6), 0.0, 1.0));
+    return anisotropic_dfg(wo.z, l.ax >= l.ay ? wo.xy : wo.yx, sqrt(a_min), strength);
+}
+
 #if defined(LOBE_NORMALIZE)
 // Per-lobe directional albedo over (cos theta_o, phi_o), blocks of ALBEDO_ROWS rows per lobe
 // (materials/patterns.py AlbedoTable); linear filtering between texel centres.
@@ -66,32 +95,13 @@ uniform sampler2D u_albedo;
 uniform int u_albedo_per_pixel;
 #endif
 uniform sampler2D u_dfg;                // rg: Beckmann (A, B), ba: GGX; x = cos, y = roughness
-uniform sampler3D u_dfg_anisotropic;    // rg: GGX (A, B); x = cos, y = azimuth, z = roughness, strength
-
-// Twin of materials/prefilter.py anisotropic_dfg_lookup: hardware-linear in sqrt(cos) (texel centres),
-// azimuth and strength (nodes, the strength inside one roughness block), by hand in roughness.
-vec2 anisotropic_dfg(float cos_o, vec2 azimuth, float roughness, float strength) {
-    float folded = atan(abs(azimuth.y), abs(azimuth.x)) / (0.5 * PI);
-    float y = (folded * float(ANISO_DFG_PHI - 1) + 0.5) / float(ANISO_DFG_PHI);
-    float r = clamp(roughness, 0.0, 1.0) * float(ANISO_DFG_ROUGHNESS - 1);
-    float r0 = min(floor(r), float(ANISO_DFG_ROUGHNESS - 2));
-    float s = clamp(strength, 0.0, 1.0) * float(ANISO_DFG_STRENGTH - 1) + 0.5;
-    float depth = float(ANISO_DFG_ROUGHNESS * ANISO_DFG_STRENGTH);
-    float x = sqrt(max(cos_o, 0.0));  // the table is uniform in sqrt(cos theta_o)
-    vec2 low = textureLod(u_dfg_anisotropic, vec3(x, y, (r0 * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
-    vec2 high = textureLod(u_dfg_anisotropic, vec3(x, y, ((r0 + 1.0) * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
-    return mix(low, high, r - r0);
-}
 
 // The tables have one level: read at LOD 0 (a multi-draw's helper invocations hold no record
 // values, so implicit derivatives of coordinates made from them are meaningless).
 vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
     if (u_albedo_per_pixel == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
-        if (l.dist == DIST_GGX && l.ax != l.ay) {
-            // scene.frag's glTF lobe: alpha_y = roughness^2, alpha_x = mix(alpha_y, 1, strength^2)
-            float strength = sqrt(max(l.ax - l.ay, 0.0) / max(1.0 - l.ay, 1e-6));
-            return lobe_dfg_albedo(l, anisotropic_dfg(wo.z, wo.xy, sqrt(l.ay), strength), wo.z);
-        }
+        // scene.frag's glTF lobe: alpha_y = roughness^2, alpha_x = mix(alpha_y, 1, strength^2)
+        if (l.dist == DIST_GGX && l.ax != l.ay) return lobe_dfg_albedo(l, anisotropic_ggx_dfg(l, wo), wo.z);
         vec4 dfg = textureLod(u_dfg, vec2(wo.z, sqrt(sqrt(l.ax * l.ay))), 0.0);  // roughness = sqrt(alpha)
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
         return lobe_dfg_albedo(l, ab, wo.z);

@@ -243,6 +243,7 @@ class PrefilteredMaps:
         self._by_fit: dict = {}
         self._rsibr: dict = {}
         self._dfg = None
+        self._anisotropic_dfg = None
         self.memory: dict[str, int] = {}
         self.seconds: dict[str, float] = {}
 
@@ -354,6 +355,17 @@ class PrefilteredMaps:
             self.seconds["DFG table"] = time.perf_counter() - t0
         return self._dfg
 
+    def anisotropic_dfg(self) -> moderngl.Texture3D:
+        """The anisotropic GGX (A, B) table (:func:`anisotropic_dfg_texture`) of split-sum's
+        anisotropic GGX lobes (shaders/prefiltered.glsl)."""
+        if self._anisotropic_dfg is None:
+            t0 = time.perf_counter()
+            self._anisotropic_dfg = anisotropic_dfg_texture(self.ctx, self.cache_dir)
+            width, height, depth = self._anisotropic_dfg.size
+            self.memory["anisotropic DFG table"] = width * height * depth * 8
+            self.seconds["anisotropic DFG table"] = time.perf_counter() - t0
+        return self._anisotropic_dfg
+
     # -- Kautz-McCool lobe maps and Banks maps ------------------------------------------------
     def lobe_map(self, fit: LobeMapFit | list, name: str = "lobe") -> moderngl.Texture3D:
         """3D map of one component's fitted lobes: slice s of lobe j (z = j S + s) holds the
@@ -463,10 +475,11 @@ class PrefilteredMaps:
     def release(self):
         for tex in list(self._split_sum.values()) + list(self._lobe_maps.values()) + list(self._rsibr.values()):
             tex.release()
-        if self._dfg is not None:
-            self._dfg.release()
+        for table in (self._dfg, self._anisotropic_dfg):
+            if table is not None:
+                table.release()
         self._split_sum.clear()
         self._lobe_maps.clear()
         self._by_fit.clear()
         self._rsibr.clear()
-        self._dfg = None
+        self._dfg = self._anisotropic_dfg = None

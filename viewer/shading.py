@@ -13,7 +13,7 @@ from scipy.stats import qmc
 
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_REFERENCE_SPP, Method
-from lobeview.materials.prefilter import SPLIT_SUM_LEVELS
+from lobeview.materials.prefilter import SPLIT_SUM_LEVELS, split_sum_is_line
 from lobeview.scenes.bright_sources import MAX_LIGHTS as MAX_CAP_LIGHTS
 
 from .cubemap import RadianceCube
@@ -209,6 +209,20 @@ class ShadingBinder:
         set_uniform(program, "u_split_sum", [unit("u_split_sum", 0), unit("u_split_sum", 1)])
         set_uniform(program, "u_split_sum_max_level", float(SPLIT_SUM_LEVELS - 1))
         bind_sampler(program, "u_dfg", maps.dfg())
+        # Split-sum's anisotropic GGX lobes take their albedo from the anisotropic table. With
+        # per-pixel lobes (glTF textures) the scene renderer's material state has bound it already
+        # where the material has anisotropy (viewer/scene_shading.py _bind_material), also where
+        # its factors alone are isotropic (roughness factor 1).
+        distributions = material.lobe_distributions
+        anisotropic = any(
+            LOBE_KINDS[p].split_sum
+            and distributions[i].kind == "ggx"
+            and split_sum_is_line(distributions[i].alpha_x, distributions[i].alpha_y)
+            for i, p in enumerate(plan)
+        )
+        if anisotropic or not per_pixel_lobes:
+            table = maps.anisotropic_dfg() if anisotropic else self.dummy_texture("3d")
+            bind_sampler(program, "u_dfg_anisotropic", table)
 
         def lobe_table_texture():
             fitted = fit_plan(plan, material.lobe_components, self.table_cache_root)
