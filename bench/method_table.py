@@ -263,10 +263,11 @@ def main(argv=None) -> int:
     say(f"[method table] {len(cases)} lobe shapes x {len(args.envs)} lights x {len(args.methods)} methods")
     table = run(cases, args.envs, args.methods, args.size, args.spp, args.supersample, say)
     table["command"] = "python -m lobeview.bench.method_table " + " ".join(argv if argv is not None else sys.argv[1:])
+    minutes = table["minutes"]  # this run's (an update's table keeps the full run's own)
     if args.update:
         table = updated_table(json.loads(Path(args.out).read_text()), table)
     Path(args.out).write_text(json.dumps(table, indent=1) + "\n")
-    say(f"[method table] wrote {args.out} ({table['minutes']} min)")
+    say(f"[method table] wrote {args.out} ({minutes} min)")
     return 0
 
 

@@ -162,6 +162,60 @@ def test_separation_leaves_wide_or_low_contrast_regions_in_the_map():
     assert not bs.separate_cube(faint).lights
 
 
+_STUDIO_TAIL = "builtin:studio's key and fill soft boxes (11 and 16 degrees) stay in the cube, in the GGX tail"
+
+
+@pytest.fixture(scope="module")
+def glossy_floor(tmp_path_factory):
+    """A roughness-0.4 metal quad under builtin:studio, seen so that its mirror direction lies on
+    the studio floor and the key and fill soft boxes 47-75 degrees off it, in the GGX tail; and
+    its reference mean over the quad's pixels."""
+    from test_textures import _textured_gltf
+
+    from lobeview.scenes.builtin_env import load_environment
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    material = {"pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.9, 0.9, 1.0], "metallicFactor": 1.0,
+                                         "roughnessFactor": 0.4}}  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_gltf(_textured_gltf(tmp_path_factory.mktemp("floor"), material, []))
+        ctx = create_headless_context()
+        renderer = SceneRenderer(ctx, scene, load_environment("builtin:studio"), size=(48, 48), progress=False,
+                                 settings=RenderSettings(cube_face_size=64, mirrors=False))  # fmt: skip
+    camera = Camera(position=(0.6, 1.2, 1.6), target=(0.5, 0.5, 0.0), fov_y=40.0)
+    reference = renderer.render(camera, "reference", spp=256)
+    yield renderer, camera, float(reference.radiance[reference.mask].mean())
+    renderer.release()
+    ctx.release()
+
+
+@pytest.mark.parametrize(
+    "method",
+    [
+        pytest.param("lobe-7+norm", marks=pytest.mark.xfail(strict=True, reason=_STUDIO_TAIL)),
+        pytest.param("lobe-15+norm", marks=pytest.mark.xfail(strict=True, reason=_STUDIO_TAIL)),
+        "fis-16",
+        pytest.param("prefiltered", marks=pytest.mark.xfail(strict=True, reason=_STUDIO_TAIL)),
+        "prefiltered-rsibr",
+    ],
+)
+def test_a_glossy_floor_under_the_studio_keeps_its_brightness(glossy_floor, method):
+    """Every real-time method within 6 % of the reference on the glossy floor (a known defect
+    where marked: lobe-7+norm and lobe-15+norm 1.55x, their four GGX tail lookups reading the
+    soft boxes 2.5x too bright; prefiltered 0.85x. Making the soft boxes cap lights (uniform
+    regions up to 25 degrees) brought every method within 4 % here but cost chrome and the
+    default alanod preview under the same studio 2-5 points: docs/measurements.md)."""
+    renderer, camera, truth = glossy_floor
+    result = renderer.render(camera, method)
+    got = float(result.radiance[result.mask].mean())
+    assert abs(got / truth - 1.0) < 0.06, (method, got, truth)
+
+
 @pytest.mark.skipif(not SHARED_ASSETS.exists(), reason="shared assets not present")
 @pytest.mark.parametrize("name", ["polyhaven_1k/chinese_garden_1k.hdr", "blender_studiolights_1k/studio.exr"])
 def test_separation_of_real_captures_conserves_energy(name):
