@@ -65,16 +65,6 @@ vec3 rsibr_radiance(vec3 wo, mat3 tbn) {
     float total = w.x + w.y + w.z;
     w = total > 1e-6 ? w / total : bary;
     int slices = u_rsibr_slices;
-    int k0 = 0, k1 = 0;
-    float f = 0.0;
-    if (slices > 1) {
-        vec3 t0 = rsibr_canonical_tangent(n);
-        float angle = mod(atan(dot(tbn[0], cross(n, t0)), dot(tbn[0], t0)), PI);
-        float s = angle / PI * float(slices);
-        k0 = int(floor(s)) % slices;
-        k1 = (k0 + 1) % slices;
-        f = s - floor(s);
-    }
     vec3 r_lookup = r;
 #if defined(PARALLAX)
     // The object's reflection proxy moves the direction the maps are read in, as for the other
@@ -86,8 +76,19 @@ vec3 rsibr_radiance(vec3 wo, mat3 tbn) {
     vec3 sum = vec3(0.0);
     for (int i = 0; i < 3; ++i) {
         int base = views[i] * slices;
-        vec3 value = rsibr_tile(base + k0, r_lookup);
-        if (slices > 1) value = mix(value, rsibr_tile(base + k1, r_lookup), f);
+        vec3 value;
+        if (slices > 1) {
+            // Map i's slices are about its own warped normal, in its own tangent field: the
+            // pixel's tangent is carried there.
+            vec3 source = u_rsibr_views[views[i]];
+            vec3 map_normal = rsibr_warped_normal(r, source);
+            vec3 carried = rsibr_transported_tangent(tbn[0], n, map_normal);
+            float s = rsibr_slice_coordinate(carried, map_normal, source, slices);
+            int k0 = int(floor(s)) % slices;
+            value = mix(rsibr_tile(base + k0, r_lookup), rsibr_tile(base + (k0 + 1) % slices, r_lookup), s - floor(s));
+        } else {
+            value = rsibr_tile(base, r_lookup);
+        }
         sum += w[i] * value * rsibr_albedo_ratio(pixel_albedo, 0.5 * length(u_rsibr_views[views[i]] + r));
     }
     return sum;

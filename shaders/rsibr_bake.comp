@@ -21,7 +21,7 @@ void main() {
     int rows = u_rows;
     if (id.x >= 2 * rows || id.y >= rows) return;
     vec3 r = latlong_to_direction((vec2(id) + 0.5) / vec2(2 * rows, rows));
-    mat3 tbn = rsibr_slice_frame(rsibr_warped_normal(r, u_view), u_angle);
+    mat3 tbn = rsibr_slice_frame(rsibr_warped_normal(r, u_view), u_angle, u_view);
     vec3 wo = transpose(tbn) * u_view;
     wo.z = max(wo.z, 1e-4);  // as view_in_frame: no lobe formula sees wo.z <= 0
     wo = normalize(wo);

@@ -16,9 +16,27 @@ vec3 rsibr_canonical_tangent(vec3 n) {
     return normalize(t);
 }
 
-// Columns (t, b, n), t = t0(n) turned by `angle` about n (materials/rsibr.py slice_frame).
-mat3 rsibr_slice_frame(vec3 n, float angle) {
-    vec3 t0 = rsibr_canonical_tangent(n);
+// The tangent carried from normal n to normal m by the smallest rotation (materials/rsibr.py
+// transported_tangent): a map's slices are about its own warped normal.
+vec3 rsibr_transported_tangent(vec3 t, vec3 n, vec3 m) {
+    return normalize(t - dot(t, m) / max(1.0 + dot(n, m), 1e-6) * (n + m));
+}
+
+// Map view's tangent field: t0(view) carried to n (materials/rsibr.py map_tangent; smooth over
+// the map's warped normals, where the global field turns fast around its poles).
+vec3 rsibr_map_tangent(vec3 n, vec3 view) {
+    return rsibr_transported_tangent(rsibr_canonical_tangent(view), view, n);
+}
+
+// Slice coordinate in [0, K) of tangent t about normal n in map view's field (tangent_angle).
+float rsibr_slice_coordinate(vec3 t, vec3 n, vec3 view, int slices) {
+    vec3 t0 = rsibr_map_tangent(n, view);
+    return mod(atan(dot(t, cross(n, t0)), dot(t, t0)), PI) / PI * float(slices);
+}
+
+// Columns (t, b, n), t = map view's t0(n) turned by `angle` about n (materials/rsibr.py slice_frame).
+mat3 rsibr_slice_frame(vec3 n, float angle, vec3 view) {
+    vec3 t0 = rsibr_map_tangent(n, view);
     vec3 t = cos(angle) * t0 + sin(angle) * cross(n, t0);
     return mat3(t, cross(n, t), n);
 }

@@ -41,7 +41,7 @@ from .mip_chain import GL_RGBA32F
 from .prefiltered import PREFILTER_LOD_BIAS
 
 RSIBR_BAKE_SAMPLES = 256  # fis-N per texel of a map (filtered lookups, LOD bias PREFILTER_LOD_BIAS)
-RSIBR_CACHE_VERSION = 1
+RSIBR_CACHE_VERSION = 2  # 2: each map's slices in its own tangent field (materials/rsibr.py map_tangent)
 _ALBEDO_TABLES = BoundedCache(64)  # rsibr_cache_key -> albedo_table of the baked lobes (~0.7 s each)
 
 
