@@ -189,7 +189,7 @@ def map_tangent(normal, view) -> np.ndarray:
     (canonical_tangent) has its poles at +-Z, and around a pole its tangents turn fast from texel
     to texel: a quad facing +Z read its anisotropic maps 1.4-2.9x too bright, and the preview
     sphere showed a swirl where its normal faced the camera (issue 45's anisotropic lobe against
-    Mitsuba 9.6 -> 6.2 % with per-map fields)."""
+    Mitsuba 9.6 -> 6.7 % with per-map fields, bench/results/mitsuba-20261127-215024.md)."""
     view = _normalize(view)
     return transported_tangent(canonical_tangent(view), view, normal)
 
