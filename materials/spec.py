@@ -10,7 +10,7 @@ microfacet  {"model": "microfacet", "distribution": "ggx" | "beckmann",
              "fresnel": "none" | {"type": "schlick", "r0": ...}
                                | {"type": "conductor", "eta": [...], "k": [...]},
              "scale": 1.0 | [r, g, b]}
-gltf        {"model": "gltf", "base_color": [r, g, b], "metallic": m, "roughness": r,
+gltf        {"model": "gltf", "base_color": [r, g, b] | grey, "metallic": m, "roughness": r,
              "anisotropy": s, "anisotropy_rotation": radians,      (optional, KHR_materials_*:
              "ior": 1.5, "specular": 1, "specular_color": [r, g, b],  anisotropy, ior, specular,
              "clearcoat": c, "clearcoat_roughness": r,               clearcoat, transmission)
@@ -116,6 +116,14 @@ def _scalar_or_rgb(value: Any, where: str, key: str) -> float | list[float]:
     return _number(value, where, key)
 
 
+def _rgb(value: Any, key: str) -> list[float]:
+    """A glTF colour: an RGB triple, a single number meaning grey. Always returned as a triple,
+    since the renderer, the baker and the glTF writer read three channels (a grey 1 given as a
+    number crashed the viewer's material binding: the fuzzer's edits mutation 105)."""
+    value = _scalar_or_rgb(value, key, key)
+    return list(value) if isinstance(value, list) else [value] * 3
+
+
 def _check_keys(obj: dict, allowed: set[str], required: set[str], where: str) -> None:
     if not isinstance(obj, dict):
         raise MaterialError(f"{where}: expected a JSON object, got {type(obj).__name__}")
@@ -203,14 +211,14 @@ def validate(desc: Any) -> dict:
         _check_keys(
             desc, common | {"base_color", "metallic", "roughness", *GLTF_EXTENSION_KEYS}, set(), "glTF material"
         )
-        out["base_color"] = _scalar_or_rgb(desc.get("base_color", [1.0, 1.0, 1.0]), "base_color", "base_color")
+        out["base_color"] = _rgb(desc.get("base_color", [1.0, 1.0, 1.0]), "base_color")
         out["metallic"] = _number(desc.get("metallic", 1.0), "metallic", "metallic")
         out["roughness"] = _number(desc.get("roughness", 1.0), "roughness", "roughness")
         for key in GLTF_EXTENSION_KEYS:
             if key not in desc:
                 continue
             if key in ("specular_color", "sheen_color", "attenuation_color"):
-                out[key] = _scalar_or_rgb(desc[key], key, key)
+                out[key] = _rgb(desc[key], key)
             elif key == "ior" and not isinstance(desc[key], bool) and desc[key] == 0:
                 out[key] = 0.0
             else:

@@ -145,6 +145,41 @@ def test_material_edits_survive_save_and_load_exactly(tmp_path):
         ctx.release()
 
 
+def test_a_gltf_grey_given_as_one_number_renders_as_its_rgb_triple():
+    """The fuzzer's edits mutation 105 (a glTF base_color of 1 in --materials) crashed the
+    viewer's material binding with a TypeError: validate accepted the number, the renderer read
+    three channels. validate now returns every glTF colour as a triple."""
+    scene = load_gltf(build_demo_scene())
+    ctx = create_headless_context()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            renderer = SceneRenderer(
+                ctx,
+                scene,
+                EnvironmentMap(np.ones((8, 16, 3), np.float32)),
+                size=(32, 20),
+                progress=False,
+                settings=RenderSettings(cube_face_size=16),
+            )
+        editor = MaterialEditor(renderer)
+        index = next(i for i, o in enumerate(scene.objects) if o.name == "brushed panel")
+        camera = next(c for c in scene.cameras if c.name == "overview")
+        camera = Camera(tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y)
+        frames = []
+        for grey in (0.5, [0.5, 0.5, 0.5]):
+            desc = {"model": "gltf", "base_color": grey, "metallic": 1.0, "roughness": 0.3, "specular_color": 1}
+            assert editor.apply(index, desc) is None
+            assert editor.desc(index)["base_color"] == [0.5, 0.5, 0.5]
+            assert editor.desc(index)["specular_color"] == [1.0, 1.0, 1.0]
+            frames.append(renderer.render(camera, "lobe-5", spp=1).radiance)
+        assert np.isfinite(frames[0]).all() and frames[0].max() > 0
+        np.testing.assert_array_equal(frames[0], frames[1])
+        renderer.release()
+    finally:
+        ctx.release()
+
+
 def test_walk_camera_moves_and_looks():
     cam = WalkCamera.from_camera(Camera((0.0, 1.0, 0.0), (0.0, 1.0, -1.0)))
     np.testing.assert_allclose(cam.forward(), [0, 0, -1], atol=1e-12)
