@@ -1,14 +1,16 @@
 """Bright sources as area lights on the sphere of directions, and their exact integration against
 any lobe (issue 39, steps 1-2; numpy reference, not yet in the shaders).
 
-A :class:`CapLight` is a spherical cap of uniform radiance: what scenes/bright_sources.py takes out
-of a radiance cube or an environment map where a few texels carry most of the energy far above
-their surroundings (a sun, a window, a softbox), so that the cube left behind is smooth enough for
-the frame's method and the source itself is integrated exactly.
+A :class:`CapLight` is a spherical cap of uniform radiance, or with a soft edge (its radiance
+falling linearly in cos(angle) to zero at the rim: a soft box): what scenes/bright_sources.py
+takes out of a radiance cube or an environment map where a few texels carry most of the energy
+far above their surroundings (a sun, a window, a softbox), so that the cube left behind is smooth
+enough for the frame's method and the source itself is integrated exactly.
 
 Integration (:func:`integrate_cap_light`): the outgoing radiance of one lobe under one light,
     L_o = integral over the cap of f(wi, wo) cos(theta_i) L dwi,
-by deterministic multiple importance sampling of two strategies, both on the golden-ratio lattice
+(L the cap's radiance times its edge profile) by deterministic multiple importance sampling of
+two strategies, both on the golden-ratio lattice
 (materials/patterns.py lattice_xi): M points uniform over the cap (pdf 1 / Omega) and K points
 from the lobe's own sampler (pdf p), combined with the balance heuristic (Veach 1997, Eq. 9.10):
     L_o = sum_i f cos L / (M / Omega + K p(x_i))  +  sum_j [y_j in cap] f cos L / (M / Omega + K p(y_j)).
@@ -47,11 +49,15 @@ LOBE_POINTS_FROM = 0.25
 @dataclass(frozen=True)
 class CapLight:
     """A spherical cap of directions around the unit vector ``direction`` with angular radius
-    acos(``cos_radius``) and uniform ``radiance`` (RGB): an area light at infinity."""
+    acos(``cos_radius``) and ``radiance`` (RGB): an area light at infinity. ``inner_fraction`` f
+    gives it a soft edge: with u = (1 - cos angle) / (1 - cos_radius), the cap's share of solid
+    angle from its axis, the radiance is ``radiance`` for u <= f and falls linearly to 0 at u = 1
+    (linear in cos(angle), as builtin:studio's soft boxes are made); f = 1: uniform."""
 
     direction: np.ndarray
     cos_radius: float
     radiance: np.ndarray
+    inner_fraction: float = 1.0
 
     def __post_init__(self):
         direction = np.asarray(self.direction, dtype=np.float64).reshape(3)
@@ -63,8 +69,11 @@ class CapLight:
         radiance = np.asarray(self.radiance, dtype=np.float64).reshape(3)
         if not np.all(np.isfinite(radiance)) or np.any(radiance < 0.0):
             raise ValueError(f"a cap light's radiance must be finite and >= 0, got {radiance}")
+        if not 0.0 <= self.inner_fraction <= 1.0:
+            raise ValueError(f"a cap light's inner fraction must lie in [0, 1], got {self.inner_fraction}")
         object.__setattr__(self, "direction", direction / length)
         object.__setattr__(self, "radiance", radiance)
+        object.__setattr__(self, "inner_fraction", float(self.inner_fraction))
 
     @property
     def solid_angle(self) -> float:
@@ -76,9 +85,20 @@ class CapLight:
         return float(np.arccos(self.cos_radius))
 
     @property
+    def lit_solid_angle(self) -> float:
+        """The integral of the edge profile over the cap: solid_angle (1 + f) / 2."""
+        return self.solid_angle * 0.5 * (1.0 + self.inner_fraction)
+
+    @property
     def power(self) -> np.ndarray:
         """The integral of its radiance over directions (RGB): what it took out of the cube."""
-        return self.radiance * self.solid_angle
+        return self.radiance * self.lit_solid_angle
+
+    def profile(self, directions: np.ndarray) -> np.ndarray:
+        """The edge profile (0 outside the cap, 1 inside its uniform core) at ``directions``."""
+        return edge_profile(
+            (1.0 - np.asarray(directions) @ self.direction) / (1.0 - self.cos_radius), self.inner_fraction
+        )
 
     def contains(self, directions: np.ndarray) -> np.ndarray:
         return np.asarray(directions) @ self.direction >= self.cos_radius
@@ -99,6 +119,26 @@ class CapLight:
         phi = 2.0 * np.pi * np.asarray(u2)
         local = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t], axis=-1)
         return local @ self.frame().T
+
+
+def edge_profile(u: np.ndarray, inner_fraction: float) -> np.ndarray:
+    """A cap's radiance profile at u = (1 - cos angle) / (1 - cos radius) (shaders/cap_lights.glsl
+    cap_edge_profile): 1 up to ``inner_fraction``, then linear to 0 at u = 1, 0 beyond."""
+    u = np.asarray(u, dtype=np.float64)
+    ramp = np.clip((1.0 - u) / max(1.0 - inner_fraction, 1e-12), 0.0, 1.0)
+    return np.where(u <= inner_fraction, 1.0, ramp)
+
+
+def profile_area_fraction(xi: np.ndarray, inner_fraction: float) -> np.ndarray:
+    """The area fraction u (the ``points`` coordinate u1) at which a share ``xi`` of the edge
+    profile's integral lies nearer the axis: the inverse of its CDF, C(u) = u / A for u <= f and
+    (f + t - t^2 / (2 w)) / A beyond, t = u - f, w = 1 - f, A = (1 + f) / 2. f = 1: u = xi."""
+    xi = np.asarray(xi, dtype=np.float64)
+    f = float(inner_fraction)
+    s = xi * 0.5 * (1.0 + f)
+    w = max(1.0 - f, 1e-300)
+    ramp = f + w * (1.0 - np.sqrt(np.maximum(1.0 - 2.0 * (s - f) / w, 0.0)))
+    return np.where(s <= f, s, ramp)
 
 
 def symmetric_cap_xi(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -163,29 +203,35 @@ def integrate_cap_light(
         return np.zeros(3)
     if cap_points is None or lobe_points is None:
         cap_points, lobe_points = cap_point_counts(lobe, light, float(wo[2]))
-    cap_density = cap_points / light.solid_angle
+    # The cap points follow the edge profile (density M profile / lit solid angle): a soft cap's
+    # single point on the axis then carries the lit solid angle, not the whole cap's.
+    cap_density = cap_points / light.lit_solid_angle
     total = np.zeros(3)
     if cap_points > 0:
         u1, u2 = cap_xi(cap_points, lobe_points)
+        u1 = profile_area_fraction(u1, light.inner_fraction)
         wi = light.points(u1, u2) @ frame  # world -> local (frame is orthonormal)
-        total += _weighted_sum(lobe, wi, wo, cap_density, lobe_points, light.radiance, np.ones(len(wi), bool))
+        total += _weighted_sum(
+            lobe, wi, wo, cap_density, lobe_points, light.radiance, edge_profile(u1, light.inner_fraction)
+        )
     if lobe_points > 0:
         u1, u2 = lattice_xi(lobe_points)
         wi = lobe.sample_wi(u1, u2, np.broadcast_to(wo, (lobe_points, 3)))
-        inside = light.contains(wi @ frame.T)
-        total += _weighted_sum(lobe, wi, wo, cap_density, lobe_points, light.radiance, inside)
+        profile = np.where(light.contains(wi @ frame.T), light.profile(wi @ frame.T), 0.0)
+        total += _weighted_sum(lobe, wi, wo, cap_density, lobe_points, light.radiance, profile)
     return total
 
 
-def _weighted_sum(lobe, wi, wo, cap_density, lobe_points, radiance, inside) -> np.ndarray:
-    """sum over ``wi`` of [inside] f cos L / (M / Omega + K p(wi)): one strategy's share."""
+def _weighted_sum(lobe, wi, wo, cap_density, lobe_points, radiance, profile) -> np.ndarray:
+    """sum over ``wi`` of h f cos L / (M h / Omega_lit + K p(wi)), h the edge profile (0 outside
+    the cap): one strategy's share."""
     wo_b = np.broadcast_to(wo, wi.shape)
     f = np.asarray(lobe.eval(wi, wo_b), dtype=np.float64)
     p = np.asarray(lobe.pdf(wi, wo_b), dtype=np.float64)
     cos_i = np.abs(wi[:, 2])
-    denominator = cap_density + lobe_points * p
-    ok = inside & np.isfinite(f).all(-1) & (denominator > 0.0)
-    weight = np.where(ok, cos_i / np.where(ok, denominator, 1.0), 0.0)
+    denominator = cap_density * profile + lobe_points * p
+    ok = (profile > 0.0) & np.isfinite(f).all(-1) & (denominator > 0.0)
+    weight = np.where(ok, profile * cos_i / np.where(ok, denominator, 1.0), 0.0)
     return np.sum(f * weight[:, None], axis=0) * radiance
 
 
@@ -200,7 +246,8 @@ def brute_force_cap_light(lobe, wo: np.ndarray, light: CapLight, frame=None, rin
     wi = light.points(a.ravel(), b.ravel()) @ frame
     f = np.asarray(lobe.eval(wi, np.broadcast_to(wo, wi.shape)), dtype=np.float64)
     cell = light.solid_angle / len(wi)
-    return np.sum(f * np.abs(wi[:, 2])[:, None], axis=0) * cell * light.radiance
+    weight = np.abs(wi[:, 2]) * edge_profile(a.ravel(), light.inner_fraction)
+    return np.sum(f * weight[:, None], axis=0) * cell * light.radiance
 
 
 # Footprint-aware lights (issue 39 item 3): a source narrower than what one pixel reflects (a sun

@@ -9,7 +9,7 @@
 #if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
 uniform int u_cap_light_count;                      // 0: none (and always 0 for the reference)
 uniform vec4 u_cap_light_axis[MAX_CAP_LIGHTS];      // xyz: direction (world), w: cos(radius)
-uniform vec3 u_cap_light_radiance[MAX_CAP_LIGHTS];
+uniform vec4 u_cap_light_radiance[MAX_CAP_LIGHTS];  // rgb: radiance, w: the soft edge's inner fraction
 #endif
 
 // Footprint-aware lights (materials/cap_lights.py footprint_alpha2, issue 39 item 3): what one
@@ -69,12 +69,26 @@ vec2 symmetric_cap_point(int i, int n) {
     return vec2((float(j) + 0.5) / float(max(pairs, 1)), azimuth);
 }
 
-// One strategy's term: f cos / (M / Omega + K p).
-vec3 cap_light_term(Lobe l, vec3 wi, vec3 wo, float cap_density, int lobe_points) {
+// materials/cap_lights.py edge_profile: 1 up to the inner fraction f of the cap's area, then
+// linear to 0 at the rim (a soft box); u = (1 - cos angle) / (1 - cos radius).
+float cap_edge_profile(float u, float inner_fraction) {
+    return u <= inner_fraction ? 1.0 : clamp((1.0 - u) / max(1.0 - inner_fraction, 1e-12), 0.0, 1.0);
+}
+
+// materials/cap_lights.py profile_area_fraction: the inverse of the profile's CDF.
+float profile_area_fraction(float xi, float inner_fraction) {
+    float s = xi * 0.5 * (1.0 + inner_fraction);
+    if (s <= inner_fraction) return s;
+    float w = max(1.0 - inner_fraction, 1e-30);
+    return inner_fraction + w * (1.0 - sqrt(max(1.0 - 2.0 * (s - inner_fraction) / w, 0.0)));
+}
+
+// One strategy's term: h f cos / (M h / Omega_lit + K p), h the edge profile.
+vec3 cap_light_term(Lobe l, vec3 wi, vec3 wo, float cap_density, int lobe_points, float profile) {
     vec3 f = lobe_eval(l, wi, wo);
     if (!any(greaterThan(f, vec3(0.0)))) return vec3(0.0);
-    float denominator = cap_density + (lobe_points > 0 ? float(lobe_points) * lobe_sample_pdf(l, wi, wo) : 0.0);
-    return f * (abs(wi.z) / denominator);
+    float denominator = cap_density * profile + (lobe_points > 0 ? float(lobe_points) * lobe_sample_pdf(l, wi, wo) : 0.0);
+    return f * (profile * abs(wi.z) / denominator);
 }
 
 // materials/cap_lights.py cap_point_counts: fewer points where the cap is small against the lobe.
@@ -94,12 +108,13 @@ ivec2 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o) {
     return ivec2(cap_points, ratio >= LOBE_POINTS_FROM ? CAP_LOBE_POINTS : 0);
 }
 
-// The integral of f cos over the cap (axis, cos_radius) of unit radiance; one_minus_cos =
-// 1 - cos_radius, passed in because a distant lamp's tiny cap needs it without cancellation.
-vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float one_minus_cos) {
+// The integral of f cos h over the cap (axis, cos_radius) of unit radiance and edge profile h
+// (inner_fraction 1: uniform); one_minus_cos = 1 - cos_radius, passed in because a distant
+// lamp's tiny cap needs it without cancellation. The cap points follow the profile.
+vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float one_minus_cos, float inner_fraction) {
     Lobe l = footprint_lobe(lobe);
     ivec2 counts = cap_point_counts(l, cos_radius, wo.z);
-    float cap_density = float(counts.x) / (2.0 * PI * one_minus_cos);
+    float cap_density = float(counts.x) / (2.0 * PI * one_minus_cos * (0.5 * (1.0 + inner_fraction)));
     vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
     vec3 t = normalize(cross(helper, axis));
     vec3 b = cross(axis, t);
@@ -108,24 +123,29 @@ vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, flo
     for (int i = 0; i < counts.x; ++i) {
         // materials/cap_lights.py cap_xi: symmetric without lobe points, the lattice with them
         vec2 u = counts.y == 0 || counts.x == 1 ? symmetric_cap_point(i, counts.x) : cap_lattice_point(i, counts.x);
+        u.x = profile_area_fraction(u.x, inner_fraction);
         float cos_t = 1.0 - u.x * one_minus_cos;
         float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
         float phi = 2.0 * PI * u.y;
         vec3 world = sin_t * (cos(phi) * t + sin(phi) * b) + cos_t * axis;
-        sum += cap_light_term(l, to_local * world, wo, cap_density, counts.y);
+        sum += cap_light_term(l, to_local * world, wo, cap_density, counts.y, cap_edge_profile(u.x, inner_fraction));
     }
     for (int j = 0; j < counts.y; ++j) {
         float p;
         vec3 wi = lobe_sample_and_pdf(l, cap_lattice_point(j, CAP_LOBE_POINTS), wo, p);
-        if (p <= 0.0 || dot(tbn * wi, axis) < cos_radius) continue;
-        sum += cap_light_term(l, wi, wo, cap_density, counts.y);
+        float cos_to_axis = dot(tbn * wi, axis);
+        if (p <= 0.0 || cos_to_axis < cos_radius) continue;
+        float profile = cap_edge_profile((1.0 - cos_to_axis) / one_minus_cos, inner_fraction);
+        if (profile <= 0.0) continue;
+        sum += cap_light_term(l, wi, wo, cap_density, counts.y, profile);
     }
     return sum;
 }
 
 vec3 cap_light_radiance(Lobe l, vec3 wo, mat3 tbn, int k) {
     float cos_radius = u_cap_light_axis[k].w;
-    return cap_integral(l, wo, tbn, u_cap_light_axis[k].xyz, cos_radius, 1.0 - cos_radius) * u_cap_light_radiance[k];
+    vec4 light = u_cap_light_radiance[k];
+    return cap_integral(l, wo, tbn, u_cap_light_axis[k].xyz, cos_radius, 1.0 - cos_radius, light.w) * light.rgb;
 }
 
 vec3 cap_lights_radiance(Lobe l, vec3 wo, mat3 tbn) {

@@ -91,7 +91,7 @@ LOBE_RECORD_FIELDS = (
     RecordField("u_lobes", "vec4", MAX_LOBES * LOBE_ROWS),
     RecordField("u_pattern", "vec2", MAX_LOBES * MAX_PATTERN),
     RecordField("u_cap_light_axis", "vec4", MAX_CAP_LIGHTS),
-    RecordField("u_cap_light_radiance", "vec3", MAX_CAP_LIGHTS),
+    RecordField("u_cap_light_radiance", "vec4", MAX_CAP_LIGHTS),
     RecordField("u_proxy_planes", "vec4", MAX_PROXY_PLANES),
 )
 

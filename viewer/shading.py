@@ -181,10 +181,10 @@ class ShadingBinder:
         set_uniform(program, "u_cap_light_count", len(lights))
         if lights:
             axes = np.zeros((MAX_CAP_LIGHTS, 4), dtype=np.float32)
-            radiance = np.zeros((MAX_CAP_LIGHTS, 3), dtype=np.float32)
+            radiance = np.zeros((MAX_CAP_LIGHTS, 4), dtype=np.float32)
             for k, light in enumerate(lights[:MAX_CAP_LIGHTS]):
                 axes[k] = (*light.direction, light.cos_radius)
-                radiance[k] = light.radiance
+                radiance[k] = (*light.radiance, light.inner_fraction)
             write_uniform(program, "u_cap_light_axis", axes)
             write_uniform(program, "u_cap_light_radiance", radiance)
         bind_sampler(program, "u_sobol", self.sobol)
