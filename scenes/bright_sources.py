@@ -20,7 +20,12 @@ equirectangular environment map):
      MIN_LIGHT_SHARE of the map's energy, regions whose peak is less than MIN_CONTRAST times
      their surroundings, and regions whose cap would be wider than
      MAX_LIGHT_SOLID_ANGLE (their structure matters), stay in the map; at most
-     MAX_LIGHTS of the strongest are taken.
+     MAX_LIGHTS of the strongest are taken;
+  6. a uniform region (a soft box, a disc lamp: the excess inside its cap varies by at most
+     MAX_UNIFORM_VARIATION) becomes a soft-edged cap instead (:func:`soft_light`): its ramp, below
+     the threshold, joins it, its surroundings are measured beyond the ramp, and the cap's rim and
+     inner fraction come from the removed energy's extent and first moment. Up to
+     MAX_UNIFORM_LIGHT_SOLID_ANGLE: a uniform region has no structure for the map to keep.
 Debevec's median-cut (2005) places lights where the energy is but does not remove them; the
 threshold-and-region scheme is the "light extraction" of production engines, with the removal
 made conservative.
@@ -48,6 +53,18 @@ MIN_CONTRAST = 100.0
 # A light is a uniform cap: a bright region wider than this (10 degrees of radius) would lose the
 # structure a sharp reflection shows (a sky or a sunlit wall), so it stays in the map.
 MAX_LIGHT_SOLID_ANGLE = 2.0 * np.pi * (1.0 - np.cos(np.radians(10.0)))
+# A uniform region (6.): builtin:studio's key and fill soft boxes (11 and 16 degrees, a ramp over
+# their outer 1.3 and 2.2 degrees) stayed in the map, the key too wide, the fill's contrast
+# measured against its own ramp; in a glossy floor's GGX tail the four tail lookups read them 2.5x
+# too bright (tests/test_cap_lights.py, the glossy floor).
+MAX_UNIFORM_VARIATION = 0.25  # coefficient of variation of the excess, weighted by solid angle
+MAX_UNIFORM_LIGHT_SOLID_ANGLE = 2.0 * np.pi * (1.0 - np.cos(np.radians(25.0)))
+SOFT_EDGE_FLOOR = 0.01  # a ramp texel's excess is at least this share of the region's median excess
+RAMP_FALL = 0.1  # a soft edge goes on while each ring's median luminance falls by this share or more
+RAMP_REACH = 1.5  # ... out to at most this many times the region's extent
+# A soft box has a flat top and a ramp: a fitted inner fraction below this is a bright core in a
+# glow (a real capture's lamps and sun), which keeps the hard cap of step 5 (the sun's size).
+MIN_SOFT_INNER_FRACTION = 0.3
 
 
 @dataclass
@@ -109,6 +126,109 @@ def separate_equirect(image: np.ndarray, **options) -> Separation:
     return separate(directions, solid, image[..., :3], np.pi / image.shape[0], **options)
 
 
+def excess_variation(excess: np.ndarray, omega: np.ndarray, cos_to_axis: np.ndarray, cos_radius: float) -> float:
+    """Coefficient of variation (weighted by solid angle) of a region's excess luminance over its
+    texels inside the cap of ``cos_radius`` about its axis (``cos_to_axis``: each texel's cosine to
+    it); inf with fewer than two texels there or no excess."""
+    inside = cos_to_axis >= cos_radius
+    if np.count_nonzero(inside) < 2:
+        return float("inf")
+    values, weights = excess[inside], omega[inside]
+    mean = float(np.average(values, weights=weights))
+    if mean <= 0.0:
+        return float("inf")
+    return float(np.sqrt(np.average((values - mean) ** 2, weights=weights)) / mean)
+
+
+def soft_cap_shape(energy: float, first_moment: float, plateau: float) -> tuple[float, float]:
+    """(1 - cos rim, inner fraction f) of the soft-edged cap (materials/cap_lights.py
+    edge_profile) with the plateau radiance ``plateau`` that holds ``energy`` = integral of L dw
+    and ``first_moment`` = integral of L (1 - cos) dw about its axis. With b = 1 - cos rim and the
+    profile 1 up to u = f b, linear to 0 at u = b (u = 1 - cos):
+        energy = pi plateau b (1 + f),   first_moment = pi plateau b^2 (1 + f + f^2) / 3,
+    so with P = energy / (pi plateau), 3 first_moment / (energy P) = (1 + f + f^2) / (1 + f)^2,
+    which falls from 1 (f = 0, a cone) to 3/4 (f = 1, uniform): f solves the quadratic
+    (1 - q) f^2 + (1 - 2 q) f + (1 - q) = 0, q that ratio; b = P / (1 + f). The rim comes from
+    the energy, not from the farthest texel: a texel centre lies up to half a texel inside it."""
+    extent = energy / (np.pi * plateau)
+    q = float(np.clip(3.0 * first_moment / (energy * extent), 0.75, 1.0))
+    if q >= 1.0:
+        f = 0.0
+    else:
+        a, b = 1.0 - q, 1.0 - 2.0 * q  # a f^2 + b f + a = 0, the root in [0, 1]
+        f = float(min((-b - np.sqrt(max(b * b - 4.0 * a * a, 0.0))) / (2.0 * a), 1.0))
+    return extent / (1.0 + f), max(f, 0.0)
+
+
+@dataclass
+class SoftLight:
+    """A uniform region as a soft-edged cap (step 6): the light, the texels it takes (its region
+    and its ramp) and what each of them loses."""
+
+    light: CapLight
+    texels: np.ndarray
+    excess: np.ndarray
+
+
+def ramp_end(dirs, luminance, centre, extent, texel_angle, all_tree) -> float:
+    """How far (a chord from ``centre``) a uniform region's soft edge reaches below the threshold:
+    out from the region's ``extent`` in rings one texel wide, until a ring's median luminance
+    falls by less than RAMP_FALL from the ring before (the ramp has ended; at most RAMP_REACH
+    times the extent). The ramp's width is the light's, not a number of texels: builtin:studio's
+    fill ramps over 2.2 degrees, 9 texels of a 256^2 cube and 2 of a 64^2 one."""
+    reach = extent * RAMP_REACH + texel_angle
+    near = np.asarray(all_tree.query_ball_point(centre, reach), dtype=int)
+    distance = np.linalg.norm(dirs[near] - centre, axis=1)
+    previous = float(np.median(luminance[near[distance <= extent]]))
+    edge = extent
+    while edge + texel_angle <= reach:
+        ring = near[(distance > edge) & (distance <= edge + texel_angle)]
+        if len(ring) == 0:
+            break
+        level = float(np.median(luminance[ring]))
+        if level > (1.0 - RAMP_FALL) * previous:
+            break
+        previous, edge = level, edge + texel_angle
+    return edge + texel_angle
+
+
+def soft_light(dirs, omega, light_in, luminance, region, centre, extent, threshold, texel_angle, all_tree):
+    """Step 6 for one uniform region, or None where it is not far enough above its surroundings.
+    The surroundings are measured in the SURROUND_TEXELS wide ring beyond the ramp (:func:`ramp_end`):
+    a soft edge fills the ring next to the region (builtin:studio's fill, a 2-degree ramp: 3x that
+    ring's level, 117x the next one's). The ramp is every texel up to its end whose excess over
+    that level is at least SOFT_EDGE_FLOOR of the region's."""
+    first = ramp_end(dirs, luminance, centre, extent, texel_angle, all_tree)
+    inner = np.asarray(all_tree.query_ball_point(centre, first), dtype=int)
+    ring = np.setdiff1d(
+        np.asarray(all_tree.query_ball_point(centre, first + SURROUND_TEXELS * texel_angle), int), inner
+    )
+    ring = ring[luminance[ring] <= threshold]
+    if len(ring) == 0:
+        return None
+    level = np.median(light_in[ring], axis=0)
+    if float(luminance[region].max()) < MIN_CONTRAST * float(level @ LUMINANCE):
+        return None
+    excess_luminance = np.maximum(luminance[inner] - float(level @ LUMINANCE), 0.0)
+    floor = SOFT_EDGE_FLOOR * float(np.median(luminance[region] - float(level @ LUMINANCE)))
+    texels = np.union1d(inner[excess_luminance >= floor], region)
+    excess = np.maximum(light_in[texels] - level, 0.0)
+    removed = excess @ LUMINANCE * omega[texels]
+    energy = float(np.sum(removed))
+    plateau = float(np.percentile(excess[np.isin(texels, region)] @ LUMINANCE, 90.0))
+    if energy <= 0.0 or plateau <= 0.0:
+        return None
+    first_moment = float(np.sum(removed * (1.0 - np.clip(dirs[texels] @ centre, -1.0, 1.0))))
+    one_minus_cos, inner_fraction = soft_cap_shape(energy, first_moment, plateau)
+    if inner_fraction < MIN_SOFT_INNER_FRACTION or 2.0 * np.pi * one_minus_cos > MAX_UNIFORM_LIGHT_SOLID_ANGLE:
+        return None
+    light = CapLight(centre, 1.0 - one_minus_cos, np.ones(3), inner_fraction)
+    power = np.sum(excess * omega[texels, None], axis=0)
+    return SoftLight(
+        CapLight(centre, 1.0 - one_minus_cos, power / light.lit_solid_angle, inner_fraction), texels, excess
+    )
+
+
 def separate(
     directions: np.ndarray,
     solid_angles: np.ndarray,
@@ -152,6 +272,7 @@ def separate(
 
     all_tree = cKDTree(dirs)
     lights, kept = [], []
+    taken = np.zeros(len(dirs), bool)  # texels another light already took (soft edges reach out)
     for region in regions:
         if len(lights) == max_lights:
             break
@@ -163,8 +284,6 @@ def separate(
         near = np.asarray(all_tree.query_ball_point(centre, extent + SURROUND_TEXELS * texel_angle), dtype=int)
         near = near[luminance[near] <= threshold]
         background = np.median(light_in[near], axis=0) if len(near) else np.zeros(3)
-        if float(luminance[region].max()) < MIN_CONTRAST * float(background @ LUMINANCE):
-            continue  # bright, but not far above its surroundings: structure, not a source
         # 4. what lies above the surroundings leaves the map
         excess = np.maximum(light_in[region] - background, 0.0)
         power = np.sum(excess * omega[region, None], axis=0)
@@ -177,9 +296,26 @@ def separate(
         spread = float(np.sum(removed * (1.0 - dirs[region] @ centre)) / max(float(np.sum(removed)), 1e-300))
         region_omega = float(np.sum(omega[region]))
         cap_omega = min(max(4.0 * np.pi * spread, float(np.min(omega[region]))), region_omega)
-        if cap_omega > MAX_LIGHT_SOLID_ANGLE:
+        cos_radius = 1.0 - cap_omega / (2.0 * np.pi)
+        # 6. a uniform region: a soft-edged cap with its ramp
+        if excess_variation(removed / omega[region], omega[region], dirs[region] @ centre, cos_radius) <= (
+            MAX_UNIFORM_VARIATION
+        ):
+            soft = soft_light(
+                dirs, omega, light_in, luminance, region, centre, extent, threshold, texel_angle, all_tree
+            )
+            if soft is not None and not taken[soft.texels].any():
+                residual[soft.texels] = light_in[soft.texels] - soft.excess
+                taken[soft.texels] = True
+                lights.append(soft.light)
+                kept.append(soft.texels)
+                continue
+        if float(luminance[region].max()) < MIN_CONTRAST * float(background @ LUMINANCE):
+            continue  # bright, but not far above its surroundings: structure, not a source
+        if cap_omega > MAX_LIGHT_SOLID_ANGLE or taken[region].any():
             continue  # a wide bright region keeps its structure in the map
         residual[region] = light_in[region] - excess
-        lights.append(CapLight(centre, 1.0 - cap_omega / (2.0 * np.pi), power / cap_omega))
+        taken[region] = True
+        lights.append(CapLight(centre, cos_radius, power / cap_omega))
         kept.append(region)
     return Separation(lights, residual.reshape(shape).astype(radiance.dtype), threshold, kept)

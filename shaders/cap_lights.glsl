@@ -18,6 +18,7 @@ uniform vec4 u_cap_light_radiance[MAX_CAP_LIGHTS];  // rgb: radiance, w: the sof
 #define FOOTPRINT_DIVISOR 12.0
 #define MAX_FOOTPRINT_ALPHA2 0.1
 float g_footprint_alpha2 = 0.0;
+float g_footprint_dr2 = 0.0;  // |dr_x|^2 + |dr_y|^2
 uniform int u_point_sampled_lights;  // 1: no footprint (tests against the per-pixel numpy twin)
 
 float footprint_alpha2(vec3 dr_dx, vec3 dr_dy) {
@@ -34,11 +35,14 @@ vec3 light_footprint_direction(vec3 position, vec3 camera, vec3 interpolated_nor
 
 void set_light_footprint(vec3 dr_dx, vec3 dr_dy) {
     g_footprint_alpha2 = u_point_sampled_lights == 1 ? 0.0 : footprint_alpha2(dr_dx, dr_dy);
+    g_footprint_dr2 = dot(dr_dx, dr_dx) + dot(dr_dy, dr_dy);
 }
 
-// The lobe as the lights see it: its alphas widened by the pixel's footprint (the tabulated
-// lobes, Rational and measured, keep theirs: their shape is not an alpha).
-Lobe footprint_lobe(Lobe l) {
+// The lobe as a light of 1 - cos(radius) = one_minus_cos sees it: its alphas widened by the
+// pixel's footprint, less for caps wider than the footprint (materials/cap_lights.py
+// footprint_alpha2); the tabulated lobes, Rational and measured, keep theirs: their shape is
+// not an alpha.
+Lobe footprint_lobe(Lobe l, float one_minus_cos) {
     if (g_footprint_alpha2 <= 0.0) return l;
 #if defined(HAS_RATIONAL)
     if (l.type == LOBE_RATIONAL) return l;
@@ -46,8 +50,9 @@ Lobe footprint_lobe(Lobe l) {
 #if defined(HAS_MEASURED)
     if (l.type == LOBE_MEASURED) return l;
 #endif
-    l.ax = sqrt(l.ax * l.ax + g_footprint_alpha2);
-    l.ay = sqrt(l.ay * l.ay + g_footprint_alpha2);
+    float widening = g_footprint_alpha2 * g_footprint_dr2 / max(g_footprint_dr2 + 2.0 * one_minus_cos, 1e-30);
+    l.ax = sqrt(l.ax * l.ax + widening);
+    l.ay = sqrt(l.ay * l.ay + widening);
     return l;
 }
 
@@ -83,37 +88,54 @@ float profile_area_fraction(float xi, float inner_fraction) {
     return inner_fraction + w * (1.0 - sqrt(max(1.0 - 2.0 * (s - inner_fraction) / w, 0.0)));
 }
 
-// One strategy's term: h f cos / (M h / Omega_lit + K p), h the edge profile.
-vec3 cap_light_term(Lobe l, vec3 wi, vec3 wo, float cap_density, int lobe_points, float profile) {
+// One strategy's term: h f cos / (a + b), a = M h / Omega_lit, b = K p, h the edge profile; with
+// the power heuristic h f cos a' / (a^2 + b^2), a' = a for a cap point, b for a lobe point
+// (materials/cap_lights.py _weighted_sum).
+vec3 cap_light_term(Lobe l, vec3 wi, vec3 wo, float cap_density, int lobe_points, float profile, bool power, bool cap_point) {
     vec3 f = lobe_eval(l, wi, wo);
     if (!any(greaterThan(f, vec3(0.0)))) return vec3(0.0);
-    float denominator = cap_density * profile + (lobe_points > 0 ? float(lobe_points) * lobe_sample_pdf(l, wi, wo) : 0.0);
+    float a = cap_density * profile;
+    float b = lobe_points > 0 ? float(lobe_points) * lobe_sample_pdf(l, wi, wo) : 0.0;
+    float denominator = power ? (a * a + b * b) / max(cap_point ? a : b, 1e-30) : a + b;
     return f * (profile * abs(wi.z) / denominator);
 }
 
 // materials/cap_lights.py cap_point_counts: fewer points where the cap is small against the lobe.
 #define LOBE_POINTS_FROM 0.25
+#define NARROW_FROM 2.0
+#define NARROW_LOBE_POINTS 16
+#define NARROW_CAP_POINTS 8
 #define CAP_SPREAD 16.0
+#define SOFT_CAP_POINTS 16  // soft-edged caps (materials/cap_lights.py SOFT_*)
+#define SOFT_LOBE_POINTS 16
+#define SOFT_CAP_SPREAD 32.0
 #define MIN_VIEW_COSINE 0.1
-ivec2 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o) {
+// (cap points, lobe points, 1: the power heuristic)
+ivec3 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o, float inner_fraction) {
+    bool soft = inner_fraction < 1.0;
+    int most_cap = soft ? SOFT_CAP_POINTS : CAP_POINTS;
+    int lobe_points = soft ? SOFT_LOBE_POINTS : CAP_LOBE_POINTS;
+    float spread = soft ? SOFT_CAP_SPREAD : CAP_SPREAD;
 #if defined(HAS_RATIONAL)
-    if (l.type == LOBE_RATIONAL) return ivec2(CAP_POINTS, CAP_LOBE_POINTS);
+    if (l.type == LOBE_RATIONAL) return ivec3(most_cap, lobe_points, 0);
 #endif
 #if defined(HAS_MEASURED)
-    if (l.type == LOBE_MEASURED) return ivec2(CAP_POINTS, CAP_LOBE_POINTS);
+    if (l.type == LOBE_MEASURED) return ivec3(most_cap, lobe_points, 0);
 #endif
     float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
     float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
-    int cap_points = int(min(float(CAP_POINTS), max(1.0, ceil(CAP_SPREAD * ratio))));
-    return ivec2(cap_points, ratio >= LOBE_POINTS_FROM ? CAP_LOBE_POINTS : 0);
+    if (ratio >= NARROW_FROM) return ivec3(NARROW_CAP_POINTS, NARROW_LOBE_POINTS, 1);
+    int cap_points = int(min(float(most_cap), max(1.0, ceil(spread * ratio))));
+    return ivec3(cap_points, ratio >= LOBE_POINTS_FROM ? lobe_points : 0, 0);
 }
 
 // The integral of f cos h over the cap (axis, cos_radius) of unit radiance and edge profile h
 // (inner_fraction 1: uniform); one_minus_cos = 1 - cos_radius, passed in because a distant
 // lamp's tiny cap needs it without cancellation. The cap points follow the profile.
 vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float one_minus_cos, float inner_fraction) {
-    Lobe l = footprint_lobe(lobe);
-    ivec2 counts = cap_point_counts(l, cos_radius, wo.z);
+    Lobe l = footprint_lobe(lobe, one_minus_cos);
+    ivec3 counts = cap_point_counts(l, cos_radius, wo.z, inner_fraction);
+    bool power = counts.z == 1;
     float cap_density = float(counts.x) / (2.0 * PI * one_minus_cos * (0.5 * (1.0 + inner_fraction)));
     vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
     vec3 t = normalize(cross(helper, axis));
@@ -128,16 +150,16 @@ vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, flo
         float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
         float phi = 2.0 * PI * u.y;
         vec3 world = sin_t * (cos(phi) * t + sin(phi) * b) + cos_t * axis;
-        sum += cap_light_term(l, to_local * world, wo, cap_density, counts.y, cap_edge_profile(u.x, inner_fraction));
+        sum += cap_light_term(l, to_local * world, wo, cap_density, counts.y, cap_edge_profile(u.x, inner_fraction), power, true);
     }
     for (int j = 0; j < counts.y; ++j) {
         float p;
-        vec3 wi = lobe_sample_and_pdf(l, cap_lattice_point(j, CAP_LOBE_POINTS), wo, p);
+        vec3 wi = lobe_sample_and_pdf(l, cap_lattice_point(j, counts.y), wo, p);
         float cos_to_axis = dot(tbn * wi, axis);
         if (p <= 0.0 || cos_to_axis < cos_radius) continue;
         float profile = cap_edge_profile((1.0 - cos_to_axis) / one_minus_cos, inner_fraction);
         if (profile <= 0.0) continue;
-        sum += cap_light_term(l, wi, wo, cap_density, counts.y, profile);
+        sum += cap_light_term(l, wi, wo, cap_density, counts.y, profile, power, false);
     }
     return sum;
 }
