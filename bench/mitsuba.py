@@ -20,7 +20,10 @@ method renders only lobeview.
 
     pip install mitsuba==3.9.1   # not a lobeview dependency; the scalar_rgb variant is used
     .venv/bin/python -m lobeview.bench.mitsuba [--size 192] [--spp 8192] [--supersample 4] [--bright-sources]
-                                               [--cases ggx:0.5 ...] [--no-cache]
+                                               [--cases ggx:0.5 ...] [--env sky|studio] [--no-cache]
+
+``--env studio`` replaces the sky by builtin:studio (soft boxes whose radiance falls to their rims:
+the soft-edged cap lights of scenes/bright_sources.py); the sun's pixel ratios are then not made.
 """
 
 from __future__ import annotations
@@ -44,8 +47,19 @@ SUN_RADIANCE = 50.0
 RECTANGLES = ((4, 0.3, 0.3), (0.3, 4, 0.3), (0.3, 0.3, 5), (3, 3, 0.3), (0.3, 3, 3), (3, 0.3, 3))
 
 
-def environment(d: np.ndarray) -> np.ndarray:
-    """Radiance (..., 3) of the test environment in directions ``d`` (..., 3), +y up."""
+ENVIRONMENTS = ("sky", "studio")
+
+
+def environment(d: np.ndarray, name: str = "sky") -> np.ndarray:
+    """Radiance (..., 3) of the test environment in directions ``d`` (..., 3), +y up: issue 45's
+    sky, or ``studio``: builtin:studio (scenes/builtin_env.py: soft boxes 11-16 degrees wide, whose
+    radiance falls to their rims; the case of the soft-edged cap lights)."""
+    if name == "studio":
+        from lobeview.scenes.builtin_env import studio
+
+        return studio(d)
+    if name != "sky":
+        raise ValueError(f"unknown environment {name!r}; use one of {ENVIRONMENTS}")
     up = d[..., 1:2]
     sky = np.where(up > 0, np.array([0.35, 0.5, 0.8]) * (0.5 + 0.5 * up), np.array([0.3, 0.25, 0.2]) * (0.6 + 0.4 * up))
     sun = (np.sum(d * SUN_DIRECTION, -1) > np.cos(np.radians(1.5)))[..., None] * SUN_RADIANCE
@@ -58,13 +72,13 @@ def environment(d: np.ndarray) -> np.ndarray:
     return out
 
 
-def mitsuba_equirect(height: int) -> np.ndarray:
+def mitsuba_equirect(height: int, env: str = "sky") -> np.ndarray:
     """The environment as Mitsuba's envmap reads it: (height, 2 height, 3), texel centres, u = 0
     facing -z (lobeview's map rolled by half its width)."""
     v, u = np.meshgrid((np.arange(height) + 0.5) / height, (np.arange(2 * height) + 0.5) / (2 * height), indexing="ij")
     theta, phi = np.pi * v, 2.0 * np.pi * u
     d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], axis=-1)
-    return environment(d).astype(np.float32)
+    return environment(d, env).astype(np.float32)
 
 
 def parse_case(text: str) -> tuple[str, float, float]:
@@ -115,23 +129,27 @@ def render_mitsuba(case: str, size: int, spp: int, envmap_file: Path) -> np.ndar
     return np.array(mi.render(scene), dtype=np.float32)
 
 
-def mitsuba_key(case: str, size: int, spp: int, version: str) -> str:
+def mitsuba_key(case: str, size: int, spp: int, version: str, env: str = "sky") -> str:
     """What a Mitsuba render of a case depends on: the case, frame, samples, Mitsuba's version
     and this module's scene (environment, camera, light), hashed for the cache file name."""
     import hashlib
 
     scene = repr((case, size, spp, version, ENV_HEIGHT, CAMERA, SUN_DIRECTION.tolist(), SUN_RADIANCE, RECTANGLES))
-    return hashlib.sha1(scene.encode() + mitsuba_equirect(64).tobytes()).hexdigest()[:16]
+    if env != "sky":  # the sky's keys stay those of the caches written before the option
+        scene += repr(env)
+    return hashlib.sha1(scene.encode() + mitsuba_equirect(64, env).tobytes()).hexdigest()[:16]
 
 
-def cached_mitsuba(case: str, size: int, spp: int, work: Path, cache: Path | None, version: str) -> tuple:
+def cached_mitsuba(
+    case: str, size: int, spp: int, work: Path, cache: Path | None, version: str, env: str = "sky"
+) -> tuple:
     """Mitsuba's image of a case and the seconds it took, read from ``cache`` (a folder, None:
     no cache) when an earlier run rendered the same scene: the path tracer takes minutes per
     case, the lobeview methods seconds, and the table is meant to be rerun after every change to
     a method."""
     from lobeview.core.cache import read_cache_file, write_cache_file
 
-    path = cache / f"mitsuba-{mitsuba_key(case, size, spp, version)}.npz" if cache else None
+    path = cache / f"mitsuba-{mitsuba_key(case, size, spp, version, env)}.npz" if cache else None
 
     def read(file: Path):
         with np.load(file) as data:
@@ -190,6 +208,7 @@ def run(
     bright_sources=False,
     supersample: int = 1,
     lod_bias: float | None = None,
+    env_name: str = "sky",
 ) -> dict:
     """``supersample``: the real-time methods render at that many times the size and are averaged
     down (issue 45's protocol: 768 x 768 averaged to 192 x 192), so that they and the two
@@ -208,12 +227,14 @@ def run(
         import mitsuba as mi
 
         mi.set_variant("scalar_rgb")
-        mi.Bitmap(mitsuba_equirect(ENV_HEIGHT)).write(str(work / "environment.exr"))
+        mi.Bitmap(mitsuba_equirect(ENV_HEIGHT, env_name)).write(str(work / "environment.exr"))
         mitsuba_version = mi.__version__
     except ImportError:
         raise SystemExit("bench.mitsuba needs Mitsuba 3: pip install mitsuba==3.9.1") from None
     ctx = create_headless_context()
-    env = EnvironmentMap.from_function(environment, height=ENV_HEIGHT, name="issue 45 sky")
+    env = EnvironmentMap.from_function(
+        lambda d: environment(d, env_name), height=ENV_HEIGHT, name="issue 45 sky" if env_name == "sky" else env_name
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         renderer = PreviewRenderer(
@@ -230,7 +251,7 @@ def run(
     camera = Camera(*CAMERA)
     rows = []
     for case in cases:
-        truth, mitsuba_seconds = cached_mitsuba(case, size, spp, work, cache, mitsuba_version)
+        truth, mitsuba_seconds = cached_mitsuba(case, size, spp, work, cache, mitsuba_version, env_name)
         bsdf = build_bsdf(validate(material(case)))
         reference = renderer.render(camera, bsdf, "reference", spp=spp)
         row = {"case": case, "mitsuba seconds": round(mitsuba_seconds, 1),
@@ -239,8 +260,12 @@ def run(
             frame = fine_renderer.render(camera, bsdf, method, spp=1, lod_bias=lod_bias).radiance
             frame = frame.reshape(size, supersample, size, supersample, 3).mean(axis=(1, 3))
             row[method] = relative_rmse(frame, truth, reference.mask)
-            row["sun"][method] = sun_ratios(frame, truth, size)
-        row["sun"]["reference"] = sun_ratios(reference.radiance, truth, size)
+            if env_name == "sky":  # the other environments have no sun
+                row["sun"][method] = sun_ratios(frame, truth, size)
+        if env_name == "sky":
+            row["sun"]["reference"] = sun_ratios(reference.radiance, truth, size)
+        else:
+            del row["sun"]
         rows.append(row)
         progress(f"[mitsuba] {case}: " + ", ".join(f"{k} {100 * v:.1f} %" for k, v in row.items()
                                                   if k not in ("case", "mitsuba seconds", "sun")))  # fmt: skip
@@ -249,7 +274,7 @@ def run(
         fine_renderer.release()
     ctx.release()
     return {"rows": rows, "methods": list(methods), "size": size, "spp": spp, "mitsuba": mitsuba_version,
-            "bright_sources": bool(bright_sources), "supersample": supersample, "lod_bias": lod_bias,
+            "bright_sources": bool(bright_sources), "supersample": supersample, "lod_bias": lod_bias, "env": env_name,
             "device": "Mesa llvmpipe (lobeview), Mitsuba scalar_rgb on the CPU"}  # fmt: skip
 
 
@@ -264,7 +289,8 @@ def markdown(results: dict, stamp: str, command: str) -> str:
         f"(real-time methods at {results.get('supersample', 1)}x{results.get('supersample', 1)} points per pixel, "
         "averaged); Mitsuba path tracer at "
         f"{results['spp']} spp (scalar_rgb), lobeview's reference at {results['spp']} samples per lobe; "
-        f"{results['device']}. Relative RMSE (%) over the sphere's pixels against Mitsuba; the reference "
+        f"{results['device']}; environment {results.get('env', 'sky')}. Relative RMSE (%) over the sphere's "
+        "pixels against Mitsuba; the reference "
         "column is the floor (both renderers' noise and model differences). Scene and conventions: "
         "bench/mitsuba.py. Bright sources: "
         + (
@@ -306,6 +332,8 @@ def main(argv=None) -> int:
                         "(scenes/bright_sources.py) for every lobeview method but the reference")  # fmt: skip
     parser.add_argument("--lod-bias", type=float, help="MIP level bias of the real-time methods (default: each "
                         "method's; lobe-N's lobes wider than alpha 0.3 add up to 1.5 levels on top)")  # fmt: skip
+    parser.add_argument("--env", choices=ENVIRONMENTS, default="sky", help="the environment: issue 45's sky "
+                        "with its sun (default) or builtin:studio's soft boxes")  # fmt: skip
     parser.add_argument("--no-cache", action="store_true", help="render Mitsuba's images again (default: reuse the "
                         "ones of an earlier run of the same scene from the lobeview cache folder)")  # fmt: skip
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
@@ -329,6 +357,7 @@ def main(argv=None) -> int:
             bright_sources=args.bright_sources,
             supersample=args.supersample,
             lod_bias=args.lod_bias,
+            env_name=args.env,
         )
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -29,6 +29,24 @@ def test_mitsuba_environment_is_lobeviews_turned_by_half_a_turn():
     assert ours[row, column].max() > 10 and theirs[row, (column + height) % (2 * height)].max() > 10
 
 
+def test_the_studio_environment_is_builtin_studio_in_both_conventions():
+    """``--env studio``: lobeview's builtin:studio, rolled into Mitsuba's convention like the sky;
+    its cache key differs from the sky's, and the sky's keys are those written before the option."""
+    from lobeview.scenes.builtin_env import studio
+
+    height = 64
+    ours = EnvironmentMap.from_function(lambda d: bench.environment(d, "studio"), height=height).image
+    assert np.array_equal(ours, EnvironmentMap.from_function(studio, height=height).image)
+    theirs = bench.mitsuba_equirect(height, "studio")
+    close = np.all(np.isclose(np.roll(ours, -height, axis=1), theirs, rtol=1e-5, atol=1e-6), axis=-1)
+    assert close.mean() > 0.999, close.mean()
+    sky_key = bench.mitsuba_key("ggx:0.3", 8, 4, "3.9.1")
+    assert bench.mitsuba_key("ggx:0.3", 8, 4, "3.9.1", "sky") == sky_key
+    assert bench.mitsuba_key("ggx:0.3", 8, 4, "3.9.1", "studio") != sky_key
+    with pytest.raises(ValueError, match="unknown environment"):
+        bench.environment(np.zeros((1, 3)), "moon")
+
+
 @pytest.mark.parametrize("case", bench.CASES)
 def test_cases_are_valid_materials(case):
     bsdf = build_bsdf(validate(bench.material(case)))

@@ -255,8 +255,6 @@ def test_a_uniform_soft_box_becomes_a_soft_edged_cap(face_size):
     assert all(np.degrees(light.radius) > 10.0 for light in separation.lights if light.inner_fraction < 1.0)
 
 
-
-
 @pytest.fixture(scope="module")
 def glossy_floor(tmp_path_factory):
     """A roughness-0.4 metal quad under builtin:studio, seen so that its mirror direction lies on
