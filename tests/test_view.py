@@ -114,22 +114,28 @@ def test_scripted_session_under_xvfb(xvfb, tmp_path):
     assert saved["chrome"]["lobes"][0]["mx"] == 0.25
 
 
-def test_material_edits_survive_save_and_load_exactly(tmp_path):
+def _demo_editor(ctx):
+    """The demo scene on a small renderer under a white sky, its material editor and the index
+    of its brushed panel."""
     scene = load_gltf(build_demo_scene())
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        renderer = SceneRenderer(
+            ctx,
+            scene,
+            EnvironmentMap(np.ones((8, 16, 3), np.float32)),
+            size=(32, 20),
+            progress=False,
+            settings=RenderSettings(cube_face_size=16),
+        )
+    index = next(i for i, o in enumerate(scene.objects) if o.name == "brushed panel")
+    return scene, renderer, MaterialEditor(renderer), index
+
+
+def test_material_edits_survive_save_and_load_exactly(tmp_path):
     ctx = create_headless_context()
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            renderer = SceneRenderer(
-                ctx,
-                scene,
-                EnvironmentMap(np.ones((8, 16, 3), np.float32)),
-                size=(32, 20),
-                progress=False,
-                settings=RenderSettings(cube_face_size=16),
-            )
-        editor = MaterialEditor(renderer)
-        index = next(i for i, o in enumerate(scene.objects) if o.name == "brushed panel")
+        scene, renderer, editor, index = _demo_editor(ctx)
         desc = editor.desc(index)
         desc["lobes"][1]["my"] = 0.123456789
         desc["kd"] = [0.01, 0.02, 0.03]
@@ -149,21 +155,9 @@ def test_a_gltf_grey_given_as_one_number_renders_as_its_rgb_triple():
     """The fuzzer's edits mutation 105 (a glTF base_color of 1 in --materials) crashed the
     viewer's material binding with a TypeError: validate accepted the number, the renderer read
     three channels. validate now returns every glTF colour as a triple."""
-    scene = load_gltf(build_demo_scene())
     ctx = create_headless_context()
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            renderer = SceneRenderer(
-                ctx,
-                scene,
-                EnvironmentMap(np.ones((8, 16, 3), np.float32)),
-                size=(32, 20),
-                progress=False,
-                settings=RenderSettings(cube_face_size=16),
-            )
-        editor = MaterialEditor(renderer)
-        index = next(i for i, o in enumerate(scene.objects) if o.name == "brushed panel")
+        scene, renderer, editor, index = _demo_editor(ctx)
         camera = next(c for c in scene.cameras if c.name == "overview")
         camera = Camera(tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y)
         frames = []
