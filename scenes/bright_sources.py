@@ -24,7 +24,8 @@ equirectangular environment map):
   6. a uniform region (a soft box, a disc lamp: the excess inside its cap varies by at most
      MAX_UNIFORM_VARIATION) becomes a soft-edged cap instead (:func:`soft_light`): its ramp, below
      the threshold, joins it, its surroundings are measured beyond the ramp, and the cap's rim and
-     inner fraction come from the removed energy's extent and first moment. Up to
+     inner fraction come from the removed energy and its first moment about the axis, given the
+     region's plateau (:func:`soft_cap_shape`). Up to
      MAX_UNIFORM_LIGHT_SOLID_ANGLE: a uniform region has no structure for the map to keep.
 Debevec's median-cut (2005) places lights where the energy is but does not remove them; the
 threshold-and-region scheme is the "light extraction" of production engines, with the removal

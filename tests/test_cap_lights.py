@@ -223,6 +223,22 @@ def test_separation_leaves_wide_or_low_contrast_regions_in_the_map():
     assert not bs.separate_cube(faint).lights
 
 
+def test_soft_cap_shape_inverts_the_profiles_energy_and_moment():
+    """soft_cap_shape against the moments of the edge profile by quadrature (not the closed form
+    it inverts): rim and inner fraction back for cones, soft boxes and uniform caps."""
+    from lobeview.materials.cap_lights import edge_profile
+
+    for rim_degrees in (2.0, 11.0, 24.0):
+        b = 1.0 - np.cos(np.radians(rim_degrees))
+        u = (np.arange(200_000) + 0.5) / 200_000 * b  # u = 1 - cos, uniform in solid angle
+        for f in (0.0, 0.3, 0.78, 1.0):
+            radiance = 7.0 * edge_profile(u / b, f)
+            energy = 2.0 * np.pi * np.sum(radiance) * b / len(u)
+            moment = 2.0 * np.pi * np.sum(radiance * u) * b / len(u)
+            one_minus_cos, inner = bs.soft_cap_shape(energy, moment, 7.0)
+            assert one_minus_cos == pytest.approx(b, rel=1e-3) and inner == pytest.approx(f, abs=2e-3), (rim_degrees, f)
+
+
 @pytest.mark.parametrize("face_size", [64, 128])
 def test_a_uniform_soft_box_becomes_a_soft_edged_cap(face_size):
     """builtin:studio's key and fill soft boxes (11 and 16 degrees, radiance 30 and 10, a ramp
