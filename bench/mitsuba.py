@@ -255,17 +255,15 @@ def run(
         bsdf = build_bsdf(validate(material(case)))
         reference = renderer.render(camera, bsdf, "reference", spp=spp)
         row = {"case": case, "mitsuba seconds": round(mitsuba_seconds, 1),
-               "reference": relative_rmse(reference.radiance, truth, reference.mask), "sun": {}}  # fmt: skip
+               "reference": relative_rmse(reference.radiance, truth, reference.mask)}  # fmt: skip
+        if env_name == "sky":  # the other environments have no sun
+            row["sun"] = {"reference": sun_ratios(reference.radiance, truth, size)}
         for method in methods:
             frame = fine_renderer.render(camera, bsdf, method, spp=1, lod_bias=lod_bias).radiance
             frame = frame.reshape(size, supersample, size, supersample, 3).mean(axis=(1, 3))
             row[method] = relative_rmse(frame, truth, reference.mask)
-            if env_name == "sky":  # the other environments have no sun
+            if "sun" in row:
                 row["sun"][method] = sun_ratios(frame, truth, size)
-        if env_name == "sky":
-            row["sun"]["reference"] = sun_ratios(reference.radiance, truth, size)
-        else:
-            del row["sun"]
         rows.append(row)
         progress(f"[mitsuba] {case}: " + ", ".join(f"{k} {100 * v:.1f} %" for k, v in row.items()
                                                   if k not in ("case", "mitsuba seconds", "sun")))  # fmt: skip

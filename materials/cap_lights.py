@@ -243,7 +243,7 @@ def integrate_cap_light(
     if lobe_points > 0:
         u1, u2 = lattice_xi(lobe_points)
         wi = lobe.sample_wi(u1, u2, np.broadcast_to(wo, (lobe_points, 3)))
-        profile = np.where(light.contains(wi @ frame.T), light.profile(wi @ frame.T), 0.0)
+        profile = light.profile(wi @ frame.T)  # 0 outside the cap
         total += _weighted_sum(lobe, wi, wo, cap_density, lobe_points, light.radiance, profile, power, False)
     return total
 

@@ -33,10 +33,9 @@ rule's 15.3, 11.5, 9.7; the whole image 3.3, 2.2, 1.8, as with k = 1). Since the
 lamp became a soft-edged cap light in the objects' cubes (issue 39, 12-20 degrees) the real-time
 frame there is better (torus and pane 9.84, 13.70 before) and 1 + 64 / spp showed them 0.4 % worse
 at 32 spp (9.88); 1 + 96 / spp: 9.50, 8.73, 8.10 (the whole image 3.24, 1.92, 1.50 against 4.66 for
-the real-time frame); 1 + 128 / spp: 9.34, 8.75, 8.15 (whole 3.32, 1.94, 1.52).
-For any true n, b a blend
-with weight b / (b + k n), k >= 1, is still better than either image alone (its error
-bn(b + k^2 n) / (b + k n)^2 is below both). Where the real-time method is exact (lightmapped
+the real-time frame); 1 + 128 / spp: 9.34, 8.75, 8.15 (whole 3.32, 1.94, 1.52). For any true
+n, b a blend with weight b / (b + k n), k >= 1, is still better than either image alone (its
+error bn(b + k^2 n) / (b + k n)^2 is below both). Where the real-time method is exact (lightmapped
 diffuse) the mean is taken (n = b = 0: weight 1). Refinement stops when the noise falls below CONVERGED_NOISE (a quarter
 of an 8-bit step) or each half has read the whole Sobol table (HALF_SAMPLE_BUDGET: beyond it a
 half would repeat its points). The estimates are taken when the sample count has doubled since
