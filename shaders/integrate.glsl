@@ -160,7 +160,8 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     if (l.dist != DIST_GGX) return core * target;
     // GGX's tail beyond the pattern's core (patterns.py step 7, ggx_tail_terms and
     // ggx_tail_integral): per quarter of the tail, its share of the albedo by quadrature over
-    // GGX_TAIL_RADIAL bands x GGX_TAIL_AZIMUTHAL microfacet normals (each its band's share of the
+    // GGX_TAIL_RADIAL bands x GGX_TAIL_AZIMUTHAL microfacet normals (slopes stretched by the lobe's
+    // own alphas, its D the density that placed them; each its band's share of the
     // projected mass, ggx_tail_quadrature, times f cos / p; zero at and below the horizon),
     // and one lookup at the f cos-weighted mean direction of its points above the horizon over
     // their share of its reflected annulus (not clamped at 80 deg: ggx_tail_solid_angle); the
@@ -169,7 +170,6 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     float inner = 2.0 * atan(sqrt(-log(XI_BORDER)) * a);
     float outer = 2.0 * atan(GGX_TAIL_OUTER_TAN * a);
     float tail_area = 2.0 * PI * (cos(inner) - cos(outer)) / float(GGX_TAIL_SAMPLES) * wide_lobe_footprint_scale(l);
-    float a2 = a * a;
     vec3 quarter_share[GGX_TAIL_SAMPLES];
     vec3 direction_sum[GGX_TAIL_SAMPLES];
     float visible_mass[GGX_TAIL_SAMPLES];
@@ -185,16 +185,16 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         float beyond_in = GGX_TAIL_FRACTION * s_in * s_in;
         float beyond_out = GGX_TAIL_FRACTION * s_out * s_out;
         float q = 1.0 - 0.5 * (beyond_in + beyond_out);
-        float tan_theta = a * sqrt(q / (1.0 - q));
-        float cos_theta = inversesqrt(1.0 + tan_theta * tan_theta);
-        float sin_theta = tan_theta * cos_theta;
-        float d_placed_denominator = cos_theta * cos_theta * (a2 - 1.0) + 1.0;
-        float d_placed = a2 / (PI * d_placed_denominator * d_placed_denominator);  // GGX D, alpha a
+        float rho = sqrt(q / (1.0 - q));  // the slope's radius in the lobe's stretched space
         float mass = (beyond_in - beyond_out) / float(GGX_TAIL_SAMPLES * GGX_TAIL_AZIMUTHAL);
         for (int k = 0; k < GGX_TAIL_SAMPLES; ++k) {
             for (int j = 0; j < GGX_TAIL_AZIMUTHAL; ++j) {
                 float phi = 2.0 * PI * (float(k) + (float(j) + 0.5) / float(GGX_TAIL_AZIMUTHAL)) / float(GGX_TAIL_SAMPLES);
-                vec3 h = vec3(sin_theta * cos(phi), sin_theta * sin(phi), cos_theta);
+                vec3 slope = vec3(l.ax * rho * cos(phi), l.ay * rho * sin(phi), 1.0);
+                float cos_theta = inversesqrt(dot(slope, slope));
+                vec3 h = slope * cos_theta;
+                float cos2 = cos_theta * cos_theta;
+                float d_placed = 1.0 / (PI * l.ax * l.ay * cos2 * cos2 * (1.0 + rho * rho) * (1.0 + rho * rho));
                 float wo_h = dot(wo, h);
                 vec3 wr = 2.0 * wo_h * h - wo;
                 if (wr.z <= 0.0) continue;

@@ -46,14 +46,17 @@ vec3 banks_lookup(int lobe_index, vec3 wo, mat3 tbn) {
     return radiance * energy;
 }
 
-// materials/prefilter.py split_sum_line_quantiles (tests/test_methods_on_mitsuba_sky.py checks
-// these against it): the line's slopes per unit scale, by distribution (DIST_BECKMANN, DIST_GGX).
-const float SPLIT_SUM_LINE_SLOPES[2][9] = float[2][9](
-    float[9](-1.126575830, -0.684070350, -0.416808192, -0.199556951, 0.0, 0.199556951, 0.416808192, 0.684070350,
-             1.126575830),
-    float[9](-1.940285000, -0.894427191, -0.496138938, -0.227921153, 0.0, 0.227921153, 0.496138938, 0.894427191,
-             1.940285000));
-#define SPLIT_SUM_LINE_NODES 9
+// materials/prefilter.py split_sum_line_quantiles and split_sum_line_weights
+// (tests/test_methods_on_mitsuba_sky.py checks these against it): the line's slopes per unit scale,
+// by distribution (DIST_BECKMANN, DIST_GGX), and the probability each node stands for.
+const float SPLIT_SUM_LINE_SLOPES[2][11] = float[2][11](
+    float[11](-1.555925243, -1.046476592, -0.684070350, -0.416808192, -0.199556951, 0.0, 0.199556951,
+              0.416808192, 0.684070350, 1.046476592, 1.555925243),
+    float[11](-4.153735804, -1.693710931, -0.894427191, -0.496138938, -0.227921153, 0.0, 0.227921153,
+              0.496138938, 0.894427191, 1.693710931, 4.153735804));
+const float SPLIT_SUM_LINE_WEIGHTS[11] = float[11](0.027777778, 0.083333333, 0.111111111, 0.111111111,
+    0.111111111, 0.111111111, 0.111111111, 0.111111111, 0.111111111, 0.083333333, 0.027777778);
+#define SPLIT_SUM_LINE_NODES 11
 #define SPLIT_SUM_LINE_RATIO 1.05
 
 // materials/prefilter.py split_sum_lod: from level PEAK_MATCHED_FROM on, the blend whose peak is alpha's.
@@ -75,23 +78,28 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // through), turned towards the normal (materials/prefilter.py split_sum_lean: a rough lobe
         // at a grazing view leans off the mirror direction, Lagarde & de Rousiers 2014); an
         // anisotropic lobe reads the map at its narrower alpha at quantiles of its slopes along its
-        // wider axis (split_sum_line).
+        // wider axis, each weighted by its probability, the nodes below the surface left out
+        // (split_sum_line), all leant at the alpha of the level they read.
         bool through = lobe_is_transmission(l);
         float alpha = sqrt(l.ax * l.ay);
         float roughness = sqrt(alpha);
-        float smooth_part = 1.0 - clamp(alpha, 0.0, 1.0);
-        float lean = smooth_part * (sqrt(smooth_part) + (1.0 - smooth_part));
         vec3 normal_side = through ? -tbn[2] : tbn[2];
         float a_min = min(l.ax, l.ay);
         float a_max = max(l.ax, l.ay);
         bool line = a_max > SPLIT_SUM_LINE_RATIO * a_min;
+        float level_alpha = line ? a_min : alpha;
+        float smooth_part = 1.0 - clamp(level_alpha, 0.0, 1.0);
+        float lean = smooth_part * (sqrt(smooth_part) + (1.0 - smooth_part));
         float spread = line ? sqrt(a_max * a_max - a_min * a_min) : 0.0;
         vec2 major = l.ax >= l.ay ? vec2(1.0, 0.0) : vec2(0.0, 1.0);
-        float lod = split_sum_lod(line ? a_min : alpha, u_split_sum_max_level);
+        float lod = split_sum_lod(level_alpha, u_split_sum_max_level);
         vec3 radiance = vec3(0.0);
+        vec3 radiance_all = vec3(0.0);  // every node, for a view whose whole line lies below the surface
+        float weight_sum = 0.0;
         int nodes = line ? SPLIT_SUM_LINE_NODES : 1;
         for (int k = 0; k < nodes; ++k) {
             float slope = line ? SPLIT_SUM_LINE_SLOPES[l.dist][k] * spread : 0.0;
+            float weight = line ? SPLIT_SUM_LINE_WEIGHTS[k] : 1.0;
             vec3 h = normalize(vec3(-slope * major, 1.0));
             vec3 local_r = 2.0 * dot(h, wo) * h - wo;
             vec3 r = tbn * vec3(local_r.xy, through ? -local_r.z : local_r.z);
@@ -100,9 +108,14 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
             float unused_offset;
             r = proxy_direction(r, unused_offset);
 #endif
-            radiance += textureLod(u_split_sum[l.dist], r, lod).rgb;
+            vec3 value = textureLod(u_split_sum[l.dist], r, lod).rgb * weight;
+            radiance_all += value;
+            if (local_r.z > 0.0) {
+                radiance += value;
+                weight_sum += weight;
+            }
         }
-        radiance /= float(nodes);
+        radiance = weight_sum > 0.0 ? radiance / weight_sum : radiance_all;
         // The albedo: an anisotropic GGX lobe's from the anisotropic table (the isotropic one at
         // the geometric-mean alpha was up to 9 % too bright on GGX 0.05 x 0.3), Beckmann's from
         // the isotropic table at that alpha (no anisotropic Beckmann table).
