@@ -426,6 +426,13 @@ def test_ggx_tail_lookups_sit_in_their_quarters_of_the_tail_around_the_mirror_di
     assert 0 < len(grazing_dirs) <= GGX_TAIL_SAMPLES and np.all(grazing_dirs[:, 2] > 0)
 
 
+def _uniform_hemisphere(count: int, seed: int) -> np.ndarray:
+    """``count`` directions uniform over the upper hemisphere (density 1 / 2 pi), seeded."""
+    u = np.random.default_rng(seed).random((count, 2))
+    r = np.sqrt(1.0 - u[:, 0] ** 2)
+    return np.stack([r * np.cos(2 * np.pi * u[:, 1]), r * np.sin(2 * np.pi * u[:, 1]), u[:, 0]], -1)
+
+
 @pytest.mark.parametrize("alpha", [0.05, 0.15, 0.3, 0.5])
 def test_ggx_tail_share_follows_the_tail_above_the_horizon(alpha):
     """Step 7: the tail's share of the albedo W (ggx_tail_terms) against Monte Carlo quadrature of
@@ -440,11 +447,8 @@ def test_ggx_tail_share_follows_the_tail_above_the_horizon(alpha):
     from lobeview.materials.patterns import ggx_tail_terms
 
     lobe = MicrofacetReflection(MicrofacetDistribution("ggx", alpha, alpha), Fresnel("none"))
-    rng = np.random.default_rng(0)
     count = 400_000
-    u = rng.random((count, 2))
-    r = np.sqrt(1.0 - u[:, 0] ** 2)
-    wi = np.stack([r * np.cos(2 * np.pi * u[:, 1]), r * np.sin(2 * np.pi * u[:, 1]), u[:, 0]], -1)
+    wi = _uniform_hemisphere(count, seed=0)
     fixed_share_errors = []
     for theta in (0.0, 20.0, 45.0, 60.0, 70.0, 80.0):
         wo = direction_from_angles_deg(theta, 0.0)
@@ -475,11 +479,8 @@ def test_anisotropic_ggx_tail_follows_the_lobe_along_its_wider_axis(alpha_x, alp
     from lobeview.materials.patterns import ggx_tail_lookups, ggx_tail_terms
 
     lobe = MicrofacetReflection(MicrofacetDistribution("ggx", alpha_x, alpha_y), Fresnel("none"))
-    rng = np.random.default_rng(1)
     count = 400_000
-    u = rng.random((count, 2))
-    r = np.sqrt(1.0 - u[:, 0] ** 2)
-    wi = np.stack([r * np.cos(2 * np.pi * u[:, 1]), r * np.sin(2 * np.pi * u[:, 1]), u[:, 0]], -1)
+    wi = _uniform_hemisphere(count, seed=1)
     for theta, phi in ((0.0, 0.0), (30.0, 0.0), (30.0, 90.0), (60.0, 45.0), (70.0, 90.0)):
         wo = direction_from_angles_deg(theta, phi)
         h = wi + wo
