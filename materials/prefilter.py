@@ -299,7 +299,7 @@ def split_sum_lean(alpha):
 # with variance alpha^2 / 2 (quantile erfinv(2u - 1)). Each node sits at the middle quantile of an
 # interval of the marginal's probability (SPLIT_SUM_LINE_EDGES) and weighs its probability: ninths,
 # the two outer ninths split at 1/36 and 35/36 (GGX's heavy tail: the outer ninth of GGX 0.05 x 0.3
-# reaches from the ground to the sky, and its one node read the ground: a sphere's lower half 35 %
+# reaches from the ground to the sky, and its one node read the ground: a sphere's lower half 20-35 %
 # too dark). Nodes whose mirror direction lies below the surface (the lobe there is cut by the
 # horizon, the albedo table already counts that) are left out and the others' weights renormalised,
 # and the lookups lean towards the normal by split_sum_lean at alpha_min, the roughness of the
@@ -307,7 +307,7 @@ def split_sum_lean(alpha):
 # dark near the silhouette). Measured by Monte Carlo at 30 pixels of the Mitsuba sphere (the exact
 # lobe integral against the line over the exactly filtered sky, GGX 0.05 x 0.3 / 0.1 x 0.5 /
 # 0.02 x 0.2): nine equal quantiles, lean at sqrt(ax ay) 9.1 / 12.8 / 6.5 %; these eleven nodes
-# 4.9 / 7.8 / 5.4 (docs/measurements.md "Split-sum's anisotropic line"). Lobes within
+# 4.9 / 7.8 / 5.4 (docs/measurements.md "Anisotropic lobes' tails"). Lobes within
 # SPLIT_SUM_LINE_RATIO of isotropic keep one lookup.
 SPLIT_SUM_LINE_EDGES = (0.0, 1.0 / 36.0) + tuple(k / 9.0 for k in range(1, 9)) + (35.0 / 36.0, 1.0)
 SPLIT_SUM_LINE_NODES = len(SPLIT_SUM_LINE_EDGES) - 1
