@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Run THERE, on a lent GPU machine, from the repository root (the device tool's working copy),
-# after bench/gpu_prepare.sh here and with carry [".whl", ".gl", ".gpu-assets"]:
+# after bench/gpu_prepare.sh here and with carry [".whl", ".gl", ".gpu-assets"] (and ".gpu-cache"
+# after `gpu_prepare.sh --with-apartment`):
 #   bash bench/gpu_device.sh [--parts fps mirrors walkthrough]
 # Installs the carried wheels and GL loaders, checks that moderngl's EGL context is the GPU's
 # (not llvmpipe), then runs python -m lobeview.bench.gpu at full size into $OUT (or
@@ -19,6 +20,11 @@ python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upg
 mkdir -p /tmp/lobeview-pkg && ln -sfn "$PWD" /tmp/lobeview-pkg/lobeview
 export PYTHONPATH=/tmp/lobeview-pkg:/tmp/site PYTHONUNBUFFERED=1 LOBEVIEW_ASSETS="$PWD/.gpu-assets"
 export LOBEVIEW_CACHE=/tmp/lobeview-cache
+# Scenes baked here by bench/gpu_prepare.sh --with-apartment (found by their parameters' key).
+mkdir -p "$LOBEVIEW_CACHE"
+for packed in .gpu-cache/*.tar.xz; do
+    [ -f "$packed" ] && tar -xJf "$packed" -C "$LOBEVIEW_CACHE"
+done
 out=${OUT:-bench/results}
 python3 - <<'PY' || exit 1
 from lobeview.viewer.context import create_headless_context, renderer_description

@@ -4,10 +4,14 @@
 #   .whl/         lobeview's dependencies missing from the GPU image, as CPython 3.12 wheels
 #   .gl/          the GL/EGL loader packages (libglvnd), unpacked there
 #   .gpu-assets/  the HDR capture Table 4.1 uses ($LOBEVIEW_ASSETS there)
-# All three are ignored by git (.git/info/exclude) and travel with `carry`.
+#   .gpu-cache/   with --with-apartment: the 12-room apartment baked here (~1-2 min on 2 cores),
+#                 packed (~11 MB), so the walkthrough part there skips its 80 s bake (a lease is
+#                 15 minutes; the third lease's walkthrough took 527 s with it)
+# All are ignored by git (.git/info/exclude) and travel with `carry` (64 MiB in all, the checkout
+# included: the apartment only fits packed).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-for folder in /.whl/ /.gl/ /.gpu-assets/; do
+for folder in /.whl/ /.gl/ /.gpu-assets/ /.gpu-cache/; do
     grep -qxF "$folder" .git/info/exclude 2>/dev/null || echo "$folder" >> .git/info/exclude
 done
 rm -rf .whl && mkdir -p .whl
@@ -23,5 +27,21 @@ apt-get "${apt_options[@]}" update -qq
 (cd .gl && apt-get "${apt_options[@]}" download libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
 rm -rf .gpu-assets && mkdir -p .gpu-assets/env/blender_studiolights_1k
 cp ../shared/assets/env/blender_studiolights_1k/interior.exr .gpu-assets/env/blender_studiolights_1k/
-du -sh .whl .gl .gpu-assets
-echo "ready: run bench/gpu_device.sh through the device tool with carry [.whl, .gl, .gpu-assets]"
+rm -rf .gpu-cache
+if [ "${1:-}" = "--with-apartment" ]; then
+    # The cache key is the scene's parameters, so what is baked here is found there.
+    bake_cache=$(mktemp -d)
+    "${PYTHON:-.venv/bin/python}" -c "
+import sys
+from lobeview.scenes.setup import load_scene_and_environment
+load_scene_and_environment('builtin:apartment-12', None, sys.argv[1])
+" "$bake_cache"
+    mkdir -p .gpu-cache
+    tar -cJf .gpu-cache/apartment-12.tar.xz -C "$bake_cache" apartment
+    rm -rf "$bake_cache"
+    carry='[".whl", ".gl", ".gpu-assets", ".gpu-cache"]'
+else
+    carry='[".whl", ".gl", ".gpu-assets"]'
+fi
+du -sh .whl .gl .gpu-assets .gpu-cache 2>/dev/null || true
+echo "ready: run bench/gpu_device.sh through the device tool with carry $carry"
