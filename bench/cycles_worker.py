@@ -11,6 +11,14 @@ Conventions (each verified by :mod:`lobeview.bench.cycles` against lobeview's ow
   (up): lobeview's u = 0.5 faces -z (glTF), Blender's u = 0.5 faces -x.
 - box pixel filter of one pixel, no denoiser, view transform Standard, exposure 0, film
   transparent (the alpha marks the object's coverage), output linear 32-bit EXR.
+- roughness floor (job "roughness_floor", default ROUGHNESS_FLOOR): Cycles 4.3 renders a GGX
+  lobe of roughness about 0.003-0.015 black (its glossy light is NaN and the sample dropped: a
+  metal sphere under a white sky at roughness 0.005 / 0.008 / 0.012 gives 0.9 / 6 / 21 % of its
+  brightness at 0, 0.002 or 0.02; DamagedHelmet's visor has roughness 0.004-0.012 in its texture).
+  Every Principled BSDF's Roughness and Coat Roughness are raised to at least the floor (a Math
+  node after a texture): at 0.02 the lobe is far narrower than a pixel or an environment texel
+  here, so the floor changes nothing else (the same sphere at 0 and at 0.02: equal means).
+  ``python -m lobeview.bench.cycles --roughness-sweep`` measures it again.
 """
 
 from __future__ import annotations
@@ -18,6 +26,9 @@ from __future__ import annotations
 import json
 import math
 import sys
+
+ROUGHNESS_FLOOR = 0.02
+ROUGHNESS_INPUTS = ("Roughness", "Coat Roughness")
 
 
 def _blender_vector(v):
@@ -27,11 +38,43 @@ def _blender_vector(v):
     return Vector((v[0], -v[2], v[1]))
 
 
+def raise_roughness(materials, floor: float) -> int:
+    """Raise every Principled BSDF's roughness inputs to at least ``floor`` (see the module's
+    docstring); returns how many inputs were changed or given a Math node."""
+    changed = 0
+    for material in materials:
+        if not material.use_nodes or material.node_tree is None:
+            continue
+        tree = material.node_tree
+        for node in list(tree.nodes):
+            if node.type != "BSDF_PRINCIPLED":
+                continue
+            for name in ROUGHNESS_INPUTS:
+                socket = node.inputs.get(name)
+                if socket is None:
+                    continue
+                if socket.is_linked:
+                    link = socket.links[0]
+                    clamp = tree.nodes.new("ShaderNodeMath")
+                    clamp.operation = "MAXIMUM"
+                    clamp.inputs[1].default_value = floor
+                    tree.links.new(link.from_socket, clamp.inputs[0])
+                    tree.links.new(clamp.outputs[0], socket)
+                    changed += 1
+                elif socket.default_value < floor:
+                    socket.default_value = floor
+                    changed += 1
+    return changed
+
+
 def render(job: dict) -> None:
     import bpy
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.gltf(filepath=job["gltf"])
+    floor = float(job.get("roughness_floor", ROUGHNESS_FLOOR))
+    if floor > 0:
+        print(f"roughness floor {floor}: {raise_roughness(bpy.data.materials, floor)} inputs", flush=True)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"

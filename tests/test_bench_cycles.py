@@ -40,13 +40,18 @@ def test_metrics_on_known_images():
     mask = np.zeros((10, 10), bool)
     mask[2:8, 2:8] = True
     same = cycles.compare(truth.copy(), truth, mask)
-    assert same == {"mean_ratio": 1.0, "rel_rmse": 0.0, "darkest_ratio": 1.0}
+    assert same == {"mean_ratio": 1.0, "rel_rmse": 0.0, "median_ratio": 1.0, "darkest_ratio": 1.0}
     image = truth.copy()
     image[2, 2:8] = 0.5  # 6 of 36 pixels at half: the darkest 5 % (one pixel) is 0.5
     got = cycles.compare(image, truth, mask)
     assert got["darkest_ratio"] == pytest.approx(0.5)
     assert got["mean_ratio"] == pytest.approx(1 - 6 * 0.5 / 36)
     assert got["rel_rmse"] == pytest.approx(np.sqrt(6 * 0.25 / 36))
+    assert got["median_ratio"] == 1.0  # 30 of 36 pixels unchanged
+    glint = truth.copy()
+    glint[4, 4] = 200.0  # one pixel carrying most of the sum moves the mean, not the median
+    got = cycles.compare(truth, glint, mask)
+    assert got["mean_ratio"] < 0.2 and got["median_ratio"] == 1.0
 
 
 def test_object_mask_drops_the_silhouette():
@@ -79,9 +84,9 @@ def test_unknown_case_and_missing_bpy_say_what_to_do(tmp_path):
 def test_markdown_lists_every_case_and_command():
     row = {"case": "sphere-white", "env": "white", "cycles_seconds": 1.0, "pixels": 100}
     for method in ("reference", "lobe-7"):
-        row[method] = {"mean_ratio": 0.975, "rel_rmse": 0.025, "darkest_ratio": 0.97}
+        row[method] = {"mean_ratio": 0.975, "rel_rmse": 0.025, "median_ratio": 0.98, "darkest_ratio": 0.97}
     results = {"rows": [row], "commands": [("sphere-white / white", "python -I worker.py job.json", "lobeview shot")],
                "blender": "4.3.0", "methods": ["lobe-7"], "size": [24, 18], "spp": 16, "ref_spp": 8}  # fmt: skip
     text = cycles.markdown(results, "20261126", "python -m lobeview.bench.cycles", "bench/figures/c.png")
-    assert "| sphere-white | white | 0.975 / 2.5 / 0.970 | 0.975 / 2.5 / 0.970 |" in text
+    assert "| sphere-white | white | 0.975 / 2.5 / 0.980 / 0.970 | 0.975 / 2.5 / 0.980 / 0.970 |" in text
     assert "python -I worker.py job.json" in text and "bench/figures/c.png" in text
