@@ -133,6 +133,14 @@ def add_scene_arguments(p) -> None:
         help="mirror-buffer resolution relative to the frame, 0.05..2 (default 1)",
     )
     a(
+        "--mirror-sizes",
+        choices=("lobe", "full"),
+        default="lobe",
+        help="'lobe' (default): a reflector shaded by lobe-N gets its mirror buffers at 1/2 or 1/4 of "
+        "--mirror-scale where its finest lookups read that much coarser (rough floors; the scene's report "
+        "shows each pass's size); 'full': every buffer at --mirror-scale",
+    )
+    a(
         "--cache",
         help="cache folder for the demo scene, cube maps, prefiltered maps and tables"
         " (default ~/.cache/lobeview or $LOBEVIEW_CACHE)",
@@ -321,6 +329,7 @@ def scene_renderer_from_args(
             bright_sources=bool(getattr(args, "bright_sources", True)),
             method_target=getattr(args, "method_target", None),
             mirrors=bool(args.mirrors),
+            mirror_lobe_sizes=getattr(args, "mirror_sizes", "lobe") == "lobe",
         ),
         progressive_cubes=progressive_cubes,
     )
@@ -385,6 +394,8 @@ def shot_command(
             parts.append("--no-mirrors")
         if args.mirror_scale != 1.0:
             parts.append(f"--mirror-scale={args.mirror_scale:g}")
+        if getattr(args, "mirror_sizes", "lobe") != "lobe":
+            parts.append(f"--mirror-sizes={args.mirror_sizes}")
         if getattr(args, "cache", None):
             parts.append(f"--cache={shlex.quote(str(args.cache))}")
     if materials is not None:

@@ -141,8 +141,10 @@ def _rendering(window) -> None:
     _, window.progressive = imgui.checkbox("refine when still", window.progressive)
     c4, mirrors = imgui.checkbox("planar mirror passes", renderer.settings.mirrors)
     c5, scale = imgui.slider_float("mirror resolution", renderer.settings.mirror_scale, 0.1, 1.0)
-    if c4 or c5:
-        renderer.configure(mirrors=mirrors, mirror_scale=scale)
+    # lobe-N reflectors whose lookups read coarse levels get 1/2 or 1/4 of that (--mirror-sizes)
+    c5b, lobe_sizes = imgui.checkbox("mirror buffers sized by their lobes", renderer.settings.mirror_lobe_sizes)
+    if c4 or c5 or c5b:
+        renderer.configure(mirrors=mirrors, mirror_scale=scale, mirror_lobe_sizes=lobe_sizes)
         window.dirty = True
     passes = renderer.mirror_passes
     _report_lines(f"mirror passes: {len(passes.drawn)} reflectors drawn, {len(passes.skipped)} skipped", passes.report)

@@ -85,7 +85,6 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
     One untimed frame first (shader compilation)."""
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.interface import UNIFORM_WRITES
-    from lobeview.viewer.mirror_pass import buffer_size
 
     rows = []
     times = path.frame_times(frames)
@@ -95,9 +94,9 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         camera = Camera.from_scene_camera(path.camera_at(float(t))).fitted_to(renderer.bounds)
         mirrors_drawn = method.kind != "prefiltered"
         unculled_ms, unculled_passes = 0.0, 0
-        unscissored_ms = 0.0
-        if mirrors_drawn:  # first without the occlusion test, then without the scissor: the
-            # frame then keeps its own buffers
+        unscissored_ms = full_buffers_ms = 0.0
+        if mirrors_drawn:  # first without the occlusion test, then without the scissor, then
+            # with every buffer at the mirror scale: the frame then keeps its own buffers
             renderer.configure(mirror_occlusion=False)
             unculled_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
             unculled_passes = len(renderer.mirror_passes.drawn)
@@ -106,6 +105,11 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
             renderer.invalidate_mirrors()
             unscissored_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
             renderer.configure(mirror_scissor=True)
+            renderer.configure(mirror_lobe_sizes=False)
+            renderer.invalidate_mirrors()
+            full_buffers_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
+            full_buffer_pixels = renderer.mirror_passes.drawn_pixels
+            renderer.configure(mirror_lobe_sizes=True)
         renderer.invalidate_mirrors()
         renderer.draw_counts.new_frame()
         UNIFORM_WRITES.reset()
@@ -113,8 +117,9 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
             _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method) if mirrors_drawn else 0.0
         )
         scissored_pixels = sum(renderer.mirror_passes.scissored_pixels.values())
-        width, height = buffer_size(renderer.size, renderer.settings.mirror_scale)
-        buffer_pixels = renderer.mirror_passes.drawn_passes * width * height
+        buffer_pixels = renderer.mirror_passes.drawn_pixels  # each pass at its own size
+        if not mirrors_drawn:
+            full_buffer_pixels = 0
         mirror = renderer.draw_counts.of("mirror")
         mirror_draws, mirror_culled = mirror.drawn, mirror.culled
         reasons = dict(Counter(renderer.mirror_passes.skipped.values()))
@@ -144,6 +149,8 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
                 "occlusion_test_ms": renderer.mirror_passes.occlusion_seconds * 1e3,
                 "mirror_ms_without_test": unculled_ms,
                 "mirror_ms_without_scissor": unscissored_ms,
+                "mirror_ms_full_buffers": full_buffers_ms,
+                "mirror_pixels_full_buffers": full_buffer_pixels,
                 "mirror_pixels_scissored": scissored_pixels,
                 "mirror_pixels": buffer_pixels,
                 "mirror_passes_without_test": unculled_passes,
@@ -234,6 +241,9 @@ def _summary(result: dict) -> dict:
         "mirror_ms_without_test_mean": mean("mirror_ms_without_test"),
         "mirror_passes_without_test_mean": mean("mirror_passes_without_test"),
         "mirror_ms_without_scissor_mean": mean("mirror_ms_without_scissor"),
+        "mirror_ms_full_buffers_mean": mean("mirror_ms_full_buffers"),
+        "buffer_pixel_share": sum(r["mirror_pixels"] for r in rows)
+        / max(sum(r["mirror_pixels_full_buffers"] for r in rows), 1),
         "scissored_fraction": sum(r["mirror_pixels_scissored"] for r in rows)
         / max(sum(r["mirror_pixels"] for r in rows), 1),
         "camera_ms_mean": mean("camera_ms"),
@@ -344,7 +354,9 @@ def _scene_markdown(result: dict) -> list[str]:
         "pre-pass). Without the occlusion test the mirror passes took "
         f"{s['mirror_ms_without_test_mean']:.0f} ms ({s['mirror_passes_without_test_mean']:.1f} passes) on average; "
         f"without the scissor {s['mirror_ms_without_scissor_mean']:.0f} ms (the scissor skipped "
-        f"{100 * s['scissored_fraction']:.0f} % of the drawn passes' pixels).",
+        f"{100 * s['scissored_fraction']:.0f} % of the drawn passes' pixels); with every buffer at the mirror "
+        f"scale (no lobe sizes) {s['mirror_ms_full_buffers_mean']:.0f} ms (the lobe sizes keep "
+        f"{100 * s['buffer_pixel_share']:.0f} % of the buffers' pixels).",
         f"Draw state: {s['draws_mean']:.0f} draws a frame set {s['uniform_values_mean']:.0f} uniform values, of "
         f"which {s['uniform_writes_mean']:.0f} were not already in their program and went to GL; with every "
         f"object's state set value by value (no draw records) the frame took {s['frame_ms_without_records_mean']:.0f}"
@@ -352,8 +364,9 @@ def _scene_markdown(result: dict) -> list[str]:
         "",
         "| frame | t (s) | frame ms | mirror passes ms | of which occlusion test ms | camera pass ms "
         "| camera draws / culled | mirror-pass draws / culled | mirror passes drawn / skipped | skipped because "
-        "| without the test: passes, ms | without the scissor: ms | pixels scissored away |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| without the test: passes, ms | without the scissor: ms | pixels scissored away "
+        "| full-size buffers: ms |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in result["frames"]:
         reasons = ", ".join(f"{k}: {v}" for k, v in sorted(r["skip_reasons"].items())) or "-"
@@ -363,7 +376,8 @@ def _scene_markdown(result: dict) -> list[str]:
             f"| {r['camera_drawn']} / {r['camera_culled']} | {r['mirror_draws']} / {r['mirror_culled']} "
             f"| {r['mirror_passes']} / {r['mirror_skipped']} | {reasons} "
             f"| {r['mirror_passes_without_test']}, {r['mirror_ms_without_test']:.0f} "
-            f"| {r['mirror_ms_without_scissor']:.0f} | {_share(r['mirror_pixels_scissored'], r['mirror_pixels'])} |"
+            f"| {r['mirror_ms_without_scissor']:.0f} | {_share(r['mirror_pixels_scissored'], r['mirror_pixels'])} "
+            f"| {r['mirror_ms_full_buffers']:.0f} |"
         )
     return lines + [""]
 
@@ -383,9 +397,10 @@ def _count_markdown(rows: list[dict]) -> list[str]:
         "| start-up warm s | frame ms (median) | mirror ms (mean) | camera ms (mean) | camera draws / culled (mean) "
         "| mirror passes drawn / skipped (mean) | without the occlusion test: mirror passes, ms (mean) "
         "| mirror ms without the scissor (mean) | pass pixels scissored away "
+        "| mirror ms with full-size buffers (mean; buffer pixels kept) "
         "| camera ms without the depth pre-pass (mean) | draws, uniform values set / sent (mean) "
         "| frame ms without draw records (mean, with) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         s = _summary(r)
@@ -399,6 +414,7 @@ def _count_markdown(rows: list[dict]) -> list[str]:
             f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} "
             f"| {s['mirror_passes_without_test_mean']:.1f}, {s['mirror_ms_without_test_mean']:.0f} "
             f"| {s['mirror_ms_without_scissor_mean']:.0f} | {100 * s['scissored_fraction']:.0f} % "
+            f"| {s['mirror_ms_full_buffers_mean']:.0f} ({100 * s['buffer_pixel_share']:.0f} %) "
             f"| {s['camera_ms_without_prepass_mean']:.0f} "
             f"| {s['draws_mean']:.0f}, {s['uniform_values_mean']:.0f} / {s['uniform_writes_mean']:.0f} "
             f"| {s['frame_ms_without_records_mean']:.0f} ({s['frame_ms_mean']:.0f}) |"

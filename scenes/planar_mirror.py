@@ -253,6 +253,55 @@ SCISSOR_LOD_SLACK = 0.0
 SCISSOR_MAX_ANGLE = np.radians(80.0)  # a reach beyond this off the buffer's axis: no scissor
 
 
+# Mirror buffers at the resolution their lobes read (issue 42: on a GPU the apartment's frame is
+# its mirror passes, bench/results/walkthrough-20261128-052454.md). A lookup of solid angle Omega
+# at an environment hit reads MIP level 0.5 log2(Omega f^2 / cos^3) + bias of a buffer of focal
+# length f pixels (shaders/incident.glsl buffer_incident), so with Omega no smaller than the lobes'
+# finest lookup it never reads below L_env = 0.5 log2(Omega_min) + log2 f + bias, and a buffer
+# halved k times shows at its level 0 what the full one shows at level k. Geometry nearer to the
+# plane than to the eye is read finer (the footprint scales by about (t / d)^2 in pixels: contact
+# reflections stay sharp on rough floors): MIRROR_CONTACT_MARGIN_LEVELS of the finest level are
+# kept, i.e. points within about 2^-margin of the eye's distance from where they touch the plane
+# read coarser than the full buffer would give them. Views up to MIRROR_FOOTPRINT_MAX_VIEW_ANGLE
+# count that the camera sees the reflector at (reflector_max_view_angle: a floor is seen at grazing
+# angles far off, where the lobe's footprint shrinks, 7x from 75 to 88 degrees).
+MIRROR_CONTACT_MARGIN_LEVELS = 3.0
+MIRROR_MAX_COARSE_LEVELS = 2  # buffers at 1/2 or 1/4 of the mirror scale at most
+MIRROR_VIEW_ANGLE_STEP = np.radians(2.0)  # view-angle bounds rounded up to this (a cache key)
+MIRROR_FOOTPRINT_MAX_VIEW_ANGLE = np.radians(89.0)
+
+
+def reflector_max_view_angle(reflector: PlanarReflector, eye) -> float:
+    """An upper bound of the angle between the reflector's normal and the direction to ``eye`` over
+    its surface, rounded up to MIRROR_VIEW_ANGLE_STEP (at most MIRROR_FOOTPRINT_MAX_VIEW_ANGLE):
+    at a point x of the plane cos(theta) = h / |eye - x| with h the eye's distance from the
+    plane, and no point of the reflector lies farther from the eye than its farthest box corner."""
+    eye = np.asarray(eye, dtype=np.float64)
+    height = abs(float(reflector.side(eye)))
+    farthest = float(np.max(np.linalg.norm(reflector.corners() - eye, axis=1)))
+    angle = float(np.arccos(np.clip(height / max(farthest, 1e-30), 0.0, 1.0)))
+    return float(min(np.ceil(angle / MIRROR_VIEW_ANGLE_STEP - 1e-9) * MIRROR_VIEW_ANGLE_STEP,
+                     MIRROR_FOOTPRINT_MAX_VIEW_ANGLE))  # fmt: skip
+
+
+def mirror_buffer_levels(
+    sample_solid_angle: float | None,
+    focal_px: float,
+    lod_bias: float,
+    margin_levels: float = MIRROR_CONTACT_MARGIN_LEVELS,
+    max_levels: int = MIRROR_MAX_COARSE_LEVELS,
+) -> int:
+    """How many times a reflector's mirror buffers may be halved (0 .. ``max_levels``): its
+    lookups' finest solid angle ``sample_solid_angle`` (materials/lobe_spread.py
+    finest_sample_solid_angle; None: unknown, 0) at an environment hit reads level
+    0.5 log2(Omega) + log2(focal_px) + lod_bias of the full buffer; ``margin_levels`` of it are kept
+    for geometry near the plane (see above)."""
+    if sample_solid_angle is None or not sample_solid_angle > 0 or not focal_px > 0:
+        return 0
+    finest_level = 0.5 * np.log2(sample_solid_angle) + np.log2(focal_px) + lod_bias
+    return int(np.clip(np.floor(finest_level - margin_levels), 0, max_levels))
+
+
 def box_screen_rect(corners: np.ndarray, view_projection: np.ndarray, size) -> tuple[float, float, float, float] | None:
     """Pixel rectangle (x0, y0, x1, y1), OpenGL rows (y up), of a box's image, its part behind
     the eye clipped away (edges crossing w = 0 cut there); None when nothing of it lies in front."""

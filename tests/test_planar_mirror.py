@@ -437,7 +437,10 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
     renderer = _renderer(ctx, mirror_floor_scene(0.05, extra_reflector=True))
     assert sorted(renderer.analysis.reflectors) == [0, 4]
     renderer.render(_camera(), "lobe-3")
-    assert unscissored(renderer.mirror_report) == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
+    # the glossy wall's lobe-3 lookups read coarse enough for a halved buffer (--mirror-sizes lobe,
+    # tests/test_mirror_sizes.py); the floor's do not
+    assert unscissored(renderer.mirror_report) == ["floor: mirror pass 240x160", "glossy wall: mirror pass 120x80"]
+    assert renderer.mirror_passes.coarse_levels == {0: 0, 4: 1}
     assert renderer.mirror_passes.drawn == [0, 4] and renderer.mirror_passes.skipped == {}
     below = Camera(position=(0.0, -1.0, 2.0), target=(0.0, -1.0, -1.0))
     renderer.render(below, "lobe-3")
@@ -454,6 +457,9 @@ def test_mirror_passes_are_skipped_where_not_needed(ctx):
     assert renderer.mirror_passes.drawn == [] and set(renderer.mirror_passes.skipped) == {0, 4}
     # Back to lobe-N with the same camera: the passes are drawn (and reported) again, not the
     # prefiltered frame's report kept.
+    renderer.render(_camera(), "lobe-3")
+    assert unscissored(renderer.mirror_report) == ["floor: mirror pass 240x160", "glossy wall: mirror pass 120x80"]
+    renderer.configure(mirror_lobe_sizes=False)
     renderer.render(_camera(), "lobe-3")
     assert unscissored(renderer.mirror_report) == ["floor: mirror pass 240x160", "glossy wall: mirror pass 240x160"]
     renderer.configure(enabled_reflectors={0})

@@ -303,7 +303,8 @@ def test_walkthrough_report_tables(tmp_path):
            "skip_reasons": {"outside the view": 2}, "occlusion_test_ms": 1.0, "mirror_ms_without_test": 9.0,
            "mirror_passes_without_test": 2, "camera_ms_without_prepass": 6.0, "mirror_ms_without_scissor": 4.0,
            "mirror_pixels_scissored": 300, "mirror_pixels": 1200, "frame_ms_without_records": 11.0, "draws": 11,
-           "uniform_values_set": 400, "uniform_writes": 90}  # fmt: skip
+           "uniform_values_set": 400, "uniform_writes": 90, "mirror_ms_full_buffers": 7.0,
+           "mirror_pixels_full_buffers": 4800}  # fmt: skip
     result = {"scene": "x", "objects": 6, "reflectors": 3, "cube_maps": 2, "cube_memory_mb": 16.0,
               "cube_memory_full_mb": 20.0, "cube_face_sizes": {256: 1, 64: 1}, "startup_cold_full_s": 2.5,
               "reflector_cubes_deferred": 3, "cubes_built_on_demand": 0,
@@ -311,11 +312,12 @@ def test_walkthrough_report_tables(tmp_path):
               "warm_stages": {"cube maps": 0.1}, "cube_face_draws": 40, "cube_face_culled": 20,
               "frames": [row], "rooms": 1}  # fmt: skip
     text = "\n".join(_scene_markdown(result) + _count_markdown([result]))
-    assert "| 0 | 0.0 | 8 | 3 | 1 | 5 | 4 / 2 | 7 / 1 | 1 / 2 | outside the view: 2 | 2, 9 | 4 | 25 % |" in text
+    assert "| 0 | 0.0 | 8 | 3 | 1 | 5 | 4 / 2 | 7 / 1 | 1 / 2 | outside the view: 2 | 2, 9 | 4 | 25 % | 7 |" in text
     assert (
         "| 1 | 6 | 3 | 2 | 16 (20) | 2.0 (2.5) | 40 / 20 | 0.5 | 8 | 3 | 5 | 4 / 2 | 1.0 / 2.0 | 2.0, 9 | 4 "
-        "| 25 % | 6 | 11, 400 / 90 | 11 (8) |" in text
+        "| 25 % | 7 (25 %) | 6 | 11, 400 / 90 | 11 (8) |" in text
     )
+    assert "with every buffer at the mirror scale (no lobe sizes) 7 ms (the lobe sizes keep 25 %" in text
     assert "11 draws a frame set 400 uniform values, of which 90 were not already" in text
     assert "faces 1 x 256^2, 1 x 64^2" in text
     json.dumps(result)  # the record is JSON

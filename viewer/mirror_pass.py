@@ -13,7 +13,7 @@ import moderngl
 import numpy as np
 
 from lobeview.core.methods import Method
-from lobeview.materials.lobe_spread import lobe_spread
+from lobeview.materials.lobe_spread import finest_sample_solid_angle, lobe_spread
 from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf
 
@@ -101,6 +101,7 @@ class MirrorPasses:
         self.probes = probes
         self.environment = drawer.environment
         self._spreads: dict = {}  # (reflector, N, normalize, pattern) -> materials.lobe_spread.lobe_spread
+        self._footprints: dict = {}  # (reflector, N) -> finest lookup solid angle (None: unbounded)
         self.targets: dict[tuple[int, str], MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
@@ -110,6 +111,7 @@ class MirrorPasses:
         self.skipped: dict[int, str] = {}  # reflector -> why it got none in the last frame
         self.occlusion_seconds = 0.0  # the last drawn frame's occlusion test (0: not run)
         self.scissored_pixels: dict[int, int] = {}  # reflector -> pixels the scissor saved, last frame
+        self.coarse_levels: dict[int, int] = {}  # reflector -> times its buffers were halved, last frame
 
     def invalidate(self) -> None:
         """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
@@ -119,6 +121,7 @@ class MirrorPasses:
         """What the buffers show and a reflector's lobes may have changed (a material edit)."""
         self.generation += 1
         self._spreads.clear()
+        self._footprints.clear()
 
     def lobe_spread(self, index: int, method: Method) -> tuple[float, float] | None:
         """How far the lobe-N lookups of reflector ``index`` reach (None: not lobe-N, unbounded)."""
@@ -131,6 +134,21 @@ class MirrorPasses:
             self._spreads[key] = lobe_spread(lobes, method.samples, method.normalize) if lobes else None
         return self._spreads[key]
 
+    def finest_footprint(self, index: int, method: Method, max_view_angle: float) -> float | None:
+        """The smallest solid angle one lobe-N lookup of reflector ``index`` reads from views up to
+        ``max_view_angle`` (radians; scenes/planar_mirror.py reflector_max_view_angle); None: not
+        lobe-N, or lobes that textures vary (no bound here)."""
+        mat = self.drawer.material_of(index)
+        if method.kind != "lobe" or per_pixel_lobes(mat):
+            return None
+        key = (index, method.samples, round(float(max_view_angle), 6))
+        if key not in self._footprints:
+            lobes = specular_lobes(build_bsdf(mat.desc))
+            self._footprints[key] = (
+                finest_sample_solid_angle(lobes, method.samples, max_view_angle) if lobes else None
+            )  # fmt: skip
+        return self._footprints[key]
+
     def render(
         self,
         camera: Camera,
@@ -142,6 +160,7 @@ class MirrorPasses:
         occlusion: bool = True,
         spreads: dict | None = None,
         lod_bias: float = 0.0,
+        footprints: dict | None = None,
     ) -> dict:
         """The buffers of the reflectors that need them for ``camera`` (index -> {'mirror' and/or
         'see-through': targets}); reused while the camera, the size, the options and the materials
@@ -150,21 +169,26 @@ class MirrorPasses:
         ``occlusion``: a reflector that opaque objects hide at every pixel centre gets no pass.
         ``spreads``: reflector -> how far its lobe-N lookups reach (materials/patterns.py
         lobe_spread; None or absent: unbounded), with the lookups' ``lod_bias``: each pass is
-        scissored to the region they can read (scenes/planar_mirror.py mirror_scissor)."""
-        from lobeview.scenes.planar_mirror import mirror_camera, mirror_scissor
+        scissored to the region they can read (scenes/planar_mirror.py mirror_scissor).
+        ``footprints``: reflector -> its lobe-N lookups' finest solid angle (finest_footprint; None
+        or absent: full size): its buffers are halved as often as those lookups allow
+        (scenes/planar_mirror.py mirror_buffer_levels)."""
+        from lobeview.scenes.planar_mirror import mirror_buffer_levels, mirror_camera, mirror_scissor
 
         spreads = spreads or {}
+        footprints = footprints or {}
         width, height = frame_size
         view_proj = camera.view_projection(width / height)
         key = (
             tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y, camera.near, camera.far,
             tuple(frame_size), scale, specular, tuple(sorted(reflectors)), self.generation, occlusion,
-            tuple(sorted(spreads.items())), lod_bias,
+            tuple(sorted(spreads.items())), lod_bias, tuple(sorted(footprints.items())),
         )  # fmt: skip
         if key == self._key:
             return self._active
-        report, active, skipped, scissored = [], {}, {}, {}
-        size = buffer_size(frame_size, scale)
+        report, active, skipped, scissored, coarse = [], {}, {}, {}, {}
+        full_size = buffer_size(frame_size, scale)
+        full_focal = full_size[1] / 2.0 / np.tan(np.radians(camera.fov_y) / 2.0)
         projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
         reasons = {index: skip_reason(reflector, camera, view_proj) for index, reflector in reflectors.items()}
         candidates = [index for index, reason in reasons.items() if reason is None]
@@ -183,6 +207,8 @@ class MirrorPasses:
                 skipped[index] = reason
                 continue
             active[index] = {}
+            coarse[index] = mirror_buffer_levels(footprints.get(index), full_focal, lod_bias)
+            size = buffer_size(frame_size, scale / 2.0 ** coarse[index])
             for kind in reflector.passes:
                 targets = self.targets.get((index, kind))
                 if targets is None or targets.size != size:
@@ -219,7 +245,15 @@ class MirrorPasses:
         self._key, self._active, self.report = key, active, report
         self.drawn, self.skipped = list(active), skipped
         self.scissored_pixels = scissored  # reflector -> buffer pixels its passes did not shade
+        self.coarse_levels = coarse
         return active
+
+    @property
+    def drawn_pixels(self) -> int:
+        """Buffer pixels of the last frame's passes (each at its own size, scissor not counted)."""
+        if not self.drawn:
+            return 0
+        return sum(t.size[0] * t.size[1] for kinds in self._active.values() for t in kinds.values())
 
     @property
     def drawn_passes(self) -> int:

@@ -245,11 +245,22 @@ class SceneRenderer(RendererBase):
                 index: self.mirror_passes.lobe_spread(index, self.drawer.object_method(index, method))
                 for index in reflectors
             }
+        footprints = {}
+        if method is not None and settings.mirror_lobe_sizes:
+            from lobeview.scenes.planar_mirror import reflector_max_view_angle
+
+            eye = camera.position
+            footprints = {
+                index: self.mirror_passes.finest_footprint(
+                    index, self.drawer.object_method(index, method), reflector_max_view_angle(reflector, eye)
+                )
+                for index, reflector in reflectors.items()
+            }
         bias = Method("lobe", 1).default_lod_bias(self.mip_filter) if lod_bias is None else float(lod_bias)
         occlusion = settings.mirror_occlusion and not jitters
         return self.mirror_passes.render(
             camera, self.size, reflectors, names, settings.mirror_scale, settings.mirror_specular, occlusion,
-            spreads, bias,
+            spreads, bias, footprints,
         )  # fmt: skip
 
     def invalidate_mirrors(self) -> None:

@@ -52,6 +52,9 @@ class RenderSettings:
     mirror_occlusion: bool = True
     # A lobe-N reflector's pass shades only the buffer region its lookups can read.
     mirror_scissor: bool = True
+    # A lobe-N reflector's buffers at 1/2 or 1/4 of mirror_scale where its finest lookups read that
+    # much coarser (scenes/planar_mirror.py mirror_buffer_levels); False: every buffer at mirror_scale.
+    mirror_lobe_sizes: bool = True
     frustum_culling: bool = True  # objects outside a pass's frustum are not drawn
     depth_prepass: bool = True  # opaque depth first: the camera pass shades once per pixel
     # Per-object draw state recorded once and replayed per draw (viewer/interface.py DrawRecorder).
