@@ -88,6 +88,24 @@ def scene_content_key(
     return h.hexdigest()[:20]
 
 
+def light_report(named_lights: list, shown: int = 8) -> str:
+    """One line saying which cube maps hold bright sources taken out as cap lights (issue 39:
+    what each object sees; an object whose cube has none integrates no light), from (object
+    name, its cube's CapLights) pairs: per object the lights' count and angular radii, the
+    objects with the most lights first, ``shown`` of them."""
+    seen = sorted(((name, lights) for name, lights in named_lights if lights), key=lambda item: -len(item[1]))
+    if not seen:
+        return f"[lights] no bright source in any of the {len(named_lights)} cube maps: no cap lights"
+    parts = []
+    for name, lights in seen[:shown]:
+        radii = sorted(float(np.degrees(np.arccos(np.clip(light.cos_radius, -1.0, 1.0)))) for light in lights)
+        span = f"{radii[0]:.1f}" if len(radii) == 1 else f"{radii[0]:.1f}-{radii[-1]:.1f}"
+        parts.append(f"{name} {len(lights)} ({span} deg)")
+    more = f", and {len(seen) - shown} more" if len(seen) > shown else ""
+    return (f"[lights] bright sources as cap lights in {len(seen)} of {len(named_lights)} cube maps: "
+            + ", ".join(parts) + more)  # fmt: skip
+
+
 class CubeBake:
     """Renders cube maps through ``drawer`` (viewer/object_drawer.py ObjectDrawer: its
     environment, background and draw loop); ``objects`` are its GPU objects (``.cube``,
@@ -230,6 +248,13 @@ class CubeBake:
         if not self.build_from_cache(objects, wanted, key, sizes):
             for _ in self.build_steps(objects, wanted, sizes):
                 pass
+        elif self.progress and self.bright_sources:
+            print(
+                light_report([(objects[i].name, objects[i].cube.lights) for i in wanted]), file=sys.stderr, flush=True
+            )
+
+    def _report_lights(self, objects: list, wanted: list[int]) -> None:
+        print(light_report([(objects[i].name, objects[i].cube.lights) for i in wanted]), file=sys.stderr, flush=True)
 
     def build_steps(
         self,
@@ -289,6 +314,10 @@ class CubeBake:
                     file=sys.stderr,
                     flush=True,
                 )
+        if self.progress and announce and self.bright_sources:
+            print(
+                light_report([(objects[i].name, objects[i].cube.lights) for i in wanted]), file=sys.stderr, flush=True
+            )
         if cache_file is not None:
             # float32, not float16: a sun seen through a window exceeds half precision's 65504.
             arrays = {f"cube_{i}": f.astype(np.float32) for i, f in faces.items()}
