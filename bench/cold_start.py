@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -147,23 +146,17 @@ def markdown(results: list[dict], device: str, stamp: str, command: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from lobeview.bench.soak import x_display
     from lobeview.core.errors import parse_size
 
     p = argparse.ArgumentParser(prog="python -m lobeview.bench.cold_start", description=__doc__.split("\n\n")[0])
     p.add_argument("--scenes", nargs="+", default=list(DEFAULT_SCENES), help="scenes (default builtin:apartment)")
-    p.add_argument("--size", default="1280x800", help="window size (default 1280x800)")
     p.add_argument("--timeout", type=float, default=900.0, help="seconds to wait for the finished state (900)")
-    p.add_argument("--out", default=None, help="Markdown report (default bench/results/cold-start-STAMP.md, + .json)")
+    p.add_argument("--size", type=parse_size, default=(1280, 800), help="window size WxH (default 1280x800)")
+    p.add_argument("--out", help="Markdown report (default bench/results/cold-start-STAMP.md, + .json)")
     args = p.parse_args(argv)
-    size = parse_size(args.size)
-    server = None
-    display = os.environ.get("DISPLAY")
-    if not display:
-        if shutil.which("Xvfb") is None:
-            raise SystemExit("needs an X display: set DISPLAY or install Xvfb")
-        from lobeview.bench.soak import start_xvfb
-
-        server, display = start_xvfb(500 + os.getpid() % 300, f"{size[0] + 64}x{size[1] + 64}x24")
+    size = args.size
+    server, display = x_display(size)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path(__file__).parent / "results" / f"cold-start-{stamp}.md"
     results = []
@@ -179,10 +172,10 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if server is not None:
             server.terminate()
-    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.context import create_headless_context, renderer_description
 
     ctx = create_headless_context()
-    device = f"{ctx.info['GL_RENDERER']} ({ctx.info['GL_VENDOR']}), {ctx.info['GL_VERSION']}"
+    device = renderer_description(ctx)
     ctx.release()
     command = "python -m lobeview.bench.cold_start " + " ".join(argv if argv is not None else sys.argv[1:])
     out.parent.mkdir(parents=True, exist_ok=True)

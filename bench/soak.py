@@ -125,6 +125,16 @@ def start_xvfb(display_number: int, screen: str = "1024x768x24") -> tuple[subpro
     return proc, display  # the caller reports the last one that did not start
 
 
+def x_display(size: tuple[int, int], first_number: int = 500) -> tuple[subprocess.Popen | None, str]:
+    """$DISPLAY when set, else a virtual X server (returned, for the caller to terminate) whose
+    screen holds a window of ``size`` (the window benches)."""
+    if os.environ.get("DISPLAY"):
+        return None, os.environ["DISPLAY"]
+    if shutil.which("Xvfb") is None:
+        raise SystemExit("needs an X display: set DISPLAY or install Xvfb")
+    return start_xvfb(first_number + os.getpid() % 300, f"{size[0] + 64}x{size[1] + 64}x24")
+
+
 def _display_for_soak() -> tuple[subprocess.Popen | None, str]:
     if os.environ.get("DISPLAY"):
         return None, os.environ["DISPLAY"]

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import shutil
 import statistics
 import subprocess
 import sys
@@ -105,15 +104,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--fixed-frames", type=int, default=12, help="frames at fixed full resolution (default 12)")
     p.add_argument("--out", default=None, help="Markdown report (default bench/results/window-STAMP.md, + .json)")
     args = p.parse_args(argv)
-    size = parse_size(args.size)
-    server = None
-    display = os.environ.get("DISPLAY")
-    if not display:
-        if shutil.which("Xvfb") is None:
-            raise SystemExit("needs an X display: set DISPLAY or install Xvfb")
-        from lobeview.bench.soak import start_xvfb
+    from lobeview.bench.soak import x_display
 
-        server, display = start_xvfb(500 + os.getpid() % 300, f"{size[0] + 64}x{size[1] + 64}x24")
+    size = parse_size(args.size)
+    server, display = x_display(size)
     stamp = time.strftime("%Y%m%d-%H%M%S")
     out = Path(args.out) if args.out else Path(__file__).parent / "results" / f"window-{stamp}.md"
     results = {}
