@@ -105,11 +105,17 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
             renderer.invalidate_mirrors()
             unscissored_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
             renderer.configure(mirror_scissor=True)
+            # Buffers of another size are allocated anew: each variant is drawn once untimed so
+            # that neither time holds the allocation (a GPU's is small, llvmpipe's is not).
             renderer.configure(mirror_lobe_sizes=False)
+            renderer.invalidate_mirrors()
+            renderer.render_mirror_passes(camera, False, method)
             renderer.invalidate_mirrors()
             full_buffers_ms = _finished_ms(renderer.ctx, renderer.render_mirror_passes, camera, False, method)
             full_buffer_pixels = renderer.mirror_passes.drawn_pixels
             renderer.configure(mirror_lobe_sizes=True)
+            renderer.invalidate_mirrors()
+            renderer.render_mirror_passes(camera, False, method)
         renderer.invalidate_mirrors()
         renderer.draw_counts.new_frame()
         UNIFORM_WRITES.reset()
