@@ -101,7 +101,7 @@ class MirrorPasses:
         self.probes = probes
         self.environment = drawer.environment
         self._spreads: dict = {}  # (reflector, N, normalize, pattern) -> materials.lobe_spread.lobe_spread
-        self._footprints: dict = {}  # (reflector, N) -> finest lookup solid angle (None: unbounded)
+        self._footprints: dict = {}  # (reflector, N, view-angle bound) -> finest lookup solid angle or None
         self.targets: dict[tuple[int, str], MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
