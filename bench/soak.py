@@ -125,22 +125,20 @@ def start_xvfb(display_number: int, screen: str = "1024x768x24") -> tuple[subpro
     return proc, display  # the caller reports the last one that did not start
 
 
-def x_display(size: tuple[int, int], first_number: int = 500) -> tuple[subprocess.Popen | None, str]:
+def x_display(
+    size: tuple[int, int] | None = None, first_number: int = 500, who: str = "the window bench"
+) -> tuple[subprocess.Popen | None, str]:
     """$DISPLAY when set, else a virtual X server (returned, for the caller to terminate) whose
-    screen holds a window of ``size`` (the window benches)."""
+    screen holds a window of ``size`` (None: the default 1024x768 screen); ``who`` names the
+    caller in the message when there is neither."""
     if os.environ.get("DISPLAY"):
         return None, os.environ["DISPLAY"]
     if shutil.which("Xvfb") is None:
-        raise SystemExit("needs an X display: set DISPLAY or install Xvfb")
-    return start_xvfb(first_number + os.getpid() % 300, f"{size[0] + 64}x{size[1] + 64}x24")
-
-
-def _display_for_soak() -> tuple[subprocess.Popen | None, str]:
-    if os.environ.get("DISPLAY"):
-        return None, os.environ["DISPLAY"]
-    if shutil.which("Xvfb") is None:
-        raise SystemExit("the soak test needs an X display: set DISPLAY or install Xvfb")
-    return start_xvfb(400 + os.getpid() % 300)
+        raise SystemExit(f"{who} needs an X display: set DISPLAY or install Xvfb")
+    number = first_number + os.getpid() % 300
+    if size is None:
+        return start_xvfb(number)
+    return start_xvfb(number, f"{size[0] + 64}x{size[1] + 64}x24")
 
 
 def run_soak(
@@ -165,7 +163,7 @@ def run_soak(
         if step["action"] == "click":
             step["x"], step["y"] = step["x"] * size[0], step["y"] * size[1]
     (work / "soak.json").write_text(json.dumps(steps))
-    xvfb, display = _display_for_soak()
+    xvfb, display = x_display(first_number=400, who="the soak test")
     t0 = time.perf_counter()
     stderr_file = open(work / "viewer.stderr", "w+")  # a file, not a pipe: a full pipe would block the viewer
     try:

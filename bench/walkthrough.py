@@ -95,6 +95,7 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         mirrors_drawn = method.kind != "prefiltered"
         unculled_ms, unculled_passes = 0.0, 0
         unscissored_ms = full_buffers_ms = 0.0
+        full_buffer_pixels = 0
         if mirrors_drawn:  # first without the occlusion test, then without the scissor, then
             # with every buffer at the mirror scale: the frame then keeps its own buffers
             renderer.configure(mirror_occlusion=False)
@@ -124,8 +125,6 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
         )
         scissored_pixels = sum(renderer.mirror_passes.scissored_pixels.values())
         buffer_pixels = renderer.mirror_passes.drawn_pixels  # each pass at its own size
-        if not mirrors_drawn:
-            full_buffer_pixels = 0
         mirror = renderer.draw_counts.of("mirror")
         mirror_draws, mirror_culled = mirror.drawn, mirror.culled
         reasons = dict(Counter(renderer.mirror_passes.skipped.values()))

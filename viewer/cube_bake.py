@@ -249,9 +249,7 @@ class CubeBake:
             for _ in self.build_steps(objects, wanted, sizes):
                 pass
         elif self.progress and self.bright_sources:
-            print(
-                light_report([(objects[i].name, objects[i].cube.lights) for i in wanted]), file=sys.stderr, flush=True
-            )
+            self._report_lights(objects, wanted)
 
     def _report_lights(self, objects: list, wanted: list[int]) -> None:
         print(light_report([(objects[i].name, objects[i].cube.lights) for i in wanted]), file=sys.stderr, flush=True)
@@ -315,9 +313,7 @@ class CubeBake:
                     flush=True,
                 )
         if self.progress and announce and self.bright_sources:
-            print(
-                light_report([(objects[i].name, objects[i].cube.lights) for i in wanted]), file=sys.stderr, flush=True
-            )
+            self._report_lights(objects, wanted)
         if cache_file is not None:
             # float32, not float16: a sun seen through a window exceeds half precision's 65504.
             arrays = {f"cube_{i}": f.astype(np.float32) for i, f in faces.items()}
