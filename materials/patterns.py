@@ -276,16 +276,26 @@ def lobe_sample_area(
     squared (the lobe's width). Times :func:`wide_lobe_footprint_scale` (1 up to alpha 0.3): the
     footprint a lookup filters over, not the lobe's share alone (finest_sample_solid_angle, which
     sizes cube faces by the lobe's width, divides it out again)."""
+    return float(lobe_sample_areas(distribution, np.asarray(wo, dtype=np.float64), n, xi_border))
+
+
+def lobe_sample_areas(
+    distribution: MicrofacetDistribution, wo: np.ndarray, n: int, xi_border: float = XI_BORDER
+) -> np.ndarray:
+    """:func:`lobe_sample_area` of every direction of ``wo`` (shape (..., 3)), shape (...): one
+    numpy pass instead of one call per view (the mirror passes' per-reflector tables)."""
+    wo = np.asarray(wo, dtype=np.float64)[..., None, :]  # (..., 1, 3) against the two border azimuths
     phis = np.array([0.0, np.pi / 2.0])
-    h_border = spherical_direction(theta_thresh(distribution, phis, xi_border), phis)
+    h_border = spherical_direction(theta_thresh(distribution, phis, xi_border), phis)  # (2, 3)
     w_centre = reflect(wo, np.array([0.0, 0.0, 1.0]))
-    w_border = reflect(np.broadcast_to(wo, h_border.shape), h_border)
-    angles = np.arccos(np.clip(dot(w_border, w_centre), -1.0, 1.0))
-    u, v = 2.0 * np.sin(0.5 * np.minimum(angles, MAX_ELLIPSE_ANGLE))
+    w_border = reflect(np.broadcast_to(wo, wo.shape[:-2] + h_border.shape), h_border)
+    angles = np.arccos(np.clip(dot(w_border, w_centre), -1.0, 1.0))  # (..., 2)
+    radii = 2.0 * np.sin(0.5 * np.minimum(angles, MAX_ELLIPSE_ANGLE))
+    u, v = radii[..., 0], radii[..., 1]
     area = np.pi * u * v / n
     if uses_line_pattern(distribution.alpha_x, distribution.alpha_y):  # not narrower than the lobe's width
-        area = max(area, np.pi * LINE_MIN_FOOTPRINT_FRACTION * min(u, v) ** 2)
-    return float(area * wide_lobe_footprint_scale(distribution))
+        area = np.maximum(area, np.pi * LINE_MIN_FOOTPRINT_FRACTION * np.minimum(u, v) ** 2)
+    return area * wide_lobe_footprint_scale(distribution)
 
 
 def wide_lobe_footprint_scale(distribution: MicrofacetDistribution) -> float:

@@ -271,6 +271,14 @@ MIRROR_VIEW_ANGLE_STEP = np.radians(2.0)  # view-angle bounds rounded up to this
 MIRROR_FOOTPRINT_MAX_VIEW_ANGLE = np.radians(89.0)
 
 
+def mirror_view_angle_bounds() -> np.ndarray:
+    """Every value reflector_max_view_angle returns: multiples of MIRROR_VIEW_ANGLE_STEP below
+    MIRROR_FOOTPRINT_MAX_VIEW_ANGLE, then that cap (radians, ascending)."""
+    steps = int(np.ceil(MIRROR_FOOTPRINT_MAX_VIEW_ANGLE / MIRROR_VIEW_ANGLE_STEP - 1e-9))
+    multiples = np.arange(steps) * MIRROR_VIEW_ANGLE_STEP
+    return np.append(multiples[multiples < MIRROR_FOOTPRINT_MAX_VIEW_ANGLE], MIRROR_FOOTPRINT_MAX_VIEW_ANGLE)
+
+
 def reflector_max_view_angle(reflector: PlanarReflector, eye) -> float:
     """An upper bound of the angle between the reflector's normal and the direction to ``eye`` over
     its surface, rounded up to MIRROR_VIEW_ANGLE_STEP (at most MIRROR_FOOTPRINT_MAX_VIEW_ANGLE):

@@ -143,3 +143,46 @@ def test_near_mirror_floor_keeps_its_full_buffer(context):
     frames, levels, _, _ = _frames(context, 0.01)
     assert set(levels[True].values()) == {0}
     np.testing.assert_array_equal(frames[True], frames[False])
+
+
+def test_view_angle_bounds_hold_every_bound_the_reflector_gives():
+    """The mirror passes tabulate the footprint at mirror_view_angle_bounds: every bound that
+    reflector_max_view_angle returns must be one of them (else a frame computes it anew)."""
+    rng = np.random.default_rng(11)
+    floor = _floor()
+    bounds = {round(float(b), 6) for b in planar_mirror.mirror_view_angle_bounds()}
+    eyes = rng.uniform(-12.0, 12.0, (400, 3))
+    eyes[:, 1] = rng.uniform(0.001, 12.0, 400)
+    for eye in eyes:
+        assert round(planar_mirror.reflector_max_view_angle(floor, eye), 6) in bounds
+    ascending = planar_mirror.mirror_view_angle_bounds()
+    assert np.all(np.diff(ascending) > 0)
+    assert ascending[-1] == pytest.approx(planar_mirror.MIRROR_FOOTPRINT_MAX_VIEW_ANGLE)
+
+
+def test_mirror_passes_footprint_table_matches_one_bound_at_a_time(context):
+    """viewer/mirror_pass.py tabulates a reflector's finest footprint over every bound in one
+    numpy pass: each entry equals finest_sample_solid_angle of that bound alone, and a bound off
+    the grid is computed as asked."""
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    sky = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=16, name="white")
+    renderer = SceneRenderer(
+        context, mirror_floor_scene(0.3), sky, size=(64, 40), progress=False,
+        settings=RenderSettings(cube_face_size=16),
+    )  # fmt: skip
+    try:
+        passes = renderer.mirror_passes
+        reflectors = renderer.reflectors()
+        assert reflectors
+        for index in reflectors:
+            lobes = specular_lobes(build_bsdf(renderer.drawer.material_of(index).desc))
+            for n in (3, 7, 15):
+                method = Method.parse(f"lobe-{n}")
+                for bound in list(planar_mirror.mirror_view_angle_bounds()) + [0.7, 1.5]:
+                    expected = finest_sample_solid_angle(lobes, n, bound)
+                    assert passes.finest_footprint(index, method, bound) == pytest.approx(expected, rel=1e-12)
+            assert passes.finest_footprint(index, Method.parse("fis-16"), 1.0) is None
+    finally:
+        renderer.release()

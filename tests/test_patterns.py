@@ -28,7 +28,7 @@ from lobeview.materials.patterns import (
 from lobeview.materials.presets import PRESETS
 from lobeview.materials.spec import build_bsdf
 from lobeview.materials.thesis import KurtLobe
-from lobeview.materials.vec import direction_from_angles_deg
+from lobeview.materials.vec import direction_from_angles_deg, spherical_direction
 
 
 def constant(value=1.0):
@@ -537,3 +537,20 @@ def test_ggx_tail_is_continuous_as_its_lookups_cross_the_horizon(alpha):
     tails = np.array([ggx_tail_integral(lobe, wo, radiance, 256, None, core, table.lookup(wo))[0]
                       for wo in (direction_from_angles_deg(t, 0.0) for t in thetas)])  # fmt: skip
     assert np.max(np.abs(np.diff(tails))) < 0.15, thetas[np.argmax(np.abs(np.diff(tails)))]
+
+
+@pytest.mark.parametrize("alphas", [(0.15, 0.15), (0.05, 0.3), (0.02, 0.4), (0.6, 0.6)])
+def test_lobe_sample_areas_equal_one_view_at_a_time(alphas):
+    """The vectorised footprint (mirror passes' tables) against the scalar one per view, on an
+    isotropic, an anisotropic ellipse, a line-pattern and a wide lobe."""
+    from lobeview.materials.patterns import lobe_sample_areas
+
+    rng = np.random.default_rng(5)
+    dist = MicrofacetDistribution("ggx", *alphas)
+    theta = rng.uniform(0.0, np.radians(89.0), (7, 4))
+    phi = rng.uniform(0.0, 2.0 * np.pi, (7, 4))
+    wo = spherical_direction(theta, phi)
+    areas = lobe_sample_areas(dist, wo, 7)
+    assert areas.shape == (7, 4)
+    one_by_one = np.array([[lobe_sample_area(dist, wo[i, j], 7) for j in range(4)] for i in range(7)])
+    np.testing.assert_allclose(areas, one_by_one, rtol=1e-13)

@@ -13,9 +13,10 @@ import moderngl
 import numpy as np
 
 from lobeview.core.methods import Method
-from lobeview.materials.lobe_spread import finest_sample_solid_angle, lobe_spread
+from lobeview.materials.lobe_spread import finest_sample_solid_angle, finest_sample_solid_angles, lobe_spread
 from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf
+from lobeview.scenes.planar_mirror import mirror_view_angle_bounds
 
 from .camera import Camera, outside_frustum, perspective
 from .frame import begin_pass, new_framebuffer
@@ -101,7 +102,7 @@ class MirrorPasses:
         self.probes = probes
         self.environment = drawer.environment
         self._spreads: dict = {}  # (reflector, N, normalize, pattern) -> materials.lobe_spread.lobe_spread
-        self._footprints: dict = {}  # (reflector, N, view-angle bound) -> finest lookup solid angle or None
+        self._footprints: dict = {}  # (reflector, N) -> {view-angle bound: finest lookup solid angle or None} or None
         self.targets: dict[tuple[int, str], MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
@@ -141,13 +142,27 @@ class MirrorPasses:
         mat = self.drawer.material_of(index)
         if method.kind != "lobe" or per_pixel_lobes(mat):
             return None
-        key = (index, method.samples, round(float(max_view_angle), 6))
+        key = (index, method.samples)
         if key not in self._footprints:
+            # Every bound reflector_max_view_angle gives, in one numpy pass: computed one bound at
+            # a time as the camera reached it, the walkthrough's frames spent milliseconds here.
             lobes = specular_lobes(build_bsdf(mat.desc))
-            self._footprints[key] = (
-                finest_sample_solid_angle(lobes, method.samples, max_view_angle) if lobes else None
-            )  # fmt: skip
-        return self._footprints[key]
+            bounds = mirror_view_angle_bounds()
+            finest = finest_sample_solid_angles(lobes, method.samples, bounds) if lobes else None
+            self._footprints[key] = None
+            if finest is not None:
+                self._footprints[key] = {
+                    round(float(b), 6): (float(f) if np.isfinite(f) else None)
+                    for b, f in zip(bounds, finest, strict=True)
+                }
+        table = self._footprints[key]
+        if table is None:
+            return None
+        bound = round(float(max_view_angle), 6)
+        if bound not in table:  # a bound off the grid (not from reflector_max_view_angle)
+            lobes = specular_lobes(build_bsdf(mat.desc))
+            table[bound] = finest_sample_solid_angle(lobes, method.samples, max_view_angle)
+        return table[bound]
 
     def render(
         self,
