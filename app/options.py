@@ -141,6 +141,14 @@ def add_scene_arguments(p) -> None:
         "shows each pass's size); 'full': every buffer at --mirror-scale",
     )
     a(
+        "--self-occlusion",
+        choices=("on", "off"),
+        default="on",
+        help="'on' (default): specular lookups that an object's own surface hides (its visibility cones, "
+        "traced against its triangles at load) see the object instead of its cube map; 'off': the cube map "
+        "everywhere",
+    )
+    a(
         "--cache",
         help="cache folder for the demo scene, cube maps, prefiltered maps and tables"
         " (default ~/.cache/lobeview or $LOBEVIEW_CACHE)",
@@ -330,6 +338,7 @@ def scene_renderer_from_args(
             method_target=getattr(args, "method_target", None),
             mirrors=bool(args.mirrors),
             mirror_lobe_sizes=getattr(args, "mirror_sizes", "lobe") == "lobe",
+            self_occlusion=getattr(args, "self_occlusion", "on") == "on",
         ),
         progressive_cubes=progressive_cubes,
     )
@@ -396,6 +405,8 @@ def shot_command(
             parts.append(f"--mirror-scale={args.mirror_scale:g}")
         if getattr(args, "mirror_sizes", "lobe") != "lobe":
             parts.append(f"--mirror-sizes={args.mirror_sizes}")
+        if getattr(args, "self_occlusion", "on") != "on":
+            parts.append(f"--self-occlusion={args.self_occlusion}")
         if getattr(args, "cache", None):
             parts.append(f"--cache={shlex.quote(str(args.cache))}")
     if materials is not None:

@@ -172,6 +172,9 @@ class SceneObject:
     # Mesh units to world units (the cube root of the node transform's |determinant|): a
     # KHR_materials_volume thickness is given in the mesh's units (materials/volume.py).
     volume_scale: float = 1.0
+    # (V, 4) visibility cones against the object itself (scenes/self_visibility.py), traced on
+    # first use; None: not yet.
+    self_visibility: np.ndarray | None = None
 
 
 @dataclass

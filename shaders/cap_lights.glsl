@@ -173,6 +173,9 @@ vec3 cap_light_radiance(Lobe l, vec3 wo, mat3 tbn, int k) {
 vec3 cap_lights_radiance(Lobe l, vec3 wo, mat3 tbn) {
     vec3 sum = vec3(0.0);
     if (wo.z <= 0.0) return sum;
-    for (int k = 0; k < u_cap_light_count; ++k) sum += cap_light_radiance(l, wo, tbn, k);
+    // A light the object's own surface hides from this point (self_occlusion.glsl): the object
+    // is seen there instead, which the residual cube's lookups already count.
+    for (int k = 0; k < u_cap_light_count; ++k)
+        sum += self_visibility(u_cap_light_axis[k].xyz) * cap_light_radiance(l, wo, tbn, k);
     return sum;
 }

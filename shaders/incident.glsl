@@ -60,10 +60,10 @@ vec3 lookup(vec3 dir_world, float lod) {
 #if !defined(METHOD_MC)
     lod += lod_offset;  // filtered methods only; mc-N and the reference read level 0
 #endif
-    return RADIANCE_LOD(d, max(lod, 0.0)).rgb;
+    return self_occluded(dir_world, RADIANCE_LOD(d, max(lod, 0.0)).rgb);
 }
 #else
-vec3 lookup(vec3 dir_world, float lod) { return RADIANCE_LOD(dir_world, max(lod, 0.0)).rgb; }
+vec3 lookup(vec3 dir_world, float lod) { return self_occluded(dir_world, RADIANCE_LOD(dir_world, max(lod, 0.0)).rgb); }
 #endif
 
 #if defined(MIRROR)

@@ -11,6 +11,7 @@
 //                sampling with the power heuristic (Veach 1997), so suns converge.
 #include "bsdf.glsl"
 #include "patterns.glsl"
+#include "self_occlusion.glsl"
 #include "cap_lights.glsl"
 
 #if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py

@@ -104,11 +104,12 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
             vec3 local_r = 2.0 * dot(h, wo) * h - wo;
             vec3 r = tbn * vec3(local_r.xy, through ? -local_r.z : local_r.z);
             r = normalize(mix(normal_side, r, lean));
+            vec3 r_from_point = r;  // the self-occlusion cone's direction (incident.glsl)
 #if defined(PARALLAX)
             float unused_offset;
             r = proxy_direction(r, unused_offset);
 #endif
-            vec3 value = textureLod(u_split_sum[l.dist], r, lod).rgb * weight;
+            vec3 value = self_occluded(r_from_point, textureLod(u_split_sum[l.dist], r, lod).rgb) * weight;
             radiance_all += value;
             if (local_r.z > 0.0) {
                 radiance += value;
@@ -153,6 +154,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
             sum += lookup(axis, cube_lod(axis, area, u_face_size)) * energy;
             continue;
         }
+        vec3 axis_from_point = axis;  // the self-occlusion cone's direction (incident.glsl)
 #if defined(PARALLAX)
         float unused_offset;
         axis = proxy_direction(axis, unused_offset);
@@ -160,7 +162,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // Fitted lobe j owns slices j depth .. (j + 1) depth - 1: linear filtering in z never
         // mixes two lobes because z stays between the first and last slice centre of the block.
         float z = (float(j * depth) + (depth > 1 ? s : 0.0) + 0.5) / float(count * depth);
-        sum += texture(u_lobe_maps[lobe_index], vec3(direction_to_latlong(axis), z)).rgb * energy;
+        sum += self_occluded(axis_from_point, texture(u_lobe_maps[lobe_index], vec3(direction_to_latlong(axis), z)).rgb) * energy;
     }
     return sum;
 }

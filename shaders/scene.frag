@@ -15,9 +15,11 @@ in vec3 v_normal;
 in vec4 v_tangent;
 in vec2 v_uv0;
 in vec2 v_uv1;
+in vec4 v_visibility;  // scenes/self_visibility.py (interpolated)
 
 uniform vec3 u_camera_position;
 uniform sampler2D u_lightmap;
+uniform int u_self_occlusion;  // 1: the visibility cones apply (RenderSettings.self_occlusion)
 #if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform int u_lightmap_texcoord;      // 0 or 1; -1: no lightmap, the environment's irradiance
 uniform float u_lightmap_intensity;
@@ -195,6 +197,15 @@ void main() {
     diffuse += sheen_term(wo.z) / PI * irradiance;  // KHR_materials_sheen, lit like the diffuse
     vec3 radiance = u_emission * emissive_texel.rgb + diffuse;
 #if defined(SPECULAR)
+    if (u_self_occlusion != 0 && v_visibility.w > SELF_NO_OCCLUSION + 1e-3) {
+        // What a hidden direction sees: the object itself, taken to look like this point (its
+        // diffuse and its specular reflectance at normal incidence, lit by its irradiance).
+        vec3 specular_reflectance = u_gltf_model == 1
+            ? mix(dielectric_f0 * specular_weight, base_color, metallic) : vec3(0.0);
+        g_self_cone = vec4(normalize(v_visibility.xyz), v_visibility.w);
+        g_self_normal = normalize(v_normal);
+        g_self_radiance = (albedo + specular_reflectance) / PI * irradiance;
+    }
 #if defined(METHOD_PREFILTERED)
     // prefiltered-rsibr (materials whose lobes no texture changes: viewer/rsibr.py)
     if (u_rsibr_lobes != 0) radiance += rsibr_radiance(wo, tbn);

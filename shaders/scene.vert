@@ -5,6 +5,7 @@ in vec3 in_normal;
 in vec4 in_tangent;
 in vec2 in_uv0;
 in vec2 in_uv1;
+in vec4 in_visibility;  // scenes/self_visibility.py: bent normal, cos of the cone's half angle
 
 uniform mat4 u_view_projection;
 #if defined(OBJECT_RECORDS)
@@ -19,6 +20,7 @@ out vec3 v_normal;
 out vec4 v_tangent;
 out vec2 v_uv0;
 out vec2 v_uv1;
+out vec4 v_visibility;
 // The same expression as depth.vert: the depth pre-pass (viewer/occlusion.py) must match exactly.
 invariant gl_Position;
 
@@ -28,6 +30,7 @@ void main() {
     v_tangent = in_tangent;
     v_uv0 = in_uv0;
     v_uv1 = in_uv1;
+    v_visibility = in_visibility;
 #if defined(OBJECT_RECORDS)
     v_object = in_object;
 #endif

@@ -20,17 +20,25 @@ after everything else) and Rational materials keep the per-object path
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
+from lobeview.core.progress import report
+from lobeview.scenes.self_visibility import NO_OCCLUSION, object_visibility_cones
+
 from .interface import DrawRecorder, bind_storage
 from .object_records import OBJECT_RECORDS_BINDING, RECORD_UNIFORMS, pack_object_record
 
-# Vertex layout of the scene's objects: position, normal, tangent (xyz, handedness), UV0, UV1.
-VERTEX_FORMAT = "3f 3f 4f 2f 2f"
-VERTEX_ATTRIBUTES = ("in_position", "in_normal", "in_tangent", "in_uv0", "in_uv1")
+# Vertex layout of the scene's objects: position, normal, tangent (xyz, handedness), UV0, UV1,
+# the visibility cone against the object itself (bent normal, cos of its half angle:
+# scenes/self_visibility.py).
+VERTEX_FORMAT = "3f 3f 4f 2f 2f 4f"
+VERTEX_ATTRIBUTES = ("in_position", "in_normal", "in_tangent", "in_uv0", "in_uv1", "in_visibility")
+VERTEX_FLOATS = 18
+POSITION_ONLY_FORMAT = f"3f {4 * (VERTEX_FLOATS - 3)}x"
 COMMAND_WORDS = 5  # DrawElementsIndirectCommand: count, instanceCount, firstIndex, baseVertex, baseInstance
 CULL_GROUP_SIZE = 64  # shaders/cull_commands.comp local_size_x
 GL_COMMAND_BARRIER_BIT = 0x00000040  # indirect commands written by a shader are read after this
@@ -47,18 +55,29 @@ class SceneGeometry:
         self.first_index = np.zeros(len(objects), dtype=np.int64)
         self.index_count = np.zeros(len(objects), dtype=np.int64)
         base_vertex = first = 0
+        t_cones = time.perf_counter()
+        traced_before = sum(obj.self_visibility is not None for obj in objects)
         for i, obj in enumerate(objects):
             m = obj.mesh
             uv1 = obj.uv1 if obj.uv1 is not None else np.zeros((len(m.positions), 2), np.float32)
-            vertices.append(np.concatenate([m.positions, m.normals, m.tangents, m.uvs, uv1], axis=1).astype(np.float32))
+            cones = object_visibility_cones(obj)
+            vertices.append(
+                np.concatenate([m.positions, m.normals, m.tangents, m.uvs, uv1, cones], axis=1).astype(np.float32)
+            )
             object_indices = np.asarray(m.indices, dtype=np.int64).ravel() + base_vertex
             indices.append(object_indices)
             self.first_index[i], self.index_count[i] = first, object_indices.size
             base_vertex += len(m.positions)
             first += object_indices.size
+        if traced_before < len(objects):
+            with_cone = sum(int(np.count_nonzero(obj.self_visibility[:, 3] > NO_OCCLUSION)) for obj in objects)
+            report(
+                f"self-occlusion cones: {with_cone} of {base_vertex} vertices see their own object"
+                f" ({time.perf_counter() - t_cones:.1f} s)"
+            )
         if base_vertex >= 2**32:
             raise ValueError(f"the scene has {base_vertex} vertices; 32-bit indices address at most 2^32")
-        data = np.concatenate(vertices) if vertices else np.zeros((1, 14), np.float32)
+        data = np.concatenate(vertices) if vertices else np.zeros((1, VERTEX_FLOATS), np.float32)
         index_data = np.concatenate(indices).astype(np.uint32) if indices else np.zeros(3, np.uint32)
         self.vertex_count = base_vertex
         self.vbo = ctx.buffer(np.ascontiguousarray(data).tobytes())
@@ -70,9 +89,18 @@ class SceneGeometry:
         """A vertex array of every object for ``program`` (the per-instance object index where
         the program reads it)."""
         if position_only:
-            content = [(self.vbo, "3f 44x", "in_position")]
+            content = [(self.vbo, POSITION_ONLY_FORMAT, "in_position")]
         else:
-            content = [(self.vbo, VERTEX_FORMAT, *VERTEX_ATTRIBUTES)]
+            # An attribute a program does not read (the linker removes it: in_visibility where no
+            # specular lobe is shaded) is skipped as padding.
+            formats, names = [], []
+            for part, name in zip(VERTEX_FORMAT.split(), VERTEX_ATTRIBUTES, strict=True):
+                if program.get(name, None) is None:
+                    formats.append(f"{4 * int(part[:-1])}x")
+                else:
+                    formats.append(part)
+                    names.append(name)
+            content = [(self.vbo, " ".join(formats), *names)]
         if program.get("in_object", None) is not None:
             content.append((self.object_slots, "1u/i", "in_object"))
         return ctx.vertex_array(program, content, self.ibo)

@@ -88,6 +88,7 @@ class SceneRenderer(RendererBase):
         packed = [pack_material(build_bsdf(scene.materials[obj.material].desc)) for obj in scene.objects]
         self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, analysis)
         shading.draw_records = settings.draw_records
+        shading.self_occlusion = settings.self_occlusion
         self.objects = self.drawer.objects
         self.draw_counts = self.drawer.draw_counts  # objects drawn and culled per kind of pass
         self.frame_draw_calls = (0, 0, 0)  # the last draw_frame's: per-object, multi-draws, culling passes
@@ -127,6 +128,7 @@ class SceneRenderer(RendererBase):
         self._settings = new
         self.drawer.settings = self.probes.settings = new
         self.shading.draw_records = new.draw_records
+        self.shading.self_occlusion = new.self_occlusion
         if rule_changed:  # the rule's picks again, or (None) every object back on the frame's method
             self.drawer.analysis = self._analyse(self.scene, new, self.cube_face_size)
             if new.method_target is None:

@@ -109,6 +109,7 @@ class SceneShading(ShadingBinder):
         self._dfg = None  # made on first use by a textured glTF lobe under normalised lobe-N
         self._anisotropic_dfg = None  # ... and by a textured anisotropic one
         self.draw_records = True  # RenderSettings.draw_records
+        self.self_occlusion = True  # RenderSettings.self_occlusion
         self._records = BoundedCache(MAX_DRAW_RECORDS)
         self.record_generation = 0  # bumped when what a record holds changes
         self.record_builds = 0  # records made so far (a count for tests and benchmarks)
@@ -121,6 +122,8 @@ class SceneShading(ShadingBinder):
     def set_pass_state(self, program, method: Method, lod_bias: float | None, seed: int) -> None:
         """ShadingBinder's pass state and the scene's lamps (shaders/lamps.glsl)."""
         super().set_pass_state(program, method, lod_bias, seed)
+        if has_uniform(program, "u_self_occlusion"):
+            set_uniform(program, "u_self_occlusion", 1 if self.self_occlusion else 0)
         if has_uniform(program, "u_lamp_count"):
             set_uniform(program, "u_lamp_count", len(self.lamps))
             for name, values in self._lamp_uniforms.items():

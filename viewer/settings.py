@@ -62,6 +62,10 @@ class RenderSettings:
     # The diffuse-shaded objects drawn by a few multi-draws whose commands a compute pass culls
     # (viewer/object_batches.py, issue 42); False: one draw call per object (kept for comparison).
     indirect_draws: bool = True
+    # Specular lookups that an object's own surface hides from the shading point see the object
+    # (its visibility cones, scenes/self_visibility.py) instead of its cube map; False: the cube
+    # map everywhere (as before issue 40's Cycles comparison found the difference).
+    self_occlusion: bool = True
 
     def __post_init__(self):
         check_mip_filter(self.mip_filter)

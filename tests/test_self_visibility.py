@@ -1,0 +1,227 @@
+"""Specular self-occlusion (issue 40; scenes/self_visibility.py, shaders/incident.glsl): the
+visibility cones against closed forms (a point at the bottom of a cylindrical well sees a cone of
+half angle atan(r / h), cosine-weighted fraction r^2 / (r^2 + h^2); a convex object hides
+nothing), the soft cone against quadrature, bad input, and the shaders against the numpy twin
+on a floor beside a wall."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lobeview.scenes.self_visibility import (
+    MIN_RAYS_PER_VERTEX,
+    NO_OCCLUSION,
+    cone_visibility,
+    rays_per_vertex,
+    self_occluded_incident,
+    vertex_visibility_cones,
+)
+
+
+def _well(radius: float, depth: float, segments: int = 96):
+    """A cylindrical well: its bottom disc (a fan around the centre vertex 0) and its wall, open
+    at the top."""
+    angle = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    ring = np.stack([radius * np.cos(angle), radius * np.sin(angle), np.zeros_like(angle)], axis=1)
+    positions = np.concatenate([[[0.0, 0.0, 0.0]], ring, ring + [0.0, 0.0, depth]])
+    normals = np.concatenate([[[0.0, 0.0, 1.0]], np.tile([0.0, 0.0, 1.0], (segments, 1)), -ring / radius])
+    faces = []
+    for i in range(segments):
+        j = (i + 1) % segments
+        faces += [(0, 1 + i, 1 + j), (1 + i, 1 + segments + i, 1 + j), (1 + j, 1 + segments + i, 1 + segments + j)]
+    return positions, normals, np.array(faces)
+
+
+@pytest.mark.parametrize("depth", [0.5, 1.0, 2.0])
+def test_bottom_of_a_well_sees_the_opening_as_its_cone(depth):
+    positions, normals, faces = _well(1.0, depth)
+    cones = vertex_visibility_cones(positions, normals, faces, rays=4096, smoothing_passes=0)
+    visible = 1.0 / (1.0 + depth**2)  # sin^2 of the opening's half angle atan(1 / depth)
+    sigma = np.sqrt(visible * (1.0 - visible) / 4096)
+    cos_expected = depth / np.hypot(1.0, depth)
+    # cos a = sqrt(1 - V): dcos = dV / (2 cos a); four standard deviations
+    assert abs(cones[0, 3] - cos_expected) < 4.0 * sigma / (2.0 * cos_expected) + 1e-3
+    np.testing.assert_allclose(cones[0, :3], [0.0, 0.0, 1.0], atol=0.01)  # bent along the axis
+    assert np.all(cones[:, 3] > NO_OCCLUSION)  # every vertex of the well sees some of it
+
+
+def test_convex_object_hides_nothing():
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(3)
+    cones = vertex_visibility_cones(sphere.vertices, sphere.vertex_normals, sphere.faces)
+    assert np.all(cones[:, 3] == NO_OCCLUSION)
+    np.testing.assert_allclose(cones[:, :3], sphere.vertex_normals, atol=1e-6)
+
+
+def test_degenerate_input_gives_finite_cones():
+    positions, normals, faces = _well(1.0, 1.0, segments=16)
+    normals[0] = 0.0
+    normals[5] = np.nan
+    cones = vertex_visibility_cones(positions, normals, faces, rays=64)
+    assert np.isfinite(cones).all()
+    np.testing.assert_allclose(np.linalg.norm(cones[:, :3], axis=1), 1.0, atol=1e-5)
+    one = vertex_visibility_cones(positions[:3], normals[:3], np.array([[0, 1, 2]]))
+    assert np.all(one[:, 3] == NO_OCCLUSION)
+    empty = vertex_visibility_cones(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3), int))
+    assert empty.shape == (0, 4)
+
+
+def test_smoothing_averages_over_triangle_neighbours():
+    from lobeview.scenes.self_visibility import _smooth_over_neighbours
+
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    values = np.array([0.0, 4.0, 8.0, 12.0])
+    (once,) = _smooth_over_neighbours(faces, 4, values, passes=1)
+    np.testing.assert_allclose(once, [4.0, 6.0, 6.0, 8.0])  # vertex 1: (0 + 4 + 8 + 12) / 4
+    (constant,) = _smooth_over_neighbours(faces, 4, np.full((4, 3), 2.5), passes=3)
+    np.testing.assert_allclose(constant, 2.5)
+
+
+@pytest.mark.parametrize("tilt_degrees", [0.0, 25.0, 50.0, 75.0])
+@pytest.mark.parametrize("visible", [0.15, 0.5, 0.85])
+def test_tilted_cone_holds_the_visible_fraction(tilt_degrees, visible):
+    """cone_cos_aperture against Monte Carlo: of cosine-distributed directions, the share inside
+    the cone (around a bent normal tilted off the normal) is the visible fraction; at tilt 0 the
+    closed form sqrt(1 - V)."""
+    from lobeview.scenes.self_visibility import cone_cos_aperture, cosine_directions
+
+    tilt = np.radians(tilt_degrees)
+    cos_aperture = float(cone_cos_aperture(np.array([tilt]), np.array([visible]))[0])
+    directions = cosine_directions(1 << 16, seed=3)
+    held = np.mean(directions @ np.array([np.sin(tilt), 0.0, np.cos(tilt)]) > cos_aperture)
+    assert held == pytest.approx(visible, abs=0.01)
+    if tilt_degrees == 0.0:
+        assert cos_aperture == pytest.approx(np.sqrt(1.0 - visible), abs=0.01)
+
+
+def test_ray_budget_of_large_objects():
+    assert rays_per_vertex(1000) == 64
+    assert rays_per_vertex(10**6) == MIN_RAYS_PER_VERTEX
+    assert MIN_RAYS_PER_VERTEX <= rays_per_vertex(200_000) < 64
+
+
+@pytest.mark.parametrize("visible", [0.1, 0.5, 0.9])
+def test_soft_cone_keeps_the_visible_fraction(visible):
+    """A cone around the normal with cos a = sqrt(1 - V), its edge softened symmetrically, lets
+    through about V of the cosine-weighted hemisphere (quadrature over the hemisphere)."""
+    x, w = np.polynomial.legendre.leggauss(400)
+    cos_t = 0.5 * (x + 1.0)
+    weights = 0.5 * w * 2.0 * cos_t  # cosine-weighted, normalised: integral of 2 cos over [0, 1]
+    directions = np.stack([np.sqrt(1.0 - cos_t**2), np.zeros_like(cos_t), cos_t], axis=1)
+    cone = np.array([0.0, 0.0, 1.0, np.sqrt(1.0 - visible)])
+    passed = np.sum(weights * cone_visibility(directions, np.broadcast_to(cone, (len(cos_t), 4))))
+    assert passed == pytest.approx(visible, abs=0.02)
+
+
+def test_visibility_and_mix():
+    cone = np.array([0.0, 0.0, 1.0, 0.8])
+    inside, edge, outside = np.array([0.0, 0.0, 1.0]), np.array([0.6, 0.0, 0.8]), np.array([1.0, 0.0, 0.0])
+    assert cone_visibility(inside, cone) == 1.0
+    assert cone_visibility(edge, cone) == pytest.approx(0.5)
+    assert cone_visibility(outside, cone) == 0.0
+    assert cone_visibility(outside, np.array([0.0, 0.0, 1.0, NO_OCCLUSION])) == 1.0
+    mixed = self_occluded_incident(np.array([4.0, 4.0, 4.0]), np.array([1.0, 2.0, 3.0]), edge, cone)
+    np.testing.assert_allclose(mixed, [2.5, 3.0, 3.5])
+
+
+# -- the shaders against the numpy twin --------------------------------------------------------
+
+
+def _grid(corner, edge_u, edge_v, steps: int):
+    from lobeview.scenes.meshes import Mesh
+
+    s, t = np.meshgrid(np.linspace(0.0, 1.0, steps + 1), np.linspace(0.0, 1.0, steps + 1), indexing="ij")
+    corner, edge_u, edge_v = (np.asarray(v, dtype=np.float64) for v in (corner, edge_u, edge_v))
+    positions = corner + s[..., None] * edge_u + t[..., None] * edge_v
+    normal = np.cross(edge_u, edge_v)
+    normal /= np.linalg.norm(normal)
+    faces = []
+    for i in range(steps):
+        for j in range(steps):
+            a, b = i * (steps + 1) + j, (i + 1) * (steps + 1) + j
+            faces += [(a, b, b + 1), (a, b + 1, a + 1)]
+    count = (steps + 1) ** 2
+    tangent = np.concatenate([edge_u / np.linalg.norm(edge_u), [1.0]])
+    return Mesh(
+        positions.reshape(-1, 3).astype(np.float32),
+        np.tile(normal, (count, 1)).astype(np.float32),
+        np.tile(tangent, (count, 1)).astype(np.float32),
+        np.stack([s.ravel(), t.ravel()], axis=1).astype(np.float32),
+        np.array(faces, dtype=np.uint32),
+    )
+
+
+def test_shaders_follow_the_numpy_cones_on_a_floor_beside_a_wall():
+    """A near-mirror metal floor (base colour 0.5) with a wall at its back, one object, under a
+    uniform sky: its cube map holds only the sky (the object is not in its own cube), so with
+    self-occlusion a floor pixel shows F (vis L + (1 - vis) 0.5 L), the hidden part seeing the
+    object as the point itself (F0 0.5 lit by E = pi L), and without it F L. The ratio of the two
+    frames is 0.5 + 0.5 vis at every floor pixel, vis from the numpy cones interpolated at the
+    pixel's position and its mirror direction."""
+    import trimesh
+
+    from lobeview.materials.spec import validate
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.meshes import merge_meshes
+    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
+    from lobeview.scenes.self_visibility import object_visibility_cones
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    floor = _grid((-1.5, 0.0, 1.0), (3.0, 0.0, 0.0), (0.0, 0.0, -2.0), 30)  # normal +y
+    wall = _grid((-1.5, 0.0, -1.0), (3.0, 0.0, 0.0), (0.0, 1.0, 0.0), 30)  # normal +z, toward the floor
+    mesh = merge_meshes([floor, wall], "corner")
+    metal = validate({"model": "gltf", "base_color": [0.5, 0.5, 0.5], "metallic": 1.0, "roughness": 0.05})
+    scene = Scene([SceneObject("corner", mesh, 0)], [SceneMaterial("metal", metal)])
+    scene.objects[0].planar_reflector = False  # its cube map, not a mirror pass
+    cones = object_visibility_cones(scene.objects[0])
+    floor_cones = cones[: len(floor.positions)]
+    assert (floor_cones[:, 3] > NO_OCCLUSION).mean() > 0.5  # the wall hides part of the floor's sky
+
+    env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=32, name="white")
+    camera = Camera(position=(0.0, 0.9, 2.6), target=(0.0, 0.0, -0.3), fov_y=45.0)
+    ctx = create_headless_context()
+    with pytest.warns(UserWarning, match="no usable lightmap"):
+        renderer = SceneRenderer(ctx, scene, env, size=(128, 96), progress=False,
+                                 settings=RenderSettings(cube_face_size=16))  # fmt: skip
+    try:
+        frames = {}
+        for occlusion in (True, False):
+            renderer.configure(self_occlusion=occlusion)
+            frames[occlusion] = renderer.render(camera, "lobe-7")
+        on, off = frames[True], frames[False]
+    finally:
+        renderer.release()
+        ctx.release()
+    assert not on.invalid.any() and not off.invalid.any()
+    floor_pixels = (on.object_id == 0) & (np.abs(on.normal[..., 1] - 1.0) < 1e-3) & (on.position[..., 2] > -0.95)
+    assert floor_pixels.sum() > 2000
+    ratio = on.radiance[floor_pixels].mean(axis=-1) / off.radiance[floor_pixels].mean(axis=-1)
+
+    # numpy: the cone at each pixel's position (barycentric on the floor's triangles, as the
+    # rasteriser interpolates), the mirror direction of the view about +y
+    points = on.position[floor_pixels].astype(np.float64)
+    steps = 30
+    cell_i = np.clip(np.floor((points[:, 0] + 1.5) / 3.0 * steps), 0, steps - 1).astype(int)
+    cell_j = np.clip(np.floor((1.0 - points[:, 2]) / 2.0 * steps), 0, steps - 1).astype(int)
+    first = 2 * (cell_i * steps + cell_j)  # the cell's two triangles: first, first + 1
+    floor_positions = floor.positions.astype(np.float64)
+    bary_first = trimesh.triangles.points_to_barycentric(floor_positions[floor.indices[first]], points)
+    in_first = np.all(bary_first >= -1e-6, axis=1)
+    triangle = np.where(in_first, first, first + 1)
+    bary = trimesh.triangles.points_to_barycentric(floor_positions[floor.indices[triangle]], points)
+    cone = np.einsum("pk,pkc->pc", bary, floor_cones[floor.indices[triangle]].astype(np.float64))
+    cone[:, :3] /= np.linalg.norm(cone[:, :3], axis=1, keepdims=True)
+    view = camera.position - points
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    mirror = view * [-1.0, 1.0, -1.0]
+    expected = 0.5 + 0.5 * cone_visibility(mirror, cone, np.array([0.0, 1.0, 0.0]))
+
+    assert (expected < 0.6).sum() > 100 and (expected > 0.95).sum() > 100  # both regimes covered
+    error = np.abs(ratio - expected)
+    assert np.quantile(error, 0.99) < 0.03, np.quantile(error, [0.5, 0.9, 0.99, 1.0])
+    assert np.mean(error) < 0.01
