@@ -24,8 +24,13 @@ specular reflectance lit by its irradiance: "the occluder looks like me").
 
 from __future__ import annotations
 
+import hashlib
+from pathlib import Path
+
 import numpy as np
 from scipy.stats import qmc
+
+from lobeview.core.cache import read_cache_file, write_cache_file
 
 SELF_VISIBILITY_RAYS = 64  # rays per vertex
 SMOOTHING_PASSES = 2  # neighbour averages of the per-vertex estimates
@@ -36,6 +41,7 @@ SOFT_EDGE = 0.1  # half width, in cosine, of the cone's soft edge (a 32-ray cone
 ORIGIN_OFFSET = 1e-4  # ray origins off the surface, times the object's extent
 NEAR_HIT_DISTANCE = 0.03  # hits nearer than this, times the object's extent, are ignored (see below)
 SEED = 11
+CACHE_VERSION = "cones-1"  # with the constants above and the mesh, the key of a cached file
 
 
 def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -221,8 +227,35 @@ def self_occluded_incident(
     return visibility * np.asarray(environment, dtype=np.float64) + (1.0 - visibility) * np.asarray(occluder)
 
 
-def object_visibility_cones(obj) -> np.ndarray:
-    """The cones of a scene object (scenes/scene.py SceneObject), traced once and kept on it."""
-    if obj.self_visibility is None or len(obj.self_visibility) != len(obj.mesh.positions):
-        obj.self_visibility = vertex_visibility_cones(obj.mesh.positions, obj.mesh.normals, obj.mesh.indices)
-    return obj.self_visibility
+def object_visibility_cones(obj, cache_folder: Path | None = None) -> np.ndarray:
+    """The cones of a scene object (scenes/scene.py SceneObject), traced once and kept on it;
+    with ``cache_folder``, kept on disk too (keyed by the mesh and the tracing's constants)."""
+    if obj.self_visibility is not None and len(obj.self_visibility) == len(obj.mesh.positions):
+        return obj.self_visibility
+    path = None
+    if cache_folder is not None:
+        constants = (
+            CACHE_VERSION, SELF_VISIBILITY_RAYS, MAX_SELF_VISIBILITY_RAYS_TOTAL, MIN_RAYS_PER_VERTEX,
+            SMOOTHING_PASSES, ORIGIN_OFFSET, NEAR_HIT_DISTANCE, SEED, APERTURE_TILTS, APERTURE_VISIBLE,
+        )  # fmt: skip
+        digest = hashlib.sha256(repr(constants).encode())
+        for array in (obj.mesh.positions, obj.mesh.normals, obj.mesh.indices):
+            data = np.ascontiguousarray(array)
+            digest.update(f"{data.dtype.str}{data.shape}".encode())
+            digest.update(data.tobytes())
+        path = Path(cache_folder) / f"cones-{digest.hexdigest()[:20]}.npy"
+    count = len(obj.mesh.positions)
+
+    def read(file: Path) -> np.ndarray:
+        cones = np.load(file, allow_pickle=False)
+        if cones.shape != (count, 4) or cones.dtype != np.float32 or not np.all(np.isfinite(cones)):
+            raise ValueError(f"cones of shape {cones.shape} ({cones.dtype}), expected ({count}, 4) float32")
+        return cones
+
+    cones = read_cache_file(path, read, "visibility cones")
+    if cones is None:
+        cones = vertex_visibility_cones(obj.mesh.positions, obj.mesh.normals, obj.mesh.indices)
+        if path is not None:
+            write_cache_file(path, lambda handle: np.save(handle, cones, allow_pickle=False))
+    obj.self_visibility = cones
+    return cones

@@ -225,3 +225,31 @@ def test_shaders_follow_the_numpy_cones_on_a_floor_beside_a_wall():
     error = np.abs(ratio - expected)
     assert np.quantile(error, 0.99) < 0.03, np.quantile(error, [0.5, 0.9, 0.99, 1.0])
     assert np.mean(error) < 0.01
+
+
+def test_cones_are_cached_by_mesh_and_a_damaged_file_is_traced_again(tmp_path, monkeypatch):
+    from lobeview.scenes import self_visibility
+    from lobeview.scenes.meshes import Mesh
+    from lobeview.scenes.scene import SceneObject
+
+    positions, normals, faces = _well(1.0, 1.0, segments=16)
+    mesh = Mesh(positions.astype(np.float32), normals.astype(np.float32), np.zeros((len(positions), 4), np.float32),
+                np.zeros((len(positions), 2), np.float32), faces.astype(np.uint32))  # fmt: skip
+    first = self_visibility.object_visibility_cones(SceneObject("well", mesh, 0), tmp_path)
+    files = list(tmp_path.glob("cones-*.npy"))
+    assert len(files) == 1
+
+    def no_tracing(*args, **kwargs):
+        raise AssertionError("traced again although the cache holds the cones")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(self_visibility, "vertex_visibility_cones", no_tracing)
+        again = self_visibility.object_visibility_cones(SceneObject("well", mesh, 0), tmp_path)
+    np.testing.assert_array_equal(first, again)
+    files[0].write_bytes(b"not a numpy file")
+    with pytest.warns(UserWarning, match="unusable cached visibility cones"):
+        traced = self_visibility.object_visibility_cones(SceneObject("well", mesh, 0), tmp_path)
+    np.testing.assert_array_equal(first, traced)
+    moved = Mesh(mesh.positions + 1.0, mesh.normals, mesh.tangents, mesh.uvs, mesh.indices)
+    self_visibility.object_visibility_cones(SceneObject("moved", moved, 0), tmp_path)
+    assert len(list(tmp_path.glob("cones-*.npy"))) == 2  # another mesh, another key

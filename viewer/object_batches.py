@@ -20,14 +20,12 @@ after everything else) and Rational materials keep the per-object path
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import moderngl
 import numpy as np
 
-from lobeview.core.progress import report
-from lobeview.scenes.self_visibility import NO_OCCLUSION, object_visibility_cones
+from lobeview.scenes.self_visibility import object_visibility_cones
 
 from .interface import DrawRecorder, bind_storage
 from .object_records import OBJECT_RECORDS_BINDING, RECORD_UNIFORMS, pack_object_record
@@ -55,8 +53,6 @@ class SceneGeometry:
         self.first_index = np.zeros(len(objects), dtype=np.int64)
         self.index_count = np.zeros(len(objects), dtype=np.int64)
         base_vertex = first = 0
-        t_cones = time.perf_counter()
-        traced_before = sum(obj.self_visibility is not None for obj in objects)
         for i, obj in enumerate(objects):
             m = obj.mesh
             uv1 = obj.uv1 if obj.uv1 is not None else np.zeros((len(m.positions), 2), np.float32)
@@ -69,12 +65,6 @@ class SceneGeometry:
             self.first_index[i], self.index_count[i] = first, object_indices.size
             base_vertex += len(m.positions)
             first += object_indices.size
-        if traced_before < len(objects):
-            with_cone = sum(int(np.count_nonzero(obj.self_visibility[:, 3] > NO_OCCLUSION)) for obj in objects)
-            report(
-                f"self-occlusion cones: {with_cone} of {base_vertex} vertices see their own object"
-                f" ({time.perf_counter() - t_cones:.1f} s)"
-            )
         if base_vertex >= 2**32:
             raise ValueError(f"the scene has {base_vertex} vertices; 32-bit indices address at most 2^32")
         data = np.concatenate(vertices) if vertices else np.zeros((1, VERTEX_FLOATS), np.float32)

@@ -41,7 +41,7 @@ class OcclusionTest:
         self.depth = None
         self.fbo = None
         self._vao = None
-        self._query = None
+        self._queries: list = []  # one samples-passed query per queried object, reused
         self.draw_calls = draw_calls
 
     def _targets(self, size) -> None:
@@ -119,13 +119,15 @@ class OcclusionTest:
         program = self.programs.program("depth.vert", "depth.frag", {})
         self.fbo.depth_mask = False
         ctx.depth_func = "<="  # a reflector lying on an occluder (a floor under a wall) is not hidden by it
-        if self._query is None:
-            self._query = ctx.query(samples=True)
-        samples = {}
-        for index, obj in queried.items():
-            with self._query:
+        # Every object's query is issued before any result is read: reading one waits for the
+        # GPU to finish it, so one wait a frame instead of one per reflector.
+        while len(self._queries) < len(queried):
+            self._queries.append(ctx.query(samples=True))
+        queries = self._queries[: len(queried)]
+        for query, obj in zip(queries, queried.values(), strict=True):
+            with query:
                 self._draw(program, obj)
-            samples[index] = int(self._query.samples)
+        samples = {index: int(query.samples) for query, index in zip(queries, queried, strict=True)}
         self.fbo.depth_mask = True
         ctx.depth_func = "<"
         return samples
@@ -142,4 +144,4 @@ class OcclusionTest:
         if self._vao is not None:
             self._vao.release()
             self._vao = None
-        self._query = None  # moderngl 5.13 queries have no release(): the context frees them
+        self._queries = []  # moderngl 5.13 queries have no release(): the context frees them

@@ -31,6 +31,7 @@ from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.analysis import analyse
 from lobeview.scenes.envmap import EnvironmentMap
 from lobeview.scenes.scene import Scene
+from lobeview.scenes.self_visibility import NO_OCCLUSION, object_visibility_cones
 
 from .camera import Camera, jittered
 from .cube_probes import CubeProbes
@@ -86,6 +87,18 @@ class SceneRenderer(RendererBase):
         analysis = self._analyse(scene, settings, settings.cube_face_size)
         report(f"materials and geometry of {len(scene.objects)} objects")
         packed = [pack_material(build_bsdf(scene.materials[obj.material].desc)) for obj in scene.objects]
+        # Visibility cones against each object itself (scenes/self_visibility.py), from the
+        # cache folder where it has them.
+        t_cones = time.perf_counter()
+        missing = [obj for obj in scene.objects if obj.self_visibility is None]
+        for obj in missing:
+            object_visibility_cones(obj, self.cache_dir)
+        if missing:
+            with_cone = sum(int(np.count_nonzero(obj.self_visibility[:, 3] > NO_OCCLUSION)) for obj in missing)
+            report(
+                f"self-occlusion cones of {len(missing)} objects: {with_cone} vertices see their own object"
+                f" ({time.perf_counter() - t_cones:.1f} s)"
+            )
         self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, analysis)
         shading.draw_records = settings.draw_records
         shading.self_occlusion = settings.self_occlusion
