@@ -11,8 +11,9 @@ object (Oat and Sander 2007, "Ambient aperture lighting"; Jimenez et al. 2016, "
 real-time strategies for accurate indirect occlusion"): ``rays`` cosine-distributed directions
 around the vertex normal are traced against the object's own triangles (embree through trimesh);
 the bent normal is the mean of the directions that escape, and the cone's half angle ``a``
-follows from the cosine-weighted visible fraction V: a cone of half angle a around the normal
-holds sin^2 a of the cosine-weighted hemisphere, so cos a = sqrt(1 - V). A vertex none of whose
+follows from the cosine-weighted visible fraction V: the cone around the bent normal holds V of
+the cosine-weighted hemisphere (cos a = sqrt(1 - V) when the bent normal is the normal; wider as
+it tilts, cone_cos_aperture). A vertex none of whose
 rays hit the object (every vertex of a convex one) gets no cone (cos a = NO_OCCLUSION): nothing
 changes there.
 
@@ -32,23 +33,18 @@ from scipy.stats import qmc
 
 from lobeview.core.cache import read_cache_file, write_cache_file
 
+from .baker import _frame
+
 SELF_VISIBILITY_RAYS = 64  # rays per vertex
 SMOOTHING_PASSES = 2  # neighbour averages of the per-vertex estimates
 MAX_SELF_VISIBILITY_RAYS_TOTAL = 4_000_000  # per object: fewer rays per vertex beyond (at least 8)
 MIN_RAYS_PER_VERTEX = 8
 NO_OCCLUSION = -2.0  # cos a of a vertex no ray of which hits its object: every direction visible
-SOFT_EDGE = 0.1  # half width, in cosine, of the cone's soft edge (a 32-ray cone is not sharper)
+SOFT_EDGE = 0.1  # half width, in cosine, of the cone's soft edge (a 64-ray cone is not sharper)
 ORIGIN_OFFSET = 1e-4  # ray origins off the surface, times the object's extent
 NEAR_HIT_DISTANCE = 0.03  # hits nearer than this, times the object's extent, are ignored (see below)
 SEED = 11
 CACHE_VERSION = "cones-1"  # with the constants above and the mesh, the key of a cached file
-
-
-def _frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    helper = np.where(np.abs(normals[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
-    tangent = np.cross(helper, normals)
-    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
-    return tangent, np.cross(normals, tangent)
 
 
 def _unit_normals(normals: np.ndarray) -> np.ndarray:
@@ -105,7 +101,7 @@ def vertex_visibility_cones(
     # A per-vertex turn of the pattern about the normal: neighbouring vertices see different
     # directions (no shared aliasing), and the result stays deterministic.
     turn = np.random.default_rng(seed).random(count) * 2.0 * np.pi
-    tangent, bitangent = _frames(normals)
+    tangent, bitangent = _frame(normals)  # the baker's tangent frame per normal
     cos_t, sin_t = np.cos(turn)[:, None], np.sin(turn)[:, None]
     tangent, bitangent = cos_t * tangent + sin_t * bitangent, cos_t * bitangent - sin_t * tangent
     directions = (
@@ -119,11 +115,11 @@ def vertex_visibility_cones(
     start = positions[:, None, :] + normals[:, None, :] * (ORIGIN_OFFSET * max(extent, 1e-12))
     start = start + directions * (NEAR_HIT_DISTANCE * max(extent, 1e-12))
     hit = mesh.ray.intersects_any(start.reshape(-1, 3), directions.reshape(-1, 3)).reshape(count, n)
+    if not hit.any():
+        return cones
     escaped = ~hit
     visible = escaped.mean(axis=1)
     bent = np.einsum("vn,vnk->vk", escaped.astype(np.float64), directions) / n  # V times the mean direction
-    if not hit.any():
-        return cones
     # A few dozen rays leave each vertex's estimate noisy (V to about +-0.09), which a near-mirror
     # shows as mottling: averaged with the neighbours that share a triangle, SMOOTHING_PASSES times.
     visible, bent = _smooth_over_neighbours(faces, count, visible, bent, passes=smoothing_passes)
