@@ -26,6 +26,7 @@ specular reflectance lit by its irradiance: "the occluder looks like me").
 from __future__ import annotations
 
 import hashlib
+from collections import OrderedDict
 from pathlib import Path
 
 import numpy as np
@@ -223,25 +224,53 @@ def self_occluded_incident(
     return visibility * np.asarray(environment, dtype=np.float64) + (1.0 - visibility) * np.asarray(occluder)
 
 
+# Cones traced in this process, by the same key as the disk cache: a scene loaded again (the
+# first-use bake's swap, a reload, every test's renderer, which has no cache folder) is not
+# traced again. Oldest first out beyond the bound (16 bytes a vertex: 4 million vertices).
+MEMORY_CACHE_BYTES = 64 * 1024 * 1024
+_traced_cones: OrderedDict[str, np.ndarray] = OrderedDict()
+
+
+def forget_traced_cones() -> None:
+    """Empty this process's cache of traced cones (the disk cache stays)."""
+    _traced_cones.clear()
+
+
+def _cones_key(mesh) -> str:
+    constants = (
+        CACHE_VERSION, SELF_VISIBILITY_RAYS, MAX_SELF_VISIBILITY_RAYS_TOTAL, MIN_RAYS_PER_VERTEX,
+        SMOOTHING_PASSES, ORIGIN_OFFSET, NEAR_HIT_DISTANCE, SEED, APERTURE_TILTS, APERTURE_VISIBLE,
+    )  # fmt: skip
+    digest = hashlib.sha256(repr(constants).encode())
+    for array in (mesh.positions, mesh.normals, mesh.indices):
+        data = np.ascontiguousarray(array)
+        digest.update(f"{data.dtype.str}{data.shape}".encode())
+        digest.update(data.tobytes())
+    return digest.hexdigest()[:20]
+
+
+def _remember(key: str, cones: np.ndarray) -> None:
+    _traced_cones[key] = cones
+    _traced_cones.move_to_end(key)
+    while len(_traced_cones) > 1 and sum(c.nbytes for c in _traced_cones.values()) > MEMORY_CACHE_BYTES:
+        _traced_cones.popitem(last=False)
+
+
 def object_visibility_cones(obj, cache_folder: Path | None = None) -> np.ndarray:
-    """The cones of a scene object (scenes/scene.py SceneObject), traced once and kept on it;
-    with ``cache_folder``, kept on disk too (keyed by the mesh and the tracing's constants)."""
+    """The cones of a scene object (scenes/scene.py SceneObject), traced once and kept on it and
+    in this process (by the mesh); with ``cache_folder``, kept on disk too (keyed by the mesh
+    and the tracing's constants)."""
     known = getattr(obj, "self_visibility", None)  # any object with a mesh (tests pass stand-ins)
     if known is not None and len(known) == len(obj.mesh.positions):
         return known
-    path = None
-    if cache_folder is not None:
-        constants = (
-            CACHE_VERSION, SELF_VISIBILITY_RAYS, MAX_SELF_VISIBILITY_RAYS_TOTAL, MIN_RAYS_PER_VERTEX,
-            SMOOTHING_PASSES, ORIGIN_OFFSET, NEAR_HIT_DISTANCE, SEED, APERTURE_TILTS, APERTURE_VISIBLE,
-        )  # fmt: skip
-        digest = hashlib.sha256(repr(constants).encode())
-        for array in (obj.mesh.positions, obj.mesh.normals, obj.mesh.indices):
-            data = np.ascontiguousarray(array)
-            digest.update(f"{data.dtype.str}{data.shape}".encode())
-            digest.update(data.tobytes())
-        path = Path(cache_folder) / f"cones-{digest.hexdigest()[:20]}.npy"
+    key = _cones_key(obj.mesh)
     count = len(obj.mesh.positions)
+    cones = _traced_cones.get(key)
+    if cones is not None:
+        _traced_cones.move_to_end(key)
+        obj.self_visibility = cones
+        return cones
+    path = None if cache_folder is None else Path(cache_folder) / f"cones-{key}.npy"
 
     def read(file: Path) -> np.ndarray:
         cones = np.load(file, allow_pickle=False)
@@ -254,5 +283,7 @@ def object_visibility_cones(obj, cache_folder: Path | None = None) -> np.ndarray
         cones = vertex_visibility_cones(obj.mesh.positions, obj.mesh.normals, obj.mesh.indices)
         if path is not None:
             write_cache_file(path, lambda handle: np.save(handle, cones, allow_pickle=False))
+    cones.setflags(write=False)  # shared by every object of this mesh
+    _remember(key, cones)
     obj.self_visibility = cones
     return cones

@@ -235,6 +235,7 @@ def test_cones_are_cached_by_mesh_and_a_damaged_file_is_traced_again(tmp_path, m
     positions, normals, faces = _well(1.0, 1.0, segments=16)
     mesh = Mesh(positions.astype(np.float32), normals.astype(np.float32), np.zeros((len(positions), 4), np.float32),
                 np.zeros((len(positions), 2), np.float32), faces.astype(np.uint32))  # fmt: skip
+    self_visibility.forget_traced_cones()
     first = self_visibility.object_visibility_cones(SceneObject("well", mesh, 0), tmp_path)
     files = list(tmp_path.glob("cones-*.npy"))
     assert len(files) == 1
@@ -245,7 +246,11 @@ def test_cones_are_cached_by_mesh_and_a_damaged_file_is_traced_again(tmp_path, m
     with monkeypatch.context() as patch:
         patch.setattr(self_visibility, "vertex_visibility_cones", no_tracing)
         again = self_visibility.object_visibility_cones(SceneObject("well", mesh, 0), tmp_path)
+        self_visibility.forget_traced_cones()  # now from the disk
+        from_disk = self_visibility.object_visibility_cones(SceneObject("well", mesh, 0), tmp_path)
     np.testing.assert_array_equal(first, again)
+    np.testing.assert_array_equal(first, from_disk)
+    self_visibility.forget_traced_cones()
     files[0].write_bytes(b"not a numpy file")
     with pytest.warns(UserWarning, match="unusable cached visibility cones"):
         traced = self_visibility.object_visibility_cones(SceneObject("well", mesh, 0), tmp_path)
@@ -253,3 +258,30 @@ def test_cones_are_cached_by_mesh_and_a_damaged_file_is_traced_again(tmp_path, m
     moved = Mesh(mesh.positions + 1.0, mesh.normals, mesh.tangents, mesh.uvs, mesh.indices)
     self_visibility.object_visibility_cones(SceneObject("moved", moved, 0), tmp_path)
     assert len(list(tmp_path.glob("cones-*.npy"))) == 2  # another mesh, another key
+
+
+def test_a_mesh_loaded_again_is_not_traced_again_without_a_cache_folder(monkeypatch):
+    """The process keeps what it traced (every test's renderer, the first-use bake's swap): the
+    same mesh in a new object is not traced again, another mesh is, and the memory is bounded."""
+    from lobeview.scenes import self_visibility
+    from lobeview.scenes.meshes import Mesh
+    from lobeview.scenes.scene import SceneObject
+
+    positions, normals, faces = _well(1.0, 1.0, segments=16)
+    mesh = Mesh(positions.astype(np.float32), normals.astype(np.float32), np.zeros((len(positions), 4), np.float32),
+                np.zeros((len(positions), 2), np.float32), faces.astype(np.uint32))  # fmt: skip
+    self_visibility.forget_traced_cones()
+    traced = []
+    real = self_visibility.vertex_visibility_cones
+    monkeypatch.setattr(self_visibility, "vertex_visibility_cones", lambda *a, **k: traced.append(1) or real(*a, **k))
+    first = self_visibility.object_visibility_cones(SceneObject("well", mesh, 0))
+    again = self_visibility.object_visibility_cones(SceneObject("well again", mesh, 0))
+    assert len(traced) == 1 and again is first and not first.flags.writeable
+    deeper = Mesh(mesh.positions * [1.0, 2.0, 1.0], mesh.normals, mesh.tangents, mesh.uvs, mesh.indices)
+    other = self_visibility.object_visibility_cones(SceneObject("deeper", deeper, 0))
+    assert len(traced) == 2 and not np.array_equal(other, first)
+    monkeypatch.setattr(self_visibility, "MEMORY_CACHE_BYTES", first.nbytes)  # room for one
+    wider = Mesh(mesh.positions * [2.0, 1.0, 2.0], mesh.normals, mesh.tangents, mesh.uvs, mesh.indices)
+    newest = self_visibility.object_visibility_cones(SceneObject("wider", wider, 0))
+    assert list(self_visibility._traced_cones.values()) == [newest]  # the older two went
+    self_visibility.forget_traced_cones()
