@@ -17,10 +17,15 @@ it tilts, cone_cos_aperture). A vertex none of whose
 rays hit the object (every vertex of a convex one) gets no cone (cos a = NO_OCCLUSION): nothing
 changes there.
 
-A lookup direction d of the specular lobes (shaders/incident.glsl self_occluded) is visible by
-``smoothstep(cos a - SOFT_EDGE, cos a + SOFT_EDGE, dot(d, bent))``; the occluded part sees the
-object itself, whose radiance is taken as the shading point's own (its diffuse and its
-specular reflectance lit by its irradiance: "the occluder looks like me").
+The cone says whether a vertex is occluded at all; which directions it hides is a horizon per
+azimuth sector (HORIZON_SECTORS, Max 1988 "Horizon mapping"; Sloan and Cohen 2000): a circular
+cone that holds the right visible fraction must cut every azimuth at one elevation, and hid the
+studio's low softboxes from Suzanne's forehead, which only its brow shadows on one side
+(docs/measurements.md). A lookup direction d of the specular lobes (shaders/self_occlusion.glsl
+self_occluded) is visible by a smoothstep of its elevation's sine across the horizon's at its
+azimuth (horizon_visibility); the occluded part sees the object itself, whose radiance is taken
+as the shading point's own (its diffuse and its specular reflectance lit by its irradiance:
+"the occluder looks like me").
 """
 
 from __future__ import annotations
@@ -45,7 +50,13 @@ SOFT_EDGE = 0.1  # half width, in cosine, of the cone's soft edge (a 64-ray cone
 ORIGIN_OFFSET = 1e-4  # ray origins off the surface, times the object's extent
 NEAR_HIT_DISTANCE = 0.03  # hits nearer than this, times the object's extent, are ignored (see below)
 SEED = 11
-CACHE_VERSION = "cones-1"  # with the constants above and the mesh, the key of a cached file
+HORIZON_SECTORS = 8  # azimuth sectors of the horizon around each normal (_traced_horizons)
+CONE_FLOATS = 4 + HORIZON_SECTORS  # per vertex: bent normal, cos of the cone's half angle, horizons
+HORIZON_SOFT_EDGE = 0.08  # half width, in sin of elevation, of the horizon's soft edge
+# The horizon's azimuths are measured in a tangent frame from this axis (horizon_frame): continuous
+# everywhere but at normals along +-axis, a direction no axis-aligned surface has.
+HORIZON_AXIS = np.array([1.0, 2.0, 3.0]) / np.sqrt(14.0)
+CACHE_VERSION = "cones-2"  # with the constants above and the mesh, the key of a cached file
 
 
 def _unit_normals(normals: np.ndarray) -> np.ndarray:
@@ -81,14 +92,15 @@ def vertex_visibility_cones(
     seed: int = SEED,
     smoothing_passes: int = SMOOTHING_PASSES,
 ) -> np.ndarray:
-    """(V, 4) float32: per vertex the bent normal (unit, the positions' space) and the cosine of
-    the visibility cone's half angle, NO_OCCLUSION where the object hides nothing from it.
+    """(V, 4 + HORIZON_SECTORS) float32: per vertex the bent normal (unit, the positions' space),
+    the cosine of the visibility cone's half angle (NO_OCCLUSION where the object hides nothing
+    from it) and the sine of the horizon's elevation in each azimuth sector (vertex_horizons).
     ``indices``: the triangles (3 per face)."""
     import trimesh
 
     positions = np.asarray(positions, dtype=np.float64)
     count = len(positions)
-    cones = np.zeros((count, 4), dtype=np.float32)
+    cones = np.zeros((count, CONE_FLOATS), dtype=np.float32)
     normals = _unit_normals(normals)
     cones[:, :3] = normals
     cones[:, 3] = NO_OCCLUSION
@@ -130,7 +142,81 @@ def vertex_visibility_cones(
     tilt = np.arccos(np.clip(np.sum(bent * normals, axis=1), -1.0, 1.0))
     cones[occluded, :3] = bent[occluded]
     cones[occluded, 3] = cone_cos_aperture(tilt[occluded], visible[occluded])
+    if occluded.any():
+        horizons = np.zeros((count, HORIZON_SECTORS))
+        horizons[occluded] = _traced_horizons(
+            mesh, positions[occluded], normals[occluded], extent, max(n // HORIZON_SECTORS, 1), seed
+        )
+        (horizons,) = _smooth_over_neighbours(faces, count, horizons, passes=smoothing_passes)
+        cones[occluded, 4:] = horizons[occluded]
     return cones
+
+
+def horizon_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tangent and bitangent about unit ``normals`` (..., 3) in which the horizon's azimuth is
+    measured (shaders/self_occlusion.glsl horizon_frame): from HORIZON_AXIS, continuous but at
+    normals along it (there from +x)."""
+    normals = np.asarray(normals, dtype=np.float64)
+    tangent = np.cross(HORIZON_AXIS, normals)
+    length = np.linalg.norm(tangent, axis=-1, keepdims=True)
+    fallback = np.cross([1.0, 0.0, 0.0], normals)
+    tangent = np.where(length > 1e-6, tangent, fallback)
+    tangent /= np.maximum(np.linalg.norm(tangent, axis=-1, keepdims=True), 1e-12)
+    return tangent, np.cross(normals, tangent)
+
+
+def _traced_horizons(mesh, positions, normals, extent, rays_per_sector, seed) -> np.ndarray:
+    """(V, HORIZON_SECTORS): per vertex and azimuth sector, the sine of the horizon's elevation,
+    taken as the sector's hidden fraction of solid angle (its rays are uniform in solid angle:
+    uniform in sin(elevation)), so that everything below the horizon is what the object hides.
+    A circular cone must cut every azimuth at one elevation; a forehead that the brow hides
+    toward one side only still sees low lights on the others (docs/measurements.md)."""
+    count = len(positions)
+    rng = np.random.default_rng(seed + 1)
+    k = rays_per_sector
+    jitter = rng.random((count, HORIZON_SECTORS, k, 2))
+    # Latin hypercube in (sin of elevation, azimuth) within the sector: stratified in both.
+    strata = rng.permuted(np.broadcast_to(np.arange(k), (count, HORIZON_SECTORS, k)), axis=2)
+    sin_e = (np.arange(k)[None, None, :] + jitter[..., 0]) / k
+    phi = (np.arange(HORIZON_SECTORS)[None, :, None] + (strata + jitter[..., 1]) / k) / HORIZON_SECTORS * 2.0 * np.pi
+    cos_e = np.sqrt(np.maximum(1.0 - sin_e**2, 0.0))
+    tangent, bitangent = horizon_frame(normals)
+    directions = (
+        (cos_e * np.cos(phi))[..., None] * tangent[:, None, None, :]
+        + (cos_e * np.sin(phi))[..., None] * bitangent[:, None, None, :]
+        + sin_e[..., None] * normals[:, None, None, :]
+    ).reshape(count, -1, 3)
+    start = positions[:, None, :] + normals[:, None, :] * (ORIGIN_OFFSET * max(extent, 1e-12))
+    start = start + directions * (NEAR_HIT_DISTANCE * max(extent, 1e-12))
+    hit = mesh.ray.intersects_any(start.reshape(-1, 3), directions.reshape(-1, 3))
+    return hit.reshape(count, HORIZON_SECTORS, k).mean(axis=2)
+
+
+def horizon_visibility(
+    directions: np.ndarray, cones: np.ndarray, normals: np.ndarray, soft_edge: float = HORIZON_SOFT_EDGE
+) -> np.ndarray:
+    """How visible unit ``directions`` (..., 3) are above the horizons of ``cones`` (..., 4 +
+    HORIZON_SECTORS) about unit ``normals`` (..., 3), in [0, 1]: the shaders' self_visibility
+    (self_occlusion.glsl). The horizon's sine is linear in azimuth between the sectors' centres;
+    smoothstep across it. Directions below the surface (transmission) and points without a cone
+    pass."""
+    directions = np.asarray(directions, dtype=np.float64)
+    cones = np.asarray(cones, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    tangent, bitangent = horizon_frame(normals)
+    sin_e = np.sum(directions * normals, axis=-1)
+    phi = np.arctan2(np.sum(directions * bitangent, axis=-1), np.sum(directions * tangent, axis=-1))
+    x = np.mod(phi / (2.0 * np.pi) * HORIZON_SECTORS - 0.5, HORIZON_SECTORS)
+    first = np.floor(x).astype(int) % HORIZON_SECTORS
+    second = (first + 1) % HORIZON_SECTORS
+    frac = x - np.floor(x)
+    horizons = cones[..., 4:]
+    h = (1.0 - frac) * np.take_along_axis(horizons, first[..., None], -1)[..., 0] + frac * np.take_along_axis(
+        horizons, second[..., None], -1
+    )[..., 0]
+    t = np.clip((sin_e - (h - soft_edge)) / (2.0 * soft_edge), 0.0, 1.0)
+    passes = (cones[..., 3] <= NO_OCCLUSION + 1e-3) | (sin_e <= 0.0)
+    return np.where(passes, 1.0, t * t * (3.0 - 2.0 * t))
 
 
 APERTURE_TILTS = 46  # table of cone_cos_aperture: bent-normal tilts 0..90 degrees
@@ -216,17 +302,18 @@ def cone_visibility(
 
 
 def self_occluded_incident(
-    environment: np.ndarray, occluder: np.ndarray, directions: np.ndarray, cones: np.ndarray
+    environment: np.ndarray, occluder: np.ndarray, directions: np.ndarray, cones: np.ndarray, normals: np.ndarray
 ) -> np.ndarray:
-    """Incident radiance with the object's self-occlusion: the environment's where the cone
-    lets the direction through, the occluder's radiance where it does not (RGB, (..., 3))."""
-    visibility = cone_visibility(directions, cones)[..., None]
+    """Incident radiance with the object's self-occlusion (the shaders' self_occluded): the
+    environment's where the direction clears the horizon, the occluder's radiance where it does
+    not (RGB, (..., 3))."""
+    visibility = horizon_visibility(directions, cones, normals)[..., None]
     return visibility * np.asarray(environment, dtype=np.float64) + (1.0 - visibility) * np.asarray(occluder)
 
 
 # Cones traced in this process, by the same key as the disk cache: a scene loaded again (the
 # first-use bake's swap, a reload, every test's renderer, which has no cache folder) is not
-# traced again. Oldest first out beyond the bound (16 bytes a vertex: 4 million vertices).
+# traced again. Oldest first out beyond the bound (48 bytes a vertex: 1.4 million vertices).
 MEMORY_CACHE_BYTES = 64 * 1024 * 1024
 _traced_cones: OrderedDict[str, np.ndarray] = OrderedDict()
 
@@ -240,6 +327,7 @@ def _cones_key(mesh) -> str:
     constants = (
         CACHE_VERSION, SELF_VISIBILITY_RAYS, MAX_SELF_VISIBILITY_RAYS_TOTAL, MIN_RAYS_PER_VERTEX,
         SMOOTHING_PASSES, ORIGIN_OFFSET, NEAR_HIT_DISTANCE, SEED, APERTURE_TILTS, APERTURE_VISIBLE,
+        HORIZON_SECTORS, tuple(HORIZON_AXIS),
     )  # fmt: skip
     digest = hashlib.sha256(repr(constants).encode())
     for array in (mesh.positions, mesh.normals, mesh.indices):
@@ -274,8 +362,8 @@ def object_visibility_cones(obj, cache_folder: Path | None = None) -> np.ndarray
 
     def read(file: Path) -> np.ndarray:
         cones = np.load(file, allow_pickle=False)
-        if cones.shape != (count, 4) or cones.dtype != np.float32 or not np.all(np.isfinite(cones)):
-            raise ValueError(f"cones of shape {cones.shape} ({cones.dtype}), expected ({count}, 4) float32")
+        if cones.shape != (count, CONE_FLOATS) or cones.dtype != np.float32 or not np.all(np.isfinite(cones)):
+            raise ValueError(f"cones of shape {cones.shape} ({cones.dtype}), expected ({count}, {CONE_FLOATS}) float32")
         return cones
 
     cones = read_cache_file(path, read, "visibility cones")

@@ -16,6 +16,8 @@ in vec4 v_tangent;
 in vec2 v_uv0;
 in vec2 v_uv1;
 in vec4 v_visibility;  // scenes/self_visibility.py (interpolated)
+in vec4 v_horizon0;
+in vec4 v_horizon1;
 
 uniform vec3 u_camera_position;
 uniform sampler2D u_lightmap;
@@ -204,6 +206,10 @@ void main() {
             ? mix(dielectric_f0 * specular_weight, base_color, metallic) : vec3(0.0);
         g_self_cone = vec4(normalize(v_visibility.xyz), v_visibility.w);
         g_self_normal = normalize(v_normal);
+        for (int k = 0; k < 4; ++k) {
+            g_self_horizon[k] = v_horizon0[k];
+            g_self_horizon[k + 4] = v_horizon1[k];
+        }
         g_self_radiance = (albedo + specular_reflectance) / PI * irradiance;
     }
 #if defined(METHOD_PREFILTERED)

@@ -10,9 +10,12 @@ import numpy as np
 import pytest
 
 from lobeview.scenes.self_visibility import (
+    CONE_FLOATS,
+    HORIZON_SECTORS,
     MIN_RAYS_PER_VERTEX,
     NO_OCCLUSION,
     cone_visibility,
+    horizon_visibility,
     rays_per_vertex,
     self_occluded_incident,
     vertex_visibility_cones,
@@ -65,7 +68,7 @@ def test_degenerate_input_gives_finite_cones():
     one = vertex_visibility_cones(positions[:3], normals[:3], np.array([[0, 1, 2]]))
     assert np.all(one[:, 3] == NO_OCCLUSION)
     empty = vertex_visibility_cones(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3), int))
-    assert empty.shape == (0, 4)
+    assert empty.shape == (0, CONE_FLOATS)
 
 
 def test_smoothing_averages_over_triangle_neighbours():
@@ -122,8 +125,61 @@ def test_visibility_and_mix():
     assert cone_visibility(edge, cone) == pytest.approx(0.5)
     assert cone_visibility(outside, cone) == 0.0
     assert cone_visibility(outside, np.array([0.0, 0.0, 1.0, NO_OCCLUSION])) == 1.0
-    mixed = self_occluded_incident(np.array([4.0, 4.0, 4.0]), np.array([1.0, 2.0, 3.0]), edge, cone)
+    # horizons: sine 0.6 all round (about +z); a direction at that elevation is half visible
+    normal = np.array([0.0, 0.0, 1.0])
+    horizons = np.concatenate([cone, np.full(HORIZON_SECTORS, 0.6)])
+    at_horizon, above, below = np.array([0.8, 0.0, 0.6]), np.array([0.0, 0.6, 0.8]), np.array([0.0, -0.95, 0.3122])
+    assert horizon_visibility(at_horizon, horizons, normal) == pytest.approx(0.5)
+    assert horizon_visibility(above, horizons, normal) == 1.0
+    assert horizon_visibility(below / np.linalg.norm(below), horizons, normal) == 0.0
+    assert horizon_visibility(-normal, horizons, normal) == 1.0  # below the surface: transmission
+    no_cone = horizons.copy()
+    no_cone[3] = NO_OCCLUSION
+    assert horizon_visibility(below / np.linalg.norm(below), no_cone, normal) == 1.0
+    mixed = self_occluded_incident(np.array([4.0, 4.0, 4.0]), np.array([1.0, 2.0, 3.0]), at_horizon, horizons, normal)
     np.testing.assert_allclose(mixed, [2.5, 3.0, 3.5])
+
+
+def test_horizon_is_linear_in_azimuth_between_sector_centres():
+    """The horizon's sine at an azimuth between two sectors' centres is their linear mix, in the
+    frame horizon_frame gives (the shaders measure azimuth the same way)."""
+    from lobeview.scenes.self_visibility import horizon_frame
+
+    normal = np.array([0.0, 1.0, 0.0])
+    tangent, bitangent = horizon_frame(normal)
+    assert abs(tangent @ normal) < 1e-12 and abs(bitangent @ normal) < 1e-12 and abs(tangent @ bitangent) < 1e-12
+    cones = np.concatenate([[0.0, 1.0, 0.0, 0.5], np.linspace(0.1, 0.8, HORIZON_SECTORS)])
+    for sector in range(HORIZON_SECTORS - 1):
+        phi = (sector + 1.0) / HORIZON_SECTORS * 2.0 * np.pi  # half way between centres k and k+1
+        h = 0.5 * (cones[4 + sector] + cones[5 + sector])
+        direction = np.sqrt(1.0 - h**2) * (np.cos(phi) * tangent + np.sin(phi) * bitangent) + h * normal
+        assert horizon_visibility(direction, cones, normal) == pytest.approx(0.5, abs=1e-9)
+
+
+def test_floor_beside_a_wall_gets_the_walls_horizon_per_azimuth():
+    """A point on a floor 1 in front of a wall 1 high and 3 wide (from x = -1.5 to 1.5): toward
+    azimuth phi off the wall's direction the wall's top stands at sin e = cos phi / sqrt(1 +
+    cos^2 phi) while |tan phi| <= 1.5, else nothing; each sector's traced horizon is the mean
+    of that over the sector (quadrature), which a circular cone cannot hold."""
+    from lobeview.scenes.meshes import merge_meshes
+    from lobeview.scenes.self_visibility import horizon_frame
+
+    floor = _grid((-1.5, 0.0, 1.0), (3.0, 0.0, 0.0), (0.0, 0.0, -2.0), 30)
+    wall = _grid((-1.5, 0.0, -1.0), (3.0, 0.0, 0.0), (0.0, 1.0, 0.0), 30)
+    mesh = merge_meshes([floor, wall], "corner")
+    cones = vertex_visibility_cones(mesh.positions, mesh.normals, mesh.indices, rays=1024, smoothing_passes=0)
+    centre = int(np.argmin(np.linalg.norm(mesh.positions[: len(floor.positions)] - [0.0, 0.0, 0.0], axis=1)))
+    assert np.allclose(mesh.positions[centre], 0.0)
+    tangent, bitangent = horizon_frame(np.array([0.0, 1.0, 0.0]))
+    phi = (np.arange(HORIZON_SECTORS * 400) + 0.5) / (HORIZON_SECTORS * 400) * 2.0 * np.pi
+    toward = np.cos(phi)[:, None] * tangent + np.sin(phi)[:, None] * bitangent
+    cos_to_wall = -toward[:, 2]  # the wall lies toward -z
+    lateral = np.abs(toward[:, 0]) / np.maximum(cos_to_wall, 1e-12)
+    hit = (cos_to_wall > 0.0) & (lateral <= 1.5)
+    sin_top = np.where(hit, cos_to_wall / np.sqrt(1.0 + cos_to_wall**2), 0.0)
+    expected = sin_top.reshape(HORIZON_SECTORS, -1).mean(axis=1)
+    assert expected.max() > 0.5 and expected.min() == 0.0  # the wall's side and the open side
+    np.testing.assert_allclose(cones[centre, 4:], expected, atol=0.03)  # 128 rays a sector
 
 
 # -- the shaders against the numpy twin --------------------------------------------------------
@@ -215,11 +271,10 @@ def test_shaders_follow_the_numpy_cones_on_a_floor_beside_a_wall():
     triangle = np.where(in_first, first, first + 1)
     bary = trimesh.triangles.points_to_barycentric(floor_positions[floor.indices[triangle]], points)
     cone = np.einsum("pk,pkc->pc", bary, floor_cones[floor.indices[triangle]].astype(np.float64))
-    cone[:, :3] /= np.linalg.norm(cone[:, :3], axis=1, keepdims=True)
     view = camera.position - points
     view /= np.linalg.norm(view, axis=1, keepdims=True)
     mirror = view * [-1.0, 1.0, -1.0]
-    expected = 0.5 + 0.5 * cone_visibility(mirror, cone, np.array([0.0, 1.0, 0.0]))
+    expected = 0.5 + 0.5 * horizon_visibility(mirror, cone, np.array([0.0, 1.0, 0.0]))
 
     assert (expected < 0.6).sum() > 100 and (expected > 0.95).sum() > 100  # both regimes covered
     error = np.abs(ratio - expected)

@@ -31,11 +31,13 @@ from .interface import DrawRecorder, bind_storage
 from .object_records import OBJECT_RECORDS_BINDING, RECORD_UNIFORMS, pack_object_record
 
 # Vertex layout of the scene's objects: position, normal, tangent (xyz, handedness), UV0, UV1,
-# the visibility cone against the object itself (bent normal, cos of its half angle:
-# scenes/self_visibility.py).
-VERTEX_FORMAT = "3f 3f 4f 2f 2f 4f"
-VERTEX_ATTRIBUTES = ("in_position", "in_normal", "in_tangent", "in_uv0", "in_uv1", "in_visibility")
-VERTEX_FLOATS = 18
+# the visibility cone against the object itself (bent normal, cos of its half angle) and its
+# horizon in 8 azimuth sectors (scenes/self_visibility.py).
+VERTEX_FORMAT = "3f 3f 4f 2f 2f 4f 4f 4f"
+VERTEX_ATTRIBUTES = (
+    "in_position", "in_normal", "in_tangent", "in_uv0", "in_uv1", "in_visibility", "in_horizon0", "in_horizon1",
+)  # fmt: skip
+VERTEX_FLOATS = 26
 POSITION_ONLY_FORMAT = f"3f {4 * (VERTEX_FLOATS - 3)}x"
 COMMAND_WORDS = 5  # DrawElementsIndirectCommand: count, instanceCount, firstIndex, baseVertex, baseInstance
 CULL_GROUP_SIZE = 64  # shaders/cull_commands.comp local_size_x
