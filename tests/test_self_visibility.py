@@ -209,13 +209,13 @@ def _grid(corner, edge_u, edge_v, steps: int):
     )
 
 
-def test_shaders_follow_the_numpy_cones_on_a_floor_beside_a_wall():
+def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall():
     """A near-mirror metal floor (base colour 0.5) with a wall at its back, one object, under a
     uniform sky: its cube map holds only the sky (the object is not in its own cube), so with
     self-occlusion a floor pixel shows F (vis L + (1 - vis) 0.5 L), the hidden part seeing the
     object as the point itself (F0 0.5 lit by E = pi L), and without it F L. The ratio of the two
-    frames is 0.5 + 0.5 vis at every floor pixel, vis from the numpy cones interpolated at the
-    pixel's position and its mirror direction."""
+    frames is 0.5 + 0.5 vis at every floor pixel, vis from the numpy horizons interpolated at the
+    pixel's position and its mirror direction (measured: 99 % within 5e-4, the worst 1.4e-3)."""
     import trimesh
 
     from lobeview.materials.spec import validate
@@ -258,7 +258,7 @@ def test_shaders_follow_the_numpy_cones_on_a_floor_beside_a_wall():
     assert floor_pixels.sum() > 2000
     ratio = on.radiance[floor_pixels].mean(axis=-1) / off.radiance[floor_pixels].mean(axis=-1)
 
-    # numpy: the cone at each pixel's position (barycentric on the floor's triangles, as the
+    # numpy: the cone and horizons at each pixel's position (barycentric on the floor's triangles, as the
     # rasteriser interpolates), the mirror direction of the view about +y
     points = on.position[floor_pixels].astype(np.float64)
     steps = 30
