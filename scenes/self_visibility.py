@@ -43,7 +43,8 @@ from .baker import _frame
 
 SELF_VISIBILITY_RAYS = 64  # rays per vertex
 SMOOTHING_PASSES = 2  # neighbour averages of the per-vertex estimates
-MAX_SELF_VISIBILITY_RAYS_TOTAL = 4_000_000  # per object: fewer rays per vertex beyond (at least 8)
+# Rays per object and pass (the cones', then the occluded vertices' horizons'): fewer a vertex beyond.
+MAX_SELF_VISIBILITY_RAYS_TOTAL = 4_000_000
 MIN_RAYS_PER_VERTEX = 8
 NO_OCCLUSION = -2.0  # cos a of a vertex no ray of which hits its object: every direction visible
 SOFT_EDGE = 0.1  # half width, in cosine, of the cone's soft edge (a 64-ray cone is not sharper)
@@ -94,7 +95,7 @@ def vertex_visibility_cones(
 ) -> np.ndarray:
     """(V, 4 + HORIZON_SECTORS) float32: per vertex the bent normal (unit, the positions' space),
     the cosine of the visibility cone's half angle (NO_OCCLUSION where the object hides nothing
-    from it) and the sine of the horizon's elevation in each azimuth sector (vertex_horizons).
+    from it) and the sine of the horizon's elevation in each azimuth sector (_traced_horizons).
     ``indices``: the triangles (3 per face)."""
     import trimesh
 
