@@ -208,7 +208,7 @@ def horizon_visibility(
     sin_e = np.sum(directions * normals, axis=-1)
     phi = np.arctan2(np.sum(directions * bitangent, axis=-1), np.sum(directions * tangent, axis=-1))
     x = np.mod(phi / (2.0 * np.pi) * HORIZON_SECTORS - 0.5, HORIZON_SECTORS)
-    first = np.floor(x).astype(int) % HORIZON_SECTORS
+    first = np.clip(np.nan_to_num(np.floor(x)).astype(int) % HORIZON_SECTORS, 0, HORIZON_SECTORS - 1)
     second = (first + 1) % HORIZON_SECTORS
     frac = x - np.floor(x)
     horizons = cones[..., 4:]
@@ -216,7 +216,7 @@ def horizon_visibility(
         horizons, second[..., None], -1
     )[..., 0]
     t = np.clip((sin_e - (h - soft_edge)) / (2.0 * soft_edge), 0.0, 1.0)
-    passes = (cones[..., 3] <= NO_OCCLUSION + 1e-3) | (sin_e <= 0.0)
+    passes = (cones[..., 3] <= NO_OCCLUSION + 1e-3) | ~(sin_e > 0.0)  # ~: a NaN normal passes too
     return np.where(passes, 1.0, t * t * (3.0 - 2.0 * t))
 
 

@@ -26,12 +26,12 @@ float self_visibility(vec3 dir) {
     if (g_self_cone.w <= SELF_NO_OCCLUSION + 1e-3) return 1.0;
     vec3 d = normalize(dir);
     float sin_e = dot(d, g_self_normal);
-    if (sin_e <= 0.0) return 1.0;
+    if (!(sin_e > 0.0)) return 1.0;  // below the surface, or a degenerate normal (NaN)
     vec3 t, b;
     horizon_frame(g_self_normal, t, b);
     float phi = atan(dot(d, b), dot(d, t));
     float x = mod(phi / (2.0 * PI) * float(HORIZON_SECTORS) - 0.5, float(HORIZON_SECTORS));
-    int first = int(floor(x)) % HORIZON_SECTORS;
+    int first = clamp(int(floor(x)) % HORIZON_SECTORS, 0, HORIZON_SECTORS - 1);  // never out of bounds
     float h = mix(g_self_horizon[first], g_self_horizon[(first + 1) % HORIZON_SECTORS], fract(x));
     return smoothstep(h - HORIZON_SOFT_EDGE, h + HORIZON_SOFT_EDGE, sin_e);
 }

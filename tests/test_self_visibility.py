@@ -133,6 +133,8 @@ def test_visibility_and_mix():
     assert horizon_visibility(above, horizons, normal) == 1.0
     assert horizon_visibility(below / np.linalg.norm(below), horizons, normal) == 0.0
     assert horizon_visibility(-normal, horizons, normal) == 1.0  # below the surface: transmission
+    with np.errstate(invalid="ignore"):
+        assert horizon_visibility(above, horizons, np.full(3, np.nan)) == 1.0  # a degenerate normal
     no_cone = horizons.copy()
     no_cone[3] = NO_OCCLUSION
     assert horizon_visibility(below / np.linalg.norm(below), no_cone, normal) == 1.0
