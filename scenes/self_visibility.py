@@ -123,12 +123,7 @@ def vertex_visibility_cones(
         + local[None, :, 1:2] * bitangent[:, None, :]
         + local[None, :, 2:3] * normals[:, None, :]
     )  # (V, n, 3)
-    # Rays start NEAR_HIT_DISTANCE along themselves: a grazing ray from a vertex whose normal is
-    # averaged over a curved, faceted surface meets the neighbouring triangles at once, which
-    # hide nothing a finer mesh would (the occlusion texture holds detail at that scale).
-    start = positions[:, None, :] + normals[:, None, :] * (ORIGIN_OFFSET * max(extent, 1e-12))
-    start = start + directions * (NEAR_HIT_DISTANCE * max(extent, 1e-12))
-    hit = mesh.ray.intersects_any(start.reshape(-1, 3), directions.reshape(-1, 3)).reshape(count, n)
+    hit = _own_hits(mesh, positions, normals, directions, extent).reshape(count, n)
     if not hit.any():
         return cones
     escaped = ~hit
@@ -151,6 +146,17 @@ def vertex_visibility_cones(
         (horizons,) = _smooth_over_neighbours(faces, count, horizons, passes=smoothing_passes)
         cones[occluded, 4:] = horizons[occluded]
     return cones
+
+
+def _own_hits(mesh, positions: np.ndarray, normals: np.ndarray, directions: np.ndarray, extent: float) -> np.ndarray:
+    """Whether each ray (``directions`` (V, n, 3) from each vertex) meets the object's own
+    ``mesh`` (trimesh), flattened. Rays start NEAR_HIT_DISTANCE along themselves: a grazing ray
+    from a vertex whose normal is averaged over a curved, faceted surface meets the neighbouring
+    triangles at once, which hide nothing a finer mesh would (the occlusion texture holds detail
+    at that scale)."""
+    start = positions[:, None, :] + normals[:, None, :] * (ORIGIN_OFFSET * max(extent, 1e-12))
+    start = start + directions * (NEAR_HIT_DISTANCE * max(extent, 1e-12))
+    return mesh.ray.intersects_any(start.reshape(-1, 3), directions.reshape(-1, 3))
 
 
 def horizon_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -187,9 +193,7 @@ def _traced_horizons(mesh, positions, normals, extent, rays_per_sector, seed) ->
         + (cos_e * np.sin(phi))[..., None] * bitangent[:, None, None, :]
         + sin_e[..., None] * normals[:, None, None, :]
     ).reshape(count, -1, 3)
-    start = positions[:, None, :] + normals[:, None, :] * (ORIGIN_OFFSET * max(extent, 1e-12))
-    start = start + directions * (NEAR_HIT_DISTANCE * max(extent, 1e-12))
-    hit = mesh.ray.intersects_any(start.reshape(-1, 3), directions.reshape(-1, 3))
+    hit = _own_hits(mesh, positions, normals, directions, extent)
     return hit.reshape(count, HORIZON_SECTORS, k).mean(axis=2)
 
 

@@ -205,7 +205,7 @@ void main() {
         vec3 specular_reflectance = u_gltf_model == 1
             ? mix(dielectric_f0 * specular_weight, base_color, metallic) : vec3(0.0);
         g_self_cone = vec4(normalize(v_visibility.xyz), v_visibility.w);
-        g_self_normal = normalize(v_normal);
+        set_self_normal(normalize(v_normal));
         for (int k = 0; k < 4; ++k) {
             g_self_horizon[k] = v_horizon0[k];
             g_self_horizon[k + 4] = v_horizon1[k];

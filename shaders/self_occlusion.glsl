@@ -11,6 +11,8 @@ const int HORIZON_SECTORS = 8;
 const vec3 HORIZON_AXIS = vec3(1.0, 2.0, 3.0) / sqrt(14.0);
 vec4 g_self_cone = vec4(0.0, 0.0, 1.0, SELF_NO_OCCLUSION);
 vec3 g_self_normal = vec3(0.0, 0.0, 1.0);
+vec3 g_self_tangent = vec3(1.0, 0.0, 0.0);  // the horizon's frame about g_self_normal (set_self_normal)
+vec3 g_self_bitangent = vec3(0.0, 1.0, 0.0);
 vec3 g_self_radiance = vec3(0.0);
 float g_self_horizon[HORIZON_SECTORS] = float[](0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
 
@@ -22,14 +24,18 @@ void horizon_frame(vec3 n, out vec3 t, out vec3 b) {
     b = cross(n, t);
 }
 
+// The shading point's normal and its horizon frame, once a pixel (not once a lookup).
+void set_self_normal(vec3 n) {
+    g_self_normal = n;
+    horizon_frame(n, g_self_tangent, g_self_bitangent);
+}
+
 float self_visibility(vec3 dir) {
     if (g_self_cone.w <= SELF_NO_OCCLUSION + 1e-3) return 1.0;
     vec3 d = normalize(dir);
     float sin_e = dot(d, g_self_normal);
     if (!(sin_e > 0.0)) return 1.0;  // below the surface, or a degenerate normal (NaN)
-    vec3 t, b;
-    horizon_frame(g_self_normal, t, b);
-    float phi = atan(dot(d, b), dot(d, t));
+    float phi = atan(dot(d, g_self_bitangent), dot(d, g_self_tangent));
     float x = mod(phi / (2.0 * PI) * float(HORIZON_SECTORS) - 0.5, float(HORIZON_SECTORS));
     int first = clamp(int(floor(x)) % HORIZON_SECTORS, 0, HORIZON_SECTORS - 1);  // never out of bounds
     float h = mix(g_self_horizon[first], g_self_horizon[(first + 1) % HORIZON_SECTORS], fract(x));
