@@ -39,6 +39,8 @@ from lobeview.viewer.preview import PREVIEW_CAMERA
 from lobeview.viewer.tonemap import TONEMAPS, to_uint8, tonemap
 
 OUTPUT_SUFFIXES = (".png", ".exr", ".npy")
+MAX_SUPERSAMPLE = 8
+MAX_RENDER_EDGE = 8192  # pixels a side of the render (parse_size's bound on --size)
 PREVIEW_ENV = "builtin:studio"
 ShotError = OptionError  # the error type the command line reports as "lobeview: error: ..."
 
@@ -74,6 +76,15 @@ def add_arguments(p) -> None:
         help="vertical field of view in degrees (default: the view's; 40 for --object, 50 for a scene without cameras)",
     )
     a("--size", default="640x400", help="image size WxH (default 640x400)")
+    a(
+        "--supersample",
+        type=int,
+        default=1,
+        metavar="K",
+        help="render K x K shading points a pixel (at K times --size) and average them: edges, creases "
+        f"and sub-pixel highlights anti-aliased, K^2 the cost (1-{MAX_SUPERSAMPLE}, default 1; the "
+        "reference's box pixel filter already integrates each pixel)",
+    )
     add_method_arguments(p)
     a(
         "--spp",
@@ -111,6 +122,16 @@ def add_arguments(p) -> None:
     )
 
 
+def box_downsample(image: np.ndarray, factor: int) -> np.ndarray:
+    """The mean of each ``factor`` x ``factor`` block of an (H factor, W factor, ...) image: the
+    box filter of a supersampled render."""
+    if factor == 1:
+        return image
+    h, w = image.shape[0] // factor, image.shape[1] // factor
+    blocks = image[: h * factor, : w * factor].reshape(h, factor, w, factor, *image.shape[2:])
+    return blocks.mean(axis=(1, 3), dtype=np.float64).astype(image.dtype)
+
+
 def _write(out: Path, radiance: np.ndarray, args) -> None:
     if out.suffix.lower() == ".png":
         from PIL import Image
@@ -138,6 +159,14 @@ def run(args) -> int:
     if args.object is not None and args.materials is not None:
         raise ShotError("--materials edits a scene's materials; with --object use --material")
     size = parse_size(args.size)
+    if not 1 <= args.supersample <= MAX_SUPERSAMPLE:
+        raise ShotError(f"--supersample must be in [1, {MAX_SUPERSAMPLE}], got {args.supersample}")
+    if max(size) * args.supersample > MAX_RENDER_EDGE:
+        raise ShotError(
+            f"--size {args.size} at --supersample {args.supersample} renders "
+            f"{size[0] * args.supersample}x{size[1] * args.supersample}: over {MAX_RENDER_EDGE} pixels a side"
+        )
+    size = (size[0] * args.supersample, size[1] * args.supersample)  # the render's; the image is /K
     args.gpu_timer = False
     stages = {}
     t0 = time.perf_counter()
@@ -152,7 +181,7 @@ def _finish(result, out: Path, args, stages: dict) -> None:
     if result.invalid.any():
         print(f"warning: {int(result.invalid.sum())} pixels produced NaN/Inf and were set to 0", file=sys.stderr)
     t0 = time.perf_counter()
-    _write(out, result.radiance, args)
+    _write(out, box_downsample(result.radiance, args.supersample), args)
     stages["write"] = time.perf_counter() - t0
 
 
@@ -167,9 +196,14 @@ def _report(
     out: Path,
     describe,
     pixel_filter: str = "box",
+    supersample: int = 1,
 ) -> None:
     extra = f", {samples} spp per lobe, {pixel_filter} pixel filter" if method.kind == "reference" else ""
-    print(f"rendered {what}, {size[0]}x{size[1]}, method {method}{extra}")
+    if supersample > 1:
+        shown = f"{size[0] // supersample}x{size[1] // supersample} ({supersample}x{supersample} supersampled)"
+    else:
+        shown = f"{size[0]}x{size[1]}"
+    print(f"rendered {what}, {shown}, method {method}{extra}")
     print(f"device: {describe(ctx)}")
     print(f"camera: {camera.describe()}")
     print("stages: " + ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in stages.items()))
@@ -230,6 +264,7 @@ def _run_preview(args, out, method, size, stages, t0, create_context, describe) 
         out,
         describe,
         args.pixel_filter,
+        args.supersample,
     )
     renderer.release()
     ctx.release()
@@ -257,7 +292,8 @@ def _run_scene(args, out, method, size, stages, t0, create_context, describe) ->
     print(f"[cube] {renderer.probes.residency.report(renderer.objects)}")
     _finish(result, out, args, stages)
     what = f"{'the demo scene' if args.scene is None else path.name} under {env.name}"
-    _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe, args.pixel_filter)
+    _report(what, method, size, result.samples_per_pixel, ctx, camera, stages, out, describe, args.pixel_filter,
+            args.supersample)  # fmt: skip
     renderer.release()
     ctx.release()
     return 0

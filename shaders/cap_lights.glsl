@@ -174,8 +174,11 @@ vec3 cap_lights_radiance(Lobe l, vec3 wo, mat3 tbn) {
     vec3 sum = vec3(0.0);
     if (wo.z <= 0.0) return sum;
     // A light the object's own surface hides from this point (self_occlusion.glsl): the object
-    // is seen there instead, which the residual cube's lookups already count.
-    for (int k = 0; k < u_cap_light_count; ++k)
-        sum += self_visibility(u_cap_light_axis[k].xyz) * cap_light_radiance(l, wo, tbn, k);
+    // is seen there instead, which the residual cube's lookups already count. The visible share
+    // is the cap's own (its solid angle as the footprint).
+    for (int k = 0; k < u_cap_light_count; ++k) {
+        float cap_solid_angle = 2.0 * PI * (1.0 - u_cap_light_axis[k].w);
+        sum += self_visibility(u_cap_light_axis[k].xyz, cap_solid_angle) * cap_light_radiance(l, wo, tbn, k);
+    }
     return sum;
 }

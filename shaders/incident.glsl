@@ -54,16 +54,18 @@ vec3 proxy_direction(vec3 dir_world, out float lod_offset) {
     return to_hit / len;
 }
 
-vec3 lookup(vec3 dir_world, float lod) {
+vec3 lookup(vec3 dir_world, float lod, float footprint) {
     float lod_offset;
     vec3 d = proxy_direction(dir_world, lod_offset);
 #if !defined(METHOD_MC)
     lod += lod_offset;  // filtered methods only; mc-N and the reference read level 0
 #endif
-    return self_occluded(dir_world, RADIANCE_LOD(d, max(lod, 0.0)).rgb);
+    return self_occluded(dir_world, RADIANCE_LOD(d, max(lod, 0.0)).rgb, footprint);
 }
 #else
-vec3 lookup(vec3 dir_world, float lod) { return self_occluded(dir_world, RADIANCE_LOD(dir_world, max(lod, 0.0)).rgb); }
+vec3 lookup(vec3 dir_world, float lod, float footprint) {
+    return self_occluded(dir_world, RADIANCE_LOD(dir_world, max(lod, 0.0)).rgb, footprint);
+}
 #endif
 
 #if defined(MIRROR)
@@ -199,6 +201,6 @@ vec3 incident(vec3 dir, float solid_angle) {
 #if defined(MIRROR)
     return mirror_incident(normalize(dir), solid_angle);
 #else
-    return lookup(dir, solid_angle > 0.0 ? cube_lod(dir, solid_angle, u_face_size) + u_lod_bias : 0.0);
+    return lookup(dir, solid_angle > 0.0 ? cube_lod(dir, solid_angle, u_face_size) + u_lod_bias : 0.0, solid_angle);
 #endif
 }

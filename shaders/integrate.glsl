@@ -241,7 +241,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         if (p_bsdf > 0.0) {
             vec3 world = tbn * wi;
             float w = power_heuristic(p_bsdf, env_pdf(world));
-            sum += lookup(world, 0.0) * lobe_eval(l, wi, wo) * (abs(wi.z) * w / p_bsdf);
+            sum += lookup(world, 0.0, 0.0) * lobe_eval(l, wi, wo) * (abs(wi.z) * w / p_bsdf);
         }
         // Environment sample, MIS-weighted against the BSDF sampler.
         vec3 world_e = env_sample(fract(q.zw + rotation_env));
@@ -250,7 +250,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         if (any(greaterThan(f, vec3(0.0)))) {
             float p_env = env_pdf(world_e);
             float w = power_heuristic(p_env, lobe_sample_pdf(l, wi_e, wo));
-            sum += lookup(world_e, 0.0) * f * (abs(wi_e.z) * w / p_env);
+            sum += lookup(world_e, 0.0, 0.0) * f * (abs(wi_e.z) * w / p_env);
         }
     }
     return sum / float(u_samples);
@@ -302,7 +302,7 @@ vec3 integrate_diffuse(vec3 wo, mat3 tbn) {
 #else
             float w = 1.0;
 #endif
-            sum += lookup(world, 0.0) * diffuse_eval(wi, wo) * (PI * w);
+            sum += lookup(world, 0.0, 0.0) * diffuse_eval(wi, wo) * (PI * w);
         }
 #if defined(ENV_SAMPLING)
         vec3 world_e = env_sample(fract(q.zw + rotation_env));
@@ -310,7 +310,7 @@ vec3 integrate_diffuse(vec3 wo, mat3 tbn) {
         if (wi_e.z > 0.0) {
             float p_env = env_pdf(world_e);
             float w = power_heuristic(p_env, wi_e.z / PI);
-            sum += lookup(world_e, 0.0) * diffuse_eval(wi_e, wo) * (wi_e.z * w / p_env);
+            sum += lookup(world_e, 0.0, 0.0) * diffuse_eval(wi_e, wo) * (wi_e.z * w / p_env);
         }
 #endif
     }

@@ -82,7 +82,7 @@ vec3 lamps_radiance(Lobe l, vec3 wo, mat3 tbn, vec3 x) {
         float sin2 = sin_r * sin_r;
         float cos_r = sqrt(max(1.0 - sin2, 0.0));
         // 1 - cos computed as sin^2 / (1 + cos): no cancellation for a distant lamp's tiny cap.
-        radiance *= self_visibility(axis);  // the object's own surface hiding the lamp (self_occlusion.glsl)
+        radiance *= self_visibility(axis, 0.0);  // the object's own surface hiding the lamp (self_occlusion.glsl)
         sum += cap_integral(l, wo, tbn, axis, cos_r, sin2 / (1.0 + cos_r), 1.0) * radiance;  // a uniform cap
     }
     return sum;

@@ -109,7 +109,8 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
             float unused_offset;
             r = proxy_direction(r, unused_offset);
 #endif
-            vec3 value = self_occluded(r_from_point, textureLod(u_split_sum[l.dist], r, lod).rgb) * weight;
+            vec3 value = self_occluded(r_from_point, textureLod(u_split_sum[l.dist], r, lod).rgb,
+                                       split_sum_footprint(l.dist, level_alpha)) * weight;
             radiance_all += value;
             if (local_r.z > 0.0) {
                 radiance += value;
@@ -151,7 +152,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
             // Narrower than the map resolves: the cube's MIP chain over the lobe's footprint
             // (lookup() follows the reflection proxy and its footprint change itself).
             float area = LOBE_DIRECT_AREA_PER_MEDIAN2 * median * median;
-            sum += lookup(axis, cube_lod(axis, area, u_face_size)) * energy;
+            sum += lookup(axis, cube_lod(axis, area, u_face_size), area) * energy;
             continue;
         }
         vec3 axis_from_point = axis;  // the self-occlusion cone's direction (incident.glsl)
@@ -162,7 +163,8 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // Fitted lobe j owns slices j depth .. (j + 1) depth - 1: linear filtering in z never
         // mixes two lobes because z stays between the first and last slice centre of the block.
         float z = (float(j * depth) + (depth > 1 ? s : 0.0) + 0.5) / float(count * depth);
-        sum += self_occluded(axis_from_point, texture(u_lobe_maps[lobe_index], vec3(direction_to_latlong(axis), z)).rgb) * energy;
+        vec3 mapped = texture(u_lobe_maps[lobe_index], vec3(direction_to_latlong(axis), z)).rgb;
+        sum += self_occluded(axis_from_point, mapped, LOBE_DIRECT_AREA_PER_MEDIAN2 * median * median) * energy;
     }
     return sum;
 }

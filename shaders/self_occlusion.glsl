@@ -30,19 +30,65 @@ void set_self_normal(vec3 n) {
     horizon_frame(n, g_self_tangent, g_self_bitangent);
 }
 
-float self_visibility(vec3 dir) {
+// Solid angle of the intersection of two spherical caps of angular radii a and b whose centres
+// lie d apart (Tovchigrechko and Vakser 2001, eq. 4; self_visibility.py cap_intersection_solid_angle).
+float cap_intersection_solid_angle(float a, float b, float d) {
+    if (d >= a + b) return 0.0;
+    float cos_a = cos(a), cos_b = cos(b), cos_d = cos(d);
+    if (d <= abs(a - b)) return 2.0 * PI * (1.0 - max(cos_a, cos_b));
+    float sin_a = max(sin(a), 1e-12), sin_b = max(sin(b), 1e-12), sin_d = max(sin(d), 1e-12);
+    float t_d = acos(clamp((cos_d - cos_a * cos_b) / (sin_a * sin_b), -1.0, 1.0));
+    float t_a = acos(clamp((cos_b - cos_d * cos_a) / (sin_d * sin_a), -1.0, 1.0));
+    float t_b = acos(clamp((cos_a - cos_d * cos_b) / (sin_d * sin_b), -1.0, 1.0));
+    return max(2.0 * (PI - t_d - t_a * cos_a - t_b * cos_b), 0.0);
+}
+
+// Angular radius of the cap a lookup averaging `footprint` sr about a direction of elevation sine
+// sin_e is taken as: its own cap and the soft edge's (a sine, 1 / cos e in angle) in quadrature
+// (self_visibility.py footprint_radius).
+float footprint_radius(float footprint, float sin_e) {
+    float own = acos(clamp(1.0 - footprint / (2.0 * PI), -1.0, 1.0));
+    float soft = HORIZON_SOFT_EDGE / max(sqrt(max(1.0 - sin_e * sin_e, 0.0)), HORIZON_MIN_COS);
+    return min(sqrt(own * own + soft * soft), MAX_FOOTPRINT_RADIUS);
+}
+
+// The solid angle a split-sum lookup of roughness alpha averages, for its self-occlusion: a cap of
+// radius k alpha (at most SPLIT_SUM_MAX_RADIUS) about the lookup direction, k fitted per
+// distribution against the lobe's own share above a horizon (self_visibility.py split_sum_footprint).
+float split_sum_footprint(int dist, float alpha) {
+    float radius = (dist == DIST_GGX ? SPLIT_SUM_RADIUS_PER_ALPHA_GGX : SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN) * alpha;
+    return 2.0 * PI * (1.0 - cos(min(radius, SPLIT_SUM_MAX_RADIUS)));
+}
+
+// The horizon's sine at azimuth phi: linear between the sectors' centres.
+const float AZIMUTH_TAP = 0.70710678;  // self_visibility.py AZIMUTH_TAP_OFFSETS
+float horizon_at(float phi) {
+    float x = mod(phi / (2.0 * PI) * float(HORIZON_SECTORS) - 0.5, float(HORIZON_SECTORS));
+    int first = clamp(int(floor(x)) % HORIZON_SECTORS, 0, HORIZON_SECTORS - 1);  // never out of bounds
+    return mix(g_self_horizon[first], g_self_horizon[(first + 1) % HORIZON_SECTORS], fract(x));
+}
+
+// The visible share of a lookup toward `dir` that averages `footprint` sr (0: one direction).
+float self_visibility(vec3 dir, float footprint) {
     if (g_self_cone.w <= SELF_NO_OCCLUSION + 1e-3) return 1.0;
     vec3 d = normalize(dir);
     float sin_e = dot(d, g_self_normal);
     if (!(sin_e > 0.0)) return 1.0;  // below the surface, or a degenerate normal (NaN)
     float phi = atan(dot(d, g_self_bitangent), dot(d, g_self_tangent));
-    float x = mod(phi / (2.0 * PI) * float(HORIZON_SECTORS) - 0.5, float(HORIZON_SECTORS));
-    int first = clamp(int(floor(x)) % HORIZON_SECTORS, 0, HORIZON_SECTORS - 1);  // never out of bounds
-    float h = mix(g_self_horizon[first], g_self_horizon[(first + 1) % HORIZON_SECTORS], fract(x));
-    return smoothstep(h - HORIZON_SOFT_EDGE, h + HORIZON_SOFT_EDGE, sin_e);
+    float radius = footprint_radius(footprint, sin_e);
+    float from_normal = acos(min(sin_e, 1.0));
+    // the cap spans the azimuths phi -+ span (all once it holds the normal); its horizon is the
+    // sectors' mean over them, weighed by the cap's width (3-point Gauss-Chebyshev, second kind)
+    float span = radius >= from_normal ? PI : asin(clamp(sin(radius) / max(sin(from_normal), 1e-12), 0.0, 1.0));
+    float h = 0.5 * horizon_at(phi) + 0.25 * (horizon_at(phi - AZIMUTH_TAP * span) + horizon_at(phi + AZIMUTH_TAP * span));
+    // the lookup's cap against the directions above the horizon (a cap about the normal), over
+    // its part above the surface
+    float above = cap_intersection_solid_angle(acos(clamp(h, -1.0, 1.0)), radius, from_normal);
+    float above_surface = cap_intersection_solid_angle(0.5 * PI, radius, from_normal);
+    return clamp(above / max(above_surface, 1e-12), 0.0, 1.0);
 }
 
-vec3 self_occluded(vec3 dir, vec3 radiance) {
-    float visible = self_visibility(dir);
+vec3 self_occluded(vec3 dir, vec3 radiance, float footprint) {
+    float visible = self_visibility(dir, footprint);
     return visible * radiance + (1.0 - visible) * g_self_radiance;
 }

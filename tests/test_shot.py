@@ -82,6 +82,8 @@ def test_shot_reference_reports_samples(tmp_path, capsys):
         (["--object", "/no/such/mesh.obj"], "no such file"),
         (["--cube-budget", "0"], "--cube-budget must be a positive number of MB"),
         (["--cube-budget", "nan"], "--cube-budget must be a positive number of MB"),
+        (["--object", "sphere", "--supersample", "0"], "--supersample must be in [1, 8]"),
+        (["--object", "sphere", "--size", "3000x8", "--supersample", "3"], "over 8192 pixels a side"),
     ],
 )
 def test_shot_bad_input_gives_a_clear_error(tmp_path, capsys, extra, message):
@@ -89,6 +91,30 @@ def test_shot_bad_input_gives_a_clear_error(tmp_path, capsys, extra, message):
     assert main(["shot", *extra, *size, "--out", str(tmp_path / "x.png")]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+
+
+def test_supersampled_shot_is_the_box_filter_of_the_larger_render(tmp_path, capsys):
+    """--supersample K renders K times --size and writes each K x K block's mean: equal to the
+    larger render averaged here; against the point-sampled image it differs most where a strong
+    edge crosses the pixel (the sphere's silhouette: anti-aliased), little elsewhere."""
+    from lobeview.app.shot import box_downsample
+
+    block = np.arange(4 * 6 * 3, dtype=np.float32).reshape(4, 6, 3)
+    np.testing.assert_allclose(box_downsample(block, 2)[1, 2], block[2:4, 4:6].mean(axis=(0, 1)))
+    common = ["shot", "--object", "sphere", "--method", "lobe-7", "--material", "gold-ggx"]
+    assert main([*common, "--size", "96x64", "--out", str(tmp_path / "big.npy")]) == 0
+    assert main([*common, "--size", "48x32", "--supersample", "2", "--out", str(tmp_path / "ss.npy")]) == 0
+    assert "48x32 (2x2 supersampled)" in capsys.readouterr().out
+    big, supersampled = np.load(tmp_path / "big.npy"), np.load(tmp_path / "ss.npy")
+    assert supersampled.shape == (32, 48, 3)
+    np.testing.assert_allclose(supersampled, box_downsample(big, 2), rtol=1e-6, atol=1e-7)
+    assert main([*common, "--size", "48x32", "--out", str(tmp_path / "point.npy")]) == 0
+    point = np.load(tmp_path / "point.npy")
+    grey_point, grey_ss = point.mean(axis=-1), supersampled.mean(axis=-1)
+    blocks = big.mean(axis=-1).reshape(32, 2, 48, 2)
+    mixed = blocks.max(axis=(1, 3)) > 1.5 * blocks.min(axis=(1, 3))  # pixels a strong edge crosses
+    assert mixed.sum() > 10
+    assert np.abs(grey_ss - grey_point)[mixed].mean() > np.abs(grey_ss - grey_point)[~mixed].mean()
 
 
 def test_shot_into_a_missing_folder_is_an_error_and_creates_nothing(tmp_path, capsys):

@@ -63,6 +63,13 @@ from lobeview.materials.rsibr import (
 from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
 from lobeview.scenes.scene import ALPHA_MODES as GLTF_ALPHA_MODES
 from lobeview.scenes.scene import TEXTURE_SLOTS
+from lobeview.scenes.self_visibility import (
+    HORIZON_MIN_COS,
+    MAX_FOOTPRINT_RADIUS,
+    SPLIT_SUM_MAX_RADIUS,
+    SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN,
+    SPLIT_SUM_RADIUS_PER_ALPHA_GGX,
+)
 
 
 class UniformError(KeyError):
@@ -239,6 +246,12 @@ SHADER_CONSTANTS: dict = {
     "LOBE_SLICES": LOBE_SLICES,
     "LOBE_TABLE_ROWS": LOBE_TABLE_ROWS,
     "LOBE_DIRECT_AREA_PER_MEDIAN2": LOBE_DIRECT_AREA_PER_MEDIAN2,
+    # scenes/self_visibility.py: the horizon seen through a lookup's footprint
+    "HORIZON_MIN_COS": float(HORIZON_MIN_COS),
+    "MAX_FOOTPRINT_RADIUS": float(MAX_FOOTPRINT_RADIUS),
+    "SPLIT_SUM_RADIUS_PER_ALPHA_GGX": float(SPLIT_SUM_RADIUS_PER_ALPHA_GGX),
+    "SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN": float(SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN),
+    "SPLIT_SUM_MAX_RADIUS": float(SPLIT_SUM_MAX_RADIUS),
     "RSIBR_MAX_VIEWS": RSIBR_MAX_VIEWS,  # materials/rsibr.py: views of a once-subdivided icosahedron
     "RSIBR_MAX_FACES": RSIBR_MAX_FACES,
     "RSIBR_FADE": float(RSIBR_FADE),
