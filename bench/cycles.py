@@ -44,6 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.app.shot import box_downsample
 from lobeview.core.errors import parse_size
 from lobeview.core.paths import cache_dir, lobeview_program
 
@@ -207,18 +208,20 @@ def shot_arguments(case: Case, env_path: Path, size, method: str, out: Path, spp
 
 
 def render_lobeview(case: Case, env_path: Path, size, method: str, work: Path, spp: int,
-                    lobeview=None) -> tuple[np.ndarray, str]:  # fmt: skip
+                    lobeview=None, supersample: int = 1) -> tuple[np.ndarray, str]:  # fmt: skip
     """lobeview's linear image of the case through ``lobeview shot`` in a process of its own (as
     a user runs it), and the command, pasteable. ``lobeview``: the command that runs lobeview
     (a list; default this interpreter's ``-m lobeview``), e.g. another checkout's for a
-    before/after table."""
+    before/after table. ``supersample`` K: rendered at K times ``size`` and box-filtered here (what
+    ``shot --supersample K`` writes; done here so an older checkout's shot runs it too)."""
     out = work / f"{case.name}-{case.environment}-{method}.npy"
-    args = shot_arguments(case, env_path, size, method, out, spp)
+    rendered = (size[0] * supersample, size[1] * supersample)
+    args = shot_arguments(case, env_path, rendered, method, out, spp)
     command = [*(lobeview or lobeview_program()), "shot", *args]
     done = subprocess.run(command, capture_output=True, text=True)
     if done.returncode != 0:
         raise RuntimeError(f"lobeview shot failed ({done.returncode}): {done.stderr[-2000:]}")
-    return np.load(out).astype(np.float64), shlex.join(command)
+    return box_downsample(np.load(out).astype(np.float64), supersample), shlex.join(command)
 
 
 def cycles_job(case: Case, env_path: Path, size, spp: int, out: Path) -> dict:
@@ -352,7 +355,7 @@ def figure_row(truth: np.ndarray, images: list[np.ndarray], mask: np.ndarray) ->
 
 
 def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, python: str, cache: Path | None,
-        progress=print, lobeview=None) -> dict:  # fmt: skip
+        progress=print, lobeview=None, supersample: int = 1) -> dict:  # fmt: skip
     version = bpy_version(python)
     rows, figures, commands = [], [], []
     for i, case in enumerate(cases):
@@ -367,7 +370,10 @@ def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, py
         images = []
         for method in ("reference", *methods):
             progress(f"[cycles] {i + 1}/{len(cases)} {case.name} under {case.environment}: lobeview {method} ...")
-            image, command = render_lobeview(case, env_path, size, method, work, ref_spp, lobeview)
+            # the reference integrates each pixel itself (box pixel filter); the real-time methods
+            # shade K x K points a pixel, as `shot --supersample K`
+            factor = 1 if method == "reference" else supersample
+            image, command = render_lobeview(case, env_path, size, method, work, ref_spp, lobeview, factor)
             images.append(image)
             row[method] = compare(image, truth[..., :3], mask)
             if method == "reference":
@@ -375,7 +381,7 @@ def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, py
         rows.append(row)
         figures.append(figure_row(truth[..., :3], images, mask))
     return {"rows": rows, "figures": figures, "commands": commands, "blender": version, "methods": list(methods),
-            "size": list(size), "spp": spp, "ref_spp": ref_spp}  # fmt: skip
+            "size": list(size), "spp": spp, "ref_spp": ref_spp, "supersample": supersample}  # fmt: skip
 
 
 def markdown(results: dict, stamp: str, command: str, figure: str) -> str:
@@ -391,7 +397,8 @@ def markdown(results: dict, stamp: str, command: str, figure: str) -> str:
         f"(CPU, no denoiser, view transform Standard), lobeview's reference at {results['ref_spp']} spp; glTF "
         "files through Blender's own importer. Over the object's pixels (Cycles' alpha = 1, one pixel in): mean "
         "brightness ratio lobeview / Cycles, relative RMSE (%), the median per-pixel ratio (the bulk of the "
-        "surface, where a few glints decide mean and RMSE) and the ratio at the darkest 5 % of pixels.",
+        "surface, where a few glints decide mean and RMSE) and the ratio at the darkest 5 % of pixels. "
+        + _supersample_note(results.get("supersample", 1)),
         "",
         "| case | env | " + " | ".join(f"{m} mean / rmse % / median / darkest" for m in methods) + " |",
         "|---|---|" + "---|" * len(methods),
@@ -406,6 +413,15 @@ def markdown(results: dict, stamp: str, command: str, figure: str) -> str:
     for label, cycles_command, lobeview_command in results["commands"]:
         lines += [f"- {label}: `{cycles_command}`; `{lobeview_command}`"]
     return "\n".join(lines) + "\n"
+
+
+def _supersample_note(factor: int) -> str:
+    if factor == 1:
+        return ("The real-time methods shade one point a pixel (no anti-aliasing): their error holds the "
+                "aliasing of edges, creases and glints.")  # fmt: skip
+    return (f"The real-time methods shade {factor}x{factor} points a pixel, box-filtered (`shot --supersample "
+            f"{factor}`), as Cycles and the reference integrate the pixel: their error is the shading's, not "
+            "aliasing.")  # fmt: skip
 
 
 def _shown(path: Path) -> str:
@@ -425,6 +441,9 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=parse_size, default=(240, 180), help="WxH (default 240x180)")
     parser.add_argument("--spp", type=int, default=512, help="Cycles samples per pixel (default 512)")
     parser.add_argument("--ref-spp", type=int, default=256, help="lobeview reference spp (default 256)")
+    parser.add_argument("--supersample", type=int, default=4, choices=range(1, 9), metavar="K",
+                        help="the real-time methods shade K x K points a pixel (default 4: their error is the "
+                             "shading's; 1 adds the aliasing of one point a pixel)")  # fmt: skip
     parser.add_argument("--bpy-python", default=sys.executable,
                         help="the Python that imports bpy (default: this one)")  # fmt: skip
     parser.add_argument("--no-cache", action="store_true", help="render Cycles' images again")
@@ -465,7 +484,7 @@ def main(argv=None) -> int:
     cases = make_cases(args.cases, args.envs, work)
     lobeview = shlex.split(args.lobeview) if args.lobeview else None
     results = run(cases, args.methods, args.size, args.spp, args.ref_spp, work, args.bpy_python, cache,
-                  lobeview=lobeview)  # fmt: skip
+                  lobeview=lobeview, supersample=args.supersample)  # fmt: skip
     results["lobeview"] = args.lobeview or "this checkout"
     out, figures = Path(args.out), Path(args.figures)
     out.mkdir(exist_ok=True)

@@ -395,13 +395,37 @@ class SceneRenderer(RendererBase):
         pixel's integral, 'point' shades every pass at the pixel centre."""
         method = Method.parse(method) if isinstance(method, str) else method
         method, offsets = self.pass_plan(method, spp, pixel_filter, self.has_rational)
-        width, height = self.size
         passes = len(offsets)
+        timer = self.gpu_timer()
+        # A box-filtered reference integrates the pixel over its passes' positions: each reads the
+        # material textures over its own share of the pixel (shaders/material_maps.glsl).
+        jittered_passes = any(tuple(offset) != (0.0, 0.0) for offset in offsets)
+        self.shading.texture_footprint = 1.0 / np.sqrt(passes) if jittered_passes else 1.0
+        try:
+            accumulated, invalid, t_shade, t_gpu, g_buffers = self._accumulate_passes(
+                camera, method, offsets, lod_bias, seed, timer
+            )
+        finally:
+            self.shading.texture_footprint = 1.0
+        return RenderResult(
+            radiance=(accumulated / passes).astype(np.float32),
+            position=g_buffers[0][..., :3],
+            normal=g_buffers[1][..., :3],
+            tangent=g_buffers[2][..., :3],
+            mask=g_buffers[0][..., 3] > 0.5,
+            invalid=invalid,
+            timings={**self.timings, "shade": t_shade, **({"gpu shade": t_gpu} if timer is not None else {})},
+            samples_per_pixel=passes * method.samples,
+            object_id=np.rint(g_buffers[1][..., 3]).astype(np.int32) - 1,
+        )
+
+    def _accumulate_passes(self, camera: Camera, method: Method, offsets, lod_bias, seed: int, timer):
+        """Draw a pass at each sub-pixel offset and sum their radiance: (sum, invalid pixels,
+        seconds, GPU seconds, the first pass's G-buffers)."""
+        width, height = self.size
         accumulated = np.zeros((height, width, 3))
         invalid = np.zeros((height, width), dtype=bool)
-        t_shade = 0.0
-        t_gpu = 0.0
-        timer = self.gpu_timer()
+        t_shade = t_gpu = 0.0
         g_buffers = None
         for p, offset in enumerate(offsets):
             t0 = time.perf_counter()
@@ -418,17 +442,7 @@ class SceneRenderer(RendererBase):
             invalid |= radiance[..., 3] < 0.0
             if g_buffers is None:
                 g_buffers = [self.read(i) for i in (1, 2, 3)]
-        return RenderResult(
-            radiance=(accumulated / passes).astype(np.float32),
-            position=g_buffers[0][..., :3],
-            normal=g_buffers[1][..., :3],
-            tangent=g_buffers[2][..., :3],
-            mask=g_buffers[0][..., 3] > 0.5,
-            invalid=invalid,
-            timings={**self.timings, "shade": t_shade, **({"gpu shade": t_gpu} if timer is not None else {})},
-            samples_per_pixel=passes * method.samples,
-            object_id=np.rint(g_buffers[1][..., 3]).astype(np.int32) - 1,
-        )
+        return accumulated, invalid, t_shade, t_gpu, g_buffers
 
     def release(self):
         super().release()

@@ -110,6 +110,10 @@ class SceneShading(ShadingBinder):
         self._anisotropic_dfg = None  # ... and by a textured anisotropic one
         self.draw_records = True  # RenderSettings.draw_records
         self.self_occlusion = True  # RenderSettings.self_occlusion
+        # The material textures' filter footprint as a share of the pixel's (shaders/
+        # material_maps.glsl): 1 shades whole pixels; a box-filtered reference, which integrates
+        # the pixel by moving each pass's position, sets 1 / sqrt(passes) (SceneRenderer.render).
+        self.texture_footprint = 1.0
         self._records = BoundedCache(MAX_DRAW_RECORDS)
         self.record_generation = 0  # bumped when what a record holds changes
         self.record_builds = 0  # records made so far (a count for tests and benchmarks)
@@ -124,6 +128,8 @@ class SceneShading(ShadingBinder):
         super().set_pass_state(program, method, lod_bias, seed)
         if has_uniform(program, "u_self_occlusion"):
             set_uniform(program, "u_self_occlusion", 1 if self.self_occlusion else 0)
+        if has_uniform(program, "u_texture_footprint"):
+            set_uniform(program, "u_texture_footprint", float(self.texture_footprint))
         if has_uniform(program, "u_lamp_count"):
             set_uniform(program, "u_lamp_count", len(self.lamps))
             for name, values in self._lamp_uniforms.items():
