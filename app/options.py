@@ -407,6 +407,8 @@ def shot_command(
             parts.append(f"--mirror-sizes={args.mirror_sizes}")
         if getattr(args, "self_occlusion", "on") != "on":
             parts.append(f"--self-occlusion={args.self_occlusion}")
+        if getattr(args, "supersample", 1) != 1:
+            parts.append(f"--supersample={args.supersample}")
         if getattr(args, "cache", None):
             parts.append(f"--cache={shlex.quote(str(args.cache))}")
     if materials is not None:

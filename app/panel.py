@@ -78,10 +78,14 @@ def _status(window) -> None:
     imgui.text(f"pass {window.pass_ms:.1f} ms, last cube map {window.cube_ms:.1f} ms")
     scale, (width, height) = window.render_scale.scale, window.wnd.buffer_size
     target = window.render_scale.target_s
+    supersample = getattr(window, "supersample", 1)
+    if supersample > 1:
+        imgui.text(f"supersampled {supersample}x{supersample}: frames rendered at "
+                   f"{width * supersample}x{height * supersample}")  # fmt: skip
     if target is None:
         imgui.text("moving: full resolution (--target-fps 0)")
     else:
-        w, h = scaled_size((width, height), scale)
+        w, h = scaled_size((width, height), scale * supersample)
         imgui.text(f"moving: {w}x{h} ({scale:.2f}x) for {1.0 / target:.0f} fps")
     imgui.text_wrapped(window.renderer.probes.residency.report(window.renderer.objects))
     refinement = window.refinement

@@ -107,12 +107,16 @@ class LobeviewWindow(mglw.WindowConfig):
         self.panel_area = PanelArea()  # where the panel was last drawn: clicks there are its
         self.widget_rects: dict = {}  # a few widgets' rectangles (the frame log's, for tests)
         size = self.wnd.buffer_size
+        # --supersample K: the frames are rendered K times the window's size each way and
+        # box-filtered into it (Accumulator.add): edges, creases and glints anti-aliased.
+        self.supersample = int(getattr(self.args, "supersample", 1))
         self.show_progress("scene renderer", None)
         # Without cached cube maps the window opens on previews and builds the exact ones over the
         # next frames (app/finishing.py), the nearest first: the first frame in seconds. A script
         # or a camera path gets the finished cube maps first (its frames are measured or compared).
         progressive = not self.args.script and self.args.path is None
-        self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment, size, session.cache,
+        self.renderer = scene_renderer_from_args(self.ctx, self.scene, session.environment,
+                                                 scaled_size(size, self.supersample), session.cache,
                                                  self.args, progressive_cubes=progressive)  # fmt: skip
         self._make_accumulators(size)
         self.pending_screenshots: list[str] = []
@@ -271,8 +275,10 @@ class LobeviewWindow(mglw.WindowConfig):
             if self.realtime_scale < 1.0:
                 # The G-buffer is the moving frame's, smaller than the window: pick exactly.
                 self._draw_realtime(self.walk.camera(), 1.0)
-            scale = self.wnd.pixel_ratio
-            picked = self.renderer.pick(int(x * scale), int(y * scale))
+            # the renderer's pixel under the pointer: window points to buffer pixels, times the
+            # supersampling, at the centre of that pixel's block
+            scale = self.wnd.pixel_ratio * self.supersample
+            picked = self.renderer.pick(int(x * scale) + self.supersample // 2, int(y * scale) + self.supersample // 2)
             if picked is not None and not 0 <= picked < len(self.scene.objects):
                 picked = None  # a stale or foreign id buffer value: select nothing rather than crash
             if picked is not None:
@@ -293,7 +299,7 @@ class LobeviewWindow(mglw.WindowConfig):
     def on_resize(self, width, height):
         self.imgui.resize(width, height)
         size = self.wnd.buffer_size
-        self.renderer.resize(scaled_size(size, self.realtime_scale))
+        self.renderer.resize(scaled_size(size, self.realtime_scale * self.supersample))
         self._release_accumulators()
         self._make_accumulators(size)
         self.dirty = True
@@ -509,10 +515,11 @@ class LobeviewWindow(mglw.WindowConfig):
         return self.cube_refresh_deferred > CUBE_REFRESH_MAX_DEFERRED
 
     def _draw_realtime(self, camera, scale: float) -> float:
-        """The real-time frame at ``scale`` times the window's size, upsampled (bilinear) into the
-        shown real-time image; returns its milliseconds (with glFinish)."""
+        """The real-time frame at ``scale`` times the window's size (times the supersampling),
+        upsampled (bilinear) or box-filtered into the shown real-time image; returns its
+        milliseconds (with glFinish)."""
         t0 = time.perf_counter()
-        size = scaled_size(self.wnd.buffer_size, scale)
+        size = scaled_size(self.wnd.buffer_size, scale * self.supersample)
         if self.renderer.size != size:
             self.renderer.resize(size)
         self.scene_passes += 1

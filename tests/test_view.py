@@ -240,6 +240,41 @@ def test_the_command_f12_prints_renders_the_screenshot_again(xvfb, tmp_path, cap
         assert difference.mean() < 0.3 and np.percentile(difference, 99) <= 2, (stem, difference.mean())
 
 
+def test_supersampled_window_shows_what_the_printed_supersampled_shot_renders(xvfb, tmp_path, capsys):
+    """view --supersample 2 renders 2x2 shading points a window pixel and box-filters them: the
+    F12 screenshot is window-sized, its printed command carries --supersample=2 and, pasted,
+    renders the same image, which differs from the point-sampled window at edges."""
+    import re
+    import shlex
+
+    from PIL import Image
+
+    from lobeview.app.cli import main
+
+    script = [
+        {"frame": 2, "action": "screenshot", "name": "ss"},
+        {"frame": 3, "action": "quit"},
+    ]
+    result = run_scripted_view(xvfb, tmp_path, script, ["--view=table", "--size=160x100", "--face-size=32",
+                                                        "--supersample=2"], 10)  # fmt: skip
+    printed = re.search(r"screenshot .*?ss\.exr/\.png[^:]*: .*?(lobeview shot .*)$", result.stdout, re.M)
+    assert printed, result.stdout
+    command = printed.group(1)
+    assert "--supersample=2" in command and "--size=160x100" in command
+    argv = shlex.split(command)
+    assert main(argv[1:]) == 0, capsys.readouterr().err
+    window = np.asarray(Image.open(tmp_path / "ss.png"), dtype=float)
+    pasted = np.asarray(Image.open(tmp_path / "ss-shot.png"), dtype=float)
+    assert window.shape == pasted.shape == (100, 160, 3)
+    difference = np.abs(pasted - window)
+    assert difference.mean() < 0.3 and np.percentile(difference, 99) <= 2, difference.mean()
+    # and differs from the point-sampled window where edges cross pixels
+    (tmp_path / "plain").mkdir()
+    run_scripted_view(xvfb, tmp_path / "plain", script, ["--view=table", "--size=160x100", "--face-size=32"], 10)
+    point = np.asarray(Image.open(tmp_path / "plain" / "ss.png"), dtype=float)
+    assert np.abs(point - window).max() > 20  # edges: anti-aliased against one point a pixel
+
+
 def test_view_flies_the_recorded_path_and_walking_takes_over(xvfb, tmp_path):
     """``view --path builtin``: the demo's recorded path drives the camera (a scripted jump to
     t = 7.5 s puts it on the path's key there, as the F12 command's camera shows); pressing W

@@ -32,6 +32,9 @@ class Accumulator:
         self.weight = 0.0
 
     def add(self, source: moderngl.Texture, weight: float = 1.0) -> None:
+        """Add ``weight`` times ``source``: resampled bilinearly, or where it is an integer K > 1
+        times this buffer's size each way (a supersampled frame), the mean of each K x K block."""
+        box = self.box_factor(source.size)
         self.fbo.use()
         self.ctx.viewport = (0, 0, *self.size)
         self.ctx.disable(moderngl.DEPTH_TEST)
@@ -40,9 +43,18 @@ class Accumulator:
         source.use(0)
         set_uniform(self.accumulate, "u_source", 0)
         set_uniform(self.accumulate, "u_weight", float(weight))
+        set_uniform(self.accumulate, "u_box", box)
         self._vao_acc.render(moderngl.TRIANGLES, vertices=3)
         self.ctx.disable(moderngl.BLEND)
         self.weight += weight
+
+    def box_factor(self, source_size) -> int:
+        """K where ``source_size`` is K times this buffer's size each way, else 1."""
+        width, height = self.size
+        factor = int(source_size[0]) // width
+        if factor > 1 and tuple(source_size) == (factor * width, factor * height):
+            return factor
+        return 1
 
     def show(self, target, viewport, exposure: float = 0.0, operator: str = "aces") -> None:
         target.use()
