@@ -274,6 +274,29 @@ def test_gpu_blend_mixes_per_pixel_as_numpy():
     ctx.release()
 
 
+def test_accumulator_box_filters_a_supersampled_source():
+    """A source K = 3 times the buffer's size each way (view --supersample) adds the mean of each
+    3 x 3 block; a source of another size is resampled as before (K = 1)."""
+    from lobeview.app.shot import box_downsample
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.display import Accumulator
+    from lobeview.viewer.shaders import ProgramCache
+
+    ctx = create_headless_context()
+    programs = ProgramCache(ctx)
+    size = (14, 9)
+    big = np.random.default_rng(4).uniform(0.0, 4.0, (3 * size[1], 3 * size[0], 3)).astype(np.float32)
+    rgba = np.concatenate([big, np.ones_like(big[..., :1])], -1)[::-1]  # row 0 at the bottom
+    source = ctx.texture((3 * size[0], 3 * size[1]), 4, np.ascontiguousarray(rgba).tobytes(), dtype="f4")
+    accumulator = Accumulator(ctx, programs, size)
+    assert accumulator.box_factor(source.size) == 3 and accumulator.box_factor((3 * size[0], 2 * size[1])) == 1
+    accumulator.add(source, 2.0)
+    np.testing.assert_allclose(accumulator.radiance(), box_downsample(big, 3), rtol=1e-5, atol=1e-6)
+    for obj in (source, accumulator):
+        obj.release()
+    ctx.release()
+
+
 REFINEMENT_LINE = re.compile(
     r"^refinement frame=(\d+) scene_passes=(\d+) spp=(\d+) refined_share=([\d.]+) noise=(-?[\d.]+)"
     r" realtime=(-?[\d.]+) shown=(-?[\d.]+) finished=(.*)$"
