@@ -21,12 +21,12 @@ The cone says whether a vertex is occluded at all; which directions it hides is 
 azimuth sector (HORIZON_SECTORS, Max 1988 "Horizon mapping"; Sloan and Cohen 2000): a circular
 cone that holds the right visible fraction must cut every azimuth at one elevation, and hid the
 studio's low softboxes from Suzanne's forehead, which only its brow shadows on one side
-(docs/measurements.md). A lookup direction d of the specular lobes (shaders/self_occlusion.glsl
-self_occluded) is visible by a smoothstep of its elevation's sine across the horizon's at its
-azimuth (horizon_visibility); the occluded part sees the object itself, whose radiance is taken
-as the shading point's own (its diffuse and its specular reflectance lit by its irradiance:
-"the occluder looks like me").
-"""
+(docs/measurements.md). A lookup of the specular lobes (shaders/self_occlusion.glsl
+self_occluded) averages the cube over a footprint about its direction d; its visible share is
+the part of that footprint's cap above the horizon, the horizon averaged over the azimuths the
+cap spans (horizon_visibility); the occluded part sees the object itself, whose radiance is
+taken as the shading point's own (its diffuse and its specular reflectance lit by its
+irradiance: "the occluder looks like me")."""
 
 from __future__ import annotations
 
@@ -53,7 +53,7 @@ NEAR_HIT_DISTANCE = 0.03  # hits nearer than this, times the object's extent, ar
 SEED = 11
 HORIZON_SECTORS = 8  # azimuth sectors of the horizon around each normal (_traced_horizons)
 CONE_FLOATS = 4 + HORIZON_SECTORS  # per vertex: bent normal, cos of the cone's half angle, horizons
-HORIZON_SOFT_EDGE = 0.08  # half width, in sin of elevation, of the horizon's soft edge
+HORIZON_SOFT_EDGE = 0.08  # a point lookup's cap radius, in sin of elevation: the horizon's soft edge
 # A lookup that averages the cube over a footprint (a filtered lobe-N or fis-N sample, a
 # prefiltered lobe, a cap light) sees the horizon through it: taken as a spherical cap of the
 # footprint's solid angle about the lookup direction, its visible share is the part of the cap above
@@ -252,7 +252,7 @@ def cap_footprint(radius):
 
 def split_sum_footprint(alpha, distribution: str = "ggx"):
     """The solid angle a split-sum lookup of roughness ``alpha`` averages, for its self-occlusion
-    (shaders/prefiltered.glsl split_sum_footprint)."""
+    (shaders/self_occlusion.glsl split_sum_footprint)."""
     per_alpha = SPLIT_SUM_RADIUS_PER_ALPHA_GGX if distribution == "ggx" else SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN
     return cap_footprint(np.minimum(per_alpha * np.asarray(alpha, dtype=np.float64), SPLIT_SUM_MAX_RADIUS))
 

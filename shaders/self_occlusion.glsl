@@ -2,9 +2,10 @@
 // self_occluded_incident). The cube map holds what the object's surroundings send, not the
 // object itself: a direction below the shading point's horizon at its azimuth (HORIZON_SECTORS
 // sectors about the normal; SELF_NO_OCCLUSION in the cone's w: nothing hidden) sees the object
-// instead, whose radiance is g_self_radiance there. Directions below the surface (transmission)
-// pass. scene.frag sets these per pixel; their defaults leave every lookup as it is (the preview,
-// RSIBR's bake).
+// instead, whose radiance is g_self_radiance there. A lookup that averages the cube over a
+// footprint sees the horizon through it (self_visibility's footprint). Directions below the
+// surface (transmission) pass. scene.frag sets these per pixel; their defaults leave every lookup
+// as it is (the preview, RSIBR's bake).
 const float SELF_NO_OCCLUSION = -2.0;
 const float HORIZON_SOFT_EDGE = 0.08;
 const int HORIZON_SECTORS = 8;
