@@ -73,3 +73,22 @@ def run_scripted_view(display: str, folder: Path, script: list, args: list, exit
     )  # fmt: skip
     assert result.returncode == 0, result.stderr[-3000:]
     return result
+
+
+def run_compute_probe(ctx, program, probe, out_vec4s: int, out_binding: int = 3):
+    """Run a shader probe (shaders/*_probe.comp): ``probe`` (n, ..., 4) float32 items in storage
+    buffer 2, ``out_vec4s`` vec4 results per item from buffer ``out_binding``; 64 invocations a
+    group, ``u_count`` = n. Returns (n, out_vec4s, 4) float32."""
+    import numpy as np
+
+    n = len(probe)
+    inputs = ctx.buffer(np.ascontiguousarray(probe, np.float32).tobytes())
+    inputs.bind_to_storage_buffer(2)
+    outputs = ctx.buffer(reserve=n * out_vec4s * 16)
+    outputs.bind_to_storage_buffer(out_binding)
+    program["u_count"] = n
+    program.run((n + 63) // 64)
+    out = np.frombuffer(outputs.read(), np.float32).reshape(n, out_vec4s, 4).copy()
+    inputs.release()
+    outputs.release()
+    return out

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_compute_probe
 
 from lobeview.bench.chi2 import SphereDomain, bsdf_chi2_test
 from lobeview.materials.measured import DEFENSIVE_COSINE, MeasuredError, MeasuredLobe, measured_lobe, split_diffuse
@@ -163,13 +164,7 @@ def test_glsl_twin_matches_numpy(tables):
         program["u_measured_table"] = 0
         cdf = ctx.buffer(lobe.sampler.pack().tobytes())
         cdf.bind_to_storage_buffer(MEASURED_BINDING)
-        inputs = ctx.buffer(probe.tobytes())
-        inputs.bind_to_storage_buffer(2)
-        outputs = ctx.buffer(reserve=n * 48)
-        outputs.bind_to_storage_buffer(4)
-        program["u_count"] = n
-        program.run((n + 63) // 64)
-        out = np.frombuffer(outputs.read(), np.float32).reshape(n, 3, 4)
+        out = run_compute_probe(ctx, program, probe, 3, out_binding=4)
     finally:
         ctx.release()
     ok = wi[:, 2] > 1e-3

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import run_compute_probe
 
 from lobeview.scenes.self_visibility import (
     CONE_FLOATS,
@@ -481,13 +482,7 @@ def test_glsl_self_visibility_and_split_sum_footprint_equal_numpy():
     ctx = create_headless_context()
     try:
         program = ProgramCache(ctx).compute("self_visibility_probe.comp")
-        inputs = ctx.buffer(probe.tobytes())
-        inputs.bind_to_storage_buffer(2)
-        outputs = ctx.buffer(reserve=n * 16)
-        outputs.bind_to_storage_buffer(3)
-        program["u_count"] = n
-        program.run((n + 63) // 64)
-        out = np.frombuffer(outputs.read(), np.float32).reshape(n, 4)
+        out = run_compute_probe(ctx, program, probe, 1)[:, 0]
     finally:
         ctx.release()
     cones = np.concatenate([np.tile([0.0, 0.0, 1.0, 0.5], (n, 1)), horizons], axis=1)

@@ -10,6 +10,7 @@ import warnings
 
 import numpy as np
 import pytest
+from conftest import run_compute_probe
 
 from lobeview.materials.volume import (
     attenuation,
@@ -160,17 +161,11 @@ def test_glsl_volume_path_equals_numpy():
     ctx = create_headless_context()
     try:
         program = ProgramCache(ctx).compute("volume_probe.comp")
-        inputs = ctx.buffer(probe.tobytes())
-        inputs.bind_to_storage_buffer(2)
-        outputs = ctx.buffer(reserve=n * 128)
-        outputs.bind_to_storage_buffer(3)
-        program["u_count"] = n
         program["u_volume_attenuation"] = (0.9, 0.5, 0.2)
         runs = []
         for volume in volumes:
             program["u_volume"] = volume
-            program.run((n + 63) // 64)
-            runs.append(np.frombuffer(outputs.read(), np.float32).reshape(n, 8, 4).copy())
+            runs.append(run_compute_probe(ctx, program, probe, 8))
     finally:
         ctx.release()
     out = runs[0]
