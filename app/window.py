@@ -46,7 +46,7 @@ from lobeview.scenes.hdrio import write_hdr_image
 from lobeview.scenes.setup import scene_view
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.display import Accumulator, RefinementBlend
-from lobeview.viewer.refinement import Refinement, two_half_estimate
+from lobeview.viewer.refinement import REFINEMENT_TEXTURE_FOOTPRINT, Refinement, two_half_estimate
 from lobeview.viewer.tonemap import to_uint8, tonemap
 
 FRAME_TIME_SMOOTHING = 0.2  # exponential smoothing of the shown frame interval
@@ -563,7 +563,11 @@ class LobeviewWindow(mglw.WindowConfig):
         if self.renderer.has_rational:
             batch = batch.for_rational()
         self.scene_passes += 1
-        self.renderer.draw_frame(camera, batch, sample_offset=plan.sample_offset, seed=plan.half, jitter=plan.jitter)
+        # Its passes integrate the pixel over their sub-pixel positions: each reads the textures
+        # over REFINEMENT_TEXTURE_FOOTPRINT of the pixel, as a reference of 64 passes does (a whole
+        # pixel's footprint on top of the integral blurred them twice: viewer/scene_renderer.py).
+        self.renderer.draw_frame(camera, batch, sample_offset=plan.sample_offset, seed=plan.half, jitter=plan.jitter,
+                                 texture_footprint=REFINEMENT_TEXTURE_FOOTPRINT)  # fmt: skip
         self.accumulator.add(self.renderer.radiance_target, float(batch.samples))
         self.halves[plan.half].add(self.renderer.radiance_target, float(batch.samples))
         refinement.added(batch.samples, plan.half)

@@ -28,7 +28,7 @@ def replay(renderer, camera, realtime: np.ndarray, batch: int, checkpoints, say)
     """Yield (spp, mean, estimate) at each checkpoint of a refinement replayed as the window
     runs it (app/window.py _refine, with a fixed batch), against the real-time frame ``realtime``."""
     from lobeview.core.methods import Method
-    from lobeview.viewer.refinement import Refinement, two_half_estimate
+    from lobeview.viewer.refinement import REFINEMENT_TEXTURE_FOOTPRINT, Refinement, two_half_estimate
 
     refinement = Refinement()
     refinement.batch = batch
@@ -36,8 +36,9 @@ def replay(renderer, camera, realtime: np.ndarray, batch: int, checkpoints, say)
     while refinement.samples < max(checkpoints):
         plan = refinement.next_pass()
         renderer.draw_frame(
-            camera, Method("reference", plan.samples), plan.sample_offset, seed=plan.half, jitter=plan.jitter
-        )
+            camera, Method("reference", plan.samples), plan.sample_offset, seed=plan.half, jitter=plan.jitter,
+            texture_footprint=REFINEMENT_TEXTURE_FOOTPRINT,
+        )  # fmt: skip
         sums[plan.half] += renderer.read(0)[..., :3] * plan.samples
         refinement.added(plan.samples, plan.half)
         if refinement.samples in checkpoints:

@@ -575,19 +575,10 @@ def test_loader_maps_sheen(tmp_path):
     assert desc["sheen_color"] == [0.8, 0.2, 0.4] and desc["sheen_roughness"] == 0.3
 
 
-def test_box_filtered_reference_reads_textures_over_a_pass_share_of_the_pixel():
-    """The box-filtered reference integrates each pixel over its passes' sub-pixel positions: a
-    texture filtered over the whole pixel on top of that is blurred twice (DamagedHelmet: 20.8 %
-    rel-RMSE off Cycles, 17.7 % with each pass reading its share). Fine stripes (period ~2.7
-    pixels, trilinear MIP chain) on a diffuse quad under a white sky, whose image is the texture's
-    pixel integral: the box-filtered reference at 48x48 against 8x8 point-sampled passes of a
-    4x larger render averaged (measured: 2.0 % rel-RMSE; 14.6 % with the whole pixel's footprint
-    in every pass)."""
-    from lobeview.app.shot import box_downsample
+def _stripes_scene():
+    """Fine stripes (period 8 texels of 128, ~2.7 pixels at 48 px) on a diffuse quad under a white
+    sky, seen from above: the image is the texture's pixel integral."""
     from lobeview.scenes.envmap import EnvironmentMap
-    from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
 
     n = 128
     stripes = np.zeros((n, n, 4), np.uint8)
@@ -599,6 +590,55 @@ def test_box_filtered_reference_reads_textures_over_a_pass_share_of_the_pixel():
                   [SceneMaterial("stripes", desc, textures=slots)])  # fmt: skip
     white = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=32, name="white")
     camera = Camera(position=(0.0, 2.6, 0.01), target=(0.0, 0.0, 0.0), fov_y=40.0)  # the quad ~44 px across
+    return scene, white, camera
+
+
+def test_window_refinement_converges_to_the_box_filtered_reference_on_textures():
+    """The window's refinement (replayed as bench/refinement.py does: app/window.py's passes with
+    REFINEMENT_TEXTURE_FOOTPRINT) integrates the pixel like the box-filtered reference and reads
+    textures likewise: after 256 samples its mean is the reference's image on the stripes
+    (measured 0.7 %; 13.5 % with the whole pixel's footprint in every pass)."""
+    from lobeview.bench.refinement import replay
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    scene, white, camera = _stripes_scene()
+    ctx = create_headless_context()
+    try:
+        with pytest.warns(UserWarning, match="no usable lightmap"):
+            renderer = SceneRenderer(ctx, scene, white, size=(48, 48), progress=False,
+                                     settings=RenderSettings(cube_face_size=16))  # fmt: skip
+        try:
+            reference = renderer.render(camera, "reference", spp=256)
+            realtime = renderer.render(camera, "lobe-7").radiance.astype(np.float64)
+            refined = None
+            for _, mean, _ in replay(renderer, camera, realtime, 4, [256], lambda _: None):
+                refined = mean
+        finally:
+            renderer.release()
+    finally:
+        ctx.release()
+    inside = reference.mask
+    truth = reference.radiance.astype(np.float64)[inside]
+    rel_rmse = np.sqrt(np.mean((refined[inside] - truth) ** 2)) / np.mean(truth)
+    assert rel_rmse < 0.03, rel_rmse
+
+
+def test_box_filtered_reference_reads_textures_over_a_pass_share_of_the_pixel():
+    """The box-filtered reference integrates each pixel over its passes' sub-pixel positions: a
+    texture filtered over the whole pixel on top of that is blurred twice (DamagedHelmet: 20.8 %
+    rel-RMSE off Cycles, 17.7 % with each pass reading its share). Fine stripes (period ~2.7
+    pixels, trilinear MIP chain) on a diffuse quad under a white sky, whose image is the texture's
+    pixel integral: the box-filtered reference at 48x48 against 8x8 point-sampled passes of a
+    4x larger render averaged (measured: 2.0 % rel-RMSE; 14.6 % with the whole pixel's footprint
+    in every pass)."""
+    from lobeview.app.shot import box_downsample
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    scene, white, camera = _stripes_scene()
     ctx = create_headless_context()
     images = {}
     try:

@@ -62,6 +62,10 @@ FIRST_ESTIMATE_AT = 32
 LOCAL_WINDOW = 9  # pixels: the neighbourhood of the per-pixel noise and bias estimates
 CAUTION_SAMPLES = 96.0  # noise_caution: the blend counts the estimated noise 1 + this / spp times
 CONVERGED_NOISE = 0.25 / 255.0  # display RMS noise at which refinement stops
+# A refinement pass's share of the pixel for its texture reads: 1/sqrt(64), a box-filtered
+# reference's of 64 passes (refinement runs that many or more before it converges); a whole
+# pixel's footprint on top of the pixel integral blurred the textures twice.
+REFINEMENT_TEXTURE_FOOTPRINT = 1.0 / 8.0
 ERROR_FLOOR = 1e-6  # display RMS error below which a pixel's errors count as zero
 HALF_SAMPLE_BUDGET = SOBOL_SIDE * SOBOL_SIDE  # the Sobol table: a half never wraps around it
 

@@ -284,12 +284,29 @@ class SceneRenderer(RendererBase):
 
     # -- frames -------------------------------------------------------------------------------------
     def draw_frame(
-        self, camera: Camera, method: Method, sample_offset: int = 0, lod_bias=None, seed: int = 0, jitter=(0.0, 0.0)
+        self,
+        camera: Camera,
+        method: Method,
+        sample_offset: int = 0,
+        lod_bias=None,
+        seed: int = 0,
+        jitter=(0.0, 0.0),
+        texture_footprint: float = 1.0,
     ) -> None:
         """One pass into the renderer's own float targets (radiance in ``targets[0]``), no read
         back: what the interactive viewer calls every frame. ``jitter``: this pass's sub-pixel
         position in pixels (a box-filtered reference, viewer/camera.py pixel_offset); the mirror
-        passes keep the unjittered camera (they are looked up by world position)."""
+        passes keep the unjittered camera (they are looked up by world position).
+        ``texture_footprint``: the material textures' filter footprint as a share of the pixel's
+        (shaders/material_maps.glsl): 1 shades whole pixels; passes that integrate the pixel over
+        their sub-pixel positions read their own share (render, the viewer's refinement)."""
+        self.shading.texture_footprint = float(texture_footprint)
+        try:
+            self._draw_frame(camera, method, sample_offset, lod_bias, seed, jitter)
+        finally:
+            self.shading.texture_footprint = 1.0
+
+    def _draw_frame(self, camera: Camera, method: Method, sample_offset: int, lod_bias, seed: int, jitter) -> None:
         camera = camera.fitted_to(self.bounds)  # any scene scale, mm to km (viewer/camera.py)
         width, height = self.size
         view_proj = jittered(camera.view_projection(width / height), jitter, self.size)
@@ -400,13 +417,10 @@ class SceneRenderer(RendererBase):
         # A box-filtered reference integrates the pixel over its passes' positions: each reads the
         # material textures over its own share of the pixel (shaders/material_maps.glsl).
         jittered_passes = any(tuple(offset) != (0.0, 0.0) for offset in offsets)
-        self.shading.texture_footprint = 1.0 / np.sqrt(passes) if jittered_passes else 1.0
-        try:
-            accumulated, invalid, t_shade, t_gpu, g_buffers = self._accumulate_passes(
-                camera, method, offsets, lod_bias, seed, timer
-            )
-        finally:
-            self.shading.texture_footprint = 1.0
+        footprint = 1.0 / np.sqrt(passes) if jittered_passes else 1.0
+        accumulated, invalid, t_shade, t_gpu, g_buffers = self._accumulate_passes(
+            camera, method, offsets, lod_bias, seed, timer, footprint
+        )
         return RenderResult(
             radiance=(accumulated / passes).astype(np.float32),
             position=g_buffers[0][..., :3],
@@ -419,7 +433,8 @@ class SceneRenderer(RendererBase):
             object_id=np.rint(g_buffers[1][..., 3]).astype(np.int32) - 1,
         )
 
-    def _accumulate_passes(self, camera: Camera, method: Method, offsets, lod_bias, seed: int, timer):
+    def _accumulate_passes(self, camera: Camera, method: Method, offsets, lod_bias, seed: int, timer,
+                           texture_footprint: float = 1.0):  # fmt: skip
         """Draw a pass at each sub-pixel offset and sum their radiance: (sum, invalid pixels,
         seconds, GPU seconds, the first pass's G-buffers)."""
         width, height = self.size
@@ -431,7 +446,8 @@ class SceneRenderer(RendererBase):
             t0 = time.perf_counter()
             _ = self.ctx.error  # reset the flag: only errors of this frame's passes count below
             with timer or contextlib.nullcontext():
-                self.draw_frame(camera, method, p * method.samples, lod_bias, seed, jitter=offset)
+                self.draw_frame(camera, method, p * method.samples, lod_bias, seed, jitter=offset,
+                                texture_footprint=texture_footprint)  # fmt: skip
             self.ctx.finish()
             self.raise_on_gl_error(method)
             t_shade += time.perf_counter() - t0
