@@ -68,7 +68,7 @@ MAX_FOOTPRINT_RADIUS = 3.0  # radians: a footprint cap no wider (pi is the whole
 # (tests/test_self_visibility.py): GGX 2.75 (worst 0.21, mean 0.042 off), Beckmann 2.25 (0.13 /
 # 0.036); the lookup direction's visibility alone was 0.88 / 0.23 off. Without the bound a rough
 # lobe's cap covers the hemisphere evenly where the lobe weighs by cosine (mean 0.10 off at alpha
-# 0.7-1: the WaterBottle's rough band 4 % too dark against Cycles).
+# 0.7-1 in that test).
 SPLIT_SUM_RADIUS_PER_ALPHA_GGX = 2.75
 SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN = 2.25
 SPLIT_SUM_MAX_RADIUS = 1.3
