@@ -26,6 +26,7 @@ from lobeview.app.options import (
     scene_renderer_from_args,
 )
 from lobeview.core.errors import OptionError, check_output_folder, parse_size
+from lobeview.core.images import box_downsample
 from lobeview.core.methods import MAX_REFERENCE_SPP, PIXEL_FILTERS, Method, resolve_cli_method
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.builtin_env import load_environment
@@ -120,16 +121,6 @@ def add_arguments(p) -> None:
         required=True,
         help="output file: .png (tonemapped sRGB) or .exr/.npy (linear radiance)",
     )
-
-
-def box_downsample(image: np.ndarray, factor: int) -> np.ndarray:
-    """The mean of each ``factor`` x ``factor`` block of an (H factor, W factor, ...) image: the
-    box filter of a supersampled render."""
-    if factor == 1:
-        return image
-    h, w = image.shape[0] // factor, image.shape[1] // factor
-    blocks = image[: h * factor, : w * factor].reshape(h, factor, w, factor, *image.shape[2:])
-    return blocks.mean(axis=(1, 3), dtype=np.float64).astype(image.dtype)
 
 
 def _write(out: Path, radiance: np.ndarray, args) -> None:

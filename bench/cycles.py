@@ -44,8 +44,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lobeview.app.shot import box_downsample
 from lobeview.core.errors import parse_size
+from lobeview.core.images import box_downsample
 from lobeview.core.paths import cache_dir, lobeview_program
 
 ASSETS = Path(__file__).resolve().parents[1].parent / "shared" / "assets"

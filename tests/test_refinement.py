@@ -277,7 +277,7 @@ def test_gpu_blend_mixes_per_pixel_as_numpy():
 def test_accumulator_box_filters_a_supersampled_source():
     """A source K = 3 times the buffer's size each way (view --supersample) adds the mean of each
     3 x 3 block; a source of another size is resampled as before (K = 1)."""
-    from lobeview.app.shot import box_downsample
+    from lobeview.core.images import box_downsample
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.display import Accumulator
     from lobeview.viewer.shaders import ProgramCache

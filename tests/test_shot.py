@@ -97,7 +97,7 @@ def test_supersampled_shot_is_the_box_filter_of_the_larger_render(tmp_path, caps
     """--supersample K renders K times --size and writes each K x K block's mean: equal to the
     larger render averaged here; against the point-sampled image it differs most where a strong
     edge crosses the pixel (the sphere's silhouette: anti-aliased), little elsewhere."""
-    from lobeview.app.shot import box_downsample
+    from lobeview.core.images import box_downsample
 
     block = np.arange(4 * 6 * 3, dtype=np.float32).reshape(4, 6, 3)
     np.testing.assert_allclose(box_downsample(block, 2)[1, 2], block[2:4, 4:6].mean(axis=(0, 1)))

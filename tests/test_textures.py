@@ -633,7 +633,7 @@ def test_box_filtered_reference_reads_textures_over_a_pass_share_of_the_pixel():
     pixel integral: the box-filtered reference at 48x48 against 8x8 point-sampled passes of a
     4x larger render averaged (measured: 2.0 % rel-RMSE; 14.6 % with the whole pixel's footprint
     in every pass)."""
-    from lobeview.app.shot import box_downsample
+    from lobeview.core.images import box_downsample
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.scene_renderer import SceneRenderer
     from lobeview.viewer.settings import RenderSettings

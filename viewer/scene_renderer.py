@@ -299,14 +299,8 @@ class SceneRenderer(RendererBase):
         passes keep the unjittered camera (they are looked up by world position).
         ``texture_footprint``: the material textures' filter footprint as a share of the pixel's
         (shaders/material_maps.glsl): 1 shades whole pixels; passes that integrate the pixel over
-        their sub-pixel positions read their own share (render, the viewer's refinement)."""
-        self.shading.texture_footprint = float(texture_footprint)
-        try:
-            self._draw_frame(camera, method, sample_offset, lod_bias, seed, jitter)
-        finally:
-            self.shading.texture_footprint = 1.0
-
-    def _draw_frame(self, camera: Camera, method: Method, sample_offset: int, lod_bias, seed: int, jitter) -> None:
+        their sub-pixel positions read their own share (render, the viewer's refinement); the
+        camera pass only: the mirror buffers and cube faces are drawn once for all passes."""
         camera = camera.fitted_to(self.bounds)  # any scene scale, mm to km (viewer/camera.py)
         width, height = self.size
         view_proj = jittered(camera.view_projection(width / height), jitter, self.size)
@@ -333,7 +327,12 @@ class SceneRenderer(RendererBase):
             counts.drawn, counts.culled = drawer.draw_depth(view_proj)
             self.frame.fbo.use()
             self.ctx.depth_func = "<="
-        drawer.draw(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors, cull=True)
+        self.shading.texture_footprint = float(texture_footprint)
+        try:
+            drawer.draw(view_proj, camera.position, method, True, None, lod_bias, sample_offset, seed, mirrors,
+                        cull=True)  # fmt: skip
+        finally:
+            self.shading.texture_footprint = 1.0
         self.ctx.depth_func = "<"
         self.probes.residency.evict(self.objects)
         self.frame_draw_calls = tuple(int(x) for x in np.subtract(self.drawer.draw_calls.total(), calls_before))
