@@ -114,6 +114,7 @@ def test_declared_uniform_parser_sees_what_the_compiler_sees(programs):
     assert len(units) == len(set(units)), "two samplers share a texture unit"
     assert declared_uniforms("uniform vec4 u_a[3]; // uniform float u_comment;\nlayout(binding = 0) uniform "
                              "sampler2D u_b;") == {"u_a", "u_b"}  # fmt: skip
+    assert declared_uniforms("uniform float u_c = 1.0; uniform vec3 u_d = vec3(0.5);") == {"u_c", "u_d"}
 
 
 def test_a_misspelt_uniform_fails_loudly(programs):

@@ -353,7 +353,7 @@ def method_defines(method: Method) -> dict:
 
 # -- uniforms ------------------------------------------------------------------------------------
 _COMMENTS = re.compile(r"//[^\n]*|/\*.*?\*/", re.DOTALL)
-_UNIFORM = re.compile(r"\buniform\b[^;{}()]*?\b(\w+)\s*(?:\[[^\]]*\])?\s*;")
+_UNIFORM = re.compile(r"\buniform\b[^;{}()=]*?\b(\w+)\s*(?:\[[^\]]*\])?\s*(?:=[^;]*)?;")  # an initializer too
 
 
 def declared_uniforms(*sources: str) -> frozenset[str]:
