@@ -25,7 +25,7 @@ from lobeview.app.options import (
     read_material_edits,
     scene_renderer_from_args,
 )
-from lobeview.core.errors import OptionError, check_output_folder, parse_size
+from lobeview.core.errors import MAX_RENDER_EDGE, OptionError, check_output_folder, parse_size
 from lobeview.core.images import box_downsample
 from lobeview.core.methods import MAX_REFERENCE_SPP, PIXEL_FILTERS, Method, resolve_cli_method
 from lobeview.materials.spec import build_bsdf, load_material
@@ -41,7 +41,6 @@ from lobeview.viewer.tonemap import TONEMAPS, to_uint8, tonemap
 
 OUTPUT_SUFFIXES = (".png", ".exr", ".npy")
 MAX_SUPERSAMPLE = 8
-MAX_RENDER_EDGE = 8192  # pixels a side of the render (parse_size's bound on --size)
 PREVIEW_ENV = "builtin:studio"
 ShotError = OptionError  # the error type the command line reports as "lobeview: error: ..."
 

@@ -32,12 +32,11 @@ from lobeview.app.options import (
     check_scene_options,
     read_material_edits,
 )
-from lobeview.core.errors import OptionError, parse_size
+from lobeview.core.errors import MAX_RENDER_EDGE, OptionError, parse_size
 from lobeview.core.methods import resolve_cli_method
 from lobeview.scenes.setup import default_environment, is_builtin, load_scene_and_environment, unbaked_builtin_scene
 
 MAX_VIEW_SUPERSAMPLE = 4
-MAX_RENDER_EDGE = 8192  # pixels a side of the rendered frame (app/shot.py's bound)
 
 
 def add_arguments(p) -> None:

@@ -20,13 +20,16 @@ def quoted(value, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+MAX_RENDER_EDGE = 8192  # pixels a side of any image lobeview renders (--size, and times --supersample)
+
+
 def parse_size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise OptionError(f"--size: expected WxH, got {text!r}") from None
-    if not (1 <= w <= 8192 and 1 <= h <= 8192):
-        raise OptionError(f"--size: width and height must be in [1, 8192], got {text!r}")
+    if not (1 <= w <= MAX_RENDER_EDGE and 1 <= h <= MAX_RENDER_EDGE):
+        raise OptionError(f"--size: width and height must be in [1, {MAX_RENDER_EDGE}], got {text!r}")
     return w, h
 
 

@@ -72,7 +72,8 @@ MAX_FOOTPRINT_RADIUS = 3.0  # radians: a footprint cap no wider (pi is the whole
 SPLIT_SUM_RADIUS_PER_ALPHA_GGX = 2.75
 SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN = 2.25
 SPLIT_SUM_MAX_RADIUS = 1.3
-AZIMUTH_TAP_OFFSETS = (-np.sqrt(0.5), 0.0, np.sqrt(0.5))  # horizon_visibility's taps across a cap
+AZIMUTH_TAP = np.sqrt(0.5)  # horizon_visibility's taps across a cap: its centre and -+ this of its span
+AZIMUTH_TAP_OFFSETS = (-AZIMUTH_TAP, 0.0, AZIMUTH_TAP)
 AZIMUTH_TAP_WEIGHTS = (0.25, 0.5, 0.25)
 # The horizon's azimuths are measured in a tangent frame from this axis (horizon_frame): continuous
 # everywhere but at normals along +-axis, a direction no axis-aligned surface has.
@@ -380,9 +381,10 @@ def _smooth_over_neighbours(faces: np.ndarray, count: int, *values: np.ndarray, 
 def cone_visibility(
     directions: np.ndarray, cones: np.ndarray, normals: np.ndarray | None = None, soft_edge: float = SOFT_EDGE
 ) -> np.ndarray:
-    """How visible unit ``directions`` (..., 3) are through ``cones`` (..., 4), in [0, 1]: the
-    shaders' self_visibility (incident.glsl), smoothstep across the cone's edge. Directions
-    below the surface of ``normals`` (transmission) pass."""
+    """How visible unit ``directions`` (..., 3) are through ``cones`` (..., 4), in [0, 1],
+    smoothstep across the cone's edge; directions below the surface of ``normals`` pass. No
+    shader reads the cone's aperture since the horizons (the shaders use only its flag,
+    NO_OCCLUSION): this is the instrument of the aperture's tests."""
     directions = np.asarray(directions, dtype=np.float64)
     cones = np.asarray(cones, dtype=np.float64)
     cos_aperture = cones[..., 3]

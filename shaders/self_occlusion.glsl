@@ -7,8 +7,6 @@
 // surface (transmission) pass. scene.frag sets these per pixel; their defaults leave every lookup
 // as it is (the preview, RSIBR's bake).
 const float SELF_NO_OCCLUSION = -2.0;
-const float HORIZON_SOFT_EDGE = 0.08;
-const int HORIZON_SECTORS = 8;
 const vec3 HORIZON_AXIS = vec3(1.0, 2.0, 3.0) / sqrt(14.0);
 vec4 g_self_cone = vec4(0.0, 0.0, 1.0, SELF_NO_OCCLUSION);
 vec3 g_self_normal = vec3(0.0, 0.0, 1.0);
@@ -62,7 +60,6 @@ float split_sum_footprint(int dist, float alpha) {
 }
 
 // The horizon's sine at azimuth phi: linear between the sectors' centres.
-const float AZIMUTH_TAP = 0.70710678;  // self_visibility.py AZIMUTH_TAP_OFFSETS
 float horizon_at(float phi) {
     float x = mod(phi / (2.0 * PI) * float(HORIZON_SECTORS) - 0.5, float(HORIZON_SECTORS));
     int first = clamp(int(floor(x)) % HORIZON_SECTORS, 0, HORIZON_SECTORS - 1);  // never out of bounds

@@ -64,7 +64,10 @@ from lobeview.scenes.reflection_proxy import MAX_PROXY_PLANES
 from lobeview.scenes.scene import ALPHA_MODES as GLTF_ALPHA_MODES
 from lobeview.scenes.scene import TEXTURE_SLOTS
 from lobeview.scenes.self_visibility import (
+    AZIMUTH_TAP,
     HORIZON_MIN_COS,
+    HORIZON_SECTORS,
+    HORIZON_SOFT_EDGE,
     MAX_FOOTPRINT_RADIUS,
     SPLIT_SUM_MAX_RADIUS,
     SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN,
@@ -248,6 +251,9 @@ SHADER_CONSTANTS: dict = {
     "LOBE_DIRECT_AREA_PER_MEDIAN2": LOBE_DIRECT_AREA_PER_MEDIAN2,
     # scenes/self_visibility.py: the horizon seen through a lookup's footprint
     "HORIZON_MIN_COS": float(HORIZON_MIN_COS),
+    "HORIZON_SECTORS": HORIZON_SECTORS,
+    "HORIZON_SOFT_EDGE": float(HORIZON_SOFT_EDGE),
+    "AZIMUTH_TAP": float(AZIMUTH_TAP),
     "MAX_FOOTPRINT_RADIUS": float(MAX_FOOTPRINT_RADIUS),
     "SPLIT_SUM_RADIUS_PER_ALPHA_GGX": float(SPLIT_SUM_RADIUS_PER_ALPHA_GGX),
     "SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN": float(SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN),
