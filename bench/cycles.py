@@ -17,7 +17,7 @@ environment files' bytes, the camera, size, samples and Blender's version).
 
     python3.11 -m venv ~/bpy-env && ~/bpy-env/bin/pip install bpy==4.3.0 numpy==1.26.4
     .venv/bin/python -m lobeview.bench.cycles --bpy-python ~/bpy-env/bin/python [--size 240x180] [--spp 512]
-        [--cases sphere-white ... | a glTF file] [--envs white garden studio] [--lobeview "COMMAND"]
+        [--cases sphere-white ... | a glTF file] [--envs white garden studio] [--lobeview "COMMAND"] [--passes]
 
 bpy is not a lobeview dependency and cannot be an optional one: bpy 4.3 (the last for Python
 3.11) is built against numpy 1.x and its Cycles add-on fails to register under lobeview's numpy
@@ -355,7 +355,9 @@ def figure_row(truth: np.ndarray, images: list[np.ndarray], mask: np.ndarray) ->
 
 
 def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, python: str, cache: Path | None,
-        progress=print, lobeview=None, supersample: int = 1) -> dict:  # fmt: skip
+        progress=print, lobeview=None, supersample: int = 1, passes: bool = False) -> dict:  # fmt: skip
+    """``passes``: under the white sky, also Cycles' light passes and where each method's error lies
+    against them (bench/cycles_passes.py)."""
     version = bpy_version(python)
     rows, figures, commands = [], [], []
     for i, case in enumerate(cases):
@@ -378,6 +380,17 @@ def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, py
             row[method] = compare(image, truth[..., :3], mask)
             if method == "reference":
                 commands.append((f"{case.name} / {case.environment}", cycles_command, command))
+        if passes and case.environment == "white":
+            from lobeview.bench.cycles_passes import passes_job, render_passes, self_occlusion_split
+
+            progress(f"[cycles] {i + 1}/{len(cases)} {case.name} under {case.environment}: Cycles' passes ...")
+            light_job = passes_job(job)
+            key = f"cycles-passes-{cycles_key(light_job, version)}.npz"
+            layers = render_passes(light_job, python, cache / key if cache else None, WORKER)
+            labelled = zip(("reference", *methods), images, strict=True)
+            row["self_occlusion"] = {
+                m: self_occlusion_split(image, truth[..., :3], layers, mask) for m, image in labelled
+            }
         rows.append(row)
         figures.append(figure_row(truth[..., :3], images, mask))
     return {"rows": rows, "figures": figures, "commands": commands, "blender": version, "methods": list(methods),
@@ -407,6 +420,9 @@ def markdown(results: dict, stamp: str, command: str, figure: str) -> str:
         cells = [f"{row[m]['mean_ratio']:.3f} / {100 * row[m]['rel_rmse']:.1f} / {row[m]['median_ratio']:.3f} / "
                  f"{row[m]['darkest_ratio']:.3f}" for m in methods]  # fmt: skip
         lines.append(f"| {row['case']} | {row['env']} | " + " | ".join(cells) + " |")
+    from lobeview.bench.cycles_passes import markdown_lines
+
+    lines += markdown_lines(results["rows"], methods)
     lines += ["", f"Figure: `{figure}` (rows in the table's order; Cycles | reference | "
               + " | ".join(results["methods"]) + f" | |{results['methods'][-1]} - Cycles| x4).", "",
               "Commands (Cycles worker, lobeview reference):", ""]  # fmt: skip
@@ -460,6 +476,10 @@ def main(argv=None) -> int:
         default=str(Path(__file__).resolve().parent / "figures"),
         help="folder of the figure (default bench/figures; made if its parent exists)",
     )
+    parser.add_argument("--passes", action="store_true",
+                        help="under the white sky also render Cycles' light passes and report where each method's "
+                             "error lies: on the pixels whose glossy lobe the object hides from itself, or "
+                             "elsewhere (bench/cycles_passes.py)")  # fmt: skip
     parser.add_argument("--roughness-sweep", action="store_true",
                         help="only check Cycles against near-zero roughness (a metal sphere, with and without the "
                              "worker's roughness floor) and write that table")  # fmt: skip
@@ -484,7 +504,7 @@ def main(argv=None) -> int:
     cases = make_cases(args.cases, args.envs, work)
     lobeview = shlex.split(args.lobeview) if args.lobeview else None
     results = run(cases, args.methods, args.size, args.spp, args.ref_spp, work, args.bpy_python, cache,
-                  lobeview=lobeview, supersample=args.supersample)  # fmt: skip
+                  lobeview=lobeview, supersample=args.supersample, passes=args.passes)  # fmt: skip
     results["lobeview"] = args.lobeview or "this checkout"
     out, figures = Path(args.out), Path(args.figures)
     out.mkdir(exist_ok=True)

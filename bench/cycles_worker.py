@@ -19,6 +19,10 @@ Conventions (each verified by :mod:`lobeview.bench.cycles` against lobeview's ow
   node after a texture): at 0.02 the lobe is far narrower than a pixel or an environment texel
   here, so the floor changes nothing else (the same sphere at 0 and at 0.02: equal means).
   ``python -m lobeview.bench.cycles --roughness-sweep`` measures it again.
+- job "passes" (``python -m lobeview.bench.cycles --passes``): the view layer's light passes
+  (PASSES) go into a multilayer EXR beside the combined image: Combined = DiffCol (DiffDir +
+  DiffInd) + GlossCol (GlossDir + GlossInd); under the white sky (radiance 1) GlossDir is the
+  share of the glossy lobe that sees the sky past the object itself.
 """
 
 from __future__ import annotations
@@ -29,6 +33,10 @@ import sys
 
 ROUGHNESS_FLOOR = 0.02
 ROUGHNESS_INPUTS = ("Roughness", "Coat Roughness")
+PASSES = ("DiffDir", "DiffInd", "DiffCol", "GlossDir", "GlossInd", "GlossCol")
+PASS_PROPERTIES = {"DiffDir": "use_pass_diffuse_direct", "DiffInd": "use_pass_diffuse_indirect",
+                   "DiffCol": "use_pass_diffuse_color", "GlossDir": "use_pass_glossy_direct",
+                   "GlossInd": "use_pass_glossy_indirect", "GlossCol": "use_pass_glossy_color"}  # fmt: skip
 
 
 def _blender_vector(v):
@@ -138,6 +146,10 @@ def render(job: dict) -> None:
     scene.camera = camera
 
     scene.render.image_settings.file_format = "OPEN_EXR"
+    if job.get("passes", False):
+        for name in PASSES:
+            setattr(bpy.context.view_layer, PASS_PROPERTIES[name], True)
+        scene.render.image_settings.file_format = "OPEN_EXR_MULTILAYER"
     scene.render.image_settings.color_depth = "32"
     scene.render.image_settings.color_mode = "RGBA"
     scene.render.filepath = job["out"]

@@ -90,3 +90,61 @@ def test_markdown_lists_every_case_and_command():
     text = cycles.markdown(results, "20261126", "python -m lobeview.bench.cycles", "bench/figures/c.png")
     assert "| sphere-white | white | 0.975 / 2.5 / 0.980 / 0.970 | 0.975 / 2.5 / 0.980 / 0.970 |" in text
     assert "python -I worker.py job.json" in text and "bench/figures/c.png" in text
+
+
+def _layers(shape, gloss_dir, gloss_ind=0.0, gloss_col=0.5, diff_col=0.2):
+    """Cycles' light passes of a white-sky render: diffuse fully lit, glossy seen by ``gloss_dir``."""
+    full = np.ones(shape + (3,), np.float32)
+    return {"DiffDir": full, "DiffInd": 0.0 * full, "DiffCol": diff_col * full, "GlossDir": gloss_dir[..., None] * full,
+            "GlossInd": gloss_ind * full, "GlossCol": gloss_col * full}  # fmt: skip
+
+
+def test_self_occlusion_split_on_known_passes():
+    from lobeview.bench.cycles_passes import self_occlusion_split
+
+    shape = (8, 8)
+    visibility = np.ones(shape)
+    visibility[:2] = 0.2  # the top two rows' glossy lobe is mostly hidden (16 of 64 pixels)
+    layers = _layers(shape, visibility)
+    truth = np.repeat((0.2 + 0.5 * visibility)[..., None], 3, axis=-1)  # Combined = DiffCol + GlossCol GlossDir
+    mask = np.ones(shape, bool)
+    image = np.repeat((0.2 + 0.5 * np.ones(shape))[..., None], 3, axis=-1)  # a renderer that hides nothing
+    image[4, 4] += 0.01  # and one small error elsewhere
+    split = self_occlusion_split(image, truth, layers, mask)
+    assert split["hidden_pixel_share"] == pytest.approx(16 / 64)
+    hidden_error = 16 * 3 * 0.4**2
+    assert split["hidden_error_share"] == pytest.approx(hidden_error / (hidden_error + 3 * 0.01**2))
+    rest = np.ones(shape, bool)
+    rest[:2] = False
+    assert split["rel_rmse_elsewhere"] == pytest.approx(np.sqrt(3 * 0.01**2 / (3 * 48)) / 0.7)
+    low, *_, open_band = split["bands"]
+    assert low["pixels"] == 16 and low["cycles"] == pytest.approx(0.2) and low["lobeview"] == pytest.approx(1.0)
+    assert open_band["pixels"] == 48 and open_band["lobeview"] == pytest.approx(1.0)
+    same = self_occlusion_split(truth, truth, layers, mask)  # a renderer equal to Cycles reads back Cycles'
+    assert same["hidden_error_share"] == 0.0 and same["bands"][0]["lobeview"] == pytest.approx(0.2)
+    without_gloss = self_occlusion_split(image, truth, _layers(shape, visibility, gloss_col=0.0), mask)
+    assert without_gloss["hidden_pixel_share"] == 0.0  # no glossy reflectance: nothing counts as hidden
+
+
+def test_passes_table_and_layered_exr(tmp_path):
+    import OpenEXR
+
+    from lobeview.bench.cycles_passes import markdown_lines, read_layers_exr, self_occlusion_split
+
+    shape = (4, 6)
+    layers = _layers(shape, np.full(shape, 0.5))
+    channels = {f"ViewLayer.{name}.{c}": np.ascontiguousarray(value[..., k], np.float32)
+                for name, value in layers.items() for k, c in enumerate("RGB")}  # fmt: skip
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}, channels) as exr:
+        exr.write(str(tmp_path / "passes.exr"))
+    read = read_layers_exr(tmp_path / "passes.exr")
+    assert set(read) == set(layers)
+    for name, value in layers.items():
+        np.testing.assert_array_equal(read[name], value)
+    truth = np.full(shape + (3,), 0.45)
+    split = self_occlusion_split(truth, truth, read, np.ones(shape, bool))
+    rows = [{"case": "bottle", "env": "white", "self_occlusion": {"reference": split}}, {"case": "x", "env": "garden"}]
+    lines = markdown_lines(rows, ["reference"])
+    assert any(line.startswith("| bottle | reference | 100.0 % | 0 % |") for line in lines)
+    assert not any(line.startswith("| x |") for line in lines)  # no passes, no row
+    assert markdown_lines([{"case": "x", "env": "garden"}], ["reference"]) == []
