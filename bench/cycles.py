@@ -68,7 +68,12 @@ MODELS = {
     "Suzanne": "gltf/Suzanne/Suzanne.gltf",
     "CornellBox": "gltf/CornellBox/CornellBox.glb",
 }
-DEFAULT_CASES = (*SPHERE_MATERIALS, *MODELS)
+# A model's mesh with one untextured material: prefiltered-rsibr bakes maps only for lobes no
+# texture changes, so on the textured models it falls back to the split-sum lookup.
+PLAIN_MODELS = {
+    "suzanne-metal": ("Suzanne", {"model": "gltf", "base_color": [0.8, 0.8, 0.8], "metallic": 1.0, "roughness": 0.35}),
+}
+DEFAULT_CASES = (*SPHERE_MATERIALS, *MODELS, *PLAIN_MODELS)
 FOV_Y = 40.0
 # Where the camera sits relative to a model's bounding sphere: up and to the side a little, so
 # that the silhouette shows grazing angles and the top shows the sky's reflection.
@@ -117,6 +122,26 @@ def sphere_gltf(name: str, work: Path, material: dict | None = None) -> Path:
     return path
 
 
+def plain_model_gltf(name: str, work: Path) -> Path:
+    """PLAIN_MODELS[name]: the model's objects with every material replaced by the one given,
+    written as .glb (every run, as sphere_gltf)."""
+    from lobeview.materials.spec import validate
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.gltf_writer import write_glb
+    from lobeview.scenes.scene import SceneMaterial
+
+    model, material = PLAIN_MODELS[name]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_gltf(ASSETS / MODELS[model])
+    scene.materials = [SceneMaterial(name, validate(material))]
+    for obj in scene.objects:
+        obj.material = 0
+    path = work / f"{name}.glb"
+    write_glb(scene, path)
+    return path
+
+
 def framing(gltf: Path) -> tuple[tuple, tuple]:
     """(camera, target) that fit the model's bounding sphere in a vertical field of view of
     FOV_Y, seen along VIEW_DIRECTION."""
@@ -141,6 +166,9 @@ def make_cases(names, envs, work: Path) -> list[Case]:
             camera, target = (0.0, 0.35, 3.2), (0.0, 0.0, 0.0)
         elif name in MODELS:
             gltf = ASSETS / MODELS[name]
+            camera, target = framing(gltf)
+        elif name in PLAIN_MODELS:
+            gltf = plain_model_gltf(name, work)
             camera, target = framing(gltf)
         else:
             path = Path(name)

@@ -3,7 +3,8 @@
 // the icosahedron triangle holding this pixel's view direction are read at its mirror direction r
 // (the mirror warp, section 3.3) and blended with spherical barycentric weights (3.4), each faded
 // near its singular texel r = -v_j and scaled by the albedo ratio of the pixel's and the map's
-// elevation; anisotropic materials mix the two tangent-angle slices around the pixel's tangent.
+// elevation; anisotropic materials mix the two tangent-angle slices around the pixel's tangent;
+// the object's own surface hides what lies below its horizons (self_occlusion.glsl).
 #include "rsibr_common.glsl"
 
 uniform sampler2DArray u_rsibr_maps;  // layer (view j, slice k) = j K + k: 2H x H, equirectangular in r
@@ -91,5 +92,19 @@ vec3 rsibr_radiance(vec3 wo, mat3 tbn) {
         }
         sum += w[i] * value * rsibr_albedo_ratio(pixel_albedo, 0.5 * length(u_rsibr_views[views[i]] + r));
     }
-    return sum;
+    // The object's own surface hides part of the baked lobes from this point (self_occlusion.glsl;
+    // the maps hold the surroundings only): each baked lobe's visible share through its split-sum
+    // footprint at the mirror direction from the point, the mean over the baked lobes, and the
+    // hidden part sees the object (g_self_radiance) through the baked lobes' albedo at n.v, as the
+    // split-sum lookups do (prefiltered.glsl). Without a cone (the preview, a convex object) it is 1.
+    float visible = 0.0;
+    int baked = 0;
+    for (int i = 0; i < u_lobe_count; ++i) {
+        if (!rsibr_lobe(i)) continue;
+        Lobe l = get_lobe(i);
+        visible += self_visibility(r, split_sum_footprint(l.dist, sqrt(l.ax * l.ay)));
+        baked += 1;
+    }
+    visible = baked > 0 ? visible / float(baked) : 1.0;
+    return visible * sum + (1.0 - visible) * g_self_radiance * pixel_albedo;
 }

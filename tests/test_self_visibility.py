@@ -19,6 +19,7 @@ from lobeview.scenes.self_visibility import (
     horizon_visibility,
     rays_per_vertex,
     self_occluded_incident,
+    split_sum_footprint,
     vertex_visibility_cones,
 )
 
@@ -235,7 +236,6 @@ def test_split_sum_footprint_matches_the_lobes_share_above_the_horizon(kind):
     views 15-80 degrees up, the horizon from 0.4 rad below to 0.4 rad above the mirror direction."""
     from lobeview.materials.microfacet import MicrofacetDistribution
     from lobeview.materials.prefilter import split_sum_lean
-    from lobeview.scenes.self_visibility import split_sum_footprint
 
     rng = np.random.default_rng(9)
     normal = np.array([0.0, 0.0, 1.0])
@@ -321,13 +321,16 @@ def _grid(corner, edge_u, edge_v, steps: int):
     )
 
 
-def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall():
+@pytest.mark.parametrize("method", ["lobe-7", "prefiltered-rsibr"])
+def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall(method):
     """A near-mirror metal floor (base colour 0.5) with a wall at its back, one object, under a
     uniform sky: its cube map holds only the sky (the object is not in its own cube), so with
     self-occlusion a floor pixel shows F (vis L + (1 - vis) 0.5 L), the hidden part seeing the
     object as the point itself (F0 0.5 lit by E = pi L), and without it F L. The ratio of the two
     frames is 0.5 + 0.5 vis at every floor pixel, vis from the numpy horizons interpolated at the
-    pixel's position and its mirror direction (measured: 99 % within 5e-4, the worst 1.4e-3)."""
+    pixel's position and its mirror direction (measured: 99 % within 5e-4, the worst 1.4e-3).
+    prefiltered-rsibr's maps hold the lobe over the surroundings alone too: its hidden share is
+    its split-sum footprint's (rsibr.glsl), the same ratio (before, 1 at every pixel)."""
     import trimesh
 
     from lobeview.materials.spec import validate
@@ -360,7 +363,7 @@ def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall():
         frames = {}
         for occlusion in (True, False):
             renderer.configure(self_occlusion=occlusion)
-            frames[occlusion] = renderer.render(camera, "lobe-7")
+            frames[occlusion] = renderer.render(camera, method)
         on, off = frames[True], frames[False]
     finally:
         renderer.release()
@@ -386,7 +389,8 @@ def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall():
     view = camera.position - points
     view /= np.linalg.norm(view, axis=1, keepdims=True)
     mirror = view * [-1.0, 1.0, -1.0]
-    expected = 0.5 + 0.5 * horizon_visibility(mirror, cone, np.array([0.0, 1.0, 0.0]))
+    footprint = split_sum_footprint(0.05**2) if method == "prefiltered-rsibr" else 0.0
+    expected = 0.5 + 0.5 * horizon_visibility(mirror, cone, np.array([0.0, 1.0, 0.0]), footprint=footprint)
 
     assert (expected < 0.6).sum() > 100 and (expected > 0.95).sum() > 100  # both regimes covered
     error = np.abs(ratio - expected)
@@ -458,7 +462,6 @@ def test_glsl_self_visibility_and_split_sum_footprint_equal_numpy():
     """self_occlusion.glsl's self_visibility (the cap of a lookup's footprint against per-sector
     horizons) and split_sum_footprint through a compute probe, against the numpy twin, for random
     normals, directions above and below them, horizons, footprints 0-2 sr and both distributions."""
-    from lobeview.scenes.self_visibility import split_sum_footprint
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.interface import DISTRIBUTIONS
     from lobeview.viewer.shaders import ProgramCache
