@@ -387,7 +387,7 @@ def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, py
     """``passes``: under the white sky, also Cycles' light passes and where each method's error lies
     against them (bench/cycles_passes.py)."""
     version = bpy_version(python)
-    rows, figures, commands = [], [], []
+    rows, figures, commands, passes_figures = [], [], [], []
     for i, case in enumerate(cases):
         env_path = environment_file(case.environment, work)
         job = cycles_job(case, env_path, size, spp, work / f"{case.name}-{case.environment}-cycles.exr")
@@ -409,7 +409,12 @@ def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, py
             if method == "reference":
                 commands.append((f"{case.name} / {case.environment}", cycles_command, command))
         if passes and case.environment == "white":
-            from lobeview.bench.cycles_passes import passes_job, render_passes, self_occlusion_split
+            from lobeview.bench.cycles_passes import (
+                passes_job,
+                render_passes,
+                self_occlusion_split,
+                visibility_figure_row,
+            )
 
             progress(f"[cycles] {i + 1}/{len(cases)} {case.name} under {case.environment}: Cycles' passes ...")
             light_job = passes_job(job)
@@ -419,9 +424,11 @@ def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, py
             row["self_occlusion"] = {
                 m: self_occlusion_split(image, truth[..., :3], layers, mask) for m, image in labelled
             }
+            passes_figures.append(visibility_figure_row(images[0], layers, mask))
         rows.append(row)
         figures.append(figure_row(truth[..., :3], images, mask))
-    return {"rows": rows, "figures": figures, "commands": commands, "blender": version, "methods": list(methods),
+    return {"rows": rows, "figures": figures, "passes_figures": passes_figures, "commands": commands,
+            "blender": version, "methods": list(methods),
             "size": list(size), "spp": spp, "ref_spp": ref_spp, "supersample": supersample}  # fmt: skip
 
 
@@ -450,7 +457,7 @@ def markdown(results: dict, stamp: str, command: str, figure: str) -> str:
         lines.append(f"| {row['case']} | {row['env']} | " + " | ".join(cells) + " |")
     from lobeview.bench.cycles_passes import markdown_lines
 
-    lines += markdown_lines(results["rows"], methods)
+    lines += markdown_lines(results["rows"], methods, results.get("passes_figure"))
     lines += ["", f"Figure: `{figure}` (rows in the table's order; Cycles | reference | "
               + " | ".join(results["methods"]) + f" | |{results['methods'][-1]} - Cycles| x4).", "",
               "Commands (Cycles worker, lobeview reference):", ""]  # fmt: skip
@@ -538,6 +545,9 @@ def main(argv=None) -> int:
     out.mkdir(exist_ok=True)
     figures.mkdir(exist_ok=True)
     figure = write_image_rows(figures, f"cycles-{stamp}.png", results.pop("figures"))
+    passes_rows = results.pop("passes_figures")
+    if passes_rows:
+        results["passes_figure"] = _shown(write_image_rows(figures, f"cycles-passes-{stamp}.png", passes_rows))
     command = "python -m lobeview.bench.cycles " + shlex.join(argv if argv is not None else sys.argv[1:])
     (out / f"cycles-{stamp}.json").write_text(json.dumps(results, indent=1))
     path = out / f"cycles-{stamp}.md"

@@ -117,10 +117,11 @@ def self_occlusion_split(image: np.ndarray, truth: np.ndarray, layers: dict, mas
     }
 
 
-def markdown_lines(rows: list, methods: list) -> list:
+def markdown_lines(rows: list, methods: list, figure: str | None = None) -> list:
     """The split's table: per case under the white sky and method, the share of pixels whose
     glossy lobe Cycles finds hidden, the share of the squared error on them, the relative RMSE on
-    the other pixels, and Cycles' / lobeview's median glossy visibility per band."""
+    the other pixels, and Cycles' / lobeview's median glossy visibility per band; ``figure``: the
+    path of the visibility figure (:func:`visibility_figure_row` per case)."""
     rows = [row for row in rows if "self_occlusion" in row]
     if not rows:
         return []
@@ -140,4 +141,35 @@ def markdown_lines(rows: list, methods: list) -> list:
             lines.append(f"| {row['case']} | {method} | {100 * split['hidden_pixel_share']:.1f} % | "
                          f"{100 * split['hidden_error_share']:.0f} % | {100 * split['rel_rmse_elsewhere']:.1f} | "
                          + " | ".join(cells) + " |")  # fmt: skip
+    if figure:
+        lines += [
+            "",
+            f"Figure: `{figure}` (one row per case above, the reference: Cycles' glossy light over its "
+            "colour | lobeview's | lobeview's excess red, deficit blue, x2; grey: no glossy reflectance).",
+        ]
     return lines
+
+
+def visibility_figure_row(image: np.ndarray, layers: dict, mask: np.ndarray) -> np.ndarray:
+    """One figure row, (H, 3 W, 3) in [0, 1]: Cycles' glossy light over its colour (direct +
+    indirect: 1 white, 0 black) | lobeview's, read back from ``image`` as in
+    :func:`self_occlusion_split` | lobeview's excess in red and its deficit in blue (x2), over
+    the pixels with a glossy reflectance; grey elsewhere."""
+    visibility, colour = glossy_visibility(layers)
+    cycles = visibility + layers["GlossInd"].mean(axis=-1)
+    diffuse = (layers["DiffCol"] * (layers["DiffDir"] + layers["DiffInd"])).mean(axis=-1)
+    lobeview = (image[..., :3].mean(axis=-1) - diffuse) / np.maximum(colour, 1e-6)
+    glossy = mask & (colour > MIN_GLOSSY_COLOUR)
+
+    def grey(values: np.ndarray) -> np.ndarray:
+        panel = np.full(values.shape + (3,), 0.25)
+        panel[glossy] = np.clip(values[glossy], 0.0, 1.0)[:, None]
+        return panel
+
+    difference = np.zeros(cycles.shape + (3,))
+    excess = np.clip(2.0 * (lobeview - cycles), 0.0, 1.0)
+    deficit = np.clip(2.0 * (cycles - lobeview), 0.0, 1.0)
+    difference[..., 0] = np.where(glossy, excess, 0.25)
+    difference[..., 1] = np.where(glossy, 0.0, 0.25)
+    difference[..., 2] = np.where(glossy, deficit, 0.25)
+    return np.concatenate([grey(cycles), grey(lobeview), difference], axis=1)

@@ -148,3 +148,23 @@ def test_passes_table_and_layered_exr(tmp_path):
     assert any(line.startswith("| bottle | reference | 100.0 % | 0 % |") for line in lines)
     assert not any(line.startswith("| x |") for line in lines)  # no passes, no row
     assert markdown_lines([{"case": "x", "env": "garden"}], ["reference"]) == []
+
+
+def test_visibility_figure_marks_what_lobeview_keeps_too_bright():
+    from lobeview.bench.cycles_passes import visibility_figure_row
+
+    shape = (4, 4)
+    visibility = np.ones(shape)
+    visibility[0] = 0.2
+    layers = _layers(shape, visibility)
+    mask = np.ones(shape, bool)
+    mask[3, 3] = False  # the background: grey in every panel
+    image = np.repeat((0.2 + 0.5 * np.ones(shape))[..., None], 3, axis=-1)  # hides nothing
+    row = visibility_figure_row(image, layers, mask)
+    assert row.shape == (4, 12, 3) and row.min() >= 0.0 and row.max() <= 1.0
+    cycles, lobeview, difference = row[:, :4], row[:, 4:8], row[:, 8:]
+    np.testing.assert_allclose(cycles[0, 0], 0.2)
+    np.testing.assert_allclose(lobeview[0, 0], 1.0)
+    np.testing.assert_allclose(difference[0, 0], [1.0, 0.0, 0.0])  # excess 0.8, x2, clipped: red
+    np.testing.assert_allclose(difference[1, 1], [0.0, 0.0, 0.0])  # equal: black
+    np.testing.assert_allclose(difference[3, 3], 0.25)
