@@ -163,8 +163,8 @@ def test_visibility_figure_marks_what_lobeview_keeps_too_bright():
     row = visibility_figure_row(image, layers, mask)
     assert row.shape == (4, 12, 3) and row.min() >= 0.0 and row.max() <= 1.0
     cycles, lobeview, difference = row[:, :4], row[:, 4:8], row[:, 8:]
-    np.testing.assert_allclose(cycles[0, 0], 0.2)
-    np.testing.assert_allclose(lobeview[0, 0], 1.0)
+    np.testing.assert_allclose(cycles[0, 0], 0.2, atol=1e-6)
+    np.testing.assert_allclose(lobeview[0, 0], 1.0, atol=1e-6)
     np.testing.assert_allclose(difference[0, 0], [1.0, 0.0, 0.0])  # excess 0.8, x2, clipped: red
-    np.testing.assert_allclose(difference[1, 1], [0.0, 0.0, 0.0])  # equal: black
+    np.testing.assert_allclose(difference[1, 1], [0.0, 0.0, 0.0], atol=1e-6)  # equal: black
     np.testing.assert_allclose(difference[3, 3], 0.25)
