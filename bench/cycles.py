@@ -17,7 +17,8 @@ environment files' bytes, the camera, size, samples and Blender's version).
 
     python3.11 -m venv ~/bpy-env && ~/bpy-env/bin/pip install bpy==4.3.0 numpy==1.26.4
     .venv/bin/python -m lobeview.bench.cycles --bpy-python ~/bpy-env/bin/python [--size 240x180] [--spp 512]
-        [--cases sphere-white ... | a glTF file] [--envs white garden studio] [--lobeview "COMMAND"] [--passes]
+        [--cases sphere-white ... | a glTF file] [--envs white garden studio] [--lobeview "COMMAND"]
+        [--passes [--trace]]
 
 bpy is not a lobeview dependency and cannot be an optional one: bpy 4.3 (the last for Python
 3.11) is built against numpy 1.x and its Cycles add-on fails to register under lobeview's numpy
@@ -383,9 +384,11 @@ def figure_row(truth: np.ndarray, images: list[np.ndarray], mask: np.ndarray) ->
 
 
 def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, python: str, cache: Path | None,
-        progress=print, lobeview=None, supersample: int = 1, passes: bool = False) -> dict:  # fmt: skip
+        progress=print, lobeview=None, supersample: int = 1, passes: bool = False,
+        trace: bool = False) -> dict:  # fmt: skip
     """``passes``: under the white sky, also Cycles' light passes and where each method's error lies
-    against them (bench/cycles_passes.py)."""
+    against them (bench/cycles_passes.py); ``trace`` (with ``passes``): the mirror direction's
+    visibility at the hidden and open pixels by vertex and per-point horizons (bench/cycles_trace.py)."""
     version = bpy_version(python)
     rows, figures, commands, passes_figures = [], [], [], []
     for i, case in enumerate(cases):
@@ -425,6 +428,15 @@ def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, py
                 m: self_occlusion_split(image, truth[..., :3], layers, mask) for m, image in labelled
             }
             passes_figures.append(visibility_figure_row(images[0], layers, mask))
+            if trace:
+                from lobeview.bench.cycles_trace import trace_case
+                from lobeview.scenes.gltf_loader import load_gltf
+
+                progress(f"[cycles] {i + 1}/{len(cases)} {case.name}: tracing the hidden and open pixels ...")
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    scene = load_gltf(case.gltf)
+                row["trace"] = trace_case(scene, case.camera, case.target, FOV_Y, size, layers)
         rows.append(row)
         figures.append(figure_row(truth[..., :3], images, mask))
     return {"rows": rows, "figures": figures, "passes_figures": passes_figures, "commands": commands,
@@ -458,6 +470,9 @@ def markdown(results: dict, stamp: str, command: str, figure: str) -> str:
     from lobeview.bench.cycles_passes import markdown_lines
 
     lines += markdown_lines(results["rows"], methods, results.get("passes_figure"))
+    from lobeview.bench.cycles_trace import markdown_lines as trace_lines
+
+    lines += trace_lines(results["rows"])
     lines += ["", f"Figure: `{figure}` (rows in the table's order; Cycles | reference | "
               + " | ".join(results["methods"]) + f" | |{results['methods'][-1]} - Cycles| x4).", "",
               "Commands (Cycles worker, lobeview reference):", ""]  # fmt: skip
@@ -515,6 +530,10 @@ def main(argv=None) -> int:
                         help="under the white sky also render Cycles' light passes and report where each method's "
                              "error lies: on the pixels whose glossy lobe the object hides from itself, or "
                              "elsewhere (bench/cycles_passes.py)")  # fmt: skip
+    parser.add_argument("--trace", action="store_true",
+                        help="with --passes: the mirror direction's visibility at the hidden and open pixels by "
+                             "lobeview's vertex horizons and by horizons traced per pixel "
+                             "(bench/cycles_trace.py)")  # fmt: skip
     parser.add_argument("--roughness-sweep", action="store_true",
                         help="only check Cycles against near-zero roughness (a metal sphere, with and without the "
                              "worker's roughness floor) and write that table")  # fmt: skip
@@ -539,7 +558,8 @@ def main(argv=None) -> int:
     cases = make_cases(args.cases, args.envs, work)
     lobeview = shlex.split(args.lobeview) if args.lobeview else None
     results = run(cases, args.methods, args.size, args.spp, args.ref_spp, work, args.bpy_python, cache,
-                  lobeview=lobeview, supersample=args.supersample, passes=args.passes)  # fmt: skip
+                  lobeview=lobeview, supersample=args.supersample, passes=args.passes or args.trace,
+                  trace=args.trace)  # fmt: skip
     results["lobeview"] = args.lobeview or "this checkout"
     out, figures = Path(args.out), Path(args.figures)
     out.mkdir(exist_ok=True)

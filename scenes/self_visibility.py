@@ -51,7 +51,7 @@ SOFT_EDGE = 0.1  # half width, in cosine, of the cone's soft edge (a 64-ray cone
 ORIGIN_OFFSET = 1e-4  # ray origins off the surface, times the object's extent
 NEAR_HIT_DISTANCE = 0.03  # hits nearer than this, times the object's extent, are ignored (see below)
 SEED = 11
-HORIZON_SECTORS = 8  # azimuth sectors of the horizon around each normal (_traced_horizons)
+HORIZON_SECTORS = 8  # azimuth sectors of the horizon around each normal (traced_horizons)
 CONE_FLOATS = 4 + HORIZON_SECTORS  # per vertex: bent normal, cos of the cone's half angle, horizons
 HORIZON_SOFT_EDGE = 0.08  # a point lookup's cap radius, in sin of elevation: the horizon's soft edge
 # A lookup that averages the cube over a footprint (a filtered lobe-N or fis-N sample, a
@@ -116,7 +116,7 @@ def vertex_visibility_cones(
 ) -> np.ndarray:
     """(V, 4 + HORIZON_SECTORS) float32: per vertex the bent normal (unit, the positions' space),
     the cosine of the visibility cone's half angle (NO_OCCLUSION where the object hides nothing
-    from it) and the sine of the horizon's elevation in each azimuth sector (_traced_horizons).
+    from it) and the sine of the horizon's elevation in each azimuth sector (traced_horizons).
     ``indices``: the triangles (3 per face)."""
     import trimesh
 
@@ -161,7 +161,7 @@ def vertex_visibility_cones(
     cones[occluded, 3] = cone_cos_aperture(tilt[occluded], visible[occluded])
     if occluded.any():
         horizons = np.zeros((count, HORIZON_SECTORS))
-        horizons[occluded] = _traced_horizons(
+        horizons[occluded] = traced_horizons(
             mesh, positions[occluded], normals[occluded], extent, max(n // HORIZON_SECTORS, 1), seed
         )
         (horizons,) = _smooth_over_neighbours(faces, count, horizons, passes=smoothing_passes)
@@ -169,14 +169,16 @@ def vertex_visibility_cones(
     return cones
 
 
-def _own_hits(mesh, positions: np.ndarray, normals: np.ndarray, directions: np.ndarray, extent: float) -> np.ndarray:
+def _own_hits(
+    mesh, positions: np.ndarray, normals: np.ndarray, directions: np.ndarray, extent: float, near_hit=NEAR_HIT_DISTANCE
+) -> np.ndarray:
     """Whether each ray (``directions`` (V, n, 3) from each vertex) meets the object's own
-    ``mesh`` (trimesh), flattened. Rays start NEAR_HIT_DISTANCE along themselves: a grazing ray
-    from a vertex whose normal is averaged over a curved, faceted surface meets the neighbouring
-    triangles at once, which hide nothing a finer mesh would (the occlusion texture holds detail
-    at that scale)."""
+    ``mesh`` (trimesh), flattened. Rays start ``near_hit`` (NEAR_HIT_DISTANCE) times the extent
+    along themselves: a grazing ray from a vertex whose normal is averaged over a curved, faceted
+    surface meets the neighbouring triangles at once, which hide nothing a finer mesh would (the
+    occlusion texture holds detail at that scale)."""
     start = positions[:, None, :] + normals[:, None, :] * (ORIGIN_OFFSET * max(extent, 1e-12))
-    start = start + directions * (NEAR_HIT_DISTANCE * max(extent, 1e-12))
+    start = start + directions * (near_hit * max(extent, 1e-12))
     return mesh.ray.intersects_any(start.reshape(-1, 3), directions.reshape(-1, 3))
 
 
@@ -193,8 +195,10 @@ def horizon_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tangent, np.cross(normals, tangent)
 
 
-def _traced_horizons(mesh, positions, normals, extent, rays_per_sector, seed) -> np.ndarray:
-    """(V, HORIZON_SECTORS): per vertex and azimuth sector, the sine of the horizon's elevation,
+def traced_horizons(mesh, positions, normals, extent, rays_per_sector, seed=SEED, near_hit=NEAR_HIT_DISTANCE):
+    """(V, HORIZON_SECTORS): per vertex (or any surface point of ``mesh``: bench/cycles_trace.py
+    traces them per pixel) and azimuth sector, the sine of the horizon's elevation, rays cut
+    ``near_hit`` times the extent from their origin (_own_hits),
     taken as the sector's hidden fraction of solid angle (its rays are uniform in solid angle:
     uniform in sin(elevation)), so that everything below the horizon is what the object hides.
     A circular cone must cut every azimuth at one elevation; a forehead that the brow hides
@@ -214,7 +218,7 @@ def _traced_horizons(mesh, positions, normals, extent, rays_per_sector, seed) ->
         + (cos_e * np.sin(phi))[..., None] * bitangent[:, None, None, :]
         + sin_e[..., None] * normals[:, None, None, :]
     ).reshape(count, -1, 3)
-    hit = _own_hits(mesh, positions, normals, directions, extent)
+    hit = _own_hits(mesh, positions, normals, directions, extent, near_hit)
     return hit.reshape(count, HORIZON_SECTORS, k).mean(axis=2)
 
 

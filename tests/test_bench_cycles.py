@@ -168,3 +168,65 @@ def test_visibility_figure_marks_what_lobeview_keeps_too_bright():
     np.testing.assert_allclose(difference[0, 0], [1.0, 0.0, 0.0])  # excess 0.8, x2, clipped: red
     np.testing.assert_allclose(difference[1, 1], [0.0, 0.0, 0.0], atol=1e-6)  # equal: black
     np.testing.assert_allclose(difference[3, 3], 0.25)
+
+
+def test_camera_rays_pass_through_the_pixel_centres_of_lobeviews_camera():
+    """bench/cycles_trace.py's rays, projected by lobeview's own view and projection matrices, land
+    on the centres of the pixels they were made for (row 0 at the top)."""
+    from lobeview.bench.cycles_trace import camera_rays
+    from lobeview.viewer.camera import Camera
+
+    camera = Camera(position=(0.3, 0.25, 0.84), target=(0.0, 0.05, 0.0), fov_y=40.0)
+    size = (240, 180)
+    pixels = np.array([[0, 0], [179, 239], [90, 120], [17, 201]])
+    rays = camera_rays(camera.position, camera.target, camera.fov_y, size, pixels)
+    points = np.asarray(camera.position) + 2.0 * rays
+    clip = np.c_[points, np.ones(len(points))] @ camera.view_projection(size[0] / size[1]).T
+    ndc = clip[:, :2] / clip[:, 3:]
+    column = (ndc[:, 0] + 1.0) / 2.0 * size[0] - 0.5
+    row = (1.0 - ndc[:, 1]) / 2.0 * size[1] - 0.5
+    np.testing.assert_allclose(np.c_[row, column], pixels, atol=1e-6)
+
+
+def test_traced_mirror_visibility_on_a_floor_before_a_wall():
+    """A floor with a wall 1 high at its back, one object, seen from above and in front: a floor
+    point whose mirror direction meets the wall well below its top is hidden by its own traced
+    horizons, one whose mirror direction passes well above it is not (the mirror ray traced
+    exactly decides which is which), for every cut; the vertex horizons are there too."""
+    import trimesh
+    from test_self_visibility import _grid
+
+    from lobeview.bench.cycles_trace import TRACE_CUTS, camera_rays, mirror_visibility
+    from lobeview.scenes.meshes import merge_meshes
+    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
+
+    floor = _grid((-1.5, 0.0, 1.0), (3.0, 0.0, 0.0), (0.0, 0.0, -2.0), 30)
+    wall = _grid((-1.5, 0.0, -1.0), (3.0, 0.0, 0.0), (0.0, 1.0, 0.0), 30)
+    mesh = merge_meshes([floor, wall], "corner")
+    scene = Scene([SceneObject("corner", mesh, 0)], [SceneMaterial("metal", {"model": "gltf"})])
+    eye = (0.0, 1.6, 2.6)
+    pixels = np.argwhere(np.ones((24, 32), bool))
+    rays = camera_rays(eye, (0.0, 0.0, -0.3), 45.0, (32, 24), pixels)
+    found = mirror_visibility(scene, eye, rays)
+    assert set(found) == {"vertices", *(f"cut {100 * cut:g} %" for cut in TRACE_CUTS)}
+
+    # the same points again, and where their mirror rays go
+    body = trimesh.Trimesh(mesh.positions, np.asarray(mesh.indices).reshape(-1, 3), process=False)
+    points, index, _ = body.ray.intersects_location(np.repeat([eye], len(rays), axis=0), rays, multiple_hits=False)
+    on_floor = points[:, 1] < 1e-6
+    assert on_floor.sum() > 100
+    view = rays[index]
+    mirror = view * [1.0, -1.0, 1.0]  # about the floor's normal +y
+    # where the mirror ray reaches the wall's plane z = -1, and how high
+    travel = (-1.0 - points[:, 2]) / np.minimum(mirror[:, 2], -1e-9)
+    height = points[:, 1] + travel * mirror[:, 1]
+    across = np.abs(points[:, 0] + travel * mirror[:, 0])
+    hidden = on_floor & (height < 0.6) & (across < 1.2)
+    clear = on_floor & (height > 1.4)
+    assert hidden.sum() > 20 and clear.sum() > 20
+    for key, values in found.items():
+        assert len(values) == len(points)
+        if key == "vertices":
+            continue
+        assert values[hidden].max() < 0.1, key
+        assert values[clear].min() > 0.9, key
