@@ -7,7 +7,8 @@ the hidden (Cycles' GlossDir below HIDDEN_BELOW) and the open (GlossDir at least
 pixels. Each pixel's centre ray is cast into the scene as lobeview loads it (trimesh); at the point
 it meets, with the interpolated vertex normal, the mirror direction of the view is tested three
 ways, each the visible share of a point lookup (scenes/self_visibility.py horizon_visibility):
-against the object's vertex horizons interpolated at the point, as lobeview shades it, and against
+against the object's vertex horizons interpolated at the point (as lobeview shades an object
+without a horizon map, scenes/horizon_maps.py), and against
 horizons traced at the point itself (16 rays a sector) with near-hit cuts of TRACE_CUTS of the
 object's extent. Only the object the ray meets hides anything (what other objects hide is in its
 cube map).
@@ -120,8 +121,9 @@ def markdown_lines(rows: list) -> list:
         return []
     keys = ["vertices", *(f"cut {100 * cut:g} %" for cut in TRACE_CUTS)]
     lines = ["", f"The mirror direction at up to {TRACE_PIXELS} hidden (Cycles' GlossDir < {HIDDEN_BELOW}) and open "
-             f"(>= {OPEN_FROM}) pixels (`--trace`): its mean visible share by the vertex horizons as lobeview shades "
-             f"it, and by horizons traced at each pixel's own point ({RAYS_PER_SECTOR} rays a sector) with the "
+             f"(>= {OPEN_FROM}) pixels (`--trace`): its mean visible share by the vertex horizons (lobeview's where an "
+             f"object has no horizon map), and by horizons traced at each pixel's own point ({RAYS_PER_SECTOR} rays a "
+             "sector) with the "
              "near-hit cut given (times the object's extent); Cycles' mean GlossDir beside.", "",
              "| case | pixels | n | Cycles | vertex horizons | "
              + " | ".join(f"per point, {k}" for k in keys[1:]) + " |",

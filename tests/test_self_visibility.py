@@ -22,6 +22,7 @@ from lobeview.scenes.self_visibility import (
     split_sum_footprint,
     vertex_visibility_cones,
 )
+from lobeview.viewer.camera import Camera
 
 
 def _well(radius: float, depth: float, segments: int = 96):
@@ -321,6 +322,55 @@ def _grid(corner, edge_u, edge_v, steps: int):
     )
 
 
+FLOOR_CAMERA = Camera(position=(0.0, 0.9, 2.6), target=(0.0, 0.0, -0.3), fov_y=45.0)
+
+
+def floor_occlusion_ratios(scene, method: str, inspect=None):
+    """The floor scene of the tests below under a uniform white sky, rendered by ``method`` with
+    self-occlusion and without: the ratio of the two at every floor pixel (normal +y, in front of
+    the wall), those pixels' positions, and ``inspect(renderer)`` before it is released."""
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=32, name="white")
+    ctx = create_headless_context()
+    renderer = SceneRenderer(
+        ctx, scene, env, size=(128, 96), progress=False, settings=RenderSettings(cube_face_size=16)
+    )
+    try:
+        inspected = inspect(renderer) if inspect is not None else None
+        frames = {}
+        for occlusion in (True, False):
+            renderer.configure(self_occlusion=occlusion)
+            frames[occlusion] = renderer.render(FLOOR_CAMERA, method)
+        on, off = frames[True], frames[False]
+    finally:
+        renderer.release()
+        ctx.release()
+    assert not on.invalid.any() and not off.invalid.any()
+    floor_pixels = (on.object_id == 0) & (np.abs(on.normal[..., 1] - 1.0) < 1e-3) & (on.position[..., 2] > -0.95)
+    assert floor_pixels.sum() > 2000
+    ratio = on.radiance[floor_pixels].mean(axis=-1) / off.radiance[floor_pixels].mean(axis=-1)
+    return ratio, on.position[floor_pixels].astype(np.float64), inspected
+
+
+def assert_floor_ratios_follow(ratio, points, cones, footprint) -> None:
+    """The floor's self-occluded / unoccluded ratios equal 0.5 + 0.5 vis (the hidden part sees
+    the point itself: F0 0.5 lit by E = pi), vis the numpy horizons ``cones`` at the pixels
+    ``points`` toward their mirror direction about +y through a lookup of ``footprint`` sr: 99 %
+    within 0.03, mean within 0.01, with both regimes (mostly hidden, open) among the pixels."""
+    view = FLOOR_CAMERA.position - points
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    mirror = view * [-1.0, 1.0, -1.0]
+    expected = 0.5 + 0.5 * horizon_visibility(mirror, cones, np.array([0.0, 1.0, 0.0]), footprint=footprint)
+    assert (expected < 0.6).sum() > 100 and (expected > 0.95).sum() > 100
+    error = np.abs(ratio - expected)
+    assert np.quantile(error, 0.99) < 0.03, np.quantile(error, [0.5, 0.9, 0.99, 1.0])
+    assert np.mean(error) < 0.01
+
+
 @pytest.mark.parametrize("method", ["lobe-7", "prefiltered-rsibr"])
 def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall(method):
     """A near-mirror metal floor (base colour 0.5) with a wall at its back, one object, under a
@@ -334,14 +384,9 @@ def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall(method):
     import trimesh
 
     from lobeview.materials.spec import validate
-    from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.meshes import merge_meshes
     from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
     from lobeview.scenes.self_visibility import object_visibility_cones
-    from lobeview.viewer.camera import Camera
-    from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
 
     floor = _grid((-1.5, 0.0, 1.0), (3.0, 0.0, 0.0), (0.0, 0.0, -2.0), 30)  # normal +y
     wall = _grid((-1.5, 0.0, -1.0), (3.0, 0.0, 0.0), (0.0, 1.0, 0.0), 30)  # normal +z, toward the floor
@@ -353,29 +398,11 @@ def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall(method):
     floor_cones = cones[: len(floor.positions)]
     assert (floor_cones[:, 3] > NO_OCCLUSION).mean() > 0.5  # the wall hides part of the floor's sky
 
-    env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=32, name="white")
-    camera = Camera(position=(0.0, 0.9, 2.6), target=(0.0, 0.0, -0.3), fov_y=45.0)
-    ctx = create_headless_context()
     with pytest.warns(UserWarning, match="no usable lightmap"):
-        renderer = SceneRenderer(ctx, scene, env, size=(128, 96), progress=False,
-                                 settings=RenderSettings(cube_face_size=16))  # fmt: skip
-    try:
-        frames = {}
-        for occlusion in (True, False):
-            renderer.configure(self_occlusion=occlusion)
-            frames[occlusion] = renderer.render(camera, method)
-        on, off = frames[True], frames[False]
-    finally:
-        renderer.release()
-        ctx.release()
-    assert not on.invalid.any() and not off.invalid.any()
-    floor_pixels = (on.object_id == 0) & (np.abs(on.normal[..., 1] - 1.0) < 1e-3) & (on.position[..., 2] > -0.95)
-    assert floor_pixels.sum() > 2000
-    ratio = on.radiance[floor_pixels].mean(axis=-1) / off.radiance[floor_pixels].mean(axis=-1)
+        ratio, points, _ = floor_occlusion_ratios(scene, method)
 
     # numpy: the cone and horizons at each pixel's position (barycentric on the floor's triangles, as the
     # rasteriser interpolates), the mirror direction of the view about +y
-    points = on.position[floor_pixels].astype(np.float64)
     steps = 30
     cell_i = np.clip(np.floor((points[:, 0] + 1.5) / 3.0 * steps), 0, steps - 1).astype(int)
     cell_j = np.clip(np.floor((1.0 - points[:, 2]) / 2.0 * steps), 0, steps - 1).astype(int)
@@ -386,16 +413,9 @@ def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall(method):
     triangle = np.where(in_first, first, first + 1)
     bary = trimesh.triangles.points_to_barycentric(floor_positions[floor.indices[triangle]], points)
     cone = np.einsum("pk,pkc->pc", bary, floor_cones[floor.indices[triangle]].astype(np.float64))
-    view = camera.position - points
-    view /= np.linalg.norm(view, axis=1, keepdims=True)
-    mirror = view * [-1.0, 1.0, -1.0]
-    footprint = split_sum_footprint(0.05**2) if method == "prefiltered-rsibr" else 0.0
-    expected = 0.5 + 0.5 * horizon_visibility(mirror, cone, np.array([0.0, 1.0, 0.0]), footprint=footprint)
-
-    assert (expected < 0.6).sum() > 100 and (expected > 0.95).sum() > 100  # both regimes covered
-    error = np.abs(ratio - expected)
-    assert np.quantile(error, 0.99) < 0.03, np.quantile(error, [0.5, 0.9, 0.99, 1.0])
-    assert np.mean(error) < 0.01
+    assert_floor_ratios_follow(
+        ratio, points, cone, split_sum_footprint(0.05**2) if method == "prefiltered-rsibr" else 0.0
+    )
 
 
 def test_cones_are_cached_by_mesh_and_a_damaged_file_is_traced_again(tmp_path, monkeypatch):

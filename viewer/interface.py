@@ -335,6 +335,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     # (viewer/lobe_batches.py AlbedoTableArray; layout(binding) as for the cube-map arrays)
     "u_albedo_array": 44,
     "u_measured_table": 45,  # a measured BRDF's table (shaders/measured.glsl)
+    "u_horizon_map": 46,  # the horizons per lightmap texel (scenes/horizon_maps.py)
 }
 
 

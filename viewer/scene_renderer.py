@@ -99,6 +99,10 @@ class SceneRenderer(RendererBase):
                 f"self-occlusion cones of {len(missing)} objects: {with_cone} vertices see their own object"
                 f" ({time.perf_counter() - t_cones:.1f} s)"
             )
+        t_maps = time.perf_counter()
+        maps = shading.prepare_horizon_maps()
+        if maps:
+            report(f"self-occlusion horizons per texel of {maps} lightmaps ({time.perf_counter() - t_maps:.1f} s)")
         self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, analysis)
         shading.draw_records = settings.draw_records
         shading.self_occlusion = settings.self_occlusion

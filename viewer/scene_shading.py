@@ -5,6 +5,7 @@ samplers, reflection proxy - recorded once per program, object and method and re
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import moderngl
@@ -122,6 +123,10 @@ class SceneShading(ShadingBinder):
         self.lamps = live_lamps(scene.lights)
         self._lamp_uniforms = lamp_uniforms(self.lamps)
         self._lamp_visibility: np.ndarray | None = None
+        # The horizons per lightmap texel (scenes/horizon_maps.py) by id of the lightmap image:
+        # (image, horizons), traced by prepare_horizon_maps; a sampler every draw binds.
+        self.horizon_maps: dict[int, tuple] = {}
+        self._no_horizon_map = ctx.texture_array((1, 1, 2), 4, np.zeros(8, np.float32).tobytes(), dtype="f4")
 
     def set_pass_state(self, program, method: Method, lod_bias: float | None, seed: int) -> None:
         """ShadingBinder's pass state and the scene's lamps (shaders/lamps.glsl)."""
@@ -134,6 +139,42 @@ class SceneShading(ShadingBinder):
             set_uniform(program, "u_lamp_count", len(self.lamps))
             for name, values in self._lamp_uniforms.items():
                 write_uniform(program, name, values)
+
+    def prepare_horizon_maps(self) -> int:
+        """The horizon map of every lightmap that objects read through their own lightmap
+        coordinates (scenes/horizon_maps.py), traced or read from the cache folder beside the
+        visibility cones; how many there are."""
+        from lobeview.scenes.horizon_maps import lightmap_horizon_map, lightmap_images
+
+        for image in lightmap_images(self.scene):
+            if id(image) in self.horizon_maps:
+                continue
+            if image.shape[0] != image.shape[1]:
+                warnings.warn(
+                    f"a lightmap of {image.shape[1]}x{image.shape[0]} texels is not square: its objects keep their "
+                    "vertices' self-occlusion horizons (no horizon map)",
+                    stacklevel=2,
+                )
+                continue
+            self.horizon_maps[id(image)] = (image, lightmap_horizon_map(self.scene, image, self.cache_dir))
+        return len(self.horizon_maps)
+
+    def horizon_map_texture(self, image) -> moderngl.TextureArray:
+        """The horizon map of the lightmap ``image`` as a two-layer RGBA32F array (sectors 0-3,
+        4-7), linear, no MIP chain; a 1 x 1 one of zeros for None."""
+        if image is None or id(image) not in self.horizon_maps:
+            return self._no_horizon_map
+        horizons = self.horizon_maps[id(image)][1]
+
+        def upload():
+            height, width = horizons.shape[:2]
+            layers = np.ascontiguousarray(np.stack([horizons[..., :4], horizons[..., 4:]]), dtype=np.float32)
+            texture = self.ctx.texture_array((width, height, 2), 4, layers.tobytes(), dtype="f4")
+            texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            texture.repeat_x = texture.repeat_y = True  # as the lightmap
+            return horizons, texture
+
+        return self.textures.get(("horizon map", id(image)), upload)[1]
 
     def lamp_visibility_of(self, index: int) -> np.ndarray:
         """(MAX_LAMPS,) float32: the fraction of object ``index`` each live lamp reaches."""
@@ -261,6 +302,13 @@ class SceneShading(ShadingBinder):
         else:
             bind_sampler(program, "u_lightmap", self.white)
             set_uniform(program, "u_lightmap_texcoord", -1)
+        # the horizons per texel of that lightmap (scenes/horizon_maps.py), where it has them
+        mapped = lightmap.image if lightmap is not None and lightmap.tex_coord == 1 else None
+        has_horizon_map = (
+            mapped is not None and id(mapped) in self.horizon_maps and self.scene.objects[obj.index].uv1 is not None
+        )
+        bind_sampler(program, "u_horizon_map", self.horizon_map_texture(mapped if has_horizon_map else None))
+        set_uniform(program, "u_has_horizon_map", int(has_horizon_map))
         bind_sampler(program, "u_irradiance", self.environment_irradiance)
         self._bind_material(program, mat)
         scene_object = self.scene.objects[obj.index]
@@ -350,6 +398,7 @@ class SceneShading(ShadingBinder):
         if self._anisotropic_dfg is not None:
             self._anisotropic_dfg.release()
         self.white.release()
+        self._no_horizon_map.release()
 
 
 def lamp_uniforms(lamps: list) -> dict[str, np.ndarray]:

@@ -1,0 +1,162 @@
+"""Specular self-occlusion per lightmap texel (issue 40): the horizons of scenes/self_visibility.py
+traced at every covered texel of a baked object's lightmap instead of at its vertices.
+
+Why: against Cycles' light passes (bench/cycles_passes.py, cycles_trace.py) 90-97 % of the
+remaining error on the glTF models lies on the pixels whose glossy lobe the object hides from
+itself, where vertex horizons, interpolated over triangles centimetres wide, cannot hold a 3 mm
+ledge or a crevice: traced at each pixel's own point with a near-hit cut of 1 % of the extent, the
+mirror direction's visible share falls from 0.56 to 0.03 on the WaterBottle (Cycles 0.13) and
+0.40 to 0.19 on DamagedHelmet (0.12), and stays 0.98-1.00 on the open pixels (a smaller cut at
+the vertices hid the open surface: a vertex at a crease sees the faces around it). A baked
+object's lightmap texels are 0.3-0.7 % of its extent, fine enough for that.
+
+The map of a lightmap (the charts of the objects that read it, in one atlas, each object's texels
+traced against its own mesh only: what other objects hide is in its cube map) holds per texel the sines
+of the HORIZON_SECTORS horizons (self_visibility.traced_horizons, the vertices' frame
+horizon_frame about the texel's interpolated normal), dilated into the gutter so that bilinear
+reads at chart edges stay on the chart's values; uncovered texels hold 0 (nothing hidden).
+shaders/scene.frag reads it at the lightmap coordinate in place of the vertices' horizons.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import numpy as np
+
+from lobeview.core.cache import read_cache_file, write_cache_file
+
+from .self_visibility import HORIZON_SECTORS, SEED, traced_horizons
+
+HORIZON_MAP_NEAR_HIT = 0.01  # the near-hit cut per texel, times the object's extent (measured above)
+HORIZON_MAP_RAYS_PER_SECTOR = 8
+HORIZON_MAP_DILATION = 2  # texels grown into the gutter around each chart
+HORIZON_MAP_VERSION = "horizon-map-1"
+# Rays a lightmap's map may trace (as MAX_SELF_VISIBILITY_RAYS_TOTAL bounds the cones'): a larger
+# atlas is traced at half its resolution, again, until its covered texels fit (16M rays: 8 s for a
+# 512^2 atlas half covered on 2 cores; the bilinear read at the lightmap coordinate is the same).
+HORIZON_MAP_MAX_RAYS = 16_000_000
+
+
+def lightmap_images(scene) -> list:
+    """The distinct lightmap images (by identity) that objects read through their own lightmap
+    coordinates: one horizon map each, in that lightmap's layout (one texture, as the lightmap,
+    so the multi-draws that group objects by their textures stay as they are)."""
+    images = {}
+    for obj in scene.objects:
+        lightmap = scene.materials[obj.material].lightmap
+        if lightmap is not None and lightmap.tex_coord == 1 and obj.uv1 is not None:
+            images.setdefault(id(lightmap.image), lightmap.image)
+    return list(images.values())
+
+
+def lightmap_objects(scene, image) -> list:
+    """The objects that read ``image`` (a lightmap) through their own lightmap coordinates."""
+    found = []
+    for obj in scene.objects:
+        lightmap = scene.materials[obj.material].lightmap
+        if lightmap is not None and lightmap.image is image and lightmap.tex_coord == 1 and obj.uv1 is not None:
+            found.append(obj)
+    return found
+
+
+def texel_horizons(objects, size: tuple[int, int], near_hit: float = HORIZON_MAP_NEAR_HIT) -> np.ndarray:
+    """(H, W, HORIZON_SECTORS) float32: the horizon sines at the texel centres of a (W, H) = ``size``
+    lightmap covered by ``objects``' lightmap coordinates (scenes/scene.py SceneObject.uv1), each
+    traced against its own object, dilated HORIZON_MAP_DILATION texels; 0 elsewhere."""
+    import trimesh
+
+    from .baker import dilate, rasterize_uv
+
+    width, height = size
+    if width != height:
+        raise ValueError(f"horizon maps follow square lightmaps, got {width}x{height}")
+    horizons = np.zeros((height, width, HORIZON_SECTORS), dtype=np.float64)
+    covered = np.zeros((height, width), dtype=bool)
+    for obj in objects:
+        faces = np.asarray(obj.mesh.indices, dtype=np.int64).reshape(-1, 3)
+        positions = np.asarray(obj.mesh.positions, dtype=np.float64)
+        normals = np.asarray(obj.mesh.normals, dtype=np.float64)
+        samples = rasterize_uv(np.asarray(obj.uv1, dtype=np.float64), positions, normals, faces, width)
+        if not len(samples.pixel) or len(faces) < 2:
+            continue
+        mesh = trimesh.Trimesh(positions, faces, process=False)
+        extent = float(np.max(positions.max(axis=0) - positions.min(axis=0)))
+        traced = traced_horizons(
+            mesh, samples.position, samples.normal, extent, HORIZON_MAP_RAYS_PER_SECTOR, SEED, near_hit=near_hit
+        )
+        rows, cols = samples.pixel[:, 0], samples.pixel[:, 1]
+        horizons[rows, cols] = traced
+        covered[rows, cols] = True
+    if covered.any():
+        horizons = dilate(horizons, covered, steps=HORIZON_MAP_DILATION)
+    return horizons.astype(np.float32)
+
+
+def _key(objects, size) -> str:
+    digest = hashlib.sha256(
+        repr(
+            (
+                HORIZON_MAP_VERSION,
+                HORIZON_MAP_NEAR_HIT,
+                HORIZON_MAP_RAYS_PER_SECTOR,
+                HORIZON_MAP_DILATION,
+                HORIZON_SECTORS,
+                SEED,
+                tuple(size),
+            )
+        ).encode()  # fmt: skip
+    )
+    for obj in objects:
+        for array in (obj.mesh.positions, obj.mesh.normals, obj.mesh.indices, obj.uv1):
+            data = np.ascontiguousarray(array)
+            digest.update(f"{data.dtype.str}{data.shape}".encode())
+            digest.update(data.tobytes())
+    return digest.hexdigest()[:20]
+
+
+def horizon_map_size(objects, lightmap_size: int, max_rays: int = HORIZON_MAP_MAX_RAYS) -> int:
+    """The side of the map traced for a ``lightmap_size`` atlas: halved until the texels the
+    objects' lightmap coordinates cover (their charts' area) times the rays a texel traces fit
+    ``max_rays``; at least 1."""
+    area = 0.0
+    for obj in objects:
+        uv = np.asarray(obj.uv1, dtype=np.float64)
+        faces = np.asarray(obj.mesh.indices, dtype=np.int64).reshape(-1, 3)
+        a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+        area += 0.5 * float(
+            np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])).sum()
+        )
+    rays_per_texel = HORIZON_SECTORS * HORIZON_MAP_RAYS_PER_SECTOR
+    size = int(lightmap_size)
+    while size > 1 and min(area, 1.0) * size * size * rays_per_texel > max_rays:
+        size //= 2
+    return size
+
+
+def lightmap_horizon_map(scene, image, cache_folder: Path | None = None) -> np.ndarray:
+    """The horizon map of the lightmap ``image`` (texel_horizons over the objects that read it, at
+    horizon_map_size), from ``cache_folder`` when traced before."""
+    objects = lightmap_objects(scene, image)
+    if image.shape[0] != image.shape[1]:
+        raise ValueError(f"horizon maps follow square lightmaps, got {image.shape[1]}x{image.shape[0]}")
+    side = horizon_map_size(objects, int(image.shape[0]))
+    size = (side, side)
+    path = None if cache_folder is None else Path(cache_folder) / f"horizons-{_key(objects, size)}.npy"
+
+    def read(file: Path) -> np.ndarray:
+        found = np.load(file, allow_pickle=False)
+        if found.shape != (size[1], size[0], HORIZON_SECTORS) or found.dtype != np.float32:
+            raise ValueError(f"horizon map of shape {found.shape} ({found.dtype})")
+        if not np.all(np.isfinite(found)):
+            raise ValueError("horizon map with non-finite values")
+        return found
+
+    found = read_cache_file(path, read, "horizon map")
+    if found is not None:
+        return found
+    horizons = texel_horizons(objects, size)
+    if path is not None:
+        write_cache_file(path, lambda handle: np.save(handle, horizons, allow_pickle=False))
+    return horizons
