@@ -313,21 +313,32 @@ def render_cycles(job: dict, python: str, cache: Path | None, version: str, work
             raise ValueError(f"image of shape {image.shape}, expected {(size[1], size[0], 4)}")
         return image, seconds
 
-    job_file = Path(job["out"]).with_suffix(".json")
-    job_file.write_text(json.dumps(job, indent=1))
-    command = shlex.join([python, "-I", str(WORKER), str(job_file)])
+    command = worker_command(job, python)
     found = read_cache_file(path, read, "Cycles render")
     if found is not None:
-        return found[0], 0.0, command
-    t0 = time.perf_counter()
-    done = subprocess.run([python, "-I", str(WORKER), str(job_file)], capture_output=True, text=True)
-    if done.returncode != 0 or not Path(job["out"]).exists():
-        raise RuntimeError(f"Cycles failed ({done.returncode}): {(done.stderr or done.stdout)[-2000:]}")
-    seconds = time.perf_counter() - t0
+        return found[0], 0.0, shlex.join(command)
+    seconds = run_worker(command, job, "Cycles")
     image = read_rgba_exr(Path(job["out"]))
     if path is not None:
         write_cache_file(path, lambda handle: np.savez(handle, image=image, seconds=seconds))
-    return image, seconds, command
+    return image, seconds, shlex.join(command)
+
+
+def worker_command(job: dict, python: str) -> list[str]:
+    """The worker's command line for ``job``, whose file it writes beside the job's output."""
+    job_file = Path(job["out"]).with_suffix(".json")
+    job_file.write_text(json.dumps(job, indent=1))
+    return [python, "-I", str(WORKER), str(job_file)]
+
+
+def run_worker(command: list[str], job: dict, what: str) -> float:
+    """Run the worker's ``command``; the seconds it took, or RuntimeError saying ``what`` failed
+    where it fails or writes no output."""
+    t0 = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True)
+    if done.returncode != 0 or not Path(job["out"]).exists():
+        raise RuntimeError(f"{what} failed ({done.returncode}): {(done.stderr or done.stdout)[-2000:]}")
+    return time.perf_counter() - t0
 
 
 def read_rgba_exr(path: Path) -> np.ndarray:
@@ -422,7 +433,11 @@ def run(cases: list[Case], methods, size, spp: int, ref_spp: int, work: Path, py
             progress(f"[cycles] {i + 1}/{len(cases)} {case.name} under {case.environment}: Cycles' passes ...")
             light_job = passes_job(job)
             key = f"cycles-passes-{cycles_key(light_job, version)}.npz"
-            layers = render_passes(light_job, python, cache / key if cache else None, WORKER)
+
+            def run_passes(passes: dict) -> float:
+                return run_worker(worker_command(passes, python), passes, "Cycles' passes")
+
+            layers = render_passes(light_job, cache / key if cache else None, run_passes)
             labelled = zip(("reference", *methods), images, strict=True)
             row["self_occlusion"] = {
                 m: self_occlusion_split(image, truth[..., :3], layers, mask) for m, image in labelled

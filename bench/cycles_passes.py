@@ -15,8 +15,6 @@ the white sky only.
 
 from __future__ import annotations
 
-import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -43,11 +41,10 @@ def passes_job(job: dict) -> dict:
     return dict(job, passes=True, spp=PASS_SPP, out=str(Path(job["out"]).with_suffix(".passes.exr")))
 
 
-def render_passes(job: dict, python: str, path: Path | None, worker: Path) -> dict:
-    """Cycles' light passes of a :func:`passes_job` by ``worker`` (bench/cycles_worker.py), read
-    from or written to the cache file ``path`` (None: no cache): {pass: (H, W, 3)}."""
-    import subprocess
-
+def render_passes(job: dict, path: Path | None, run) -> dict:
+    """Cycles' light passes of a :func:`passes_job`, rendered by ``run(job)`` (bench/cycles.py
+    run_worker: the seconds it took) or read from the cache file ``path`` (None: no cache) where
+    an earlier run wrote them: {pass: (H, W, 3)}."""
     from lobeview.bench.cycles_worker import PASSES
     from lobeview.core.cache import read_cache_file, write_cache_file
 
@@ -63,18 +60,13 @@ def render_passes(job: dict, python: str, path: Path | None, worker: Path) -> di
     found = read_cache_file(path, read, "Cycles passes")
     if found is not None:
         return found
-    job_file = Path(job["out"]).with_suffix(".json")
-    job_file.write_text(json.dumps(job, indent=1))
-    t0 = time.perf_counter()
-    done = subprocess.run([python, "-I", str(worker), str(job_file)], capture_output=True, text=True)
-    if done.returncode != 0 or not Path(job["out"]).exists():
-        raise RuntimeError(f"Cycles' passes failed ({done.returncode}): {(done.stderr or done.stdout)[-2000:]}")
+    seconds = run(job)
     layers = read_layers_exr(Path(job["out"]))
     missing = [name for name in PASSES if name not in layers]
     if missing:
         raise RuntimeError(f"Cycles wrote no {missing} passes into {job['out']}")
     layers = {name: layers[name][..., :3] for name in PASSES}
-    print(f"[cycles] passes in {time.perf_counter() - t0:.1f} s", flush=True)
+    print(f"[cycles] passes in {seconds:.1f} s", flush=True)
     if path is not None:
         write_cache_file(path, lambda handle: np.savez(handle, **layers))
     return layers

@@ -111,6 +111,12 @@ def rasterize_uv(
     )
 
 
+def uv_triangle_areas(uv: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(T,) the areas of the triangles ``faces`` (T, 3) in the 2D coordinates ``uv`` (V, 2)."""
+    a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
+    return 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
+
+
 def lightmap_uv_overlap(scene: Scene, resolution: int) -> float:
     """Fraction of the lightmap coordinates' texels claimed twice: by two objects (per-object
     lightmap UVs, each spanning [0, 1], or instances of one mesh), or by two triangles of one
@@ -120,10 +126,8 @@ def lightmap_uv_overlap(scene: Scene, resolution: int) -> float:
     for obj in scene.objects:
         if obj.uv1 is None:
             continue
-        uv = obj.uv1.astype(np.float64) * resolution
         tri = obj.mesh.indices.reshape(-1, 3)
-        a, b, c = uv[tri[:, 0]], uv[tri[:, 1]], uv[tri[:, 2]]
-        area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
+        area = uv_triangle_areas(obj.uv1.astype(np.float64) * resolution, tri)
         samples = rasterize_uv(obj.uv1.astype(np.float64), obj.mesh.positions, obj.mesh.normals, tri, resolution)
         claimed.append(samples.pixel[:, 0] * resolution + samples.pixel[:, 1])
         area_total += max(float(area.sum()), float(len(samples.pixel)))

@@ -27,6 +27,7 @@ import numpy as np
 
 from lobeview.core.cache import read_cache_file, write_cache_file
 
+from .baker import dilate, rasterize_uv, uv_triangle_areas
 from .self_visibility import HORIZON_SECTORS, SEED, traced_horizons
 
 HORIZON_MAP_NEAR_HIT = 0.01  # the near-hit cut per texel, times the object's extent (measured above)
@@ -39,26 +40,28 @@ HORIZON_MAP_VERSION = "horizon-map-1"
 HORIZON_MAP_MAX_RAYS = 16_000_000
 
 
+def uv1_lightmap(scene, obj):
+    """The lightmap image ``obj`` reads through its own lightmap coordinates (TEXCOORD_1), or None:
+    what has a horizon map."""
+    lightmap = scene.materials[obj.material].lightmap
+    return lightmap.image if lightmap is not None and lightmap.tex_coord == 1 and obj.uv1 is not None else None
+
+
 def lightmap_images(scene) -> list:
     """The distinct lightmap images (by identity) that objects read through their own lightmap
     coordinates: one horizon map each, in that lightmap's layout (one texture, as the lightmap,
     so the multi-draws that group objects by their textures stay as they are)."""
     images = {}
     for obj in scene.objects:
-        lightmap = scene.materials[obj.material].lightmap
-        if lightmap is not None and lightmap.tex_coord == 1 and obj.uv1 is not None:
-            images.setdefault(id(lightmap.image), lightmap.image)
+        image = uv1_lightmap(scene, obj)
+        if image is not None:
+            images.setdefault(id(image), image)
     return list(images.values())
 
 
 def lightmap_objects(scene, image) -> list:
     """The objects that read ``image`` (a lightmap) through their own lightmap coordinates."""
-    found = []
-    for obj in scene.objects:
-        lightmap = scene.materials[obj.material].lightmap
-        if lightmap is not None and lightmap.image is image and lightmap.tex_coord == 1 and obj.uv1 is not None:
-            found.append(obj)
-    return found
+    return [obj for obj in scene.objects if uv1_lightmap(scene, obj) is image]
 
 
 def texel_horizons(objects, size: tuple[int, int], near_hit: float = HORIZON_MAP_NEAR_HIT) -> np.ndarray:
@@ -66,8 +69,6 @@ def texel_horizons(objects, size: tuple[int, int], near_hit: float = HORIZON_MAP
     lightmap covered by ``objects``' lightmap coordinates (scenes/scene.py SceneObject.uv1), each
     traced against its own object, dilated HORIZON_MAP_DILATION texels; 0 elsewhere."""
     import trimesh
-
-    from .baker import dilate, rasterize_uv
 
     width, height = size
     if width != height:
@@ -120,14 +121,12 @@ def horizon_map_size(objects, lightmap_size: int, max_rays: int = HORIZON_MAP_MA
     """The side of the map traced for a ``lightmap_size`` atlas: halved until the texels the
     objects' lightmap coordinates cover (their charts' area) times the rays a texel traces fit
     ``max_rays``; at least 1."""
-    area = 0.0
-    for obj in objects:
-        uv = np.asarray(obj.uv1, dtype=np.float64)
-        faces = np.asarray(obj.mesh.indices, dtype=np.int64).reshape(-1, 3)
-        a, b, c = uv[faces[:, 0]], uv[faces[:, 1]], uv[faces[:, 2]]
-        area += 0.5 * float(
-            np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])).sum()
+    area = sum(
+        float(
+            uv_triangle_areas(np.asarray(obj.uv1, dtype=np.float64), np.asarray(obj.mesh.indices).reshape(-1, 3)).sum()
         )
+        for obj in objects
+    )
     rays_per_texel = HORIZON_SECTORS * HORIZON_MAP_RAYS_PER_SECTOR
     size = int(lightmap_size)
     while size > 1 and min(area, 1.0) * size * size * rays_per_texel > max_rays:

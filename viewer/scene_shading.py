@@ -16,6 +16,7 @@ from lobeview.core.methods import Method
 from lobeview.materials.gltf import specular_f0_unclamped
 from lobeview.materials.volume import volume_of
 from lobeview.scenes.baker import spot_ramp
+from lobeview.scenes.horizon_maps import uv1_lightmap
 from lobeview.scenes.lamps import DIRECTIONAL_ANGULAR_RADIUS, LAMP_RADIUS, MAX_LAMPS, lamp_visibility, live_lamps
 from lobeview.scenes.scene import (
     CLAMP_TO_EDGE,
@@ -303,10 +304,8 @@ class SceneShading(ShadingBinder):
             bind_sampler(program, "u_lightmap", self.white)
             set_uniform(program, "u_lightmap_texcoord", -1)
         # the horizons per texel of that lightmap (scenes/horizon_maps.py), where it has them
-        mapped = lightmap.image if lightmap is not None and lightmap.tex_coord == 1 else None
-        has_horizon_map = (
-            mapped is not None and id(mapped) in self.horizon_maps and self.scene.objects[obj.index].uv1 is not None
-        )
+        mapped = uv1_lightmap(self.scene, self.scene.objects[obj.index])
+        has_horizon_map = mapped is not None and id(mapped) in self.horizon_maps
         bind_sampler(program, "u_horizon_map", self.horizon_map_texture(mapped if has_horizon_map else None))
         set_uniform(program, "u_has_horizon_map", int(has_horizon_map))
         bind_sampler(program, "u_irradiance", self.environment_irradiance)
