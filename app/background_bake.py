@@ -22,16 +22,50 @@ from pathlib import Path
 PROGRESS_INTERVAL_S = 0.25  # the worker sends at most this many progress lines a second
 
 
-def _build_builtin(scene_arg: str | None, cache: str) -> Path:
+def _trace_horizon_maps(scene_path: str, horizon_cache: str, limits) -> Path:
+    """The self-occlusion of the scene file's objects traced into the viewer's cache folder, where
+    its renderer finds them: the horizon maps per lightmap texel (scenes/horizon_maps.py; taken by
+    SceneShading.prepare_horizon_maps) and the vertices' visibility cones (scenes/
+    self_visibility.py; which a renderer made for the file would otherwise trace between frames)."""
+    from lobeview.core.progress import report
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.horizon_maps import trace_horizon_maps
+    from lobeview.scenes.self_visibility import object_visibility_cones
+
+    scene = load_gltf(Path(scene_path), limits)
+    report("self-occlusion cones of the vertices", None)
+    for obj in scene.objects:
+        object_visibility_cones(obj, Path(horizon_cache))
+    trace_horizon_maps(scene, Path(horizon_cache))
+    return Path(scene_path)
+
+
+def _horizon_maps_after_bake(path: Path, horizon_cache: str | None, limits) -> None:
+    """A bake's horizon maps traced in the same worker, so that the baked scene comes in with them;
+    a failure here is left to the window's own horizon-map worker (which says why)."""
+    if horizon_cache is None:
+        return
+    try:
+        _trace_horizon_maps(str(path), horizon_cache, limits)
+    except Exception:  # noqa: BLE001 - the bake itself succeeded
+        pass
+
+
+def _build_builtin(scene_arg: str | None, cache: str, horizon_cache: str | None = None) -> Path:
+    from lobeview.core.trust import DEFAULT_LIMITS
     from lobeview.scenes.setup import build_builtin_scene
 
-    return build_builtin_scene(scene_arg, Path(cache))
+    path = build_builtin_scene(scene_arg, Path(cache))
+    _horizon_maps_after_bake(path, horizon_cache, DEFAULT_LIMITS)
+    return path
 
 
-def _bake_gltf_file(source: str, environment_spec: str, out: str, limits) -> Path:
+def _bake_gltf_file(source: str, environment_spec: str, out: str, limits, horizon_cache: str | None = None) -> Path:
     from lobeview.scenes.gltf_bake import bake_first_use
 
-    return bake_first_use(Path(source), environment_spec, Path(out), limits)
+    path = bake_first_use(Path(source), environment_spec, Path(out), limits)
+    _horizon_maps_after_bake(path, horizon_cache, limits)
+    return path
 
 
 def bake_worker(build, arguments: tuple, messages) -> None:
@@ -60,29 +94,42 @@ class BackgroundBake:
     imports it); made by :meth:`for_builtin` or :meth:`for_gltf`. ``label``: what the window's
     title calls the result (None: the written file's name)."""
 
-    def __init__(self, build, arguments: tuple, label: str | None = None):
+    def __init__(self, build, arguments: tuple, label: str | None = None, what: str = "lightmaps"):
         self.label = label
+        self.what = what  # what the status line says is being made
         context = multiprocessing.get_context("spawn")  # no fork of a process that holds a GL context
         self._messages = context.Queue()
         self.process = context.Process(
             target=bake_worker, args=(build, arguments, self._messages), name="lobeview bake", daemon=True
         )
         self.process.start()
-        self.status = "lightmaps: starting the bake"
+        self.status = f"{what}: starting"
         self.fraction: float | None = None
         self.path: Path | None = None
         self.error: str | None = None
 
     @classmethod
-    def for_builtin(cls, scene_arg: str | None, cache: Path) -> BackgroundBake:
-        """The built-in scene ``scene_arg`` built and baked into ``cache``."""
-        return cls(_build_builtin, (scene_arg, str(cache)))
+    def for_builtin(cls, scene_arg: str | None, cache: Path, horizon_cache: Path | None = None) -> BackgroundBake:
+        """The built-in scene ``scene_arg`` built and baked into ``cache``, its horizon maps traced
+        into ``horizon_cache`` (the renderer's cache folder) after."""
+        return cls(_build_builtin, (scene_arg, str(cache), None if horizon_cache is None else str(horizon_cache)))
 
     @classmethod
-    def for_gltf(cls, source: Path, environment_spec: str, out: Path, limits) -> BackgroundBake:
+    def for_horizon_maps(cls, scene_path: Path, horizon_cache: Path, limits) -> BackgroundBake:
+        """The horizon maps per lightmap texel of the baked scene file ``scene_path`` traced into
+        ``horizon_cache`` (the window's renderer takes them from there: app/finishing.py)."""
+        arguments = (str(scene_path), str(horizon_cache), limits)
+        return cls(_trace_horizon_maps, arguments, what="self-occlusion horizons")
+
+    @classmethod
+    def for_gltf(
+        cls, source: Path, environment_spec: str, out: Path, limits, horizon_cache: Path | None = None
+    ) -> BackgroundBake:
         """The first-use bake of the glTF file ``source`` under ``environment_spec`` into ``out``
-        (scenes/gltf_bake.py first_use_bake_file), with the trust ``limits`` of its load."""
-        arguments = (str(source), environment_spec, str(out), limits)
+        (scenes/gltf_bake.py first_use_bake_file), with the trust ``limits`` of its load; its
+        horizon maps traced into ``horizon_cache`` after."""
+        horizons = None if horizon_cache is None else str(horizon_cache)
+        arguments = (str(source), environment_spec, str(out), limits, horizons)
         return cls(_bake_gltf_file, arguments, label=f"{Path(source).name} (baked)")
 
     @property
@@ -98,7 +145,7 @@ class BackgroundBake:
                 return
             wait = 0.0
             if kind == "progress":
-                self.status, self.fraction = f"lightmaps: {values[0]}", values[1]
+                self.status, self.fraction = f"{self.what}: {values[0]}", values[1]
             elif kind == "done":
                 self.path = Path(values[0])
             else:

@@ -1,11 +1,13 @@
 """What the window does while its scene is still being finished (issue 42 item 2: a first frame
-in seconds): it swaps in the baked scene when the background bake ends (app/background_bake.py)
-and advances the progressive cube-map build (viewer/cube_probes.py) between frames. The window
-(app/window.py) owns one :class:`SceneFinishing` and calls it once per frame."""
+in seconds): it swaps in the baked scene when the background bake ends (app/background_bake.py),
+takes the horizon maps per lightmap texel (scenes/horizon_maps.py) from a worker that traces the
+ones the cache lacks, and advances the progressive cube-map build (viewer/cube_probes.py) between
+frames. The window (app/window.py) owns one :class:`SceneFinishing` and calls it once per frame."""
 
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 from lobeview.app.frame_pacing import REST_DELAY_S
 from lobeview.app.options import apply_reflection_proxy, scene_renderer_from_args
@@ -18,6 +20,8 @@ class SceneFinishing:
 
     def __init__(self, background_bake=None):
         self.background_bake = background_bake
+        self.horizon_worker = None  # app/background_bake.BackgroundBake tracing the horizon maps
+        self.horizon_maps_asked_for = None  # the renderer a horizon worker ran for (once each)
         self.cube_build_redrawn_at = 0.0  # when the progressive cube-map build last redrew the frame
 
     @property
@@ -25,10 +29,51 @@ class SceneFinishing:
         """The background bake's progress line (None: no bake running)."""
         return self.background_bake.status if self.background_bake is not None else None
 
+    @property
+    def horizon_status(self) -> str | None:
+        """The horizon-map worker's progress line (None: none running)."""
+        return self.horizon_worker.status if self.horizon_worker is not None else None
+
     def cancel(self) -> None:
-        """The window closes: stop the worker."""
-        if self.background_bake is not None:
-            self.background_bake.cancel()
+        """The window closes: stop the workers."""
+        for worker in (self.background_bake, self.horizon_worker):
+            if worker is not None:
+                worker.cancel()
+
+    def poll_horizon_maps(self, window) -> None:
+        """The renderer's missing horizon maps (SceneShading.missing_horizon_maps): a worker
+        traces them into its cache folder from the scene file (not while a bake runs: that one
+        traces the baked scene's), and the renderer takes them when it ends; its objects draw with
+        their vertices' horizons meanwhile. A scene with no file to trace from is traced here."""
+        renderer = window.renderer
+        worker = self.horizon_worker
+        if worker is None:
+            if not renderer.shading.missing_horizon_maps or self.background_bake is not None:
+                return
+            if self.horizon_maps_asked_for is renderer:
+                return
+            self.horizon_maps_asked_for = renderer
+            scene_path = window.session.scene_path
+            if scene_path is None or not Path(scene_path).is_file():
+                window.show_progress("tracing the self-occlusion horizons per lightmap texel", None)
+                renderer.shading.prepare_horizon_maps(trace=True)
+                window.dirty = True
+                return
+            from lobeview.app.background_bake import BackgroundBake
+
+            self.horizon_worker = BackgroundBake.for_horizon_maps(scene_path, renderer.cache_dir, window.args.limits)
+            return
+        if not worker.poll():
+            return
+        self.horizon_worker = None
+        if worker.error is not None:
+            window.message = f"self-occlusion horizons per texel failed ({worker.error}): vertex horizons kept"
+            return
+        if renderer is not self.horizon_maps_asked_for:
+            return  # traced for a renderer since replaced: the new one asks again (from the cache)
+        if renderer.shading.prepare_horizon_maps(trace=False):
+            window.message = "some self-occlusion horizon maps were not found after tracing: vertex horizons kept"
+        window.dirty = True
 
     def poll_background_bake(self, window) -> None:
         """Swap in the baked scene once the worker has written it: the same objects with

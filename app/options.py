@@ -312,6 +312,12 @@ def lobe_width_cubes(args, method: Method | None = None) -> bool:
     return choice == "lobe"
 
 
+def renderer_cache_folder(cache: Path) -> Path:
+    """The scene renderer's cache folder (cube maps, cones, horizon maps) under the cache ``cache``:
+    where a worker process leaves what the renderer reads (app/background_bake.py)."""
+    return Path(cache) / "cubes"
+
+
 def scene_renderer_from_args(
     ctx, scene, env, size, cache, args, method: Method | None = None, progressive_cubes: bool = False
 ):
@@ -326,7 +332,7 @@ def scene_renderer_from_args(
         scene,
         env,
         size=size,
-        cache_dir=cache / "cubes",
+        cache_dir=renderer_cache_folder(cache),
         settings=RenderSettings(
             cube_face_size=args.face_size,
             mirror_scale=args.mirror_scale,

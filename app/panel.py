@@ -167,6 +167,9 @@ def _rendering(window) -> None:
     if window.finishing.bake_status is not None:  # app/background_bake.py
         imgui.text_wrapped(f"{window.finishing.bake_status} (in the background; until then diffuse light is the "
                            "environment's, unoccluded)")  # fmt: skip
+    if window.finishing.horizon_status is not None:  # app/finishing.py poll_horizon_maps
+        imgui.text_wrapped(f"{window.finishing.horizon_status} (in the background; until then glossy "
+                           "self-occlusion from the vertices')")  # fmt: skip
     if renderer.cube_build_status is not None:
         imgui.text_wrapped(renderer.cube_build_status)
     for line in renderer.draw_report:

@@ -31,6 +31,7 @@ from lobeview.app.options import (
     apply_reflection_proxy,
     check_scene_options,
     read_material_edits,
+    renderer_cache_folder,
 )
 from lobeview.core.errors import MAX_RENDER_EDGE, OptionError, parse_size
 from lobeview.core.methods import resolve_cli_method
@@ -146,7 +147,8 @@ def first_use_bake(args, scene_path: Path, scene, cache: Path):
 
             print(f"lobeview: {scene_path.name} has no lightmaps: baking them in the background into {baked}",
                   file=sys.stderr)  # fmt: skip
-            return scene_path, scene, BackgroundBake.for_gltf(scene_path, env_spec, baked, args.limits)
+            horizon_cache = renderer_cache_folder(cache)
+            return scene_path, scene, BackgroundBake.for_gltf(scene_path, env_spec, baked, args.limits, horizon_cache)
         progress.report(f"baking the lightmaps of {scene_path.name} (first use)", None)
         try:
             bake_first_use(scene_path, env_spec, baked, args.limits)
@@ -231,7 +233,7 @@ def run(args) -> int:
             cache = cache_dir(args.cache)
             unbaked = unbaked_builtin_scene(args.scene, cache)
             if unbaked is not None:
-                background = BackgroundBake.for_builtin(args.scene, cache)
+                background = BackgroundBake.for_builtin(args.scene, cache, renderer_cache_folder(cache))
                 scene, scene_path = unbaked, Path(f"{args.scene or 'builtin:demo'} (lightmaps baking)")
                 environment = load_environment(args.env or default_environment(args.scene))
         if background is None:

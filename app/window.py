@@ -436,6 +436,7 @@ class LobeviewWindow(mglw.WindowConfig):
         self.poll_fit()
 
         self.finishing.poll_background_bake(self)
+        self.finishing.poll_horizon_maps(self)
         camera = self.walk.camera()
         self.finishing.continue_cube_build(self, camera, t_frame)
         refinement = self.refinement
@@ -549,6 +550,7 @@ class LobeviewWindow(mglw.WindowConfig):
             "path_time": self.path_time,
             "cube_build": self.renderer.probes.pending_progress if self.renderer.cube_build_status else None,
             "background_bake": self.finishing.bake_status,
+            "horizon_maps": self.finishing.horizon_status,
             "widgets": {name: [round(v, 1) for v in rect] for name, rect in self.widget_rects.items()},
         }
         self.stats_file.write(json.dumps(record) + "\n")

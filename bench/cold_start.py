@@ -35,20 +35,24 @@ def events(log: list[tuple[float, dict]]) -> dict:
     """The start-up's milestones from the frame log, each line with the seconds since launch at
     which it was seen: the first frame (its own state, bake and cube-map build), the first frame
     with no bake running after one ran (None: no bake ran, or it did not end), and the first frame
-    with neither a bake nor a cube-map build running (None: not reached)."""
+    with no bake, cube-map build or horizon-map worker running (None: not reached); ``swap_pause_s``: the
+    seconds between the last frame drawn during the bake and the first after it (None: no swap)."""
     if not log:
-        return {"first_frame_s": None, "baked_s": None, "finished_s": None, "frames": 0}
+        return {"first_frame_s": None, "baked_s": None, "swap_pause_s": None, "finished_s": None, "frames": 0}
     first_seen, first = log[0]
     baking = False
-    baked = finished = None
+    baked = finished = swap_pause = None
+    previous_seen = first_seen
     for seen, record in log:
-        bake, cubes = record.get("background_bake"), record.get("cube_build")
+        bake, cubes, horizons = record.get("background_bake"), record.get("cube_build"), record.get("horizon_maps")
         if bake is not None:
             baking = True
         elif baking and baked is None:
-            baked = seen
-        if bake is None and cubes is None and finished is None and (baked is not None or not baking):
+            baked, swap_pause = seen, seen - previous_seen
+        idle = bake is None and cubes is None and horizons is None
+        if idle and finished is None and (baked is not None or not baking):
             finished = seen
+        previous_seen = seen
     return {
         "first_frame_s": first_seen,
         "first_frame_window_s": first.get("t"),
@@ -56,6 +60,7 @@ def events(log: list[tuple[float, dict]]) -> dict:
         "first_frame_cube_build": first.get("cube_build"),
         "first_frame_state": first.get("state"),
         "baked_s": baked,
+        "swap_pause_s": swap_pause,
         "finished_s": finished,
         "frames": len(log),
     }
@@ -129,10 +134,12 @@ def markdown(results: list[dict], device: str, stamp: str, command: str) -> str:
         "",
         f"`{command}`; {device}; {os.cpu_count()} CPU cores. `lobeview view SCENE` from an empty cache folder, "
         "seconds since the process was launched at which the window's frame log showed: its first frame (what "
-        "it drew it with), the baked scene swapped in, the finished state (no bake, every cube map exact).",
+        "it drew it with), the baked scene swapped in, the pause of the view at that swap (from the last frame "
+        "drawn during the bake), the finished state (no bake, every cube map exact).",
         "",
-        "| scene | size | first frame s | first frame: bake / cube maps | baked scene in s | finished s | frames |",
-        "|---|---|---|---|---|---|---|",
+        "| scene | size | first frame s | first frame: bake / cube maps | baked scene in s | pause at the swap s "
+        "| finished s | frames |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in results:
         bake, cubes = r.get("first_frame_bake"), r.get("first_frame_cube_build")
@@ -140,7 +147,7 @@ def markdown(results: list[dict], device: str, stamp: str, command: str) -> str:
         finished = _seconds(r["finished_s"]) if r["finished_s"] is not None else f"not within {r['timeout_s']:.0f}"
         lines.append(
             f"| {r['scene']} | {r['size'][0]}x{r['size'][1]} | {_seconds(r['first_frame_s'])} | {how} "
-            f"| {_seconds(r['baked_s'])} | {finished} | {r['frames']} |"
+            f"| {_seconds(r['baked_s'])} | {_seconds(r.get('swap_pause_s'))} | {finished} | {r['frames']} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -167,8 +174,8 @@ def main(argv: list[str] | None = None) -> int:
                 work.mkdir()
                 results.append(cold_start(scene, size, args.timeout, display, work))
                 r = results[-1]
-                _say(f"{scene}: first frame {_seconds(r['first_frame_s'])} s, baked {_seconds(r['baked_s'])} s, "
-                     f"finished {_seconds(r['finished_s'])} s")  # fmt: skip
+                _say(f"{scene}: first frame {_seconds(r['first_frame_s'])} s, baked {_seconds(r['baked_s'])} s "
+                     f"(paused {_seconds(r['swap_pause_s'])} s), finished {_seconds(r['finished_s'])} s")  # fmt: skip
     finally:
         if server is not None:
             server.terminate()

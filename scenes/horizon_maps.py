@@ -134,9 +134,10 @@ def horizon_map_size(objects, lightmap_size: int, max_rays: int = HORIZON_MAP_MA
     return size
 
 
-def lightmap_horizon_map(scene, image, cache_folder: Path | None = None) -> np.ndarray:
+def lightmap_horizon_map(scene, image, cache_folder: Path | None = None, trace: bool = True) -> np.ndarray | None:
     """The horizon map of the lightmap ``image`` (texel_horizons over the objects that read it, at
-    horizon_map_size), from ``cache_folder`` when traced before."""
+    horizon_map_size), from ``cache_folder`` when traced before; traced (and cached) otherwise,
+    or None with ``trace`` False (the viewer's first frame: app/background_bake.py traces it)."""
     objects = lightmap_objects(scene, image)
     if image.shape[0] != image.shape[1]:
         raise ValueError(f"horizon maps follow square lightmaps, got {image.shape[1]}x{image.shape[0]}")
@@ -153,9 +154,27 @@ def lightmap_horizon_map(scene, image, cache_folder: Path | None = None) -> np.n
         return found
 
     found = read_cache_file(path, read, "horizon map")
-    if found is not None:
+    if found is not None or not trace:
         return found
     horizons = texel_horizons(objects, size)
     if path is not None:
         write_cache_file(path, lambda handle: np.save(handle, horizons, allow_pickle=False))
     return horizons
+
+
+def square_lightmap_images(scene) -> list:
+    """lightmap_images that can have a horizon map (square ones; the viewer warns about the rest)."""
+    return [image for image in lightmap_images(scene) if image.shape[0] == image.shape[1]]
+
+
+def trace_horizon_maps(scene, cache_folder: Path) -> int:
+    """Trace into ``cache_folder`` the horizon maps of ``scene`` it lacks (a worker process's
+    job: app/background_bake.py), with progress; the number traced."""
+    from lobeview.core.progress import report
+
+    images = square_lightmap_images(scene)
+    missing = [image for image in images if lightmap_horizon_map(scene, image, cache_folder, trace=False) is None]
+    for done, image in enumerate(missing):
+        report(f"self-occlusion horizons per texel: lightmap {done + 1} of {len(missing)}", done / len(missing))
+        lightmap_horizon_map(scene, image, cache_folder)
+    return len(missing)

@@ -70,3 +70,45 @@ def test_the_window_opens_before_the_bake_and_swaps_the_lightmaps_in(xvfb, tmp_p
         warnings.simplefilter("ignore")
         names = [o.name for o in load_gltf(baked).objects]
     assert names == [o.name for o in demo_geometry().objects]
+    # the worker traced the baked scene's horizon maps too: the swapped-in renderer found them
+    from lobeview.app.options import renderer_cache_folder
+    from lobeview.scenes.horizon_maps import lightmap_horizon_map, square_lightmap_images
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_gltf(baked)
+    images = square_lightmap_images(scene)
+    assert images and all(lightmap_horizon_map(scene, i, renderer_cache_folder(cache), trace=False) is not None
+                          for i in images)  # fmt: skip
+    assert all(f["horizon_maps"] is None for f in frames)  # no second worker after the swap
+
+
+def test_a_baked_file_opens_at_once_and_its_horizon_maps_come_from_a_worker(xvfb, tmp_path):
+    """A scene file with lightmaps whose horizon maps are not cached: the first frame is drawn while
+    a worker traces them (the frame log's horizon_maps says so), later frames after it ended."""
+    from test_horizon_maps import _corner_scene
+
+    from lobeview.scenes.gltf_writer import write_glb
+
+    scene, _ = _corner_scene()
+    path = write_glb(scene, tmp_path / "corner.glb", lightmap=scene.materials[0].lightmap.image)
+    stats, cache = tmp_path / "frames.jsonl", tmp_path / "cache"
+    command = [sys.executable, "-m", "lobeview", "view", str(path), "--cache", str(cache), "--size", "160x100",
+               "--face-size", "16", "--stats", str(stats)]  # fmt: skip
+    env = {**os.environ, "DISPLAY": xvfb}
+    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 300
+        while time.monotonic() < deadline and process.poll() is None:
+            frames = _frames(stats)
+            if any(f["horizon_maps"] is None for f in frames[1:]):
+                break
+            time.sleep(0.5)
+        assert process.poll() is None, process.communicate()[1][-3000:]
+    finally:
+        process.terminate()
+        _, stderr = process.communicate(timeout=60)
+    frames = _frames(stats)
+    assert frames and frames[0]["horizon_maps"] is not None, stderr[-3000:]
+    assert any(f["horizon_maps"] is None for f in frames[1:]), stderr[-3000:]
+    assert len(list((cache / "cubes").glob("horizons-*.npy"))) == 1

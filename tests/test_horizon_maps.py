@@ -147,3 +147,76 @@ def test_a_large_atlas_is_traced_coarser_within_the_ray_budget():
     assert lightmap_horizon_map(scene, image).shape == (MAP, MAP, HORIZON_SECTORS)
     with pytest.raises(ValueError, match="square"):
         lightmap_horizon_map(scene, np.zeros((MAP, MAP // 2, 3), np.float32))
+
+
+def test_the_viewer_takes_its_horizon_maps_from_a_worker(tmp_path, monkeypatch):
+    """The viewer's renderer (progressive, with a cache folder) does not trace on its first frame:
+    its objects keep the vertices' horizons, the map counted missing; the worker's job (the
+    scene's .glb loaded and traced into the cache folder, app/background_bake.py) finds the same
+    key; installed, the next frame draws with the map (the records made again) and equals a
+    renderer that traced it before its first frame."""
+    from test_self_visibility import FLOOR_CAMERA
+
+    from lobeview.app.background_bake import _trace_horizon_maps
+    from lobeview.core.trust import DEFAULT_LIMITS
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.gltf_loader import load_gltf
+    from lobeview.scenes.gltf_writer import write_glb
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    built, _ = _corner_scene()
+    path = write_glb(built, tmp_path / "corner.glb", lightmap=built.materials[0].lightmap.image)
+    env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=32, name="white")
+    ctx = create_headless_context()
+    frames = {}
+    try:
+        for progressive in (True, False):
+            scene = load_gltf(path)
+            scene.objects[0].planar_reflector = False
+            cache = tmp_path / ("worker" if progressive else "traced")
+            settings = RenderSettings(cube_face_size=16)
+            renderer = SceneRenderer(ctx, scene, env, size=(96, 72), progress=False, cache_dir=cache,
+                                     settings=settings, progressive_cubes=progressive)  # fmt: skip
+            try:
+                while renderer.cube_build_status is not None:
+                    renderer.continue_cube_build(0.0, FLOOR_CAMERA)
+                if not progressive:
+                    assert renderer.shading.missing_horizon_maps == 0 and len(renderer.shading.horizon_maps) == 1
+                    frames["traced"] = renderer.render(FLOOR_CAMERA, "lobe-7")
+                    continue
+                assert renderer.shading.missing_horizon_maps == 1 and not renderer.shading.horizon_maps
+                frames["vertices"] = renderer.render(FLOOR_CAMERA, "lobe-7")
+                assert _trace_horizon_maps(str(path), str(cache), DEFAULT_LIMITS) == path
+                generation = renderer.shading.record_generation
+                assert renderer.shading.prepare_horizon_maps(trace=False) == 0  # what the window does
+                assert renderer.shading.record_generation > generation
+                frames["installed"] = renderer.render(FLOOR_CAMERA, "lobe-7")
+            finally:
+                renderer.release()
+    finally:
+        ctx.release()
+    # what the worker (a fresh process: no cones kept in memory) leaves in a folder of its own
+    from collections import OrderedDict
+
+    from lobeview.scenes import self_visibility
+
+    monkeypatch.setattr(self_visibility, "_traced_cones", OrderedDict())
+    fresh = tmp_path / "fresh"
+    _trace_horizon_maps(str(path), str(fresh), DEFAULT_LIMITS)
+    assert len(list(fresh.glob("horizons-*.npy"))) == 1 and len(list(fresh.glob("cones-*.npy"))) == 1
+    installed, traced, vertices = (frames[k].radiance for k in ("installed", "traced", "vertices"))
+    np.testing.assert_allclose(installed, traced, atol=1e-5)
+    assert np.abs(vertices - traced).max() > 0.05  # the map changes the floor: the check can fail
+
+
+def test_trace_horizon_maps_traces_only_what_the_cache_lacks(tmp_path):
+    from lobeview.scenes.horizon_maps import trace_horizon_maps
+
+    scene, _ = _corner_scene()
+    image = scene.materials[0].lightmap.image
+    assert lightmap_horizon_map(scene, image, tmp_path, trace=False) is None
+    assert trace_horizon_maps(scene, tmp_path) == 1
+    assert trace_horizon_maps(scene, tmp_path) == 0
+    assert lightmap_horizon_map(scene, image, tmp_path, trace=False) is not None

@@ -99,10 +99,15 @@ class SceneRenderer(RendererBase):
                 f"self-occlusion cones of {len(missing)} objects: {with_cone} vertices see their own object"
                 f" ({time.perf_counter() - t_cones:.1f} s)"
             )
+        # The horizons per lightmap texel: traced here for `shot` and the benchmarks; the viewer
+        # (progressive, with a cache folder) takes what the cache has and leaves the rest to a
+        # worker process (app/finishing.py), its objects on their vertices' horizons meanwhile
+        # (shading.missing_horizon_maps).
         t_maps = time.perf_counter()
-        maps = shading.prepare_horizon_maps()
-        if maps:
-            report(f"self-occlusion horizons per texel of {maps} lightmaps ({time.perf_counter() - t_maps:.1f} s)")
+        shading.prepare_horizon_maps(trace=not (progressive_cubes and self.cache_dir))
+        if shading.horizon_maps:
+            report(f"self-occlusion horizons per texel of {len(shading.horizon_maps)} lightmaps"
+                   f" ({time.perf_counter() - t_maps:.1f} s)")  # fmt: skip
         self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, analysis)
         shading.draw_records = settings.draw_records
         shading.self_occlusion = settings.self_occlusion

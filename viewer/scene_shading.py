@@ -127,6 +127,8 @@ class SceneShading(ShadingBinder):
         # The horizons per lightmap texel (scenes/horizon_maps.py) by id of the lightmap image:
         # (image, horizons), traced by prepare_horizon_maps; a sampler every draw binds.
         self.horizon_maps: dict[int, tuple] = {}
+        self._unmappable_lightmaps: set[int] = set()  # non-square: warned about once
+        self.missing_horizon_maps = 0  # lightmaps whose map the cache lacked (not traced yet)
         self._no_horizon_map = ctx.texture_array((1, 1, 2), 4, np.zeros(8, np.float32).tobytes(), dtype="f4")
 
     def set_pass_state(self, program, method: Method, lod_bias: float | None, seed: int) -> None:
@@ -141,24 +143,36 @@ class SceneShading(ShadingBinder):
             for name, values in self._lamp_uniforms.items():
                 write_uniform(program, name, values)
 
-    def prepare_horizon_maps(self) -> int:
+    def prepare_horizon_maps(self, trace: bool = True) -> int:
         """The horizon map of every lightmap that objects read through their own lightmap
-        coordinates (scenes/horizon_maps.py), traced or read from the cache folder beside the
-        visibility cones; how many there are."""
+        coordinates (scenes/horizon_maps.py), read from the cache folder beside the visibility
+        cones, or traced there unless ``trace`` is False (the viewer's first frame: a worker traces
+        them, app/finishing.py); how many are still missing (their objects keep the vertices'
+        horizons). A map that arrives bumps ``record_generation`` (the per-object records hold
+        whether an object has one)."""
         from lobeview.scenes.horizon_maps import lightmap_horizon_map, lightmap_images
 
+        missing, before = 0, len(self.horizon_maps)
         for image in lightmap_images(self.scene):
-            if id(image) in self.horizon_maps:
+            if id(image) in self.horizon_maps or id(image) in self._unmappable_lightmaps:
                 continue
             if image.shape[0] != image.shape[1]:
+                self._unmappable_lightmaps.add(id(image))
                 warnings.warn(
                     f"a lightmap of {image.shape[1]}x{image.shape[0]} texels is not square: its objects keep their "
                     "vertices' self-occlusion horizons (no horizon map)",
                     stacklevel=2,
                 )
                 continue
-            self.horizon_maps[id(image)] = (image, lightmap_horizon_map(self.scene, image, self.cache_dir))
-        return len(self.horizon_maps)
+            horizons = lightmap_horizon_map(self.scene, image, self.cache_dir, trace=trace)
+            if horizons is None:
+                missing += 1
+            else:
+                self.horizon_maps[id(image)] = (image, horizons)
+        if len(self.horizon_maps) != before:
+            self.record_generation += 1
+        self.missing_horizon_maps = missing
+        return missing
 
     def horizon_map_texture(self, image) -> moderngl.TextureArray:
         """The horizon map of the lightmap ``image`` as a two-layer RGBA32F array (sectors 0-3,
