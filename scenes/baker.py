@@ -122,13 +122,16 @@ def lightmap_uv_overlap(scene: Scene, resolution: int) -> float:
     lightmap UVs, each spanning [0, 1], or instances of one mesh), or by two triangles of one
     object (mirrored or stacked charts; measured as UV area beyond the texels covered). One
     shared atlas needs 0; a few per cent come from texel-centre sampling along chart edges."""
+    return uv_overlap([(obj.uv1, obj.mesh) for obj in scene.objects if obj.uv1 is not None], resolution)
+
+
+def uv_overlap(charts: list, resolution: int) -> float:
+    """lightmap_uv_overlap of the (uv, mesh) pairs ``charts`` in one [0, 1]^2 atlas."""
     claimed, area_total = [], 0.0
-    for obj in scene.objects:
-        if obj.uv1 is None:
-            continue
-        tri = obj.mesh.indices.reshape(-1, 3)
-        area = uv_triangle_areas(obj.uv1.astype(np.float64) * resolution, tri)
-        samples = rasterize_uv(obj.uv1.astype(np.float64), obj.mesh.positions, obj.mesh.normals, tri, resolution)
+    for uv, mesh in charts:
+        tri = mesh.indices.reshape(-1, 3)
+        area = uv_triangle_areas(uv.astype(np.float64) * resolution, tri)
+        samples = rasterize_uv(uv.astype(np.float64), mesh.positions, mesh.normals, tri, resolution)
         claimed.append(samples.pixel[:, 0] * resolution + samples.pixel[:, 1])
         area_total += max(float(area.sum()), float(len(samples.pixel)))
     if not claimed or area_total == 0:

@@ -16,6 +16,16 @@ of the HORIZON_SECTORS horizons (self_visibility.traced_horizons, the vertices' 
 horizon_frame about the texel's interpolated normal), dilated into the gutter so that bilinear
 reads at chart edges stay on the chart's values; uncovered texels hold 0 (nothing hidden).
 shaders/scene.frag reads it at the lightmap coordinate in place of the vertices' horizons.
+
+An object without a lightmap (a user's glTF shot as it is) gets a map of its own over its texture
+coordinates (TEXCOORD_0) where they can hold one: inside one unit square (shifted by whole units:
+the map repeats), without overlap (mirrored or stacked charts would give two surfaces one
+texel: DamagedHelmet's halves share theirs) and with texels small against the near-hit cut on
+nearly all of its surface (an artist's atlas gives parts that no texture shows a few texels:
+Suzanne's UV0 texels are 1.8 % of its extent at the median, 71 % of its surface has texels above
+the 1 % cut, and its map made it 13.2 % off Cycles against 10.7 % with vertex horizons; the
+WaterBottle's 0.34 %, 0.8 % of its surface above: 14.1 -> 5.4 %), at most UV0_HORIZON_MAP_SIZE a
+side, all of a scene's such maps together within HORIZON_MAP_MAX_RAYS.
 """
 
 from __future__ import annotations
@@ -27,17 +37,23 @@ import numpy as np
 
 from lobeview.core.cache import read_cache_file, write_cache_file
 
-from .baker import dilate, rasterize_uv, uv_triangle_areas
-from .self_visibility import HORIZON_SECTORS, SEED, traced_horizons
+from .baker import dilate, rasterize_uv, uv_overlap, uv_triangle_areas
+from .self_visibility import HORIZON_SECTORS, NO_OCCLUSION, SEED, object_visibility_cones, traced_horizons
 
 HORIZON_MAP_NEAR_HIT = 0.01  # the near-hit cut per texel, times the object's extent (measured above)
 HORIZON_MAP_RAYS_PER_SECTOR = 8
 HORIZON_MAP_DILATION = 2  # texels grown into the gutter around each chart
-HORIZON_MAP_VERSION = "horizon-map-1"
+HORIZON_MAP_VERSION = "horizon-map-2"  # 2: objects that hide nothing from their vertices are not traced
 # Rays a lightmap's map may trace (as MAX_SELF_VISIBILITY_RAYS_TOTAL bounds the cones'): a larger
 # atlas is traced at half its resolution, again, until its covered texels fit (16M rays: 8 s for a
 # 512^2 atlas half covered on 2 cores; the bilinear read at the lightmap coordinate is the same).
 HORIZON_MAP_MAX_RAYS = 16_000_000
+# An object without a lightmap: its map over TEXCOORD_0 at most this many texels a side (the
+# WaterBottle's texels then 0.4 % of its extent, as its 512^2 lightmap's), its charts overlapping
+# on at most UV0_MAX_OVERLAP of their texels (what texel-centre sampling along chart edges gives).
+UV0_HORIZON_MAP_SIZE = 512
+UV0_MAX_OVERLAP = 0.02
+UV0_MAX_COARSE_AREA = 0.05  # the share of the surface whose texels may exceed the near-hit cut
 
 
 def uv1_lightmap(scene, obj):
@@ -64,10 +80,13 @@ def lightmap_objects(scene, image) -> list:
     return [obj for obj in scene.objects if uv1_lightmap(scene, obj) is image]
 
 
-def texel_horizons(objects, size: tuple[int, int], near_hit: float = HORIZON_MAP_NEAR_HIT) -> np.ndarray:
+def texel_horizons(
+    objects, size: tuple[int, int], near_hit: float = HORIZON_MAP_NEAR_HIT, uvs: list | None = None
+) -> np.ndarray:
     """(H, W, HORIZON_SECTORS) float32: the horizon sines at the texel centres of a (W, H) = ``size``
-    lightmap covered by ``objects``' lightmap coordinates (scenes/scene.py SceneObject.uv1), each
-    traced against its own object, dilated HORIZON_MAP_DILATION texels; 0 elsewhere."""
+    lightmap covered by ``objects``' lightmap coordinates (scenes/scene.py SceneObject.uv1; or
+    ``uvs``, one (V, 2) array per object), each traced against its own object, dilated
+    HORIZON_MAP_DILATION texels; 0 elsewhere."""
     import trimesh
 
     width, height = size
@@ -75,11 +94,13 @@ def texel_horizons(objects, size: tuple[int, int], near_hit: float = HORIZON_MAP
         raise ValueError(f"horizon maps follow square lightmaps, got {width}x{height}")
     horizons = np.zeros((height, width, HORIZON_SECTORS), dtype=np.float64)
     covered = np.zeros((height, width), dtype=bool)
-    for obj in objects:
+    for obj, uv in zip(objects, uvs if uvs is not None else [obj.uv1 for obj in objects], strict=True):
+        if not hides_from_itself(obj):
+            continue  # its texels keep 0: nothing hidden, as its vertices say
         faces = np.asarray(obj.mesh.indices, dtype=np.int64).reshape(-1, 3)
         positions = np.asarray(obj.mesh.positions, dtype=np.float64)
         normals = np.asarray(obj.mesh.normals, dtype=np.float64)
-        samples = rasterize_uv(np.asarray(obj.uv1, dtype=np.float64), positions, normals, faces, width)
+        samples = rasterize_uv(np.asarray(uv, dtype=np.float64), positions, normals, faces, width)
         if not len(samples.pixel) or len(faces) < 2:
             continue
         mesh = trimesh.Trimesh(positions, faces, process=False)
@@ -95,7 +116,16 @@ def texel_horizons(objects, size: tuple[int, int], near_hit: float = HORIZON_MAP
     return horizons.astype(np.float32)
 
 
-def _key(objects, size) -> str:
+def hides_from_itself(obj) -> bool:
+    """Whether any vertex of the object sees its own surface (its visibility cones, scenes/
+    self_visibility.py, traced once and kept on it): a plane, a box or any convex object hides
+    nothing from itself, and its horizon map would be all zeros at the cost of every texel's rays
+    (the apartment's walls, floors and boxes)."""
+    cones = object_visibility_cones(obj)
+    return bool(np.any(cones[:, 3] > NO_OCCLUSION))
+
+
+def _key(objects, size, uvs: list) -> str:
     digest = hashlib.sha256(
         repr(
             (
@@ -109,23 +139,22 @@ def _key(objects, size) -> str:
             )
         ).encode()  # fmt: skip
     )
-    for obj in objects:
-        for array in (obj.mesh.positions, obj.mesh.normals, obj.mesh.indices, obj.uv1):
+    for obj, uv in zip(objects, uvs, strict=True):
+        for array in (obj.mesh.positions, obj.mesh.normals, obj.mesh.indices, uv):
             data = np.ascontiguousarray(array)
             digest.update(f"{data.dtype.str}{data.shape}".encode())
             digest.update(data.tobytes())
     return digest.hexdigest()[:20]
 
 
-def horizon_map_size(objects, lightmap_size: int, max_rays: int = HORIZON_MAP_MAX_RAYS) -> int:
+def horizon_map_size(objects, lightmap_size: int, max_rays: int = HORIZON_MAP_MAX_RAYS, uvs=None) -> int:
     """The side of the map traced for a ``lightmap_size`` atlas: halved until the texels the
-    objects' lightmap coordinates cover (their charts' area) times the rays a texel traces fit
-    ``max_rays``; at least 1."""
+    objects' lightmap coordinates (or ``uvs``) cover (their charts' area) times the rays a texel
+    traces fit ``max_rays``; at least 1."""
+    uvs = uvs if uvs is not None else [obj.uv1 for obj in objects]
     area = sum(
-        float(
-            uv_triangle_areas(np.asarray(obj.uv1, dtype=np.float64), np.asarray(obj.mesh.indices).reshape(-1, 3)).sum()
-        )
-        for obj in objects
+        float(uv_triangle_areas(np.asarray(uv, dtype=np.float64), np.asarray(obj.mesh.indices).reshape(-1, 3)).sum())
+        for obj, uv in zip(objects, uvs, strict=True)
     )
     rays_per_texel = HORIZON_SECTORS * HORIZON_MAP_RAYS_PER_SECTOR
     size = int(lightmap_size)
@@ -141,9 +170,72 @@ def lightmap_horizon_map(scene, image, cache_folder: Path | None = None, trace: 
     objects = lightmap_objects(scene, image)
     if image.shape[0] != image.shape[1]:
         raise ValueError(f"horizon maps follow square lightmaps, got {image.shape[1]}x{image.shape[0]}")
-    side = horizon_map_size(objects, int(image.shape[0]))
+    uvs = [obj.uv1 for obj in objects]
+    return _horizon_map(objects, uvs, horizon_map_size(objects, int(image.shape[0])), cache_folder, trace)
+
+
+def uv0_chart(obj) -> np.ndarray | None:
+    """The object's texture coordinates (TEXCOORD_0) moved by whole units into [0, 1]^2 (the map
+    repeats as the shader reads it), or None where they span more than one unit or are not finite."""
+    uvs = getattr(obj.mesh, "uvs", None)
+    if uvs is None or len(uvs) != len(obj.mesh.positions) or not len(uvs):
+        return None
+    uv = np.asarray(uvs, dtype=np.float64)
+    if not np.all(np.isfinite(uv)):
+        return None
+    uv = uv - np.floor(uv.min(axis=0))
+    return uv if float(uv.max()) <= 1.0 else None
+
+
+def coarse_texel_area(obj, uv: np.ndarray, side: int, near_hit: float = HORIZON_MAP_NEAR_HIT) -> float:
+    """The share of the object's surface whose texels, on a ``side`` map over ``uv``, are wider
+    than ``near_hit`` times its extent (a triangle's texel width: the square root of its area over
+    the texels its chart covers)."""
+    faces = np.asarray(obj.mesh.indices, dtype=np.int64).reshape(-1, 3)
+    positions = np.asarray(obj.mesh.positions, dtype=np.float64)
+    extent = float(np.max(positions.max(axis=0) - positions.min(axis=0)))
+    edges = positions[faces[:, 1:]] - positions[faces[:, :1]]
+    area = 0.5 * np.linalg.norm(np.cross(edges[:, 0], edges[:, 1]), axis=1)
+    if extent <= 0.0 or area.sum() <= 0.0:
+        return 1.0
+    texels = uv_triangle_areas(uv, faces) * side * side
+    width = np.sqrt(area / np.maximum(texels, 1e-30))
+    return float(area[width > near_hit * extent].sum() / area.sum())
+
+
+def uv0_mapped_objects(scene) -> tuple[int, list[tuple[int, np.ndarray]]]:
+    """(side, [(object index, uv0_chart)]): the objects that read no lightmap through their own
+    lightmap coordinates but whose texture coordinates can hold a horizon map (uv0_chart; charts
+    overlapping on at most UV0_MAX_OVERLAP at UV0_HORIZON_MAP_SIZE), and the one side of their
+    maps (halved from UV0_HORIZON_MAP_SIZE until all fit HORIZON_MAP_MAX_RAYS), keeping those
+    whose texels at that side exceed the near-hit cut on at most UV0_MAX_COARSE_AREA of their
+    surface."""
+    candidates = []
+    for index, obj in enumerate(scene.objects):
+        if uv1_lightmap(scene, obj) is not None or len(obj.mesh.indices) < 6 or not hides_from_itself(obj):
+            continue
+        uv = uv0_chart(obj)
+        if uv is not None and uv_overlap([(uv, obj.mesh)], UV0_HORIZON_MAP_SIZE) <= UV0_MAX_OVERLAP:
+            candidates.append((index, uv))
+    if not candidates:
+        return 0, []
+    objects = [scene.objects[index] for index, _ in candidates]
+    side = horizon_map_size(objects, UV0_HORIZON_MAP_SIZE, uvs=[uv for _, uv in candidates])
+    kept = [(i, uv) for i, uv in candidates if coarse_texel_area(scene.objects[i], uv, side) <= UV0_MAX_COARSE_AREA]
+    return side, kept
+
+
+def uv0_horizon_map(
+    scene, index: int, uv: np.ndarray, side: int, cache_folder: Path | None = None, trace: bool = True
+) -> np.ndarray | None:
+    """The horizon map of object ``index`` over its texture coordinates ``uv`` at ``side``
+    (uv0_mapped_objects), cached as lightmap_horizon_map's."""
+    return _horizon_map([scene.objects[index]], [uv], side, cache_folder, trace)
+
+
+def _horizon_map(objects, uvs: list, side: int, cache_folder: Path | None, trace: bool) -> np.ndarray | None:
     size = (side, side)
-    path = None if cache_folder is None else Path(cache_folder) / f"horizons-{_key(objects, size)}.npy"
+    path = None if cache_folder is None else Path(cache_folder) / f"horizons-{_key(objects, size, uvs)}.npy"
 
     def read(file: Path) -> np.ndarray:
         found = np.load(file, allow_pickle=False)
@@ -156,7 +248,7 @@ def lightmap_horizon_map(scene, image, cache_folder: Path | None = None, trace: 
     found = read_cache_file(path, read, "horizon map")
     if found is not None or not trace:
         return found
-    horizons = texel_horizons(objects, size)
+    horizons = texel_horizons(objects, size, uvs=uvs)
     if path is not None:
         write_cache_file(path, lambda handle: np.save(handle, horizons, allow_pickle=False))
     return horizons
@@ -169,12 +261,19 @@ def square_lightmap_images(scene) -> list:
 
 def trace_horizon_maps(scene, cache_folder: Path) -> int:
     """Trace into ``cache_folder`` the horizon maps of ``scene`` it lacks (a worker process's
-    job: app/background_bake.py), with progress; the number traced."""
+    job: app/background_bake.py), its lightmaps' and its unbaked objects', with progress; the
+    number traced."""
     from lobeview.core.progress import report
 
     images = square_lightmap_images(scene)
     missing = [image for image in images if lightmap_horizon_map(scene, image, cache_folder, trace=False) is None]
+    side, mapped = uv0_mapped_objects(scene)
+    unmapped = [(i, uv) for i, uv in mapped if uv0_horizon_map(scene, i, uv, side, cache_folder, trace=False) is None]
+    total = len(missing) + len(unmapped)
     for done, image in enumerate(missing):
-        report(f"self-occlusion horizons per texel: lightmap {done + 1} of {len(missing)}", done / len(missing))
+        report(f"self-occlusion horizons per texel: lightmap {done + 1} of {len(missing)}", done / total)
         lightmap_horizon_map(scene, image, cache_folder)
-    return len(missing)
+    for done, (index, uv) in enumerate(unmapped):
+        report(f"self-occlusion horizons per texel: {scene.objects[index].name}", (len(missing) + done) / total)
+        uv0_horizon_map(scene, index, uv, side, cache_folder)
+    return total

@@ -23,10 +23,12 @@ uniform vec3 u_camera_position;
 uniform sampler2D u_lightmap;
 uniform int u_self_occlusion;  // 1: the visibility cones apply (RenderSettings.self_occlusion)
 // The horizons per lightmap texel (scenes/horizon_maps.py): layers 0 and 1 hold sectors 0-3 and
-// 4-7, read at the lightmap coordinate in place of the vertices' horizons where the object has one.
+// 4-7, read at the lightmap coordinate (or, for an object without a lightmap, at its texture
+// coordinate) in place of the vertices' horizons where the object has one.
 uniform sampler2DArray u_horizon_map;
 #if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
 uniform int u_has_horizon_map;        // 1: u_horizon_map holds this object's lightmap's horizons
+uniform int u_horizon_map_uv;         // the coordinates it is read at: 1 TEXCOORD_1, 0 TEXCOORD_0
 uniform int u_lightmap_texcoord;      // 0 or 1; -1: no lightmap, the environment's irradiance
 uniform float u_lightmap_intensity;
 uniform vec3 u_emission;              // emissive factor x KHR_materials_emissive_strength
@@ -212,8 +214,9 @@ void main() {
         g_self_cone = vec4(normalize(v_visibility.xyz), texel_horizons ? 0.0 : v_visibility.w);
         set_self_normal(normalize(v_normal));
         // bilinear at level 0 (no MIP chain: a read inside this branch needs no derivatives)
-        vec4 horizon0 = texel_horizons ? textureLod(u_horizon_map, vec3(v_uv1, 0.0), 0.0) : v_horizon0;
-        vec4 horizon1 = texel_horizons ? textureLod(u_horizon_map, vec3(v_uv1, 1.0), 0.0) : v_horizon1;
+        vec2 horizon_uv = u_horizon_map_uv == 0 ? v_uv0 : v_uv1;
+        vec4 horizon0 = texel_horizons ? textureLod(u_horizon_map, vec3(horizon_uv, 0.0), 0.0) : v_horizon0;
+        vec4 horizon1 = texel_horizons ? textureLod(u_horizon_map, vec3(horizon_uv, 1.0), 0.0) : v_horizon1;
         for (int k = 0; k < 4; ++k) {
             g_self_horizon[k] = horizon0[k];
             g_self_horizon[k + 4] = horizon1[k];

@@ -111,19 +111,41 @@ def _bilinear_repeat(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
             + at(y0 + 1, x0 + 1) * fx * fy)  # fmt: skip
 
 
+def _unbaked_corner_scene():
+    """_corner_scene without its lightmap, its atlas layout as the texture coordinates instead,
+    moved by two whole units in u (the map repeats: the chart is found in [0, 1]^2)."""
+    scene, floor = _corner_scene()
+    obj = scene.objects[0]
+    obj.mesh.uvs = (obj.uv1 + [2.0, 0.0]).astype(np.float32)
+    obj.uv1 = None
+    scene.materials[0].lightmap = None
+    return scene, floor
+
+
+@pytest.mark.parametrize("coordinates", ["lightmap", "texture"])
 @pytest.mark.parametrize("method", ["lobe-7", "prefiltered"])
-def test_shaders_read_the_horizons_at_the_lightmap_coordinate(method):
+def test_shaders_read_the_horizons_at_the_lightmap_coordinate(method, coordinates):
     """The floor-beside-a-wall test of test_self_visibility with a lightmap: each floor pixel's
     self-occluded / unoccluded ratio is 0.5 + 0.5 vis (the hidden part sees the point itself: F0
     0.5 lit by the lightmap's E = pi), vis from the horizon map read bilinearly at the pixel's
-    lightmap coordinate, not from the vertices."""
+    lightmap coordinate, not from the vertices. Without a lightmap (``texture``): the object's
+    own map read at its texture coordinates (lit by the white sky's E = pi)."""
     from lobeview.scenes.self_visibility import CONE_FLOATS, split_sum_footprint
 
-    scene, _ = _corner_scene()
-    image_id = id(scene.materials[0].lightmap.image)
-    ratio, points, horizons = floor_occlusion_ratios(
-        scene, method, inspect=lambda renderer: renderer.shading.horizon_maps[image_id][1]
-    )
+    if coordinates == "lightmap":
+        scene, _ = _corner_scene()
+        image_id = id(scene.materials[0].lightmap.image)
+
+        def inspect(renderer):
+            return renderer.shading.horizon_maps[image_id][1]
+    else:
+        scene, _ = _unbaked_corner_scene()
+
+        def inspect(renderer):
+            assert not renderer.shading.horizon_maps and len(renderer.shading.uv0_horizon_maps) == 1
+            return renderer.shading.uv0_horizon_maps[0]
+
+    ratio, points, horizons = floor_occlusion_ratios(scene, method, inspect=inspect)
     inset = 1.0 / MAP
     s, t = (points[:, 0] + 1.5) / 3.0, (1.0 - points[:, 2]) / 2.0
     uv1 = np.stack([inset + s * (0.5 - 2 * inset), inset + t * (1.0 - 2 * inset)], axis=-1)
@@ -131,6 +153,29 @@ def test_shaders_read_the_horizons_at_the_lightmap_coordinate(method):
     cones[:, :3] = [0.0, 1.0, 0.0]
     cones[:, 4:] = _bilinear_repeat(horizons.astype(np.float64), uv1)
     assert_floor_ratios_follow(ratio, points, cones, split_sum_footprint(0.05**2) if method == "prefiltered" else 0.0)
+
+
+def test_which_unbaked_objects_get_a_map_over_their_texture_coordinates():
+    """An object without a lightmap whose texture coordinates lie in one unit square (after whole
+    units) without overlap gets a map; its chart comes back moved into [0, 1]^2. Not: charts
+    overlapping (both faces on the same texels), coordinates spanning two units, an object with
+    a lightmap (it has the lightmap's map)."""
+    from lobeview.scenes.horizon_maps import uv0_chart, uv0_mapped_objects
+
+    baked, _ = _corner_scene()
+    assert uv0_mapped_objects(baked) == (0, [])
+    scene, _ = _unbaked_corner_scene()
+    side, ((index, chart),) = uv0_mapped_objects(scene)
+    assert side == 512 and index == 0 and chart.min() >= 0.0 and chart.max() <= 1.0
+    np.testing.assert_allclose(chart, scene.objects[0].mesh.uvs - [2.0, 0.0], atol=1e-6)
+    overlapping, _ = _unbaked_corner_scene()
+    mesh = overlapping.objects[0].mesh
+    half = len(mesh.uvs) // 2  # the wall's vertices on the floor's texels
+    mesh.uvs[half:] = mesh.uvs[:half]
+    assert uv0_mapped_objects(overlapping) == (0, [])
+    wide, _ = _unbaked_corner_scene()
+    wide.objects[0].mesh.uvs[0] += [1.5, 0.0]
+    assert uv0_chart(wide.objects[0]) is None and uv0_mapped_objects(wide) == (0, [])
 
 
 def test_a_large_atlas_is_traced_coarser_within_the_ray_budget():
@@ -220,3 +265,47 @@ def test_trace_horizon_maps_traces_only_what_the_cache_lacks(tmp_path):
     assert trace_horizon_maps(scene, tmp_path) == 1
     assert trace_horizon_maps(scene, tmp_path) == 0
     assert lightmap_horizon_map(scene, image, tmp_path, trace=False) is not None
+
+
+def test_texture_coordinates_too_coarse_for_the_cut_keep_the_vertex_horizons():
+    """A texel's width against the near-hit cut (1 % of the extent): the floor alone, its chart a
+    quarter of the square over 3 x 2 units (extent 3), has texels of sqrt(6 / (0.25 * side^2)):
+    above the cut (0.03) at side 128 (0.038), below at 512 (0.0096); squeezing the wall's chart to
+    a sliver makes half the surface coarse, and the object keeps its vertices' horizons."""
+    from lobeview.scenes.horizon_maps import coarse_texel_area, uv0_mapped_objects
+
+    scene, floor = _corner_scene()
+    floor_object = type(scene.objects[0])("floor", floor, 0)
+    quarter = floor.uvs * 0.5
+    assert coarse_texel_area(floor_object, quarter, 128) == 1.0
+    assert coarse_texel_area(floor_object, quarter, 512) == 0.0
+    squeezed, _ = _unbaked_corner_scene()
+    uvs = squeezed.objects[0].mesh.uvs
+    half = len(uvs) // 2
+    uvs[half:] = uvs[half] + (uvs[half:] - uvs[half]) * 0.02  # the wall on a sliver of texels
+    assert uv0_mapped_objects(squeezed) == (512, [])
+
+
+def test_objects_that_hide_nothing_from_themselves_are_not_traced(monkeypatch):
+    """A quad, a box and a sphere hide nothing from their own vertices (their cones): the map
+    leaves their texels at 0 without tracing them, and no object of theirs gets a map over its
+    texture coordinates; the corner (a floor before a wall) is traced."""
+    from lobeview.scenes import horizon_maps
+    from lobeview.scenes.horizon_maps import hides_from_itself, uv0_mapped_objects
+    from lobeview.scenes.meshes import box_mesh, quad, uv_sphere
+    from lobeview.scenes.scene import Scene
+
+    scene, _ = _corner_scene()
+    corner = scene.objects[0]
+    SceneObject = type(corner)
+    shapes = [quad((0, 0, 0), (1, 0, 0), (0, 0, 1)), box_mesh((0, 0, 0), (1, 1, 1)), uv_sphere(1.0, 16, 32)]
+    convex = [SceneObject(f"shape {i}", mesh, 0) for i, mesh in enumerate(shapes)]
+    assert hides_from_itself(corner) and not any(hides_from_itself(obj) for obj in convex)
+    assert uv0_mapped_objects(Scene(convex, scene.materials)) == (0, [])
+    traced = []
+    original = horizon_maps.traced_horizons
+    monkeypatch.setattr(horizon_maps, "traced_horizons", lambda *a, **k: traced.append(len(a[1])) or original(*a, **k))
+    plane = convex[0]
+    plane.uv1 = plane.mesh.uvs.copy()
+    assert not texel_horizons([plane], (MAP, MAP)).any() and not traced
+    assert texel_horizons([corner], (MAP, MAP)).any() and len(traced) == 1

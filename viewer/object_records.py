@@ -64,6 +64,7 @@ OBJECT_RECORD_FIELDS = (
     RecordField("u_alpha_mode", "int"),
     RecordField("u_lightmap_texcoord", "int"),
     RecordField("u_has_horizon_map", "int"),
+    RecordField("u_horizon_map_uv", "int"),
     RecordField("u_map_texcoord", "int", "MATERIAL_MAPS"),
     RecordField("u_map_mirrored", "ivec2", "MATERIAL_MAPS"),
     RecordField("u_map_transform", "mat3", "MATERIAL_MAPS"),

@@ -105,9 +105,9 @@ class SceneRenderer(RendererBase):
         # (shading.missing_horizon_maps).
         t_maps = time.perf_counter()
         shading.prepare_horizon_maps(trace=not (progressive_cubes and self.cache_dir))
-        if shading.horizon_maps:
-            report(f"self-occlusion horizons per texel of {len(shading.horizon_maps)} lightmaps"
-                   f" ({time.perf_counter() - t_maps:.1f} s)")  # fmt: skip
+        maps = len(shading.horizon_maps) + len(shading.uv0_horizon_maps)
+        if maps:
+            report(f"self-occlusion horizons per texel: {maps} maps ({time.perf_counter() - t_maps:.1f} s)")
         self.drawer = ObjectDrawer(ctx, scene, packed, shading, self.environment, self.frame, settings, analysis)
         shading.draw_records = settings.draw_records
         shading.self_occlusion = settings.self_occlusion

@@ -127,8 +127,11 @@ class SceneShading(ShadingBinder):
         # The horizons per lightmap texel (scenes/horizon_maps.py) by id of the lightmap image:
         # (image, horizons), traced by prepare_horizon_maps; a sampler every draw binds.
         self.horizon_maps: dict[int, tuple] = {}
+        # An object without a lightmap: its map over its texture coordinates, by object index.
+        self.uv0_horizon_maps: dict[int, np.ndarray] = {}
         self._unmappable_lightmaps: set[int] = set()  # non-square: warned about once
-        self.missing_horizon_maps = 0  # lightmaps whose map the cache lacked (not traced yet)
+        self.missing_horizon_maps = 0  # maps the cache lacked (not traced yet)
+        self._uv0_mapped: list | None = None  # scenes/horizon_maps.py uv0_mapped_objects, found once
         self._no_horizon_map = ctx.texture_array((1, 1, 2), 4, np.zeros(8, np.float32).tobytes(), dtype="f4")
 
     def set_pass_state(self, program, method: Method, lod_bias: float | None, seed: int) -> None:
@@ -145,14 +148,20 @@ class SceneShading(ShadingBinder):
 
     def prepare_horizon_maps(self, trace: bool = True) -> int:
         """The horizon map of every lightmap that objects read through their own lightmap
-        coordinates (scenes/horizon_maps.py), read from the cache folder beside the visibility
-        cones, or traced there unless ``trace`` is False (the viewer's first frame: a worker traces
-        them, app/finishing.py); how many are still missing (their objects keep the vertices'
+        coordinates, and of every object without one whose texture coordinates can hold one
+        (scenes/horizon_maps.py), read from the cache folder beside the visibility cones, or
+        traced there unless ``trace`` is False (the viewer's first frame: a worker traces them,
+        app/finishing.py); how many are still missing (their objects keep the vertices'
         horizons). A map that arrives bumps ``record_generation`` (the per-object records hold
         whether an object has one)."""
-        from lobeview.scenes.horizon_maps import lightmap_horizon_map, lightmap_images
+        from lobeview.scenes.horizon_maps import (
+            lightmap_horizon_map,
+            lightmap_images,
+            uv0_horizon_map,
+            uv0_mapped_objects,
+        )
 
-        missing, before = 0, len(self.horizon_maps)
+        missing, before = 0, len(self.horizon_maps) + len(self.uv0_horizon_maps)
         for image in lightmap_images(self.scene):
             if id(image) in self.horizon_maps or id(image) in self._unmappable_lightmaps:
                 continue
@@ -169,27 +178,42 @@ class SceneShading(ShadingBinder):
                 missing += 1
             else:
                 self.horizon_maps[id(image)] = (image, horizons)
-        if len(self.horizon_maps) != before:
+        if self._uv0_mapped is None:
+            self._uv0_mapped = uv0_mapped_objects(self.scene)
+        side, mapped = self._uv0_mapped
+        for index, uv in mapped:
+            if index not in self.uv0_horizon_maps:
+                horizons = uv0_horizon_map(self.scene, index, uv, side, self.cache_dir, trace=trace)
+                if horizons is None:
+                    missing += 1
+                else:
+                    self.uv0_horizon_maps[index] = horizons
+        if len(self.horizon_maps) + len(self.uv0_horizon_maps) != before:
             self.record_generation += 1
         self.missing_horizon_maps = missing
         return missing
 
-    def horizon_map_texture(self, image) -> moderngl.TextureArray:
-        """The horizon map of the lightmap ``image`` as a two-layer RGBA32F array (sectors 0-3,
-        4-7), linear, no MIP chain; a 1 x 1 one of zeros for None."""
-        if image is None or id(image) not in self.horizon_maps:
+    def horizon_map_texture(self, key) -> moderngl.TextureArray:
+        """The horizon map of a lightmap (``key`` its image) or of an unbaked object (``key`` its
+        index) as a two-layer RGBA32F array (sectors 0-3, 4-7), linear, no MIP chain, repeating
+        as the lightmap; a 1 x 1 one of zeros for None or a key without a map."""
+        if isinstance(key, int):
+            horizons = self.uv0_horizon_maps.get(key)
+        else:
+            horizons = self.horizon_maps[id(key)][1] if key is not None and id(key) in self.horizon_maps else None
+        if horizons is None:
             return self._no_horizon_map
-        horizons = self.horizon_maps[id(image)][1]
 
         def upload():
             height, width = horizons.shape[:2]
             layers = np.ascontiguousarray(np.stack([horizons[..., :4], horizons[..., 4:]]), dtype=np.float32)
             texture = self.ctx.texture_array((width, height, 2), 4, layers.tobytes(), dtype="f4")
             texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
-            texture.repeat_x = texture.repeat_y = True  # as the lightmap
+            texture.repeat_x = texture.repeat_y = True
             return horizons, texture
 
-        return self.textures.get(("horizon map", id(image)), upload)[1]
+        cache_key = ("horizon map", key) if isinstance(key, int) else ("horizon map", id(key))
+        return self.textures.get(cache_key, upload)[1]
 
     def lamp_visibility_of(self, index: int) -> np.ndarray:
         """(MAX_LAMPS,) float32: the fraction of object ``index`` each live lamp reaches."""
@@ -318,10 +342,17 @@ class SceneShading(ShadingBinder):
             bind_sampler(program, "u_lightmap", self.white)
             set_uniform(program, "u_lightmap_texcoord", -1)
         # the horizons per texel of that lightmap (scenes/horizon_maps.py), where it has them
+        # or over its texture coordinates where it has no lightmap
         mapped = uv1_lightmap(self.scene, self.scene.objects[obj.index])
-        has_horizon_map = mapped is not None and id(mapped) in self.horizon_maps
-        bind_sampler(program, "u_horizon_map", self.horizon_map_texture(mapped if has_horizon_map else None))
-        set_uniform(program, "u_has_horizon_map", int(has_horizon_map))
+        if mapped is not None and id(mapped) in self.horizon_maps:
+            horizon_key, horizon_uv = mapped, 1
+        elif obj.index in self.uv0_horizon_maps:
+            horizon_key, horizon_uv = obj.index, 0
+        else:
+            horizon_key, horizon_uv = None, 1
+        bind_sampler(program, "u_horizon_map", self.horizon_map_texture(horizon_key))
+        set_uniform(program, "u_has_horizon_map", int(horizon_key is not None))
+        set_uniform(program, "u_horizon_map_uv", horizon_uv)
         bind_sampler(program, "u_irradiance", self.environment_irradiance)
         self._bind_material(program, mat)
         scene_object = self.scene.objects[obj.index]
