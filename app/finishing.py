@@ -48,31 +48,50 @@ class SceneFinishing:
         renderer = window.renderer
         worker = self.horizon_worker
         if worker is None:
-            if not renderer.shading.missing_horizon_maps or self.background_bake is not None:
+            if not renderer.shading.missing_horizon_maps:
+                return
+            if self.background_bake is not None:
+                # the baked scene comes with its own maps: this one's cube-map build waits for them
+                # (its specular bounces; the swap replaces them), nothing traced in the window
+                renderer.horizon_maps_traced_elsewhere = True
                 return
             if self.horizon_maps_asked_for is renderer:
                 return
             self.horizon_maps_asked_for = renderer
             scene_path = window.session.scene_path
             if scene_path is None or not Path(scene_path).is_file():
-                window.show_progress("tracing the self-occlusion horizons per lightmap texel", None)
-                renderer.shading.prepare_horizon_maps(trace=True)
-                window.dirty = True
+                self.trace_horizon_maps_here(window)
                 return
             from lobeview.app.background_bake import BackgroundBake
 
             self.horizon_worker = BackgroundBake.for_horizon_maps(scene_path, renderer.cache_dir, window.args.limits)
+            renderer.horizon_maps_traced_elsewhere = True  # its cube-map build waits for them
             return
         if not worker.poll():
             return
         self.horizon_worker = None
-        if worker.error is not None:
-            window.message = f"self-occlusion horizons per texel failed ({worker.error}): vertex horizons kept"
-            return
+        self.horizon_maps_asked_for.horizon_maps_traced_elsewhere = False
         if renderer is not self.horizon_maps_asked_for:
             return  # traced for a renderer since replaced: the new one asks again (from the cache)
-        if renderer.shading.prepare_horizon_maps(trace=False):
-            window.message = "some self-occlusion horizon maps were not found after tracing: vertex horizons kept"
+        if worker.error is not None or renderer.shading.prepare_horizon_maps(trace=False):
+            why = worker.error or "its maps were not found in the cache folder"
+            window.message = f"the self-occlusion worker failed ({why}): traced here instead"
+            self.trace_horizon_maps_here(window)
+        window.dirty = True
+
+    def trace_horizon_maps_here(self, window) -> None:
+        """The renderer's missing horizon maps traced in the window's own process (a scene with no
+        file, a worker that failed, a screenshot due; the loading overlay shows it). Should that
+        fail too, its objects keep their vertices' horizons and the cube-map build goes on
+        without writing its cache file (its cube maps would not be those `shot` makes)."""
+        renderer = window.renderer
+        window.show_progress("tracing the self-occlusion horizons per texel", None)
+        try:
+            renderer.shading.prepare_horizon_maps(trace=True)
+        except Exception as exc:  # noqa: BLE001 - the viewer goes on with vertex horizons
+            window.message = f"self-occlusion horizons per texel failed ({type(exc).__name__}: {exc}): vertex horizons"
+            renderer.shading.missing_horizon_maps = 0
+            renderer.probes.bake.cache_dir = None
         window.dirty = True
 
     def poll_background_bake(self, window) -> None:
@@ -85,6 +104,7 @@ class SceneFinishing:
         self.background_bake = None
         if bake.error is not None:
             window.message = f"the lightmap bake failed ({bake.error}): the scene stays without lightmaps"
+            window.renderer.horizon_maps_traced_elsewhere = False  # poll_horizon_maps traces its maps now
             return
         from lobeview.scenes.gltf_loader import load_gltf
 
@@ -92,6 +112,7 @@ class SceneFinishing:
             scene = load_gltf(bake.path, window.args.limits)
         except Exception as exc:  # noqa: BLE001 - the viewer keeps the scene it has
             window.message = f"the baked scene {bake.path.name} could not be loaded ({exc}); kept the unbaked one"
+            window.renderer.horizon_maps_traced_elsewhere = False
             return
         edited = {m.name: m.desc for m in window.scene.materials}
         for material in scene.materials:
@@ -124,10 +145,14 @@ class SceneFinishing:
         if renderer.cube_build_status is None:
             return
         finish = bool(window.pending_screenshots)
+        if renderer.probes.held and not finish:
+            return  # waits for the horizon maps (poll_horizon_maps): nothing to draw again
         resting = not window.dirty and t_frame - window.last_change >= REST_DELAY_S and not window.held_keys.down_since
         if not (finish or resting):
             return
         if finish:
+            if renderer.shading.missing_horizon_maps:  # the build's later bounces wait for them
+                self.trace_horizon_maps_here(window)
             window.show_progress("finishing the cube maps for the screenshot", None)
         while True:
             renderer.continue_cube_build(0.0, camera)

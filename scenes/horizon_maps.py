@@ -215,7 +215,15 @@ def uv0_mapped_objects(scene) -> tuple[int, list[tuple[int, np.ndarray]]]:
         if uv1_lightmap(scene, obj) is not None or len(obj.mesh.indices) < 6 or not hides_from_itself(obj):
             continue
         uv = uv0_chart(obj)
-        if uv is not None and uv_overlap([(uv, obj.mesh)], UV0_HORIZON_MAP_SIZE) <= UV0_MAX_OVERLAP:
+        if uv is None:
+            continue
+        # the cheap tests first (the overlap's rasterising takes a second per object in Python):
+        # charts whose area exceeds the square's overlap (a box's faces each over [0, 1]^2), and
+        # texels too coarse even at the largest side
+        area = float(uv_triangle_areas(uv, np.asarray(obj.mesh.indices, dtype=np.int64).reshape(-1, 3)).sum())
+        if area > 1.0 + UV0_MAX_OVERLAP or coarse_texel_area(obj, uv, UV0_HORIZON_MAP_SIZE) > UV0_MAX_COARSE_AREA:
+            continue
+        if uv_overlap([(uv, obj.mesh)], UV0_HORIZON_MAP_SIZE) <= UV0_MAX_OVERLAP:
             candidates.append((index, uv))
     if not candidates:
         return 0, []

@@ -112,3 +112,25 @@ def test_a_baked_file_opens_at_once_and_its_horizon_maps_come_from_a_worker(xvfb
     assert frames and frames[0]["horizon_maps"] is not None, stderr[-3000:]
     assert any(f["horizon_maps"] is None for f in frames[1:]), stderr[-3000:]
     assert len(list((cache / "cubes").glob("horizons-*.npy"))) == 1
+
+
+def test_while_a_bake_runs_the_unbaked_scenes_maps_are_left_to_it():
+    """The unbaked scene shown during a bake may lack horizon maps (over its texture coordinates):
+    no worker is started and nothing traced in the window; its cube-map build waits (the baked
+    scene replaces it); a failed bake lets the window trace them after all."""
+    from types import SimpleNamespace
+
+    from lobeview.app.finishing import SceneFinishing
+
+    traced = []
+    shading = SimpleNamespace(missing_horizon_maps=1, prepare_horizon_maps=lambda trace: traced.append(trace) or 0)
+    renderer = SimpleNamespace(shading=shading, horizon_maps_traced_elsewhere=False)
+    window = SimpleNamespace(renderer=renderer, session=SimpleNamespace(scene_path=None), dirty=False, message=None,
+                             show_progress=lambda *a: None)  # fmt: skip
+    finishing = SceneFinishing(background_bake=object())
+    finishing.poll_horizon_maps(window)
+    assert renderer.horizon_maps_traced_elsewhere and finishing.horizon_worker is None and not traced
+    finishing.background_bake = None  # the bake failed: the scene stays
+    renderer.horizon_maps_traced_elsewhere = False
+    finishing.poll_horizon_maps(window)  # no scene file to give a worker: traced here
+    assert traced == [True] and finishing.horizon_worker is None

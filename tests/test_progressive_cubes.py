@@ -31,20 +31,33 @@ def _cube_sizes(renderer) -> dict:
     return {obj.index: obj.cube.face_size for obj in renderer.objects if obj.cube is not None}
 
 
-def test_progressive_build_ends_with_the_exact_cube_maps_and_caches_them(ctx, tmp_path):
+def test_progressive_build_ends_with_the_exact_cube_maps_and_caches_them(ctx, tmp_path, monkeypatch):
     scene = _demo_scene()
     camera = _scene_camera(scene, "overview")
     exact = _renderer(ctx, scene)
+    from lobeview.viewer.cube_bake import CubeBake
+
+    preview_renders = []  # the specular flag of every face render the progressive start makes
+    original = CubeBake.render_faces
+    monkeypatch.setattr(CubeBake, "render_faces", lambda self, *a, **k: preview_renders.append(
+        k.get("specular", False)) or original(self, *a, **k))  # fmt: skip
     progressive = _renderer(ctx, scene, cache_dir=tmp_path, progressive=True)
+    monkeypatch.undo()
     try:
         final_sizes = _cube_sizes(exact)
         preview_sizes = _cube_sizes(progressive)
         assert preview_sizes.keys() == final_sizes.keys()
         assert all(preview_sizes[i] < final_sizes[i] for i in final_sizes)  # previews first
+        # of the first bounce only (cube_probes.PREVIEW_BOUNCES): one diffuse render per cube map
+        assert progressive.cube_bounces > 1 and preview_renders == [False] * len(final_sizes)
         assert progressive.cube_build_status is not None
         preview = progressive.render(camera, "lobe-7", spp=1).radiance
         assert np.all(np.isfinite(preview)) and preview.max() > 0.01
         assert not list(tmp_path.glob("cubes-*.npz"))  # nothing cached before the build ends
+        # Its horizon map is not in yet (the window's worker traces it, app/finishing.py): the build
+        # holds after its first bounce until it is, as the worker's tracing leaves it in the cache.
+        assert progressive.shading.missing_horizon_maps == 1
+        progressive.horizon_maps_traced_elsewhere = True  # what the window sets while its worker runs
         # The first step renders the cube map of the object nearest the camera.
         progressive.continue_cube_build(0.0, camera)
         grown = [i for i, s in _cube_sizes(progressive).items() if s != preview_sizes[i]]
@@ -52,6 +65,14 @@ def test_progressive_build_ends_with_the_exact_cube_maps_and_caches_them(ctx, tm
         nearest = min(final_sizes, key=lambda i: float(np.linalg.norm(progressive.objects[i].probe_centre - eye)))
         assert grown == [nearest]
         steps = 1
+        while not progressive.probes.held:
+            steps += progressive.continue_cube_build(0.0, camera)
+        assert steps == len(final_sizes) and progressive.continue_cube_build(0.0, camera) == 0
+        assert "waits for the self-occlusion horizons" in progressive.cube_build_status
+        from lobeview.scenes.horizon_maps import trace_horizon_maps
+
+        assert trace_horizon_maps(scene, tmp_path) == 1  # the worker's job
+        assert progressive.shading.prepare_horizon_maps(trace=False) == 0  # what the window does then
         while progressive.cube_build_status is not None:
             steps += progressive.continue_cube_build(0.0, camera)
         # A render per object and bounce, an install per object and later bounce, the cache
@@ -90,6 +111,8 @@ def test_a_material_edit_restarts_the_build_for_the_edited_scene(ctx, tmp_path):
         assert done == 0 and total > 0  # started again
         while progressive.cube_build_status is not None:
             progressive.continue_cube_build(1.0)
+        # no worker traced the horizon map: the build traced it itself before its specular bounces
+        assert progressive.shading.missing_horizon_maps == 0 and progressive.shading.horizon_maps
         assert not list(tmp_path.glob("cubes-*.npz"))  # an edited scene's cube maps are not cached
     finally:
         progressive.release()

@@ -263,6 +263,7 @@ class CubeBake:
         nearest=None,
         announce: bool = True,
         background_write: bool = False,
+        bounces: int | None = None,
     ):
         """Render the cube maps of ``wanted`` with every bounce, one object's six faces per step
         (a generator: it yields (steps done, steps in all) after each), so a window can spread the
@@ -272,15 +273,17 @@ class CubeBake:
         later bounce's are installed together at its end, as every object of it reads the
         previous bounce's. ``cache``: write the cache file (under the key set before) at the end;
         ``announce``: tell the progress listeners (a window's loading overlay) of each step;
-        ``background_write``: write the cache file in a thread (``cache_writer``)."""
+        ``background_write``: write the cache file in a thread (``cache_writer``); ``bounces``:
+        fewer than the bake's (the progressive start's previews: the first bounce only)."""
         if not wanted:
             return
         sizes = self._sizes(wanted, sizes)
         faces = {}
-        cache_file = self._cache_file() if cache else None
-        total = self.steps_for(len(wanted), cache_file is not None)
+        count = self.bounces if bounces is None else min(bounces, self.bounces)
+        cache_file = self._cache_file() if cache and count == self.bounces else None  # only the finished maps
+        total = (2 * count - 1) * len(wanted) + int(cache_file is not None)  # steps_for with ``count`` bounces
         done = 0
-        for bounce in range(self.bounces):
+        for bounce in range(count):
             t0 = time.perf_counter()
             remaining = list(wanted)
             while remaining:
@@ -289,7 +292,7 @@ class CubeBake:
                 obj = objects[i]
                 if announce:
                     report(
-                        f"cube maps, bounce {bounce + 1} of {self.bounces}: {obj.name} "
+                        f"cube maps, bounce {bounce + 1} of {count}: {obj.name} "
                         f"({len(wanted) - len(remaining)} of {len(wanted)})",
                         done / total,
                     )

@@ -24,6 +24,7 @@ from .settings import RenderSettings
 # Progressive start: preview cube maps this many times smaller across (never below PREVIEW_MIN_FACE).
 PREVIEW_DIVISOR = 8
 PREVIEW_MIN_FACE = 8
+PREVIEW_BOUNCES = 1
 
 
 class CubeProbes:
@@ -69,6 +70,11 @@ class CubeProbes:
         self.progressive = bool(progressive) and settings.cube_budget_mb is None
         self.pending = None  # the exact build's steps while it runs (CubeBake.build_steps)
         self.pending_progress = (0, 0)
+        self.pending_first_bounce = 0  # its first bounce's steps (diffuse renders, no lookup)
+        # True while what the later (specular) bounces draw is not final yet (the horizon maps a
+        # worker traces: SceneRenderer sets it): the build stops after its first bounce, so that
+        # the cube maps it caches are those `shot` makes.
+        self.hold_specular_bounces = lambda: False
         self.focus = None  # the camera's position: the first bounce renders its nearest first
         at_start, sizes, key = self._start_plan()
         if not self.progressive:
@@ -99,10 +105,13 @@ class CubeProbes:
 
     # -- progressive start ---------------------------------------------------------------------
     def _start_progressive(self, at_start: list[int], sizes: dict) -> None:
-        """Every cube map at PREVIEW_DIVISOR times smaller faces now (all bounces, not cached),
-        then the exact build as steps; its cache file is written when it finishes."""
+        """Every cube map at PREVIEW_DIVISOR times smaller faces now (the first bounce only: the
+        scene's diffuse light, as the exact build's first bounce shows it until its last bounce
+        ends; half the preview's cost, which is the first frame's and the baked scene's swap's on
+        a CPU; not cached), then the exact build as steps; its cache file is written when it
+        finishes."""
         preview = {i: max(PREVIEW_MIN_FACE, sizes.get(i, self.bake.face_size) // PREVIEW_DIVISOR) for i in at_start}
-        for _ in self.bake.build_steps(self.objects, at_start, preview, cache=False):
+        for _ in self.bake.build_steps(self.objects, at_start, preview, cache=False, bounces=PREVIEW_BOUNCES):
             pass
         self._pend_exact_build(at_start, sizes, cache=not self.edited)
 
@@ -113,6 +122,7 @@ class CubeProbes:
             self.objects, at_start, sizes, cache=cache, nearest=self._nearest, announce=False, background_write=True
         )
         self.pending_progress = (0, self.bake.steps_for(len(at_start), cache and self.bake.cache_dir is not None))
+        self.pending_first_bounce = len(at_start)
 
     def _nearest(self, remaining: list[int]) -> int:
         if self.focus is None:
@@ -124,10 +134,10 @@ class CubeProbes:
         """Advance the progressive build by whole steps (one object's faces each) while
         ``seconds`` last, at least one; returns the steps made, its end (the last bounce's
         install and the cache file) counting as one (0: nothing pending)."""
-        if self.pending is None:
+        if self.pending is None or self.held:
             return 0
         t0, steps = time.perf_counter(), 0
-        while self.pending is not None and (steps == 0 or time.perf_counter() - t0 < seconds):
+        while self.pending is not None and not self.held and (steps == 0 or time.perf_counter() - t0 < seconds):
             step = next(self.pending, None)
             steps += 1
             if step is None:
@@ -135,6 +145,13 @@ class CubeProbes:
             else:
                 self.pending_progress = step
         return steps
+
+    @property
+    def held(self) -> bool:
+        """Whether the build waits before its specular bounces (hold_specular_bounces)."""
+        if self.pending is None or self.pending_progress[0] < self.pending_first_bounce:
+            return False
+        return bool(self.hold_specular_bounces())
 
     @property
     def building(self) -> bool:

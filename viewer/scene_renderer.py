@@ -129,6 +129,12 @@ class SceneRenderer(RendererBase):
         report("cube maps", 0.0)
         self.progressive_cubes = bool(progressive_cubes)
         self.probes = CubeProbes(ctx, self.drawer, settings, env_hash, progress, self.cache_dir, progressive_cubes)
+        # The specular bounces draw the objects' self-occlusion: not before its horizon maps are in,
+        # or the cached cube maps would not be `shot`'s. The window's worker traces them
+        # (app/finishing.py sets horizon_maps_traced_elsewhere meanwhile: the build waits);
+        # otherwise continue_cube_build traces them before those bounces.
+        self.horizon_maps_traced_elsewhere = False
+        self.probes.hold_specular_bounces = lambda: shading.missing_horizon_maps > 0
         self.mirror_passes = MirrorPasses(ctx, self.drawer, self.probes, settings.mip_filter)
         self.drawer.mirror_passes = self.mirror_passes
         self.timings["cube maps"] = time.perf_counter() - t0
@@ -386,6 +392,8 @@ class SceneRenderer(RendererBase):
         if not self.probes.building:
             return None
         done, total = self.probes.pending_progress
+        if self.probes.held:
+            return f"cube maps: step {done} of {total}, the next bounce waits for the self-occlusion horizons"
         return f"cube maps: step {done} of {total} (object renders, installs, cache file; previews shown meanwhile)"
 
     def continue_cube_build(self, seconds: float, camera: Camera | None = None) -> int:
@@ -396,6 +404,8 @@ class SceneRenderer(RendererBase):
             return 0
         if camera is not None:
             self.probes.focus = np.asarray(camera.position, dtype=np.float64)
+        if self.probes.held and not self.horizon_maps_traced_elsewhere:
+            self.shading.prepare_horizon_maps(trace=True)  # no worker traces them: here, before those bounces
         viewport = self.ctx.viewport
         steps = self.probes.continue_build(seconds)
         self.ctx.viewport = viewport
