@@ -36,6 +36,25 @@ def _frames(stats) -> list[dict]:
     return [json.loads(line) for line in complete if line.strip()]
 
 
+def _view_until_done(arguments: list[str], xvfb: str, stats, field: str, timeout: float) -> tuple[list[dict], str]:
+    """Run `lobeview view ARGUMENTS --stats STATS` until a frame after the first has ``field``
+    null in its log (the work it names ended) or ``timeout``; the frames logged and stderr."""
+    command = [sys.executable, "-m", "lobeview", "view", *arguments, "--stats", str(stats)]
+    env = {**os.environ, "DISPLAY": xvfb}
+    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline and process.poll() is None:
+            if any(f[field] is None for f in _frames(stats)[1:]):
+                break
+            time.sleep(0.5)
+        assert process.poll() is None, process.communicate()[1][-3000:]
+    finally:
+        process.terminate()
+        _, stderr = process.communicate(timeout=60)
+    return _frames(stats), stderr
+
+
 def test_the_window_opens_before_the_bake_and_swaps_the_lightmaps_in(xvfb, tmp_path):
     """The demo from an empty cache: the first frame comes while the worker bakes (the frame log's
     background_bake says so), later frames after the swap (null), and the baked scene is cached
@@ -44,22 +63,8 @@ def test_the_window_opens_before_the_bake_and_swaps_the_lightmaps_in(xvfb, tmp_p
     from lobeview.scenes.gltf_loader import load_gltf
 
     stats, cache = tmp_path / "frames.jsonl", tmp_path / "cache"
-    env = {**os.environ, "DISPLAY": xvfb}
-    command = [sys.executable, "-m", "lobeview", "view", "--cache", str(cache), "--size", "240x150",
-               "--face-size", "32", "--stats", str(stats)]  # fmt: skip
-    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 600
-        while time.monotonic() < deadline and process.poll() is None:
-            frames = _frames(stats)
-            if any(f["background_bake"] is None for f in frames[1:]):
-                break
-            time.sleep(1.0)
-        assert process.poll() is None, process.communicate()[1][-3000:]
-    finally:
-        process.terminate()
-        _, stderr = process.communicate(timeout=60)
-    frames = _frames(stats)
+    arguments = ["--cache", str(cache), "--size", "240x150", "--face-size", "32"]
+    frames, stderr = _view_until_done(arguments, xvfb, stats, "background_bake", 600)
     assert frames, stderr[-3000:]
     assert frames[0]["background_bake"] is not None  # the scene was shown before its bake ended
     swapped = next(f for f in frames if f["background_bake"] is None)
@@ -93,22 +98,8 @@ def test_a_baked_file_opens_at_once_and_its_horizon_maps_come_from_a_worker(xvfb
     scene, _ = _corner_scene()
     path = write_glb(scene, tmp_path / "corner.glb", lightmap=scene.materials[0].lightmap.image)
     stats, cache = tmp_path / "frames.jsonl", tmp_path / "cache"
-    command = [sys.executable, "-m", "lobeview", "view", str(path), "--cache", str(cache), "--size", "160x100",
-               "--face-size", "16", "--stats", str(stats)]  # fmt: skip
-    env = {**os.environ, "DISPLAY": xvfb}
-    process = subprocess.Popen(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 300
-        while time.monotonic() < deadline and process.poll() is None:
-            frames = _frames(stats)
-            if any(f["horizon_maps"] is None for f in frames[1:]):
-                break
-            time.sleep(0.5)
-        assert process.poll() is None, process.communicate()[1][-3000:]
-    finally:
-        process.terminate()
-        _, stderr = process.communicate(timeout=60)
-    frames = _frames(stats)
+    arguments = [str(path), "--cache", str(cache), "--size", "160x100", "--face-size", "16"]
+    frames, stderr = _view_until_done(arguments, xvfb, stats, "horizon_maps", 300)
     assert frames and frames[0]["horizon_maps"] is not None, stderr[-3000:]
     assert any(f["horizon_maps"] is None for f in frames[1:]), stderr[-3000:]
     assert len(list((cache / "cubes").glob("horizons-*.npy"))) == 1
