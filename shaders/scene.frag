@@ -27,7 +27,7 @@ uniform int u_self_occlusion;  // 1: the visibility cones apply (RenderSettings.
 // coordinate) in place of the vertices' horizons where the object has one.
 uniform sampler2DArray u_horizon_map;
 #if !defined(OBJECT_RECORDS)  // per object in viewer/object_records.py
-uniform int u_has_horizon_map;        // 1: u_horizon_map holds this object's lightmap's horizons
+uniform int u_has_horizon_map;        // 1: u_horizon_map holds this object's horizons (its lightmap's or its own)
 uniform int u_horizon_map_uv;         // the coordinates it is read at: 1 TEXCOORD_1, 0 TEXCOORD_0
 uniform int u_lightmap_texcoord;      // 0 or 1; -1: no lightmap, the environment's irradiance
 uniform float u_lightmap_intensity;

@@ -281,7 +281,7 @@ class CubeBake:
         faces = {}
         count = self.bounces if bounces is None else min(bounces, self.bounces)
         cache_file = self._cache_file() if cache and count == self.bounces else None  # only the finished maps
-        total = (2 * count - 1) * len(wanted) + int(cache_file is not None)  # steps_for with ``count`` bounces
+        total = self.steps_for(len(wanted), cache_file is not None, count)
         done = 0
         for bounce in range(count):
             t0 = time.perf_counter()
@@ -334,10 +334,12 @@ class CubeBake:
                 write()
             yield total, total
 
-    def steps_for(self, cube_maps: int, cached: bool) -> int:
+    def steps_for(self, cube_maps: int, cached: bool, bounces: int | None = None) -> int:
         """The steps build_steps takes for ``cube_maps``: one render per object and bounce, one
-        install per object and later bounce, and the cache file's write."""
-        return (2 * self.bounces - 1) * cube_maps + int(cached)
+        install per object and later bounce, and the cache file's write (``bounces``: build_steps'
+        own, default the bake's)."""
+        bounces = self.bounces if bounces is None else bounces
+        return (2 * bounces - 1) * cube_maps + int(cached)
 
     def build_one(self, objects: list, index: int, size: int, cached: bool = True) -> str:
         """The cube map of one object on demand (a reflector whose mirror pass does not shade it
