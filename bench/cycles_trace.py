@@ -8,8 +8,8 @@ pixels. Each pixel's centre ray is cast into the scene as lobeview loads it (tri
 it meets, with the interpolated vertex normal, the mirror direction of the view is tested three
 ways, each the visible share of a point lookup (scenes/self_visibility.py horizon_visibility):
 against the object's vertex horizons interpolated at the point (as lobeview shades an object
-without a horizon map, scenes/horizon_maps.py), and against
-horizons traced at the point itself (16 rays a sector) with near-hit cuts of TRACE_CUTS of the
+without a horizon map, scenes/horizon_maps.py), and against horizons traced at the point itself
+(16 rays in each of a horizon map's MAP_HORIZON_SECTORS) with near-hit cuts of TRACE_CUTS of the
 object's extent. Only the object the ray meets hides anything (what other objects hide is in its
 cube map).
 """
@@ -50,7 +50,7 @@ def mirror_visibility(scene, eye, rays: np.ndarray) -> dict:
     import trimesh
 
     from lobeview.scenes.self_visibility import (
-        CONE_FLOATS,
+        MAP_HORIZON_SECTORS,
         NO_OCCLUSION,
         horizon_visibility,
         object_visibility_cones,
@@ -80,13 +80,15 @@ def mirror_visibility(scene, eye, rays: np.ndarray) -> dict:
         normal = np.where((np.sum(normal * view, axis=1) > 0.0)[:, None], -normal, normal)  # toward the eye
         mirror = view - 2.0 * np.sum(view * normal, axis=1, keepdims=True) * normal
         cones = np.einsum("pk,pkc->pc", bary, object_visibility_cones(obj).astype(np.float64)[corners])
-        results["vertices"].append(horizon_visibility(mirror, cones, normal))
+        results["vertices"].append(horizon_visibility(mirror, cones, normal, below_hidden=True))
         extent = float(np.max(mesh.extents))
         for cut in TRACE_CUTS:
-            traced = np.zeros((len(point), CONE_FLOATS))
+            traced = np.zeros((len(point), 4 + MAP_HORIZON_SECTORS))  # as a horizon map holds them
             traced[:, :3], traced[:, 3] = normal, NO_OCCLUSION + 1.0  # a cone: the horizons apply
-            traced[:, 4:] = traced_horizons(mesh, point, normal, extent, RAYS_PER_SECTOR, near_hit=cut)
-            results[f"cut {100 * cut:g} %"].append(horizon_visibility(mirror, traced, normal))
+            traced[:, 4:] = traced_horizons(
+                mesh, point, normal, extent, RAYS_PER_SECTOR, near_hit=cut, sectors=MAP_HORIZON_SECTORS
+            )
+            results[f"cut {100 * cut:g} %"].append(horizon_visibility(mirror, traced, normal, below_hidden=True))
     return {key: np.concatenate(values) if values else np.zeros(0) for key, values in results.items()}
 
 

@@ -12,7 +12,7 @@ object's lightmap texels are 0.3-0.7 % of its extent, fine enough for that.
 
 The map of a lightmap (the charts of the objects that read it, in one atlas, each object's texels
 traced against its own mesh only: what other objects hide is in its cube map) holds per texel the sines
-of the HORIZON_SECTORS horizons (self_visibility.traced_horizons, the vertices' frame
+of the MAP_HORIZON_SECTORS horizons (self_visibility.traced_horizons, the vertices' frame
 horizon_frame about the texel's interpolated normal), dilated into the gutter so that bilinear
 reads at chart edges stay on the chart's values; uncovered texels hold 0 (nothing hidden).
 shaders/scene.frag reads it at the lightmap coordinate in place of the vertices' horizons.
@@ -38,16 +38,18 @@ import numpy as np
 from lobeview.core.cache import read_cache_file, write_cache_file
 
 from .baker import dilate, rasterize_uv, uv_overlap, uv_triangle_areas
-from .self_visibility import HORIZON_SECTORS, NO_OCCLUSION, SEED, object_visibility_cones, traced_horizons
+from .self_visibility import MAP_HORIZON_SECTORS, NO_OCCLUSION, SEED, object_visibility_cones, traced_horizons
 
 HORIZON_MAP_NEAR_HIT = 0.01  # the near-hit cut per texel, times the object's extent (measured above)
-HORIZON_MAP_RAYS_PER_SECTOR = 8
+HORIZON_MAP_RAYS_PER_SECTOR = 8  # MAP_HORIZON_SECTORS of them: 128 rays a texel
 HORIZON_MAP_DILATION = 2  # texels grown into the gutter around each chart
-HORIZON_MAP_VERSION = "horizon-map-2"  # 2: objects that hide nothing from their vertices are not traced
+# 2: objects that hide nothing from their vertices are not traced; 3: MAP_HORIZON_SECTORS (16, was 8)
+HORIZON_MAP_VERSION = "horizon-map-3"
 # Rays a lightmap's map may trace (as MAX_SELF_VISIBILITY_RAYS_TOTAL bounds the cones'): a larger
-# atlas is traced at half its resolution, again, until its covered texels fit (16M rays: 8 s for a
-# 512^2 atlas half covered on 2 cores; the bilinear read at the lightmap coordinate is the same).
-HORIZON_MAP_MAX_RAYS = 16_000_000
+# atlas is traced at half its resolution, again, until its covered texels fit (32M rays; 128 a
+# texel: 6-8.5 s for the WaterBottle's, Suzanne's and DamagedHelmet's 512^2 atlases, 32-58 %
+# covered, on 2 cores; the bilinear read at the lightmap coordinate is the same).
+HORIZON_MAP_MAX_RAYS = 32_000_000
 # An object without a lightmap: its map over TEXCOORD_0 at most this many texels a side (the
 # WaterBottle's texels then 0.4 % of its extent, as its 512^2 lightmap's), its charts overlapping
 # on at most UV0_MAX_OVERLAP of their texels (what texel-centre sampling along chart edges gives).
@@ -83,7 +85,7 @@ def lightmap_objects(scene, image) -> list:
 def texel_horizons(
     objects, size: tuple[int, int], near_hit: float = HORIZON_MAP_NEAR_HIT, uvs: list | None = None
 ) -> np.ndarray:
-    """(H, W, HORIZON_SECTORS) float32: the horizon sines at the texel centres of a (W, H) = ``size``
+    """(H, W, MAP_HORIZON_SECTORS) float32: the horizon sines at the texel centres of a (W, H) = ``size``
     lightmap covered by ``objects``' lightmap coordinates (scenes/scene.py SceneObject.uv1; or
     ``uvs``, one (V, 2) array per object), each traced against its own object, dilated
     HORIZON_MAP_DILATION texels; 0 elsewhere."""
@@ -92,7 +94,7 @@ def texel_horizons(
     width, height = size
     if width != height:
         raise ValueError(f"horizon maps follow square lightmaps, got {width}x{height}")
-    horizons = np.zeros((height, width, HORIZON_SECTORS), dtype=np.float64)
+    horizons = np.zeros((height, width, MAP_HORIZON_SECTORS), dtype=np.float64)
     covered = np.zeros((height, width), dtype=bool)
     for obj, uv in zip(objects, uvs if uvs is not None else [obj.uv1 for obj in objects], strict=True):
         if not hides_from_itself(obj):
@@ -106,8 +108,9 @@ def texel_horizons(
         mesh = trimesh.Trimesh(positions, faces, process=False)
         extent = float(np.max(positions.max(axis=0) - positions.min(axis=0)))
         traced = traced_horizons(
-            mesh, samples.position, samples.normal, extent, HORIZON_MAP_RAYS_PER_SECTOR, SEED, near_hit=near_hit
-        )
+            mesh, samples.position, samples.normal, extent, HORIZON_MAP_RAYS_PER_SECTOR, SEED, near_hit,
+            sectors=MAP_HORIZON_SECTORS,
+        )  # fmt: skip
         rows, cols = samples.pixel[:, 0], samples.pixel[:, 1]
         horizons[rows, cols] = traced
         covered[rows, cols] = True
@@ -133,7 +136,7 @@ def _key(objects, size, uvs: list) -> str:
                 HORIZON_MAP_NEAR_HIT,
                 HORIZON_MAP_RAYS_PER_SECTOR,
                 HORIZON_MAP_DILATION,
-                HORIZON_SECTORS,
+                MAP_HORIZON_SECTORS,
                 SEED,
                 tuple(size),
             )
@@ -156,7 +159,7 @@ def horizon_map_size(objects, lightmap_size: int, max_rays: int = HORIZON_MAP_MA
         float(uv_triangle_areas(np.asarray(uv, dtype=np.float64), np.asarray(obj.mesh.indices).reshape(-1, 3)).sum())
         for obj, uv in zip(objects, uvs, strict=True)
     )
-    rays_per_texel = HORIZON_SECTORS * HORIZON_MAP_RAYS_PER_SECTOR
+    rays_per_texel = MAP_HORIZON_SECTORS * HORIZON_MAP_RAYS_PER_SECTOR
     size = int(lightmap_size)
     while size > 1 and min(area, 1.0) * size * size * rays_per_texel > max_rays:
         size //= 2
@@ -247,7 +250,7 @@ def _horizon_map(objects, uvs: list, side: int, cache_folder: Path | None, trace
 
     def read(file: Path) -> np.ndarray:
         found = np.load(file, allow_pickle=False)
-        if found.shape != (size[1], size[0], HORIZON_SECTORS) or found.dtype != np.float32:
+        if found.shape != (size[1], size[0], MAP_HORIZON_SECTORS) or found.dtype != np.float32:
             raise ValueError(f"horizon map of shape {found.shape} ({found.dtype})")
         if not np.all(np.isfinite(found)):
             raise ValueError("horizon map with non-finite values")

@@ -52,6 +52,12 @@ ORIGIN_OFFSET = 1e-4  # ray origins off the surface, times the object's extent
 NEAR_HIT_DISTANCE = 0.03  # hits nearer than this, times the object's extent, are ignored (see below)
 SEED = 11
 HORIZON_SECTORS = 8  # azimuth sectors of the horizon around each normal (traced_horizons)
+# ... in a horizon map (scenes/horizon_maps.py): a point's own horizons, of which 8 sectors'
+# (linear in azimuth between their centres) let a crease's narrow open azimuths through, 16 far
+# less (DamagedHelmet's mirror directions Cycles finds hidden, traced per point: visible share
+# 0.17 -> 0.13, exactly by ray 0.11; docs/measurements.md). Vertex horizons, interpolated over
+# triangles, gain nothing comparable from more sectors and keep two vertex attributes.
+MAP_HORIZON_SECTORS = 16
 CONE_FLOATS = 4 + HORIZON_SECTORS  # per vertex: bent normal, cos of the cone's half angle, horizons
 HORIZON_SOFT_EDGE = 0.08  # a point lookup's cap radius, in sin of elevation: the horizon's soft edge
 # A lookup that averages the cube over a footprint (a filtered lobe-N or fis-N sample, a
@@ -195,9 +201,11 @@ def horizon_frame(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return tangent, np.cross(normals, tangent)
 
 
-def traced_horizons(mesh, positions, normals, extent, rays_per_sector, seed=SEED, near_hit=NEAR_HIT_DISTANCE):
-    """(V, HORIZON_SECTORS): per vertex (or any surface point of ``mesh``: bench/cycles_trace.py
-    traces them per pixel) and azimuth sector, the sine of the horizon's elevation, rays cut
+def traced_horizons(
+    mesh, positions, normals, extent, rays_per_sector, seed=SEED, near_hit=NEAR_HIT_DISTANCE, sectors=HORIZON_SECTORS
+):
+    """(V, ``sectors``): per vertex (or any surface point of ``mesh``: the horizon maps' texels,
+    bench/cycles_trace.py's pixels) and azimuth sector, the sine of the horizon's elevation, rays cut
     ``near_hit`` times the extent from their origin (_own_hits),
     taken as the sector's hidden fraction of solid angle (its rays are uniform in solid angle:
     uniform in sin(elevation)), so that everything below the horizon is what the object hides.
@@ -206,11 +214,11 @@ def traced_horizons(mesh, positions, normals, extent, rays_per_sector, seed=SEED
     count = len(positions)
     rng = np.random.default_rng(seed + 1)
     k = rays_per_sector
-    jitter = rng.random((count, HORIZON_SECTORS, k, 2))
+    jitter = rng.random((count, sectors, k, 2))
     # Latin hypercube in (sin of elevation, azimuth) within the sector: stratified in both.
-    strata = rng.permuted(np.broadcast_to(np.arange(k), (count, HORIZON_SECTORS, k)), axis=2)
+    strata = rng.permuted(np.broadcast_to(np.arange(k), (count, sectors, k)), axis=2)
     sin_e = (np.arange(k)[None, None, :] + jitter[..., 0]) / k
-    phi = (np.arange(HORIZON_SECTORS)[None, :, None] + (strata + jitter[..., 1]) / k) / HORIZON_SECTORS * 2.0 * np.pi
+    phi = (np.arange(sectors)[None, :, None] + (strata + jitter[..., 1]) / k) / sectors * 2.0 * np.pi
     cos_e = np.sqrt(np.maximum(1.0 - sin_e**2, 0.0))
     tangent, bitangent = horizon_frame(normals)
     directions = (
@@ -219,7 +227,7 @@ def traced_horizons(mesh, positions, normals, extent, rays_per_sector, seed=SEED
         + sin_e[..., None] * normals[:, None, None, :]
     ).reshape(count, -1, 3)
     hit = _own_hits(mesh, positions, normals, directions, extent, near_hit)
-    return hit.reshape(count, HORIZON_SECTORS, k).mean(axis=2)
+    return hit.reshape(count, sectors, k).mean(axis=2)
 
 
 def cap_intersection_solid_angle(radius_a, radius_b, separation):
@@ -263,10 +271,12 @@ def split_sum_footprint(alpha, distribution: str = "ggx"):
 
 
 def _horizon_at(horizons: np.ndarray, phi: np.ndarray) -> np.ndarray:
-    """The horizon's sine at azimuth ``phi``: linear between the sectors' centres."""
-    x = np.mod(phi / (2.0 * np.pi) * HORIZON_SECTORS - 0.5, HORIZON_SECTORS)
-    first = np.clip(np.nan_to_num(np.floor(x)).astype(int) % HORIZON_SECTORS, 0, HORIZON_SECTORS - 1)
-    second = (first + 1) % HORIZON_SECTORS
+    """The horizon's sine at azimuth ``phi``: linear between the centres of the sectors
+    ``horizons`` (..., sectors) holds (HORIZON_SECTORS at vertices, MAP_HORIZON_SECTORS in maps)."""
+    sectors = horizons.shape[-1]
+    x = np.mod(phi / (2.0 * np.pi) * sectors - 0.5, sectors)
+    first = np.clip(np.nan_to_num(np.floor(x)).astype(int) % sectors, 0, sectors - 1)
+    second = (first + 1) % sectors
     frac = x - np.floor(x)
     at_first = np.take_along_axis(horizons, first[..., None], -1)[..., 0]
     return (1.0 - frac) * at_first + frac * np.take_along_axis(horizons, second[..., None], -1)[..., 0]
@@ -278,12 +288,17 @@ def horizon_visibility(
     normals: np.ndarray,
     soft_edge: float = HORIZON_SOFT_EDGE,
     footprint=0.0,
+    below_hidden=False,
 ) -> np.ndarray:
     """How visible unit ``directions`` (..., 3) are above the horizons of ``cones`` (..., 4 +
-    HORIZON_SECTORS) about unit ``normals`` (..., 3), in [0, 1]: the shaders' self_visibility
+    sectors: HORIZON_SECTORS at vertices, MAP_HORIZON_SECTORS in a horizon map) about unit
+    ``normals`` (..., 3), in [0, 1]: the shaders' self_visibility
     (self_occlusion.glsl). The horizon's sine is linear in azimuth between the sectors' centres;
     the share of the lookup's cap (``footprint`` sr and the soft edge, footprint_radius) above it.
-    Directions below the surface (transmission) and points without a cone pass."""
+    Points without a cone pass. A direction below the surface passes for a transmission lobe and
+    is hidden (0) for a reflection lobe's lookup (``below_hidden``, boolean or per direction): it
+    points into the object (a rough lobe's tail, a normal map's tilt), whose own surface is what
+    it sees, as a path tracer finds (DamagedHelmet against Cycles: docs/measurements.md)."""
     directions = np.asarray(directions, dtype=np.float64)
     cones = np.asarray(cones, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -313,8 +328,9 @@ def horizon_visibility(
     above_surface = cap_intersection_solid_angle(0.5 * np.pi, radius, from_normal)
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.clip(above / np.maximum(above_surface, 1e-12), 0.0, 1.0)
-    passes = (cones[..., 3] <= NO_OCCLUSION + 1e-3) | ~(sin_e > 0.0)  # ~: a NaN normal passes too
-    return np.where(passes, 1.0, share)
+    no_cone = cones[..., 3] <= NO_OCCLUSION + 1e-3
+    below = np.asarray(below_hidden, dtype=bool) & (sin_e <= 0.0)  # a NaN normal is neither: it passes
+    return np.where(no_cone, 1.0, np.where(below, 0.0, np.where(sin_e > 0.0, share, 1.0)))
 
 
 APERTURE_TILTS = 46  # table of cone_cos_aperture: bent-normal tilts 0..90 degrees
@@ -407,11 +423,14 @@ def self_occluded_incident(
     cones: np.ndarray,
     normals: np.ndarray,
     footprint=0.0,
+    below_hidden=False,
 ) -> np.ndarray:
     """Incident radiance with the object's self-occlusion (the shaders' self_occluded): the
     environment's where the direction clears the horizon, the occluder's radiance where it does
-    not (RGB, (..., 3)), for lookups averaging ``footprint`` sr."""
-    visibility = horizon_visibility(directions, cones, normals, footprint=footprint)[..., None]
+    not (RGB, (..., 3)), for lookups averaging ``footprint`` sr (``below_hidden``: a reflection
+    lobe's, horizon_visibility)."""
+    visibility = horizon_visibility(directions, cones, normals, footprint=footprint, below_hidden=below_hidden)
+    visibility = visibility[..., None]
     return visibility * np.asarray(environment, dtype=np.float64) + (1.0 - visibility) * np.asarray(occluder)
 
 

@@ -102,6 +102,7 @@ vec3 rsibr_radiance(vec3 wo, mat3 tbn) {
     for (int i = 0; i < u_lobe_count; ++i) {
         if (!rsibr_lobe(i)) continue;
         Lobe l = get_lobe(i);
+        g_self_below_hidden = true;  // reflection lobes only (materials/rsibr.py)
         visible += self_visibility(r, split_sum_footprint(l.dist, sqrt(l.ax * l.ay)));
         baked += 1;
     }

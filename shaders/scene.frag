@@ -213,13 +213,20 @@ void main() {
             ? mix(dielectric_f0 * specular_weight, base_color, metallic) : vec3(0.0);
         g_self_cone = vec4(normalize(v_visibility.xyz), texel_horizons ? 0.0 : v_visibility.w);
         set_self_normal(normalize(v_normal));
-        // bilinear at level 0 (no MIP chain: a read inside this branch needs no derivatives)
-        vec2 horizon_uv = u_horizon_map_uv == 0 ? v_uv0 : v_uv1;
-        vec4 horizon0 = texel_horizons ? textureLod(u_horizon_map, vec3(horizon_uv, 0.0), 0.0) : v_horizon0;
-        vec4 horizon1 = texel_horizons ? textureLod(u_horizon_map, vec3(horizon_uv, 1.0), 0.0) : v_horizon1;
-        for (int k = 0; k < 4; ++k) {
-            g_self_horizon[k] = horizon0[k];
-            g_self_horizon[k + 4] = horizon1[k];
+        if (texel_horizons) {
+            // bilinear at level 0 (no MIP chain: a read inside this branch needs no derivatives)
+            vec2 horizon_uv = u_horizon_map_uv == 0 ? v_uv0 : v_uv1;
+            g_self_sectors = MAP_HORIZON_SECTORS;
+            for (int layer = 0; layer < MAP_HORIZON_SECTORS / 4; ++layer) {
+                vec4 four = textureLod(u_horizon_map, vec3(horizon_uv, float(layer)), 0.0);
+                for (int k = 0; k < 4; ++k) g_self_horizon[4 * layer + k] = four[k];
+            }
+        } else {
+            g_self_sectors = HORIZON_SECTORS;
+            for (int k = 0; k < 4; ++k) {
+                g_self_horizon[k] = v_horizon0[k];
+                g_self_horizon[k + 4] = v_horizon1[k];
+            }
         }
         g_self_radiance = (albedo + specular_reflectance) / PI * irradiance;
     }
@@ -235,11 +242,13 @@ void main() {
 #if defined(METHOD_PREFILTERED)
         if (rsibr_lobe(i)) {
             Lobe baked = get_lobe(i);  // RSIBR's maps are baked from the residual, without lamps
+            g_self_below_hidden = !lobe_is_transmission(baked);
             radiance += scene_cap_lights(baked, wo, tbn) + lamps_radiance(baked, wo, tbn, v_position);
             continue;
         }
 #endif
         Lobe l = get_lobe(i);
+        g_self_below_hidden = !lobe_is_transmission(l);  // self_occlusion.glsl
         if (u_gltf_model == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
             // alpha = roughness^2 per pixel, stretched along the anisotropy direction (local x)
             // by KHR_materials_anisotropy (materials/gltf.py anisotropic_alphas).

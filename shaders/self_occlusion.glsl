@@ -4,8 +4,9 @@
 // sectors about the normal; SELF_NO_OCCLUSION in the cone's w: nothing hidden) sees the object
 // instead, whose radiance is g_self_radiance there. A lookup that averages the cube over a
 // footprint sees the horizon through it (self_visibility's footprint). Directions below the
-// surface (transmission) pass. scene.frag sets these per pixel; their defaults leave every lookup
-// as it is (the preview, RSIBR's bake).
+// surface pass for a transmission lobe and are hidden for a reflection lobe (g_self_below_hidden:
+// they point into the object). scene.frag sets these per pixel and lobe; their defaults leave
+// every lookup as it is (the preview, RSIBR's bake).
 const float SELF_NO_OCCLUSION = -2.0;
 const vec3 HORIZON_AXIS = vec3(1.0, 2.0, 3.0) / sqrt(14.0);
 vec4 g_self_cone = vec4(0.0, 0.0, 1.0, SELF_NO_OCCLUSION);
@@ -13,7 +14,12 @@ vec3 g_self_normal = vec3(0.0, 0.0, 1.0);
 vec3 g_self_tangent = vec3(1.0, 0.0, 0.0);  // the horizon's frame about g_self_normal (set_self_normal)
 vec3 g_self_bitangent = vec3(0.0, 1.0, 0.0);
 vec3 g_self_radiance = vec3(0.0);
-float g_self_horizon[HORIZON_SECTORS] = float[](0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+// The shading point's horizons: HORIZON_SECTORS of them from its vertices', MAP_HORIZON_SECTORS
+// from a horizon map (g_self_sectors says which).
+float g_self_horizon[MAP_HORIZON_SECTORS] = float[](0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+                                                   0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+int g_self_sectors = HORIZON_SECTORS;
+bool g_self_below_hidden = false;  // the lobe looked up reflects (scene.frag, per lobe)
 
 // The frame the horizon's azimuths are measured in (self_visibility.py horizon_frame).
 void horizon_frame(vec3 n, out vec3 t, out vec3 b) {
@@ -61,9 +67,9 @@ float split_sum_footprint(int dist, float alpha) {
 
 // The horizon's sine at azimuth phi: linear between the sectors' centres.
 float horizon_at(float phi) {
-    float x = mod(phi / (2.0 * PI) * float(HORIZON_SECTORS) - 0.5, float(HORIZON_SECTORS));
-    int first = clamp(int(floor(x)) % HORIZON_SECTORS, 0, HORIZON_SECTORS - 1);  // never out of bounds
-    return mix(g_self_horizon[first], g_self_horizon[(first + 1) % HORIZON_SECTORS], fract(x));
+    float x = mod(phi / (2.0 * PI) * float(g_self_sectors) - 0.5, float(g_self_sectors));
+    int first = clamp(int(floor(x)) % g_self_sectors, 0, g_self_sectors - 1);  // never out of bounds
+    return mix(g_self_horizon[first], g_self_horizon[(first + 1) % g_self_sectors], fract(x));
 }
 
 // The visible share of a lookup toward `dir` that averages `footprint` sr (0: one direction).
@@ -71,7 +77,8 @@ float self_visibility(vec3 dir, float footprint) {
     if (g_self_cone.w <= SELF_NO_OCCLUSION + 1e-3) return 1.0;
     vec3 d = normalize(dir);
     float sin_e = dot(d, g_self_normal);
-    if (!(sin_e > 0.0)) return 1.0;  // below the surface, or a degenerate normal (NaN)
+    if (sin_e <= 0.0) return g_self_below_hidden ? 0.0 : 1.0;  // below the surface
+    if (!(sin_e > 0.0)) return 1.0;  // a degenerate normal (NaN)
     float phi = atan(dot(d, g_self_bitangent), dot(d, g_self_tangent));
     float radius = footprint_radius(footprint, sin_e);
     float from_normal = acos(min(sin_e, 1.0));

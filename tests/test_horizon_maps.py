@@ -8,7 +8,7 @@ import pytest
 from test_self_visibility import _grid, assert_floor_ratios_follow, floor_occlusion_ratios
 
 from lobeview.scenes.horizon_maps import lightmap_horizon_map, lightmap_images, lightmap_objects, texel_horizons
-from lobeview.scenes.self_visibility import HORIZON_SECTORS, horizon_frame
+from lobeview.scenes.self_visibility import MAP_HORIZON_SECTORS, horizon_frame
 
 MAP = 64  # lightmap texels a side
 
@@ -41,25 +41,26 @@ def _wall_horizon_per_sector(point: np.ndarray) -> np.ndarray:
     <= 1, |x| <= 1.5): the mean over each sector of the wall top's elevation sine, 0 where the
     azimuth misses the wall (quadrature, the frame of horizon_frame about +y)."""
     tangent, bitangent = horizon_frame(np.array([0.0, 1.0, 0.0]))
-    phi = (np.arange(HORIZON_SECTORS * 400) + 0.5) / (HORIZON_SECTORS * 400) * 2.0 * np.pi
+    phi = (np.arange(MAP_HORIZON_SECTORS * 400) + 0.5) / (MAP_HORIZON_SECTORS * 400) * 2.0 * np.pi
     toward = np.cos(phi)[:, None] * tangent + np.sin(phi)[:, None] * bitangent
     to_wall = -toward[:, 2]
     distance = (point[2] + 1.0) / np.maximum(to_wall, 1e-12)  # along the floor to the wall's plane
     lateral = np.abs(point[0] + distance * toward[:, 0])
     hit = (to_wall > 0.0) & (lateral <= 1.5)
     sin_top = np.where(hit, 1.0 / np.sqrt(1.0 + distance**2), 0.0)
-    return sin_top.reshape(HORIZON_SECTORS, -1).mean(axis=1)
+    return sin_top.reshape(MAP_HORIZON_SECTORS, -1).mean(axis=1)
 
 
 def test_texel_horizons_are_the_walls_exact_horizons():
     """Every covered floor texel away from the chart's edge holds the wall's horizon per sector
-    (8 stratified rays a sector: mean error below 0.05, 95 % below 0.15, none above 0.35); the
-    lightmap and its objects are found; a lightmap that is not square is refused."""
+    (HORIZON_MAP_RAYS_PER_SECTOR stratified rays in each of MAP_HORIZON_SECTORS: mean error below
+    0.05, 95 % below 0.15, none above 0.35; measured 0.019, 0.097, 0.30); the lightmap and its
+    objects are found; a lightmap that is not square is refused."""
     scene, floor = _corner_scene()
     assert lightmap_images(scene) == [scene.materials[0].lightmap.image]
     assert lightmap_objects(scene, scene.materials[0].lightmap.image) == scene.objects
     horizons = texel_horizons(scene.objects, (MAP, MAP))
-    assert horizons.shape == (MAP, MAP, HORIZON_SECTORS) and horizons.dtype == np.float32
+    assert horizons.shape == (MAP, MAP, MAP_HORIZON_SECTORS) and horizons.dtype == np.float32
     # floor texel (row i, column j) centre -> uv1 -> the floor's (s, t) -> position
     rows, cols = np.mgrid[4 : MAP - 4, 4 : MAP // 2 - 4]
     u, v = (cols + 0.5) / MAP, (rows + 0.5) / MAP
@@ -67,7 +68,7 @@ def test_texel_horizons_are_the_walls_exact_horizons():
     s, t = (u - inset) / (0.5 - 2 * inset), (v - inset) / (1.0 - 2 * inset)
     points = np.stack([-1.5 + 3.0 * s, np.zeros_like(s), 1.0 - 2.0 * t], axis=-1).reshape(-1, 3)
     expected = np.array([_wall_horizon_per_sector(p) for p in points])
-    found = horizons[rows, cols].reshape(-1, HORIZON_SECTORS)
+    found = horizons[rows, cols].reshape(-1, MAP_HORIZON_SECTORS)
     error = np.abs(found - expected)
     assert expected.max() > 0.5  # near the wall, its side is high
     assert error.mean() < 0.05, error.mean()
@@ -130,7 +131,7 @@ def test_shaders_read_the_horizons_at_the_lightmap_coordinate(method, coordinate
     0.5 lit by the lightmap's E = pi), vis from the horizon map read bilinearly at the pixel's
     lightmap coordinate, not from the vertices. Without a lightmap (``texture``): the object's
     own map read at its texture coordinates (lit by the white sky's E = pi)."""
-    from lobeview.scenes.self_visibility import CONE_FLOATS, split_sum_footprint
+    from lobeview.scenes.self_visibility import split_sum_footprint
 
     if coordinates == "lightmap":
         scene, _ = _corner_scene()
@@ -149,7 +150,7 @@ def test_shaders_read_the_horizons_at_the_lightmap_coordinate(method, coordinate
     inset = 1.0 / MAP
     s, t = (points[:, 0] + 1.5) / 3.0, (1.0 - points[:, 2]) / 2.0
     uv1 = np.stack([inset + s * (0.5 - 2 * inset), inset + t * (1.0 - 2 * inset)], axis=-1)
-    cones = np.zeros((len(points), CONE_FLOATS))
+    cones = np.zeros((len(points), 4 + MAP_HORIZON_SECTORS))
     cones[:, :3] = [0.0, 1.0, 0.0]
     cones[:, 4:] = _bilinear_repeat(horizons.astype(np.float64), uv1)
     assert_floor_ratios_follow(ratio, points, cones, split_sum_footprint(0.05**2) if method == "prefiltered" else 0.0)
@@ -182,14 +183,14 @@ def test_a_large_atlas_is_traced_coarser_within_the_ray_budget():
     from lobeview.scenes.horizon_maps import HORIZON_MAP_RAYS_PER_SECTOR, horizon_map_size
 
     scene, _ = _corner_scene()
-    rays_per_texel = HORIZON_SECTORS * HORIZON_MAP_RAYS_PER_SECTOR
+    rays_per_texel = MAP_HORIZON_SECTORS * HORIZON_MAP_RAYS_PER_SECTOR
     covered = 0.5 * (1 - 2 / MAP) + 0.5 * (1 - 2 / MAP) * (1 - 4 / MAP)  # the two charts' uv area, about
     assert horizon_map_size(scene.objects, 512) == 512  # 0.9 x 512^2 x 64 = 15M rays: within 16M
     assert horizon_map_size(scene.objects, 2048) == 512
     assert horizon_map_size(scene.objects, 512, max_rays=int(covered * 128 * 128 * rays_per_texel) + 1000) == 128
     assert horizon_map_size(scene.objects, 512, max_rays=1) == 1
     image = scene.materials[0].lightmap.image
-    assert lightmap_horizon_map(scene, image).shape == (MAP, MAP, HORIZON_SECTORS)
+    assert lightmap_horizon_map(scene, image).shape == (MAP, MAP, MAP_HORIZON_SECTORS)
     with pytest.raises(ValueError, match="square"):
         lightmap_horizon_map(scene, np.zeros((MAP, MAP // 2, 3), np.float32))
 
@@ -316,3 +317,42 @@ def test_objects_that_hide_nothing_from_themselves_are_not_traced(monkeypatch):
     plane.uv1 = plane.mesh.uvs.copy()
     assert not texel_horizons([plane], (MAP, MAP)).any() and not traced
     assert texel_horizons([corner], (MAP, MAP)).any() and len(traced) == 1
+
+
+def test_map_sectors_resolve_a_corridors_open_azimuths():
+    """Why a horizon map holds MAP_HORIZON_SECTORS (16) sectors: at the floor of a corridor (walls
+    of height 1 at x -+0.2, 2 long) a low direction along it escapes, and so does everything
+    within 11.3 degrees of its axis, a crease's narrow open azimuths. With the axis at a 16-sector
+    centre, horizons traced in 16 sectors see the direction 10 degrees up along it as open; in 8,
+    whose sectors are twice as wide and linear between their centres, the walls on either side
+    of the open wedge raise its horizon and hide it (measured: 1.0 and 0.0; by the ray itself, 1)."""
+    import trimesh
+
+    from lobeview.scenes.self_visibility import HORIZON_SECTORS, horizon_visibility, traced_horizons
+
+    up = np.array([0.0, 1.0, 0.0])
+    tangent, bitangent = horizon_frame(up)
+    centre = 0.5 * 2.0 * np.pi / MAP_HORIZON_SECTORS  # the first 16-sector's centre
+    axis = np.cos(centre) * tangent + np.sin(centre) * bitangent
+    across = np.cross(up, axis)
+    boxes = []
+    for side in (-1.0, 1.0):  # two thin walls along the axis
+        wall = trimesh.creation.box(extents=(0.02, 1.0, 2.0))
+        frame = np.eye(4)
+        frame[:3, 0], frame[:3, 1], frame[:3, 2] = across, up, axis
+        frame[:3, 3] = side * 0.21 * across + 0.5 * up
+        wall.apply_transform(frame)
+        boxes.append(wall)
+    floor = trimesh.creation.box(extents=(3.0, 0.02, 3.0))
+    floor.apply_translation([0.0, -0.01, 0.0])
+    corridor = trimesh.util.concatenate([*boxes, floor])
+    point, extent = np.zeros((1, 3)), float(np.max(corridor.extents))
+    low = (np.cos(np.radians(10.0)) * axis + np.sin(np.radians(10.0)) * up)[None]
+    assert not corridor.ray.intersects_any(point + 1e-4 * up, low)  # the ray escapes
+    shares = {}
+    for sectors in (HORIZON_SECTORS, MAP_HORIZON_SECTORS):
+        horizons = traced_horizons(corridor, point, up[None], extent, 64, near_hit=1e-3, sectors=sectors)
+        cones = np.concatenate([[[0.0, 1.0, 0.0, 0.5]], horizons], axis=1)
+        shares[sectors] = float(horizon_visibility(low, cones, up[None], below_hidden=True)[0])
+    assert shares[MAP_HORIZON_SECTORS] > 0.9, shares
+    assert shares[HORIZON_SECTORS] < 0.5, shares

@@ -13,6 +13,7 @@ from conftest import run_compute_probe
 from lobeview.scenes.self_visibility import (
     CONE_FLOATS,
     HORIZON_SECTORS,
+    MAP_HORIZON_SECTORS,
     MIN_RAYS_PER_VERTEX,
     NO_OCCLUSION,
     cone_visibility,
@@ -138,11 +139,17 @@ def test_visibility_and_mix():
     assert horizon_visibility(above, horizons, normal) == 1.0
     assert horizon_visibility(below / np.linalg.norm(below), horizons, normal) == 0.0
     assert horizon_visibility(-normal, horizons, normal) == 1.0  # below the surface: transmission
+    grazing_below = np.array([0.0, 0.999, -0.0447])
+    assert horizon_visibility(grazing_below, horizons, normal, below_hidden=True) == 0.0  # a reflection's
+    assert horizon_visibility(-normal, horizons, normal, below_hidden=True) == 0.0
+    assert horizon_visibility(above, horizons, normal, below_hidden=True) == 1.0
     with np.errstate(invalid="ignore"):
         assert horizon_visibility(above, horizons, np.full(3, np.nan)) == 1.0  # a degenerate normal
+        assert horizon_visibility(above, horizons, np.full(3, np.nan), below_hidden=True) == 1.0
     no_cone = horizons.copy()
     no_cone[3] = NO_OCCLUSION
     assert horizon_visibility(below / np.linalg.norm(below), no_cone, normal) == 1.0
+    assert horizon_visibility(-normal, no_cone, normal, below_hidden=True) == 1.0  # nothing hidden: no stand-in
     mixed = self_occluded_incident(np.array([4.0, 4.0, 4.0]), np.array([1.0, 2.0, 3.0]), at_horizon, horizons, normal)
     share = float(horizon_visibility(at_horizon, horizons, normal))
     np.testing.assert_allclose(mixed, share * 4.0 + (1.0 - share) * np.array([1.0, 2.0, 3.0]))
@@ -350,22 +357,30 @@ def floor_occlusion_ratios(scene, method: str, inspect=None):
         renderer.release()
         ctx.release()
     assert not on.invalid.any() and not off.invalid.any()
-    floor_pixels = (on.object_id == 0) & (np.abs(on.normal[..., 1] - 1.0) < 1e-3) & (on.position[..., 2] > -0.95)
+    # the floor by position (a normal map tilts the G-buffer's normal), in front of the wall
+    floor_pixels = (on.object_id == 0) & (np.abs(on.position[..., 1]) < 1e-3) & (on.position[..., 2] > -0.95)
     assert floor_pixels.sum() > 2000
     ratio = on.radiance[floor_pixels].mean(axis=-1) / off.radiance[floor_pixels].mean(axis=-1)
     return ratio, on.position[floor_pixels].astype(np.float64), inspected
 
 
-def assert_floor_ratios_follow(ratio, points, cones, footprint) -> None:
+def assert_floor_ratios_follow(
+    ratio, points, cones, footprint, shading_normal=(0.0, 1.0, 0.0), both_regimes: bool = True
+) -> None:
     """The floor's self-occluded / unoccluded ratios equal 0.5 + 0.5 vis (the hidden part sees
-    the point itself: F0 0.5 lit by E = pi), vis the numpy horizons ``cones`` at the pixels
-    ``points`` toward their mirror direction about +y through a lookup of ``footprint`` sr: 99 %
-    within 0.03, mean within 0.01, with both regimes (mostly hidden, open) among the pixels."""
+    the point itself: F0 0.5 lit by E = pi), vis the numpy horizons ``cones`` about the floor's
+    normal +y at the pixels ``points`` toward their mirror direction about ``shading_normal`` (a
+    normal map's) through a lookup of ``footprint`` sr, a reflection's (hidden below the floor):
+    99 % within 0.03, mean within 0.01, with both regimes (mostly hidden, open) among the pixels
+    unless ``both_regimes`` is False."""
     view = FLOOR_CAMERA.position - points
     view /= np.linalg.norm(view, axis=1, keepdims=True)
-    mirror = view * [-1.0, 1.0, -1.0]
-    expected = 0.5 + 0.5 * horizon_visibility(mirror, cones, np.array([0.0, 1.0, 0.0]), footprint=footprint)
-    assert (expected < 0.6).sum() > 100 and (expected > 0.95).sum() > 100
+    normal = np.asarray(shading_normal, dtype=np.float64) / np.linalg.norm(shading_normal)
+    mirror = 2.0 * (view @ normal)[:, None] * normal - view
+    floor_normal = np.array([0.0, 1.0, 0.0])
+    visible = horizon_visibility(mirror, cones, floor_normal, footprint=footprint, below_hidden=True)
+    expected = 0.5 + 0.5 * visible
+    assert (expected < 0.6).sum() > 100 and ((expected > 0.95).sum() > 100 or not both_regimes)
     error = np.abs(ratio - expected)
     assert np.quantile(error, 0.99) < 0.03, np.quantile(error, [0.5, 0.9, 0.99, 1.0])
     assert np.mean(error) < 0.01
@@ -381,8 +396,6 @@ def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall(method):
     pixel's position and its mirror direction (measured: 99 % within 5e-4, the worst 1.4e-3).
     prefiltered-rsibr's maps hold the lobe over the surroundings alone too: its hidden share is
     its split-sum footprint's (rsibr.glsl), the same ratio (before, 1 at every pixel)."""
-    import trimesh
-
     from lobeview.materials.spec import validate
     from lobeview.scenes.meshes import merge_meshes
     from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
@@ -400,10 +413,21 @@ def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall(method):
 
     with pytest.warns(UserWarning, match="no usable lightmap"):
         ratio, points, _ = floor_occlusion_ratios(scene, method)
+    # numpy: the cone and horizons at each pixel's position, the mirror direction of the view about +y
+    assert_floor_ratios_follow(
+        ratio,
+        points,
+        _floor_cones_at(points, floor, floor_cones),
+        split_sum_footprint(0.05**2) if method == "prefiltered-rsibr" else 0.0,
+    )
 
-    # numpy: the cone and horizons at each pixel's position (barycentric on the floor's triangles, as the
-    # rasteriser interpolates), the mirror direction of the view about +y
-    steps = 30
+
+def _floor_cones_at(points: np.ndarray, floor, floor_cones: np.ndarray, steps: int = 30) -> np.ndarray:
+    """The cones and horizons of the floor's vertices (``_grid`` of ``steps`` cells a side over
+    x in [-1.5, 1.5], z in [1, -1]) at floor ``points``, barycentric on its triangles as the
+    rasteriser interpolates."""
+    import trimesh
+
     cell_i = np.clip(np.floor((points[:, 0] + 1.5) / 3.0 * steps), 0, steps - 1).astype(int)
     cell_j = np.clip(np.floor((1.0 - points[:, 2]) / 2.0 * steps), 0, steps - 1).astype(int)
     first = 2 * (cell_i * steps + cell_j)  # the cell's two triangles: first, first + 1
@@ -412,10 +436,48 @@ def test_shaders_follow_the_numpy_horizons_on_a_floor_beside_a_wall(method):
     in_first = np.all(bary_first >= -1e-6, axis=1)
     triangle = np.where(in_first, first, first + 1)
     bary = trimesh.triangles.points_to_barycentric(floor_positions[floor.indices[triangle]], points)
-    cone = np.einsum("pk,pkc->pc", bary, floor_cones[floor.indices[triangle]].astype(np.float64))
-    assert_floor_ratios_follow(
-        ratio, points, cone, split_sum_footprint(0.05**2) if method == "prefiltered-rsibr" else 0.0
-    )
+    return np.einsum("pk,pkc->pc", bary, floor_cones[floor.indices[triangle]].astype(np.float64))
+
+
+def test_a_reflection_below_the_surface_sees_the_object_itself():
+    """The floor beside a wall again, its shading normal tilted 10 degrees away from the camera
+    by a uniform normal map: at the floor's far half the mirror direction about that normal lies
+    below the floor (a normal map takes reflections there), which a reflection lobe's lookups
+    take as hidden, seeing the object (the stand-in radiance, F0 0.5 lit by E = pi: ratio 0.5);
+    nearer, 0.5 + 0.5 vis by the horizons as before. Before, every direction below the surface
+    passed (ratio 1 on the far half)."""
+    from lobeview.materials.spec import validate
+    from lobeview.scenes.meshes import merge_meshes
+    from lobeview.scenes.scene import NEAREST, Scene, SceneMaterial, SceneObject, TextureSlot
+    from lobeview.scenes.self_visibility import object_visibility_cones
+
+    floor = _grid((-1.5, 0.0, 1.0), (3.0, 0.0, 0.0), (0.0, 0.0, -2.0), 30)  # normal +y, tangent +x
+    wall = _grid((-1.5, 0.0, -1.0), (3.0, 0.0, 0.0), (0.0, 1.0, 0.0), 30)
+    mesh = merge_meshes([floor, wall], "corner")
+    tilt = np.radians(10.0)
+    # tangent space (0, sin, cos): toward the bitangent n x t = -z, away from the camera at +z
+    texel = np.round((np.array([0.0, np.sin(tilt), np.cos(tilt)]) * 0.5 + 0.5) * 255)
+    normal_map = np.tile(np.append(texel, 255).astype(np.uint8), (4, 4, 1))
+    metal = validate({"model": "gltf", "base_color": [0.5, 0.5, 0.5], "metallic": 1.0, "roughness": 0.05})
+    textures = {"normal": TextureSlot(normal_map, mag_filter=NEAREST, min_filter=NEAREST)}
+    scene = Scene([SceneObject("corner", mesh, 0)], [SceneMaterial("metal", metal, textures=textures)])
+    scene.objects[0].planar_reflector = False
+    floor_cones = object_visibility_cones(scene.objects[0])[: len(floor.positions)]
+
+    with pytest.warns(UserWarning, match="no usable lightmap"):
+        ratio, points, _ = floor_occlusion_ratios(scene, "lobe-7")
+    decoded = texel[:3] / 255.0 * 2.0 - 1.0  # the texel as the shader reads it: (0, sin, cos) in tangent space
+    shading_normal = decoded[0] * np.array([1.0, 0.0, 0.0]) + decoded[1] * np.array([0.0, 0.0, -1.0])
+    shading_normal = shading_normal + decoded[2] * np.array([0.0, 1.0, 0.0])
+    view = FLOOR_CAMERA.position - points
+    view /= np.linalg.norm(view, axis=1, keepdims=True)
+    normal = shading_normal / np.linalg.norm(shading_normal)
+    below = (2.0 * (view @ normal)[:, None] * normal - view)[:, 1] < -0.02
+    assert below.sum() > 300 and (~below).sum() > 300
+    np.testing.assert_allclose(np.median(ratio[below]), 0.5, atol=0.01)
+    cones = _floor_cones_at(points, floor, floor_cones)
+    # above the floor the tilted mirror leans toward the wall: partly hidden, none fully open
+    assert_floor_ratios_follow(ratio, points, cones, 0.0, shading_normal, both_regimes=False)
 
 
 def test_cones_are_cached_by_mesh_and_a_damaged_file_is_traced_again(tmp_path, monkeypatch):
@@ -478,10 +540,13 @@ def test_a_mesh_loaded_again_is_not_traced_again_without_a_cache_folder(monkeypa
     self_visibility.forget_traced_cones()
 
 
-def test_glsl_self_visibility_and_split_sum_footprint_equal_numpy():
+@pytest.mark.parametrize("sectors", [HORIZON_SECTORS, MAP_HORIZON_SECTORS])
+def test_glsl_self_visibility_and_split_sum_footprint_equal_numpy(sectors):
     """self_occlusion.glsl's self_visibility (the cap of a lookup's footprint against per-sector
-    horizons) and split_sum_footprint through a compute probe, against the numpy twin, for random
-    normals, directions above and below them, horizons, footprints 0-2 sr and both distributions."""
+    horizons, as many sectors as vertices or a horizon map hold) and split_sum_footprint through a
+    compute probe, against the numpy twin, for random normals, directions above and below them
+    (below: hidden for a reflection lobe, passing for a transmission lobe), horizons, footprints
+    0-2 sr and both distributions."""
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.interface import DISTRIBUTIONS
     from lobeview.viewer.shaders import ProgramCache
@@ -493,15 +558,18 @@ def test_glsl_self_visibility_and_split_sum_footprint_equal_numpy():
     directions = rng.normal(size=(n, 3)) + 1.5 * normals  # mostly above the surface
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
     footprints = np.where(rng.random(n) < 0.2, 0.0, rng.uniform(0.0, 2.0, n) ** 2)
-    horizons = rng.uniform(-0.1, 0.9, (n, HORIZON_SECTORS))
+    horizons = rng.uniform(-0.1, 0.9, (n, sectors))
     kinds = rng.choice(["ggx", "beckmann"], n)
     alphas = rng.uniform(0.002, 1.0, n)
-    probe = np.zeros((n, 5, 4), np.float32)
+    horizon_rows = MAP_HORIZON_SECTORS // 4
+    probe = np.zeros((n, 3 + horizon_rows, 4), np.float32)
     probe[:, 0, :3], probe[:, 0, 3] = directions, footprints
-    probe[:, 1, :3] = normals
-    probe[:, 2], probe[:, 3] = horizons[:, :4], horizons[:, 4:]
-    probe[:, 4, 0] = [DISTRIBUTIONS[k] for k in kinds]
-    probe[:, 4, 1] = alphas
+    probe[:, 1, :3], probe[:, 1, 3] = normals, sectors
+    probe[:, 2 : 2 + horizon_rows] = np.pad(horizons, ((0, 0), (0, MAP_HORIZON_SECTORS - sectors))).reshape(n, -1, 4)
+    reflects = rng.random(n) < 0.5
+    probe[:, -1, 0] = [DISTRIBUTIONS[k] for k in kinds]
+    probe[:, -1, 1] = alphas
+    probe[:, -1, 2] = reflects
     ctx = create_headless_context()
     try:
         program = ProgramCache(ctx).compute("self_visibility_probe.comp")
@@ -510,13 +578,16 @@ def test_glsl_self_visibility_and_split_sum_footprint_equal_numpy():
         ctx.release()
     cones = np.concatenate([np.tile([0.0, 0.0, 1.0, 0.5], (n, 1)), horizons], axis=1)
     expected = horizon_visibility(probe[:, 0, :3].astype(np.float64), cones, probe[:, 1, :3].astype(np.float64),
-                                  footprint=probe[:, 0, 3].astype(np.float64))  # fmt: skip
+                                  footprint=probe[:, 0, 3].astype(np.float64), below_hidden=reflects)  # fmt: skip
+    below = np.sum(probe[:, 0, :3] * probe[:, 1, :3], axis=1) <= 0.0
+    assert (below & reflects).sum() > 20 and np.all(expected[below & reflects] == 0.0)
+    assert np.all(expected[below & ~reflects] == 1.0)
     assert 0.1 < np.mean((expected > 0.02) & (expected < 0.98)) < 0.9  # partial shares covered
     # float32: acos near +-1 in the cap formula loses up to 0.005 of share on the smallest caps
     # (the soft edge's alone, 0.1-0.2 rad); 99 % of items within 2e-3
     np.testing.assert_allclose(out[:, 0], expected, atol=8e-3)
     assert np.quantile(np.abs(out[:, 0] - expected), 0.99) < 2e-3
     footprint = np.array(
-        [split_sum_footprint(a, k) for a, k in zip(probe[:, 4, 1].astype(np.float64), kinds, strict=True)]
+        [split_sum_footprint(a, k) for a, k in zip(probe[:, -1, 1].astype(np.float64), kinds, strict=True)]
     )
     np.testing.assert_allclose(out[:, 1], footprint, rtol=1e-4, atol=1e-6)

@@ -68,6 +68,7 @@ from lobeview.scenes.self_visibility import (
     HORIZON_MIN_COS,
     HORIZON_SECTORS,
     HORIZON_SOFT_EDGE,
+    MAP_HORIZON_SECTORS,
     MAX_FOOTPRINT_RADIUS,
     SPLIT_SUM_MAX_RADIUS,
     SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN,
@@ -251,7 +252,8 @@ SHADER_CONSTANTS: dict = {
     "LOBE_DIRECT_AREA_PER_MEDIAN2": LOBE_DIRECT_AREA_PER_MEDIAN2,
     # scenes/self_visibility.py: the horizon seen through a lookup's footprint
     "HORIZON_MIN_COS": float(HORIZON_MIN_COS),
-    "HORIZON_SECTORS": HORIZON_SECTORS,
+    "HORIZON_SECTORS": HORIZON_SECTORS,  # at vertices
+    "MAP_HORIZON_SECTORS": MAP_HORIZON_SECTORS,  # in a horizon map (u_horizon_map's layers, 4 each)
     "HORIZON_SOFT_EDGE": float(HORIZON_SOFT_EDGE),
     "AZIMUTH_TAP": float(AZIMUTH_TAP),
     "MAX_FOOTPRINT_RADIUS": float(MAX_FOOTPRINT_RADIUS),

@@ -28,6 +28,7 @@ from lobeview.scenes.scene import (
     SceneMaterial,
     TextureSlot,
 )
+from lobeview.scenes.self_visibility import MAP_HORIZON_SECTORS
 
 from .interface import (
     ALPHA_MODES,
@@ -132,7 +133,9 @@ class SceneShading(ShadingBinder):
         self._unmappable_lightmaps: set[int] = set()  # non-square: warned about once
         self.missing_horizon_maps = 0  # maps the cache lacked (not traced yet)
         self._uv0_mapped: list | None = None  # scenes/horizon_maps.py uv0_mapped_objects, found once
-        self._no_horizon_map = ctx.texture_array((1, 1, 2), 4, np.zeros(8, np.float32).tobytes(), dtype="f4")
+        self._no_horizon_map = ctx.texture_array(
+            (1, 1, MAP_HORIZON_SECTORS // 4), 4, np.zeros(MAP_HORIZON_SECTORS, np.float32).tobytes(), dtype="f4"
+        )
 
     def set_pass_state(self, program, method: Method, lod_bias: float | None, seed: int) -> None:
         """ShadingBinder's pass state and the scene's lamps (shaders/lamps.glsl)."""
@@ -195,8 +198,9 @@ class SceneShading(ShadingBinder):
 
     def horizon_map_texture(self, key) -> moderngl.TextureArray:
         """The horizon map of a lightmap (``key`` its image) or of an unbaked object (``key`` its
-        index) as a two-layer RGBA32F array (sectors 0-3, 4-7), linear, no MIP chain, repeating
-        as the lightmap; a 1 x 1 one of zeros for None or a key without a map."""
+        index) as an RGBA32F array of MAP_HORIZON_SECTORS / 4 layers (sectors 0-3, 4-7, ...),
+        linear, no MIP chain, repeating as the lightmap; a 1 x 1 one of zeros for None or a key
+        without a map."""
         if isinstance(key, int):
             horizons = self.uv0_horizon_maps.get(key)
         else:
@@ -206,8 +210,10 @@ class SceneShading(ShadingBinder):
 
         def upload():
             height, width = horizons.shape[:2]
-            layers = np.ascontiguousarray(np.stack([horizons[..., :4], horizons[..., 4:]]), dtype=np.float32)
-            texture = self.ctx.texture_array((width, height, 2), 4, layers.tobytes(), dtype="f4")
+            count = horizons.shape[-1] // 4
+            layers = np.moveaxis(horizons.reshape(height, width, count, 4), 2, 0)
+            layers = np.ascontiguousarray(layers, dtype=np.float32)
+            texture = self.ctx.texture_array((width, height, count), 4, layers.tobytes(), dtype="f4")
             texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
             texture.repeat_x = texture.repeat_y = True
             return horizons, texture
