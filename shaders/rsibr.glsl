@@ -99,10 +99,10 @@ vec3 rsibr_radiance(vec3 wo, mat3 tbn) {
     // split-sum lookups do (prefiltered.glsl). Without a cone (the preview, a convex object) it is 1.
     float visible = 0.0;
     int baked = 0;
+    g_self_below_hidden = true;  // reflection lobes only (materials/rsibr.py)
     for (int i = 0; i < u_lobe_count; ++i) {
         if (!rsibr_lobe(i)) continue;
         Lobe l = get_lobe(i);
-        g_self_below_hidden = true;  // reflection lobes only (materials/rsibr.py)
         visible += self_visibility(r, split_sum_footprint(l.dist, sqrt(l.ax * l.ay)));
         baked += 1;
     }

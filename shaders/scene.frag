@@ -239,16 +239,14 @@ void main() {
     VolumeShading volume = volume_shading(view, tbn, dielectric_f0, specular_weight);
     volume.enabled = volume.enabled && u_gltf_model == 1;
     for (int i = 0; i < u_lobe_count; ++i) {
+        Lobe l = get_lobe(i);
+        g_self_below_hidden = !lobe_is_transmission(l);  // self_occlusion.glsl
 #if defined(METHOD_PREFILTERED)
-        if (rsibr_lobe(i)) {
-            Lobe baked = get_lobe(i);  // RSIBR's maps are baked from the residual, without lamps
-            g_self_below_hidden = !lobe_is_transmission(baked);
-            radiance += scene_cap_lights(baked, wo, tbn) + lamps_radiance(baked, wo, tbn, v_position);
+        if (rsibr_lobe(i)) {  // RSIBR's maps are baked from the residual, without lamps
+            radiance += scene_cap_lights(l, wo, tbn) + lamps_radiance(l, wo, tbn, v_position);
             continue;
         }
 #endif
-        Lobe l = get_lobe(i);
-        g_self_below_hidden = !lobe_is_transmission(l);  // self_occlusion.glsl
         if (u_gltf_model == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
             // alpha = roughness^2 per pixel, stretched along the anisotropy direction (local x)
             // by KHR_materials_anisotropy (materials/gltf.py anisotropic_alphas).
