@@ -1,7 +1,8 @@
 // Bright sources taken out of the radiance cube (scenes/bright_sources.py), integrated per lobe
-// by deterministic two-strategy MIS (numpy reference: materials/cap_lights.py
-// integrate_cap_light): CAP_POINTS points uniform over the cap and CAP_LOBE_POINTS points from
-// the lobe's sampler, both on the golden-ratio lattice, balance heuristic.
+// (numpy reference: materials/cap_lights.py integrate_cap_light): a cap not much wider than the
+// lobe by a product Gauss rule over the cap, a wider one by deterministic two-strategy MIS,
+// CAP_POINTS points uniform over the cap and CAP_LOBE_POINTS points from the lobe's sampler, both
+// on the golden-ratio lattice, balance heuristic.
 #define MAX_CAP_LIGHTS 8
 #define CAP_POINTS 8
 #define CAP_LOBE_POINTS 8
@@ -129,19 +130,67 @@ ivec3 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o, float inner_
     return ivec3(cap_points, ratio >= LOBE_POINTS_FROM ? lobe_points : 0, 0);
 }
 
+// materials/cap_lights.py gauss_cap_rule: (rings, azimuths) of the product Gauss rule for a cap
+// not much wider than the lobe, (0, 0) where the two-strategy sum integrates it.
+ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o) {
+#if defined(HAS_RATIONAL)
+    if (l.type == LOBE_RATIONAL) return ivec2(0);
+#endif
+#if defined(HAS_MEASURED)
+    if (l.type == LOBE_MEASURED) return ivec2(0);
+#endif
+    float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
+    float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
+    // GAUSS_RULES
+    if (ratio < 0.01) return ivec2(1, 1);
+    if (ratio < 0.2) return ivec2(1, 4);
+    if (ratio < 0.35) return ivec2(2, 6);
+    if (ratio < 0.6) return ivec2(3, 6);
+    if (ratio < 1.0) return ivec2(3, 8);
+    return ivec2(0);
+}
+
+// materials/cap_lights.py gauss_legendre_unit: node i of the n-point rule on [0, 1] (xy: node,
+// weight), n = 1..3.
+vec2 gauss_node(int i, int n) {
+    if (n == 1) return vec2(0.5, 1.0);
+    if (n == 2) return vec2(i == 0 ? 0.21132486540518713 : 0.7886751345948129, 0.5);
+    if (i == 1) return vec2(0.5, 0.4444444444444444);
+    return vec2(i == 0 ? 0.1127016653792583 : 0.8872983346207417, 0.2777777777777778);
+}
+
 // The integral of f cos h over the cap (axis, cos_radius) of unit radiance and edge profile h
 // (inner_fraction 1: uniform); one_minus_cos = 1 - cos_radius, passed in because a distant
 // lamp's tiny cap needs it without cancellation. The cap points follow the profile.
 vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float one_minus_cos, float inner_fraction) {
     Lobe l = footprint_lobe(lobe, one_minus_cos);
-    ivec3 counts = cap_point_counts(l, cos_radius, wo.z, inner_fraction);
-    bool power = counts.z == 1;
-    float cap_density = float(counts.x) / (2.0 * PI * one_minus_cos * (0.5 * (1.0 + inner_fraction)));
     vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
     vec3 t = normalize(cross(helper, axis));
     vec3 b = cross(axis, t);
     mat3 to_local = transpose(tbn);
     vec3 sum = vec3(0.0);
+    float lit_solid_angle = 2.0 * PI * one_minus_cos * (0.5 * (1.0 + inner_fraction));
+    ivec2 rule = gauss_cap_rule(l, cos_radius, wo.z);
+    if (rule.x > 0) {  // materials/cap_lights.py gauss_cap_integral
+        for (int i = 0; i < rule.x; ++i) {
+            vec2 node = gauss_node(i, rule.x);
+            float u1 = profile_area_fraction(node.x, inner_fraction);
+            float cos_t = 1.0 - u1 * one_minus_cos;
+            float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
+            vec3 ring = vec3(0.0);
+            for (int j = 0; j < rule.y; ++j) {
+                float phi = 2.0 * PI * (float(j) + 0.5) / float(rule.y);
+                vec3 wi = to_local * (sin_t * (cos(phi) * t + sin(phi) * b) + cos_t * axis);
+                vec3 f = lobe_eval(l, wi, wo);
+                ring += f * abs(wi.z);
+            }
+            sum += ring * node.y;
+        }
+        return sum * (lit_solid_angle / float(rule.y));
+    }
+    ivec3 counts = cap_point_counts(l, cos_radius, wo.z, inner_fraction);
+    bool power = counts.z == 1;
+    float cap_density = float(counts.x) / lit_solid_angle;
     for (int i = 0; i < counts.x; ++i) {
         // materials/cap_lights.py cap_xi: symmetric without lobe points, the lattice with them
         vec2 u = counts.y == 0 || counts.x == 1 ? symmetric_cap_point(i, counts.x) : cap_lattice_point(i, counts.x);

@@ -83,6 +83,45 @@ def test_cap_light_integral_against_independent_estimates(name, lobe):
                 assert np.allclose(coarse, truth, rtol=0.15), case
 
 
+def test_caps_about_as_wide_as_the_lobe_against_random_mis():
+    """Caps of 0.2-25 degrees up to as wide as the lobe (q < GAUSS_BELOW), anywhere from the
+    lobe's peak to beyond its edge, on GGX / Beckmann lobes of alpha 0.01-0.5 seen at 0-80
+    degrees, uniform and soft-edged: integrate_cap_light (the product Gauss rule there) within 1.5 %
+    of a 100 000-sample random MIS estimate, relative to the value with the cap on the lobe's
+    peak (the scale of the highlight). The two-strategy lattice sum it replaced was 9.7 % off at
+    the 95th percentile for q in 0.2-0.35 (a lobe's lattice points landing in the cap or not),
+    12 % at worst."""
+    from lobeview.materials.cap_lights import GAUSS_BELOW, cap_width_ratio
+
+    rng = np.random.default_rng(7)
+    errors = []
+    while len(errors) < 40:
+        kind = "ggx" if rng.random() < 0.7 else "beckmann"
+        lobe = _microfacet(kind, float(np.exp(rng.uniform(np.log(0.01), np.log(0.5)))))
+        theta_o = rng.uniform(0.0, 80.0)
+        wo = np.array([np.sin(np.radians(theta_o)), 0.0, np.cos(np.radians(theta_o))])
+        mirror = reflect(wo, np.array([0.0, 0.0, 1.0]))
+        radius = float(np.exp(rng.uniform(np.log(0.2), np.log(25.0))))
+        inner = 1.0 if rng.random() < 0.7 else 0.6
+        peak = CapLight(mirror, np.cos(np.radians(radius)), np.ones(3), inner)
+        ratio = cap_width_ratio(lobe, peak, float(wo[2]))
+        if ratio >= GAUSS_BELOW:
+            continue
+        width = np.degrees(peak.radius / ratio)  # the lobe's width at this view
+        off = np.radians(rng.uniform(0.0, 1.5) * (radius + width))
+        phi = rng.uniform(0.0, 2.0 * np.pi)
+        side = np.sin(phi) * np.array([0.0, 1.0, 0.0]) + np.cos(phi) * np.cross(mirror, [0.0, 1.0, 0.0])
+        light = CapLight(np.cos(off) * mirror + np.sin(off) * side, peak.cos_radius, np.ones(3), inner)
+        truth = _monte_carlo(lobe, wo, light, n=100_000)[0]
+        scale = max(_monte_carlo(lobe, wo, peak, n=100_000)[0], truth)
+        if scale <= 0.0:
+            continue
+        got = integrate_cap_light(lobe, wo, light)[0]
+        errors.append((abs(got - truth) / scale, lobe.distribution, theta_o, radius, np.degrees(off), ratio))
+    worst = max(errors, key=lambda e: e[0])
+    assert worst[0] < 0.015, worst
+
+
 @pytest.mark.parametrize("inner_fraction", [0.0, 0.6])
 def test_soft_edged_caps_against_independent_estimates(inner_fraction):
     """A cap whose radiance falls linearly (in cos) to its rim, as a soft box: integrate_cap_light
