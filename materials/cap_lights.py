@@ -245,9 +245,11 @@ def gauss_cap_integral(lobe, wo: np.ndarray, light: CapLight, rings: int, azimut
     """The cap integral by the product Gauss rule: nodes at the profile's area fractions of the
     Gauss-Legendre points (so the points follow the edge profile, as the two-strategy sum's cap
     points do), azimuths (j + 1/2) / azimuths, each point weighted by the lit solid angle times
-    its ring's weight over ``azimuths``."""
+    its ring's weight over ``azimuths``; a rule of one point takes the axis."""
     frame = np.eye(3) if frame is None else np.asarray(frame, dtype=np.float64)
     nodes, weights = gauss_legendre_unit(rings)
+    # A single point lies on the axis (the symmetric rule for a cap tiny against the lobe).
+    nodes = np.zeros(1) if rings * azimuths == 1 else nodes
     u1 = np.repeat(profile_area_fraction(nodes, light.inner_fraction), azimuths)
     u2 = np.tile((np.arange(azimuths) + 0.5) / azimuths, rings)
     wi = light.points(u1, u2) @ frame

@@ -174,7 +174,8 @@ vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, flo
     if (rule.x > 0) {  // materials/cap_lights.py gauss_cap_integral
         for (int i = 0; i < rule.x; ++i) {
             vec2 node = gauss_node(i, rule.x);
-            float u1 = profile_area_fraction(node.x, inner_fraction);
+            // one point: on the axis
+            float u1 = rule.y == 1 ? 0.0 : profile_area_fraction(node.x, inner_fraction);
             float cos_t = 1.0 - u1 * one_minus_cos;
             float sin_t = sqrt(max(1.0 - cos_t * cos_t, 0.0));
             vec3 ring = vec3(0.0);
