@@ -142,7 +142,7 @@ ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o) {
     float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
     float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
     // GAUSS_RULES
-    if (ratio < 0.01) return ivec2(1, 1);
+    if (ratio < 0.05) return ivec2(1, 1);
     if (ratio < 0.2) return ivec2(1, 4);
     if (ratio < 0.35) return ivec2(2, 6);
     if (ratio < 0.6) return ivec2(3, 6);
