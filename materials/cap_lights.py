@@ -39,33 +39,24 @@ import numpy as np
 
 from .patterns import GOLDEN_LATTICE_STEP, LATTICE_U2_START, lattice_xi
 
-CAP_POINTS = 8  # at most this many cap points per light and lobe (shaders/cap_lights.glsl)
-LOBE_POINTS = 8  # lobe points per light and lobe, where the lobe is narrow against the cap
-# Fewer points where the cap is small against the lobe (cap_point_counts): with q = the cap's
-# radius / the lobe's width 2 atan(2 sqrt(ax ay)) cos(theta_o) (reflected lobes narrow towards
-# grazing views), ceil(CAP_SPREAD q) cap points (one, on the axis, for a sun on a glossy lobe: f
-# hardly changes over the cap) and lobe points only from q = LOBE_POINTS_FROM on (below it they
-# would almost never fall inside the cap). All 8 + 8 for every light made a lobe-7 frame 3.5x
-# slower under a studio's four softboxes (llvmpipe); this rule keeps the test's worst case at
-# 14 % (2 CAP_POINTS q without the view's cosine: 52 %, a 5-degree cap on a grazing GGX 0.1 lobe).
-CAP_SPREAD = 16.0
-# A soft-edged cap (a soft box, 11-25 degrees) takes twice the points and twice the spread: with
-# 8 + 8 the deterministic sum's error showed as blotches and doubled discs inside the boxes'
-# reflections (builtin:studio, 128-pixel spheres against the reference: gold-ggx 7.8 %,
-# alanod-2000gs-1lobe 7.4, brushed-steel-beckmann 10.9 with 8 + 8; 5.1 / 4.0 / 6.7 with 16 + 16;
-# frame time 2.3x that of the cube without the lights on llvmpipe, docs/measurements.md).
+CAP_POINTS = 8  # cap points per light and lobe of a lobe without a width (Rational, measured)
+LOBE_POINTS = 8  # ... and lobe points
+# Soft-edged caps (soft boxes) of such lobes take twice as many: with 8 + 8 the deterministic
+# sum's error showed as blotches inside the boxes' reflections (builtin:studio, fifteenth session).
 SOFT_CAP_POINTS = 16
 SOFT_LOBE_POINTS = 16
-SOFT_CAP_SPREAD = 32.0
 MIN_VIEW_COSINE = 0.1
-LOBE_POINTS_FROM = 0.25
-# A lobe narrow against the cap (q >= NARROW_FROM: chrome in a soft box) takes NARROW_LOBE_POINTS
-# lobe points and NARROW_CAP_POINTS cap points combined by the power heuristic (Veach 1997, Eq.
-# 9.13, beta = 2): inside a uniform cap f cos / p is nearly constant over the lobe's samples, while
-# with the balance heuristic each of 8 cap points that lands in the lobe's core added up to 1/8 of
-# its albedo, so the sum jumped by -9 / +12 % from pixel to pixel (chrome under builtin:studio;
-# 1 % with these). The cap points stay for the lobe's tail where its core misses the cap.
-NARROW_FROM = 2.0
+# A lobe no wider than the cap (q >= NARROW_FROM, q = the cap's radius / the lobe's width
+# 2 atan(2 sqrt(ax ay)) cos(theta_o): reflected lobes narrow towards grazing views; chrome in a
+# soft box) takes NARROW_LOBE_POINTS lobe points and NARROW_CAP_POINTS cap points combined by the
+# power heuristic (Veach 1997, Eq. 9.13, beta = 2): inside a uniform cap f cos / p is nearly
+# constant over the lobe's samples, while with the balance heuristic each of 8 cap points that
+# lands in the lobe's core added up to 1/8 of its albedo (-9 / +12 % from pixel to pixel, chrome
+# under builtin:studio; 1 % with these). The cap points stay for the lobe's tail where its core
+# misses the cap. From q = 1 (was 2, with 8 + 8 points by the balance heuristic between 1 and 2:
+# 150 random caps with q in 1-2 at 7.9 % / 12 % error at the 95th percentile / worst, 3.8 / 9.6 %
+# with these 8 + 16; narrower caps take the Gauss rule below).
+NARROW_FROM = 1.0
 NARROW_LOBE_POINTS = 16
 NARROW_CAP_POINTS = 8
 # A cap not much wider than the lobe (q < GAUSS_BELOW) is integrated over the cap alone by a
@@ -78,11 +69,11 @@ NARROW_CAP_POINTS = 8
 # with the cap on the lobe's peak). The rule's rings x azimuths by q, the fewest points whose
 # error on those caps is <= 0.6 % at the 95th percentile and <= 1 % at worst (azimuths count more
 # than rings: 3 x 8 equals 4 x 8 up to q = 1; docs/measurements.md). Beyond q = 1 a Gauss rule
-# of 24 points is no better than the two-strategy sum (6 against 7.6 %), which stays there.
+# of 24 points is no better than the two-strategy sum (6 against 7.6 %): the NARROW_* sum.
 # One point on the axis up to q = 0.05 (second order in q: 0.17 / 0.35 % there, 0.63 / 0.96 up
 # to 0.1, against a 3 x 16 rule).
 GAUSS_RULES = ((0.05, 1, 1), (0.2, 1, 4), (0.35, 2, 6), (0.6, 3, 6), (1.0, 3, 8))
-GAUSS_BELOW = GAUSS_RULES[-1][0]
+GAUSS_BELOW = GAUSS_RULES[-1][0]  # = NARROW_FROM: every cap of a lobe with a width has a rule
 GAUSS_RINGS = 3  # Gauss-Legendre rules of 1-3 nodes (shaders/cap_lights.glsl gauss_node)
 
 
@@ -262,20 +253,15 @@ def gauss_cap_integral(lobe, wo: np.ndarray, light: CapLight, rings: int, azimut
 
 
 def cap_point_counts(lobe, light: CapLight, cos_theta_o: float = 1.0) -> tuple[int, int, bool]:
-    """(cap points, lobe points, power heuristic) for ``lobe`` under ``light`` seen at
-    cos(theta_o) (the rules above): all of them for lobes without a microfacet width (the
-    Rational BRDF)."""
-    soft = light.inner_fraction < 1.0
-    most_cap, lobe_points, spread = (
-        (SOFT_CAP_POINTS, SOFT_LOBE_POINTS, SOFT_CAP_SPREAD) if soft else (CAP_POINTS, LOBE_POINTS, CAP_SPREAD)
-    )
+    """(cap points, lobe points, power heuristic) of the two-strategy sum for ``lobe`` under
+    ``light`` seen at cos(theta_o): NARROW_* by the power heuristic for a lobe with a microfacet
+    width (the sum integrates caps with q >= NARROW_FROM; narrower ones take the Gauss rule), all
+    points by the balance heuristic for lobes without one (the Rational BRDF, measured tables)."""
     ratio = cap_width_ratio(lobe, light, cos_theta_o)
     if ratio is None:
-        return most_cap, lobe_points, False
-    if ratio >= NARROW_FROM:
-        return NARROW_CAP_POINTS, NARROW_LOBE_POINTS, True
-    cap_points = int(min(most_cap, max(1, np.ceil(spread * ratio))))
-    return cap_points, lobe_points if ratio >= LOBE_POINTS_FROM else 0, False
+        soft = light.inner_fraction < 1.0
+        return (SOFT_CAP_POINTS, SOFT_LOBE_POINTS, False) if soft else (CAP_POINTS, LOBE_POINTS, False)
+    return NARROW_CAP_POINTS, NARROW_LOBE_POINTS, True
 
 
 def integrate_cap_light(

@@ -19,8 +19,9 @@ equirectangular environment map):
      with the uniform radiance that carries the removed power; regions holding less than
      MIN_LIGHT_SHARE of the map's energy, regions whose peak is less than MIN_CONTRAST times
      their surroundings, and regions whose cap would be wider than
-     MAX_LIGHT_SOLID_ANGLE (their structure matters), stay in the map; at most
-     MAX_LIGHTS of the strongest are taken;
+     MAX_LIGHT_SOLID_ANGLE (their structure matters), and regions wider than 2 degrees and more
+     than MAX_ELONGATION times longer than wide (a band of city lights: a cap would be a disc),
+     stay in the map; at most MAX_LIGHTS of the strongest are taken;
   6. a uniform region (a soft box, a disc lamp: the excess inside its cap varies by at most
      MAX_UNIFORM_VARIATION) becomes a soft-edged cap instead (:func:`soft_light`): its ramp, below
      the threshold, joins it, its surroundings are measured beyond the ramp, and the cap's rim and
@@ -66,6 +67,31 @@ RAMP_REACH = 1.5  # ... out to at most this many times the region's extent
 # A soft box has a flat top and a ramp: a fitted inner fraction below this is a bright core in a
 # glow (a real capture's lamps and sun), which keeps the hard cap of step 5 (the sun's size).
 MIN_SOFT_INNER_FRACTION = 0.3
+
+
+# A region much longer than wide (its energy's spread along its major axis over its minor, in the
+# plane tangent at its centre) would become a round cap: a mirror would show a disc where the
+# capture has a band. Such a region stays in the map where its cap is wider than 2 degrees
+# (narrower ones are below what most lobes resolve).
+MAX_ELONGATION = 3.5
+ELONGATED_FROM_SOLID_ANGLE = 2.0 * np.pi * (1.0 - np.cos(np.radians(2.0)))
+
+
+def elongation(directions: np.ndarray, weights: np.ndarray, centre: np.ndarray) -> float:
+    """sqrt of the ratio of the major to the minor eigenvalue of the ``weights``-weighted
+    covariance of ``directions`` projected (gnomonically) on the plane tangent at ``centre``."""
+    helper = np.array([0.0, 1.0, 0.0]) if abs(centre[1]) < 0.9 else np.array([1.0, 0.0, 0.0])
+    t = np.cross(helper, centre)
+    t /= np.linalg.norm(t)
+    b = np.cross(centre, t)
+    depth = np.maximum(directions @ centre, 1e-6)
+    plane = np.stack([directions @ t, directions @ b], axis=1) / depth[:, None]
+    if len(plane) < 3 or float(np.sum(weights)) <= 0.0:
+        return 1.0
+    mean = np.average(plane, axis=0, weights=weights)
+    covariance = np.cov((plane - mean).T, aweights=weights)
+    low, high = np.linalg.eigvalsh(covariance)
+    return float(np.sqrt(high / max(low, 1e-30)))
 
 
 @dataclass
@@ -315,6 +341,8 @@ def separate(
             continue  # bright, but not far above its surroundings: structure, not a source
         if cap_omega > MAX_LIGHT_SOLID_ANGLE or taken[region].any():
             continue  # a wide bright region keeps its structure in the map
+        if cap_omega > ELONGATED_FROM_SOLID_ANGLE and elongation(dirs[region], removed, centre) > MAX_ELONGATION:
+            continue  # a band (a horizon's city lights) is no cap: the map keeps its shape
         residual[region] = light_in[region] - excess
         taken[region] = True
         lights.append(CapLight(centre, cos_radius, power / cap_omega))

@@ -101,33 +101,24 @@ vec3 cap_light_term(Lobe l, vec3 wi, vec3 wo, float cap_density, int lobe_points
     return f * (profile * abs(wi.z) / denominator);
 }
 
-// materials/cap_lights.py cap_point_counts: fewer points where the cap is small against the lobe.
-#define LOBE_POINTS_FROM 0.25
-#define NARROW_FROM 2.0
+// materials/cap_lights.py cap_point_counts: (cap points, lobe points, 1: the power heuristic)
+// of the two-strategy sum, for caps with q >= NARROW_FROM (narrower ones: gauss_cap_rule) and
+// for lobes without a width.
 #define NARROW_LOBE_POINTS 16
 #define NARROW_CAP_POINTS 8
-#define CAP_SPREAD 16.0
-#define SOFT_CAP_POINTS 16  // soft-edged caps (materials/cap_lights.py SOFT_*)
+#define SOFT_CAP_POINTS 16  // soft-edged caps of lobes without a width (materials/cap_lights.py SOFT_*)
 #define SOFT_LOBE_POINTS 16
-#define SOFT_CAP_SPREAD 32.0
 #define MIN_VIEW_COSINE 0.1
-// (cap points, lobe points, 1: the power heuristic)
-ivec3 cap_point_counts(Lobe l, float cos_radius, float cos_theta_o, float inner_fraction) {
+ivec3 cap_point_counts(Lobe l, float inner_fraction) {
     bool soft = inner_fraction < 1.0;
-    int most_cap = soft ? SOFT_CAP_POINTS : CAP_POINTS;
-    int lobe_points = soft ? SOFT_LOBE_POINTS : CAP_LOBE_POINTS;
-    float spread = soft ? SOFT_CAP_SPREAD : CAP_SPREAD;
+    ivec3 without_width = soft ? ivec3(SOFT_CAP_POINTS, SOFT_LOBE_POINTS, 0) : ivec3(CAP_POINTS, CAP_LOBE_POINTS, 0);
 #if defined(HAS_RATIONAL)
-    if (l.type == LOBE_RATIONAL) return ivec3(most_cap, lobe_points, 0);
+    if (l.type == LOBE_RATIONAL) return without_width;
 #endif
 #if defined(HAS_MEASURED)
-    if (l.type == LOBE_MEASURED) return ivec3(most_cap, lobe_points, 0);
+    if (l.type == LOBE_MEASURED) return without_width;
 #endif
-    float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
-    float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
-    if (ratio >= NARROW_FROM) return ivec3(NARROW_CAP_POINTS, NARROW_LOBE_POINTS, 1);
-    int cap_points = int(min(float(most_cap), max(1.0, ceil(spread * ratio))));
-    return ivec3(cap_points, ratio >= LOBE_POINTS_FROM ? lobe_points : 0, 0);
+    return ivec3(NARROW_CAP_POINTS, NARROW_LOBE_POINTS, 1);
 }
 
 // materials/cap_lights.py gauss_cap_rule: (rings, azimuths) of the product Gauss rule for a cap
@@ -141,13 +132,12 @@ ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o) {
 #endif
     float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
     float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
-    // GAUSS_RULES
-    if (ratio < 0.05) return ivec2(1, 1);
+    if (ratio < 0.05) return ivec2(1, 1);  // GAUSS_RULES
     if (ratio < 0.2) return ivec2(1, 4);
     if (ratio < 0.35) return ivec2(2, 6);
     if (ratio < 0.6) return ivec2(3, 6);
     if (ratio < 1.0) return ivec2(3, 8);
-    return ivec2(0);
+    return ivec2(0);  // NARROW_FROM
 }
 
 // materials/cap_lights.py gauss_legendre_unit: node i of the n-point rule on [0, 1] (xy: node,
@@ -189,7 +179,7 @@ vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, flo
         }
         return sum * (lit_solid_angle / float(rule.y));
     }
-    ivec3 counts = cap_point_counts(l, cos_radius, wo.z, inner_fraction);
+    ivec3 counts = cap_point_counts(l, inner_fraction);
     bool power = counts.z == 1;
     float cap_density = float(counts.x) / lit_solid_angle;
     for (int i = 0; i < counts.x; ++i) {
