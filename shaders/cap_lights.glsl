@@ -1,8 +1,9 @@
 // Bright sources taken out of the radiance cube (scenes/bright_sources.py), integrated per lobe
-// (numpy reference: materials/cap_lights.py integrate_cap_light): a cap not much wider than the
-// lobe by a product Gauss rule over the cap, a wider one by deterministic two-strategy MIS,
-// CAP_POINTS points uniform over the cap and CAP_LOBE_POINTS points from the lobe's sampler, both
-// on the golden-ratio lattice, balance heuristic.
+// (numpy reference: materials/cap_lights.py integrate_cap_light): a cap at most as wide as the
+// lobe by a product Gauss rule over the cap, a wider one by deterministic two-strategy MIS of
+// points uniform over the cap and points from the lobe's sampler, both on the golden-ratio
+// lattice (the power heuristic; the balance heuristic with CAP_POINTS + CAP_LOBE_POINTS for the
+// Rational and measured lobes, which have no width).
 #define MAX_CAP_LIGHTS 8
 #define CAP_POINTS 8
 #define CAP_LOBE_POINTS 8
