@@ -226,7 +226,7 @@ class BSDF:
             # inverse CDFs) needs a finer rule: its own minimum order, integrand given.
             own = hasattr(comp, "primary_integrand")
             comp_order = max(order, comp.min_quadrature_order) if own else order
-            x, w = _gauss_legendre_unit(comp_order)
+            x, w = gauss_legendre_unit(comp_order)
             u1, u2 = np.meshgrid(x, x, indexing="ij")
             quad_w = np.outer(w, w)
             chunk = max(1, 1_000_000 // (comp_order * comp_order))
@@ -251,7 +251,7 @@ class BSDF:
 
 
 @functools.lru_cache(maxsize=16)
-def _gauss_legendre_unit(order: int) -> tuple[np.ndarray, np.ndarray]:
+def gauss_legendre_unit(order: int) -> tuple[np.ndarray, np.ndarray]:
     """Gauss-Legendre nodes and weights of ``order`` points on [0, 1] (cached: numpy's leggauss
     solves an eigenproblem each call, 2 ms at order 48)."""
     nodes, weights = np.polynomial.legendre.leggauss(order)

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .bsdf import gauss_legendre_unit
 from .patterns import GOLDEN_LATTICE_STEP, LATTICE_U2_START, lattice_xi
 
 CAP_POINTS = 8  # cap points per light and lobe of a lobe without a width (Rational, measured)
@@ -226,19 +227,13 @@ def gauss_cap_rule(lobe, light: CapLight, cos_theta_o: float = 1.0) -> tuple[int
     return None
 
 
-def gauss_legendre_unit(rings: int) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Legendre nodes and weights on [0, 1] (weights summing to 1)."""
-    if not 1 <= rings <= GAUSS_RINGS:
-        raise ValueError(f"the cap's Gauss rule has 1-{GAUSS_RINGS} rings, got {rings}")
-    x, w = np.polynomial.legendre.leggauss(rings)
-    return 0.5 * (x + 1.0), 0.5 * w
-
-
 def gauss_cap_integral(lobe, wo: np.ndarray, light: CapLight, rings: int, azimuths: int, frame=None) -> np.ndarray:
     """The cap integral by the product Gauss rule: nodes at the profile's area fractions of the
     Gauss-Legendre points (so the points follow the edge profile, as the two-strategy sum's cap
     points do), azimuths (j + 1/2) / azimuths, each point weighted by the lit solid angle times
     its ring's weight over ``azimuths``; a rule of one point takes the axis."""
+    if not 1 <= rings <= GAUSS_RINGS:
+        raise ValueError(f"the cap's Gauss rule has 1-{GAUSS_RINGS} rings, got {rings}")
     frame = np.eye(3) if frame is None else np.asarray(frame, dtype=np.float64)
     nodes, weights = gauss_legendre_unit(rings)
     # A single point lies on the axis (the symmetric rule for a cap tiny against the lobe).

@@ -141,7 +141,7 @@ ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o) {
     return ivec2(0);  // NARROW_FROM
 }
 
-// materials/cap_lights.py gauss_legendre_unit: node i of the n-point rule on [0, 1] (xy: node,
+// materials/bsdf.py gauss_legendre_unit: node i of the n-point rule on [0, 1] (xy: node,
 // weight), n = 1..3.
 vec2 gauss_node(int i, int n) {
     if (n == 1) return vec2(0.5, 1.0);
