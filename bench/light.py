@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from lobeview.bench.captures import environment_files  # noqa: F401 (the bench's views; tests call it here)
+
 MATERIALS = (
     "gold-ggx", "beckmann:0.3", "ggx:0.05", "alanod-2000gs-1lobe", "miro5-2lobe", "frosted-glass",
     "gltf-red-plastic",
@@ -32,28 +34,6 @@ METHODS = ("lobe-3+norm", "lobe-7+norm", "lobe-11+norm", "lobe-15+norm", "lobe-1
 QUICK_METHODS = ("lobe-7+norm", "lobe-15+norm", "fis-16", "prefiltered")
 SIZE = 160
 CAMERA = ((0.0, 0.0, 4.0), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0), 40.0)
-
-
-def environment_files(views=None) -> list[Path]:
-    """The HDR captures of ../shared/assets/env (all, or those named by stem or path)."""
-    from lobeview.core.paths import shared_assets_dir
-
-    root = shared_assets_dir()
-    found = sorted(p for p in (root / "env").rglob("*") if p.suffix in (".exr", ".hdr")) if root else []
-    if not views:
-        if not found:
-            raise SystemExit("bench light: no HDR captures in ../shared/assets/env; name files with --views")
-        return found
-    chosen = []
-    for view in views:
-        path = Path(view)
-        if not path.exists():
-            matches = [p for p in found if p.stem == view]
-            if not matches:
-                raise SystemExit(f"bench light: no environment {view!r} (stems: {', '.join(p.stem for p in found)})")
-            path = matches[0]
-        chosen.append(path)
-    return chosen
 
 
 def build_material(name: str):

@@ -24,6 +24,9 @@ method renders only lobeview.
 
 ``--env studio`` replaces the sky by builtin:studio (soft boxes whose radiance falls to their rims:
 the soft-edged cap lights of scenes/bright_sources.py); the sun's pixel ratios are then not made.
+``--env courtyard`` (any capture of ../shared/assets/env by stem, or an .exr / .hdr path): a real
+HDR capture, read once (scenes/hdrio.py sanitises it) and given to both renderers texel for texel,
+Mitsuba's copy rolled by half its width (:func:`capture_image`).
 """
 
 from __future__ import annotations
@@ -47,7 +50,27 @@ SUN_RADIANCE = 50.0
 RECTANGLES = ((4, 0.3, 0.3), (0.3, 4, 0.3), (0.3, 0.3, 5), (3, 3, 0.3), (0.3, 3, 3), (3, 0.3, 3))
 
 
-ENVIRONMENTS = ("sky", "studio")
+ENVIRONMENTS = ("sky", "studio")  # analytic; any other --env names an HDR capture (capture_path)
+
+
+def is_capture(env: str) -> bool:
+    return env not in ENVIRONMENTS
+
+
+def capture_path(env: str) -> Path:
+    """The HDR file of ``--env``: a stem of ../shared/assets/env (bench/light.py's views) or a path."""
+    from lobeview.bench.captures import environment_files
+
+    return environment_files([env])[0]
+
+
+def capture_image(env: str) -> np.ndarray:
+    """lobeview's equirectangular image of a capture (H, 2H, 3), sanitised as the viewer reads it."""
+    from lobeview.scenes.envmap import EnvironmentMap
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the sanitising warnings are the viewer's to show
+        return np.asarray(EnvironmentMap.load(capture_path(env)).image, dtype=np.float32)
 
 
 def environment(d: np.ndarray, name: str = "sky") -> np.ndarray:
@@ -74,7 +97,10 @@ def environment(d: np.ndarray, name: str = "sky") -> np.ndarray:
 
 def mitsuba_equirect(height: int, env: str = "sky") -> np.ndarray:
     """The environment as Mitsuba's envmap reads it: (height, 2 height, 3), texel centres, u = 0
-    facing -z (lobeview's map rolled by half its width)."""
+    facing -z (lobeview's map rolled by half its width). A capture keeps its own resolution."""
+    if is_capture(env):
+        image = capture_image(env)
+        return np.roll(image, -(image.shape[1] // 2), axis=1)
     v, u = np.meshgrid((np.arange(height) + 0.5) / height, (np.arange(2 * height) + 0.5) / (2 * height), indexing="ij")
     theta, phi = np.pi * v, 2.0 * np.pi * u
     d = np.stack([np.sin(theta) * np.sin(phi), np.cos(theta), -np.sin(theta) * np.cos(phi)], axis=-1)
@@ -232,9 +258,11 @@ def run(
     except ImportError:
         raise SystemExit("bench.mitsuba needs Mitsuba 3: pip install mitsuba==3.9.1") from None
     ctx = create_headless_context()
-    env = EnvironmentMap.from_function(
-        lambda d: environment(d, env_name), height=ENV_HEIGHT, name="issue 45 sky" if env_name == "sky" else env_name
-    )
+    if is_capture(env_name):
+        env = EnvironmentMap(capture_image(env_name), str(capture_path(env_name)))
+    else:
+        name = "issue 45 sky" if env_name == "sky" else env_name
+        env = EnvironmentMap.from_function(lambda d: environment(d, env_name), height=ENV_HEIGHT, name=name)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         renderer = PreviewRenderer(
@@ -330,8 +358,9 @@ def main(argv=None) -> int:
                         "(scenes/bright_sources.py) for every lobeview method but the reference")  # fmt: skip
     parser.add_argument("--lod-bias", type=float, help="MIP level bias of the real-time methods (default: each "
                         "method's; lobe-N's lobes wider than alpha 0.3 add up to 1.5 levels on top)")  # fmt: skip
-    parser.add_argument("--env", choices=ENVIRONMENTS, default="sky", help="the environment: issue 45's sky "
-                        "with its sun (default) or builtin:studio's soft boxes")  # fmt: skip
+    parser.add_argument("--env", default="sky", help="the environment: issue 45's sky with its sun (default), "
+                        "studio (builtin:studio's soft boxes), or an HDR capture: a stem of ../shared/assets/env "
+                        "(courtyard, interior, ...) or a path")  # fmt: skip
     parser.add_argument("--no-cache", action="store_true", help="render Mitsuba's images again (default: reuse the "
                         "ones of an earlier run of the same scene from the lobeview cache folder)")  # fmt: skip
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
@@ -342,6 +371,8 @@ def main(argv=None) -> int:
 
     for case in args.cases:
         parse_case(case)
+    if is_capture(args.env):
+        capture_path(args.env)  # an unknown capture stops here, before any rendering
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
     with tempfile.TemporaryDirectory(prefix="lobeview-mitsuba-") as work:
         cache = None if args.no_cache else cache_dir() / "mitsuba"

@@ -168,3 +168,29 @@ def test_mitsuba_renders_are_cached(tmp_path, monkeypatch):
     assert len(calls) == 3  # rendered again, and written whole again
     bench.cached_mitsuba("ggx:0.3", 8, 4, tmp_path, tmp_path / "cache", "3.9.1")
     assert len(calls) == 3
+
+
+def test_a_capture_is_given_to_both_renderers_texel_for_texel(tmp_path):
+    """``--env FILE``: a real HDR capture (here a written one with a bright texel facing -z and
+    one NaN, which the reader sanitises) goes to Mitsuba as lobeview reads it, rolled by half its
+    width; its cache key depends on the image; an unknown capture stops before rendering."""
+    from lobeview.scenes.hdrio import write_hdr_image
+
+    height = 16
+    rng = np.random.default_rng(2)
+    image = rng.random((height, 2 * height, 3)).astype(np.float32)
+    image[height // 2, height] = 500.0  # lobeview's column u = 0.5 faces -z
+    image[3, 5] = np.nan
+    path = write_hdr_image(tmp_path / "capture.exr", image)
+    assert bench.is_capture(str(path)) and not bench.is_capture("studio")
+    ours = bench.capture_image(str(path))
+    assert np.all(np.isfinite(ours)) and ours[height // 2, height].max() == pytest.approx(500.0)
+    theirs = bench.mitsuba_equirect(64, str(path))  # the capture's own resolution
+    np.testing.assert_array_equal(theirs, np.roll(ours, -height, axis=1))
+    assert theirs[height // 2, 0].max() == pytest.approx(500.0)  # Mitsuba's u = 0 faces -z
+    key = bench.mitsuba_key("ggx:0.3", 8, 4, "3.9.1", str(path))
+    image[0, 0] = 2.0
+    write_hdr_image(path, image)
+    assert bench.mitsuba_key("ggx:0.3", 8, 4, "3.9.1", str(path)) != key
+    with pytest.raises(SystemExit, match="no environment"):
+        bench.capture_path("no-such-capture")
