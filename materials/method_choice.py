@@ -1,7 +1,9 @@
 """The cheapest real-time method that meets an error target, per material and view (issue 45).
 
 No method wins everywhere: against Mitsuba (bench/results/mitsuba-*.md) prefiltered-rsibr is the
-most accurate on rough GGX lobes, lobe-N on near-mirrors, and plain prefiltered is one lookup. The
+most accurate on rough GGX lobes, lobe-N on near-mirrors, and plain prefiltered reads one map
+level (along a line of 11 lookups off the normal since the twenty-fifth session: the table's
+prefiltered column, measured before, overstates its error; bench/method_table.py remeasures). The
 rule reads a measured table (``method_errors.json`` beside this file, written by
 bench/method_table.py): the relative RMSE of each candidate method against lobeview's converged
 reference on the preview sphere, per lobe shape (GGX or Beckmann, the narrower roughness
@@ -47,9 +49,10 @@ RSIBR_SLICES_READ = 2  # an anisotropic lobe blends the two tangent slices aroun
 def lookups_per_lobe(method: str, anisotropic: bool, kind: str) -> int:
     """Cube-map (or map) lookups per pixel for one lobe of a ``kind`` ('ggx'/'beckmann')
     distribution: lobe-N reads N samples (+norm adds GGX_TAIL_SAMPLES tail lookups on GGX);
-    prefiltered reads one split-sum level (SPLIT_SUM_LINE_NODES along an anisotropic lobe's line)
-    and the DFG table; prefiltered-rsibr three views' maps (two tangent slices each when
-    anisotropic); fis-N N samples."""
+    prefiltered reads one split-sum level at SPLIT_SUM_LINE_NODES along a line (an anisotropic
+    lobe's wider axis; an isotropic lobe's plane of incidence wherever the view is off the normal,
+    materials/split_sum_oblique.py) and the DFG table; prefiltered-rsibr three views' maps (two
+    tangent slices each when anisotropic); fis-N N samples."""
     from lobeview.core.methods import Method
 
     m = Method.parse(method)
@@ -58,7 +61,7 @@ def lookups_per_lobe(method: str, anisotropic: bool, kind: str) -> int:
     if m.kind in ("fis", "mc"):
         return m.samples
     if m.kind == "prefiltered" and m.mode in ("auto", "splitsum"):
-        return (SPLIT_SUM_LINE_NODES if anisotropic else 1) + 1
+        return SPLIT_SUM_LINE_NODES + 1
     if m.kind == "prefiltered" and m.mode == "rsibr":
         return RSIBR_VIEWS_READ * (RSIBR_SLICES_READ if anisotropic else 1)
     raise ValueError(f"no lookup count for {method!r}")

@@ -30,6 +30,7 @@ from .conductor import MicrofacetReflection
 from .fresnel import Fresnel
 from .microfacet import ALPHA_MIN, MicrofacetDistribution
 from .patterns import GOLDEN_LATTICE_STEP  # rotation of successive rings, in turns
+from .split_sum_oblique import MIN_OBLIQUE_XY, oblique_alpha_ratio
 
 # The prefilter quadrature's cells (RadialProfile.cells): the centre cap's diameter is the
 # kernel's spread / CELL_CORE_DIVISIONS, rings beyond it grow by CELL_GROWTH of their angle, and
@@ -339,17 +340,27 @@ def split_sum_line_quantiles(kind: str) -> np.ndarray:
 
 def split_sum_line(wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float) -> tuple[np.ndarray, np.ndarray, float]:
     """The split-sum lookups of a lobe in its local frame: (mirror directions (k, 3) before the
-    lean, weights (k,), the alpha whose map level they read and whose lean they take). One lookup
-    at sqrt(alpha_x alpha_y) for (nearly) isotropic lobes; otherwise the quantile line above at
-    min(alpha_x, alpha_y): each node's slope s along the wider axis is the half vector
+    lean, weights (k,), the alpha whose map level they read). An anisotropic lobe: the quantile
+    line above at min(alpha_x, alpha_y) along its wider axis; an isotropic lobe seen off the
+    normal: the line along the plane of incidence at alpha rho(alpha, cos theta_o) with the slope
+    scale sqrt(alpha^2 - alpha'^2) (split_sum_oblique.py); at normal incidence one lookup at
+    sqrt(alpha_x alpha_y). Each node's slope s along the line's axis e is the half vector
     normalize(-s e, 1), reflected; nodes below the surface are left out (all of them kept if none
     is above)."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
     a_min, a_max = min(alpha_x, alpha_y), max(alpha_x, alpha_y)
-    if not split_sum_is_line(alpha_x, alpha_y):
+    along_view = float(np.hypot(wo[0], wo[1]))
+    if split_sum_is_line(alpha_x, alpha_y):
+        level_alpha, spread = a_min, np.sqrt(a_max * a_max - a_min * a_min)
+        major = np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
+    elif along_view > MIN_OBLIQUE_XY:
+        alpha = float(np.sqrt(alpha_x * alpha_y))
+        level_alpha = alpha * oblique_alpha_ratio(kind, alpha, wo[2])
+        spread = np.sqrt(max(alpha * alpha - level_alpha * level_alpha, 0.0))
+        major = wo[:2] / along_view
+    else:
         return np.array([[-wo[0], -wo[1], wo[2]]]), np.ones(1), float(np.sqrt(alpha_x * alpha_y))
-    slopes = split_sum_line_quantiles(kind) * np.sqrt(a_max * a_max - a_min * a_min)
-    major = np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
+    slopes = split_sum_line_quantiles(kind) * spread
     h = np.concatenate([-slopes[:, None] * major[None], np.ones((len(slopes), 1))], axis=1)
     h /= np.linalg.norm(h, axis=1, keepdims=True)
     r = 2.0 * (h @ wo)[:, None] * h - wo
@@ -357,7 +368,7 @@ def split_sum_line(wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float) ->
     above = r[:, 2] > 0.0
     if above.any():
         weights = np.where(above, weights, 0.0)
-    return r, weights / weights.sum(), float(a_min)
+    return r, weights / weights.sum(), float(level_alpha)
 
 
 def split_sum_direction(normal: np.ndarray, mirror: np.ndarray, t) -> np.ndarray:
@@ -375,13 +386,15 @@ def split_sum_lookups(
     directions (k, 3), weights (k,), the alpha whose map level they read). :func:`split_sum_line`'s
     mirror directions (mirrored below the surface for a thin transmission lobe: straight through),
     taken to world space by ``frame`` (columns tangent, bitangent, normal) and leant towards the
-    normal (the transmission lobe's -normal) by :func:`split_sum_lean` at the level's alpha
-    (sqrt(alpha_x alpha_y), or alpha_min on the line)."""
+    normal (the transmission lobe's -normal) by :func:`split_sum_lean`: at alpha_min on an
+    anisotropic lobe's line, at the lobe's own sqrt(alpha_x alpha_y) otherwise (the oblique line's
+    narrower level alpha lost the rough lobes' off-specular shift, split_sum_oblique.py)."""
     local, weights, level_alpha = split_sum_line(wo, kind, alpha_x, alpha_y)
+    lean_alpha = level_alpha if split_sum_is_line(alpha_x, alpha_y) else float(np.sqrt(alpha_x * alpha_y))
     if transmission:
         local = local * np.array([1.0, 1.0, -1.0])
     normal = -frame[:, 2] if transmission else frame[:, 2]
-    world = split_sum_direction(normal, local @ np.asarray(frame).T, split_sum_lean(level_alpha))
+    world = split_sum_direction(normal, local @ np.asarray(frame).T, split_sum_lean(lean_alpha))
     return world, weights, level_alpha
 
 

@@ -58,6 +58,41 @@ const float SPLIT_SUM_LINE_WEIGHTS[11] = float[11](0.027777778, 0.083333333, 0.1
     0.111111111, 0.111111111, 0.111111111, 0.111111111, 0.111111111, 0.083333333, 0.027777778);
 #define SPLIT_SUM_LINE_NODES 11
 #define SPLIT_SUM_LINE_RATIO 1.05
+// materials/split_sum_oblique.py: an isotropic lobe seen off the normal narrows across the plane
+// of incidence; it reads the map at alpha rho(alpha, cos theta_o) (OBLIQUE_RATIO: rows
+// OBLIQUE_ALPHAS, columns cos theta_o 0.1 .. 1.0, GGX's rows first, then Beckmann's).
+#define MIN_OBLIQUE_XY 1e-4
+const float OBLIQUE_ALPHAS[8] = float[8](0.1, 0.15, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0);
+const float OBLIQUE_RATIO[160] = float[160](
+    0.205, 0.249, 0.323, 0.408, 0.499, 0.596, 0.694, 0.794, 0.897, 1.000,
+    0.288, 0.307, 0.359, 0.429, 0.508, 0.598, 0.691, 0.789, 0.892, 1.000,
+    0.362, 0.367, 0.403, 0.458, 0.526, 0.604, 0.691, 0.786, 0.889, 1.000,
+    0.476, 0.470, 0.488, 0.522, 0.571, 0.631, 0.703, 0.787, 0.886, 1.000,
+    0.556, 0.547, 0.557, 0.582, 0.618, 0.667, 0.726, 0.799, 0.889, 1.000,
+    0.625, 0.611, 0.617, 0.636, 0.665, 0.705, 0.755, 0.818, 0.898, 1.000,
+    0.802, 0.763, 0.753, 0.760, 0.775, 0.800, 0.835, 0.876, 0.932, 1.000,
+    1.000, 1.000, 1.000, 1.000, 1.000, 1.000, 1.000, 1.000, 1.000, 1.000,
+    0.140, 0.217, 0.307, 0.402, 0.500, 0.598, 0.698, 0.799, 0.901, 1.000,
+    0.170, 0.243, 0.322, 0.408, 0.500, 0.597, 0.696, 0.796, 0.898, 1.000,
+    0.202, 0.270, 0.344, 0.423, 0.509, 0.598, 0.695, 0.794, 0.896, 1.000,
+    0.259, 0.323, 0.390, 0.460, 0.535, 0.614, 0.699, 0.792, 0.892, 1.000,
+    0.306, 0.368, 0.431, 0.496, 0.564, 0.635, 0.712, 0.795, 0.889, 1.000,
+    0.344, 0.404, 0.464, 0.526, 0.589, 0.655, 0.725, 0.803, 0.892, 1.000,
+    0.397, 0.455, 0.513, 0.571, 0.633, 0.699, 0.771, 0.850, 0.930, 1.000,
+    0.447, 0.516, 0.597, 0.693, 0.813, 0.973, 1.000, 1.000, 1.000, 1.000);
+float oblique_ratio(int dist, float alpha, float cos_o) {
+    float a = clamp(alpha, 0.1, 1.0);
+    int i = 0;
+    for (int k = 0; k < 6; ++k) if (a >= OBLIQUE_ALPHAS[k + 1]) i = k + 1;
+    float ta = clamp((a - OBLIQUE_ALPHAS[i]) / (OBLIQUE_ALPHAS[i + 1] - OBLIQUE_ALPHAS[i]), 0.0, 1.0);
+    float cc = clamp(cos_o, 0.1, 1.0) * 10.0 - 1.0;
+    int j = min(int(floor(cc)), 8);
+    float tc = cc - float(j);
+    int base = dist == DIST_GGX ? 0 : 80;
+    float r00 = OBLIQUE_RATIO[base + i * 10 + j], r01 = OBLIQUE_RATIO[base + i * 10 + j + 1];
+    float r10 = OBLIQUE_RATIO[base + (i + 1) * 10 + j], r11 = OBLIQUE_RATIO[base + (i + 1) * 10 + j + 1];
+    return mix(mix(r00, r01, tc), mix(r10, r11, tc), ta);
+}
 
 // materials/prefilter.py split_sum_lod: from level PEAK_MATCHED_FROM on, the blend whose peak is alpha's.
 #define PEAK_MATCHED_FROM 2.0
@@ -79,19 +114,26 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // at a grazing view leans off the mirror direction, Lagarde & de Rousiers 2014); an
         // anisotropic lobe reads the map at its narrower alpha at quantiles of its slopes along its
         // wider axis, each weighted by its probability, the nodes below the surface left out
-        // (split_sum_line), all leant at the alpha of the level they read.
+        // (split_sum_line), all leant at the alpha of the level they read; an isotropic lobe
+        // seen off the normal reads the same line along the plane of incidence at the narrower
+        // alpha of its spread across that plane, leant at its own alpha (split_sum_oblique.py).
         bool through = lobe_is_transmission(l);
         float alpha = sqrt(l.ax * l.ay);
         float roughness = sqrt(alpha);
         vec3 normal_side = through ? -tbn[2] : tbn[2];
         float a_min = min(l.ax, l.ay);
         float a_max = max(l.ax, l.ay);
-        bool line = a_max > SPLIT_SUM_LINE_RATIO * a_min;
-        float level_alpha = line ? a_min : alpha;
-        float smooth_part = 1.0 - clamp(level_alpha, 0.0, 1.0);
+        bool aniso_line = a_max > SPLIT_SUM_LINE_RATIO * a_min;
+        float len_xy = length(wo.xy);
+        bool oblique = !aniso_line && len_xy > MIN_OBLIQUE_XY;
+        bool line = aniso_line || oblique;
+        float level_alpha = aniso_line ? a_min : (oblique ? alpha * oblique_ratio(l.dist, alpha, wo.z) : alpha);
+        float lean_alpha = aniso_line ? a_min : alpha;  // the whole lobe's off-specular shift
+        float smooth_part = 1.0 - clamp(lean_alpha, 0.0, 1.0);
         float lean = smooth_part * (sqrt(smooth_part) + (1.0 - smooth_part));
-        float spread = line ? sqrt(a_max * a_max - a_min * a_min) : 0.0;
-        vec2 major = l.ax >= l.ay ? vec2(1.0, 0.0) : vec2(0.0, 1.0);
+        float spread = aniso_line ? sqrt(a_max * a_max - a_min * a_min)
+                                  : sqrt(max(alpha * alpha - level_alpha * level_alpha, 0.0));
+        vec2 major = oblique ? wo.xy / len_xy : (l.ax >= l.ay ? vec2(1.0, 0.0) : vec2(0.0, 1.0));
         float lod = split_sum_lod(level_alpha, u_split_sum_max_level);
         vec3 radiance = vec3(0.0);
         vec3 radiance_all = vec3(0.0);  // every node, for a view whose whole line lies below the surface
@@ -122,7 +164,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // the geometric-mean alpha was up to 9 % too bright on GGX 0.05 x 0.3), Beckmann's from
         // the isotropic table at that alpha (no anisotropic Beckmann table).
         vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
-        vec2 ab = l.dist == DIST_GGX ? (line ? anisotropic_ggx_dfg(l, wo) : dfg.ba) : dfg.rg;
+        vec2 ab = l.dist == DIST_GGX ? (aniso_line ? anisotropic_ggx_dfg(l, wo) : dfg.ba) : dfg.rg;
         return radiance * lobe_dfg_albedo(l, ab, wo.z);
     }
     if (u_lobe_map_mode[lobe_index] == LOBE_MAP_BANKS) return banks_lookup(lobe_index, wo, tbn);

@@ -24,6 +24,7 @@ from lobeview.materials.lobe_fit import (
 )
 from lobeview.materials.patterns import cube_map_lod, specular_lobes
 from lobeview.materials.spec import build_bsdf, load_material
+from lobeview.materials.split_sum_oblique import oblique_alpha_ratio
 from lobeview.scenes.envmap import EnvironmentMap, equirect_direction
 from lobeview.scenes.meshes import uv_sphere
 from lobeview.viewer.context import create_headless_context
@@ -129,9 +130,10 @@ def test_lobe_map_slices_match_brute_force(gl):
 
 
 def test_split_sum_render_matches_numpy_twin(gl):
-    """gold-ggx: textureLod(split-sum cube, d, split_sum_lod(alpha)) (F0 A + B), F0 of the exact
-    conductor Fresnel, A and B from the numpy DFG table, d the mirror direction leant towards the
-    normal by split_sum_lean."""
+    """gold-ggx: the weighted textureLod(split-sum cube, d, split_sum_lod(level alpha)) of
+    split_sum_lookups (F0 A + B), F0 of the exact conductor Fresnel, A and B from the numpy DFG
+    table at the lobe's alpha: off the normal the oblique line (split_sum_oblique.py) at a level
+    alpha below the lobe's, its directions leant towards the normal by split_sum_lean."""
     renderer, lookup = gl
     desc = load_material("gold-ggx")
     result = renderer.render(CAMERA, build_bsdf(desc), "prefiltered", background=False)
@@ -143,8 +145,10 @@ def test_split_sum_render_matches_numpy_twin(gl):
     for y, x in _pixels(result, count=16):
         frame, wo = _frame(result, y, x)
         dirs, weights, level_alpha = pf.split_sum_lookups(wo, frame, "ggx", desc["alpha_u"], desc["alpha_v"])
-        assert len(weights) == 1 and level_alpha == pytest.approx(roughness**2)
-        radiance = lookup(cube, dirs, float(pf.split_sum_lod(level_alpha)))[0]
+        alpha = roughness**2
+        assert len(weights) == pf.SPLIT_SUM_LINE_NODES and wo[2] < 0.999
+        assert level_alpha == pytest.approx(alpha * oblique_alpha_ratio("ggx", alpha, wo[2])) and level_alpha < alpha
+        radiance = weights @ lookup(cube, dirs, float(pf.split_sum_lod(level_alpha)))
         a, b = pf.dfg_lookup(table, wo[2], roughness)
         expected = radiance * (f0 * a + b)
         assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
@@ -228,8 +232,8 @@ def test_split_sum_of_glTF_extension_lobes_matches_numpy_twin(gl, desc, lobe_typ
         for lobe in lobes:
             through = getattr(lobe, "transmission", False)
             roughness = np.sqrt(lobe.distribution.alpha_x)
-            dirs, _, level_alpha = pf.split_sum_lookups(wo, frame, "ggx", roughness**2, roughness**2, through)
-            radiance = lookup(cube, dirs, float(pf.split_sum_lod(level_alpha)))[0]
+            dirs, weights, level_alpha = pf.split_sum_lookups(wo, frame, "ggx", roughness**2, roughness**2, through)
+            radiance = weights @ lookup(cube, dirs, float(pf.split_sum_lod(level_alpha)))
             expected += radiance * pf.dfg_albedo(lobe, wo[2], pf.dfg_lookup(table, wo[2], roughness))
         assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
 
