@@ -20,7 +20,7 @@ method renders only lobeview.
 
     pip install mitsuba==3.9.1   # not a lobeview dependency; the scalar_rgb variant is used
     .venv/bin/python -m lobeview.bench.mitsuba [--size 192] [--spp 8192] [--supersample 4] [--bright-sources]
-                                               [--cases ggx:0.5 ...] [--env sky|studio] [--no-cache]
+                                               [--cases ggx:0.5 ...] [--env sky|studio|CAPTURE] [--no-cache]
 
 ``--env studio`` replaces the sky by builtin:studio (soft boxes whose radiance falls to their rims:
 the soft-edged cap lights of scenes/bright_sources.py); the sun's pixel ratios are then not made.
