@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lobeview.materials import patterns
+from lobeview.materials import fitted_pattern, patterns
+from lobeview.materials.microfacet import MicrofacetDistribution
 
 MIP_KERNEL_SIGMA = float(np.sqrt(0.25 + 1.0 / 6.0))  # level-L texels per read of a deep level L (tent chain)
 FACE_SIZE = 256
@@ -76,15 +77,6 @@ def lookup_weights(lobe, wo: np.ndarray, n: int, table, face_size: int = FACE_SI
     return np.array(weights), np.array(directions).reshape(-1, 3), np.array(lods)
 
 
-def mip_kernel_sigma(level) -> np.ndarray:
-    """The model's sigma of a read of ``level``, in level texels: the chain's L levels of tent sum to
-    1/4 (1 - 4^-L) level texels^2 (a geometric series), the bilinear read adds 1/6; MIP_KERNEL_SIGMA
-    for deep levels (measured: 0.596 / 0.634 / 0.643 / 0.645 at levels 1-4, the formula 0.595 /
-    0.633 / 0.643 / 0.645)."""
-    level = np.maximum(np.asarray(level, dtype=np.float64), 0.0)
-    return np.sqrt(0.25 * (1.0 - 4.0**-level) + 1.0 / 6.0)
-
-
 def _unit_reads(call: int, index: int):
     """A radiance function that returns 1 for read ``index`` of its ``call``-th call, 0 elsewhere."""
     seen = [-1]
@@ -100,11 +92,9 @@ def _unit_reads(call: int, index: int):
 
 
 def lookup_sigmas(directions: np.ndarray, lods: np.ndarray, face_size: int = FACE_SIZE) -> np.ndarray:
-    """The angular standard deviation (rad) of each read's blur (the module's model)."""
-    max_component = np.max(np.abs(directions), axis=-1)
-    texel = 2.0 / face_size * max_component**1.5
-    level = np.maximum(lods, 0.0)
-    return mip_kernel_sigma(level) * np.exp2(level) * texel
+    """The angular standard deviation (rad) of each read's blur (the module's model, kept with the
+    fitted patterns that choose levels by it: materials/fitted_pattern.py read_sigma_texels)."""
+    return fitted_pattern.read_sigma_texels(lods) * fitted_pattern.texel_angle(directions, face_size)
 
 
 def direction_grid(height: int = GRID_HEIGHT) -> tuple[np.ndarray, np.ndarray]:
@@ -143,6 +133,15 @@ def kernel_distances(lobe, view_deg: float, n: int, table, grid, solid_angles, f
     l2 = np.sqrt(np.sum((kernel - truth) ** 2 * solid_angles) / np.sum(truth**2 * solid_angles))
     l1 = np.sum(np.abs(kernel - truth) * solid_angles) / np.sum(truth * solid_angles)
     return float(l2), float(l1)
+
+
+def fitted_kernel_distance(kind: str, alpha: float, view_deg: float, table) -> float:
+    """The fitted pattern's relative L2 distance at a view, its reads interpolated from ``table``
+    (so between nodes as the estimator reads them)."""
+    distribution = MicrofacetDistribution(kind, alpha, alpha)
+    target = fitted_pattern.lobe_target(distribution, float(np.cos(np.radians(view_deg))))
+    a, b, weight, sigma = fitted_pattern.table_reads(table, alpha, float(np.cos(np.radians(view_deg))))
+    return fitted_pattern.kernel_distance(fitted_pattern.FittedPattern(a, b, weight, sigma, 0.0), target)
 
 
 def sunless_sky(directions: np.ndarray) -> np.ndarray:
@@ -201,9 +200,10 @@ def sphere_views(pixels: int = FLOOR_PIXELS):
                 yield wo, frame
 
 
-def ideal_floor(lobe, n: int, pixels: int = FLOOR_PIXELS, sigma_scale: float = 1.0) -> float:
+def ideal_floor(lobe, n: int, pixels: int = FLOOR_PIXELS, sigma_scale: float = 1.0, fitted=None) -> float:
     """Relative RMSE (fraction) of lobe-N+norm with ideal Gaussian reads (the module's sigmas times
-    ``sigma_scale``) against exact quadrature of the sunless sky, over the preview sphere's pixels."""
+    ``sigma_scale``) against exact quadrature of the sunless sky, over the preview sphere's pixels;
+    with ``fitted`` (a materials/fitted_pattern.py PatternTable) the fitted pattern's reads."""
     dirs, solid, radiance = sky_quadrature()
     table = patterns.AlbedoTable.build(lobe)
 
@@ -221,7 +221,10 @@ def ideal_floor(lobe, n: int, pixels: int = FLOOR_PIXELS, sigma_scale: float = 1
         above = local[:, 2] > 0.0
         f = lobe.eval(local[above], np.broadcast_to(wo, (int(above.sum()), 3)))
         truth.append(np.sum(f * (local[above, 2] * solid[above])[:, None] * radiance[above], axis=0))
-        estimate.append(patterns.integrate_lobe(lobe, wo, gaussian_reads, n, FACE_SIZE, frame, albedo_table=table))
+        if fitted is None:
+            estimate.append(patterns.integrate_lobe(lobe, wo, gaussian_reads, n, FACE_SIZE, frame, albedo_table=table))
+        else:
+            estimate.append(fitted_pattern.integrate_fitted(lobe, wo, gaussian_reads, fitted, FACE_SIZE, frame, table))
     truth, estimate = np.array(truth), np.array(estimate)
     return float(np.sqrt(np.mean((estimate - truth) ** 2) / np.mean(truth**2)))
 
@@ -255,7 +258,21 @@ def measure_mip_kernel_sigma(ctx, levels=(2, 3, 4), face_size: int = FACE_SIZE) 
     return out
 
 
-def markdown(rows, n: int, stamp: str, command: str, floors=None) -> str:
+FITTED_NOTE = "N reads for Beckmann, N + 4 for GGX: lobe-N+norm's budget with its tail term"
+
+
+def fitted_table_for(lobe, n: int):
+    """The committed fitted table of an isotropic lobe's distribution at lobe-N, or None."""
+    dist = lobe.distribution
+    if dist.alpha_x != dist.alpha_y:
+        return None
+    try:
+        return fitted_pattern.load_table(dist.kind, fitted_pattern.read_count(dist.kind, n))
+    except (OSError, KeyError, ValueError):
+        return None
+
+
+def markdown(rows, n: int, stamp: str, command: str, floors=None, fitted_rows=None) -> str:
     lines = [f"# lobe-{n}+norm's kernel against its lobe ({stamp})", "", f"`{command}`", "",
              f"Relative L2 / L1 distance between sum_j w_j G_j (each read a Gaussian of sigma {MIP_KERNEL_SIGMA:.3f}"
              f" 2^lod texels, cube faces {FACE_SIZE}^2) and f cos, by view angle from the normal "
@@ -264,11 +281,19 @@ def markdown(rows, n: int, stamp: str, command: str, floors=None) -> str:
              "|---|" + "---|" * len(VIEWS_DEG)]  # fmt: skip
     for case, cells in rows:
         lines.append(f"| {case} | " + " | ".join(f"{l2:.3f} / {l1:.3f}" for l2, l1 in cells) + " |")
+    if fitted_rows:
+        lines += ["", f"The fitted pattern (materials/fitted_pattern.py, {FITTED_NOTE}): relative L2 distance, "
+                  "its reads interpolated from the committed table at each view:", "",
+                  "| case | " + " | ".join(f"{v:g} deg" for v in VIEWS_DEG) + " |",
+                  "|---|" + "---|" * len(VIEWS_DEG)]  # fmt: skip
+        for case, cells in fitted_rows:
+            lines.append(f"| {case} | " + " | ".join(f"{l2:.3f}" for l2 in cells) + " |")
     if floors:
         lines += ["", f"lobe-{n}+norm with ideal Gaussian reads against exact quadrature, issue 45's sky without its "
                   f"sun, {FLOOR_PIXELS}^2 pixels of the preview sphere (relative RMSE %):", "",
-                  "| case | floor |", "|---|---|"]  # fmt: skip
-        lines += [f"| {case} | {100 * floor:.1f} |" for case, floor in floors]
+                  "| case | thesis pattern | fitted pattern |", "|---|---|---|"]  # fmt: skip
+        lines += [f"| {case} | {100 * floor:.1f} | " + ("-" if fitted is None else f"{100 * fitted:.1f}") + " |"
+                  for case, floor, fitted in floors]  # fmt: skip
     return "\n".join(lines) + "\n"
 
 
@@ -281,23 +306,32 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     lobes = {case: lobe_of(case) for case in args.cases}  # a bad case stops here
     grid, solid_angles = direction_grid()
-    rows, floors = [], []
+    rows, floors, fitted_rows = [], [], []
     for case, lobe in lobes.items():
         table = patterns.AlbedoTable.build(lobe)
         cells = [kernel_distances(lobe, view, args.n, table, grid, solid_angles) for view in VIEWS_DEG]
         rows.append((case, cells))
         by_view = ", ".join(f"{v:g} deg {l2:.3f}" for v, (l2, _) in zip(VIEWS_DEG, cells, strict=True))
         print(f"[lobe kernel] {case}: {by_view}")
+        fitted = fitted_table_for(lobe, args.n)
+        if fitted is not None:
+            dist = lobe.distribution
+            fitted_cells = [fitted_kernel_distance(dist.kind, dist.alpha_x, view, fitted) for view in VIEWS_DEG]
+            fitted_rows.append((case, fitted_cells))
+            print(f"[lobe kernel] {case} fitted: " + ", ".join(f"{l2:.3f}" for l2 in fitted_cells))
         if args.floor and np.sqrt(lobe.distribution.alpha_x * lobe.distribution.alpha_y) >= FLOOR_MIN_ALPHA:
-            floors.append((case, ideal_floor(lobe, args.n)))
-            print(f"[lobe kernel] {case}: ideal-read floor {100 * floors[-1][1]:.1f} %")
+            thesis_floor = ideal_floor(lobe, args.n)
+            fitted_floor = None if fitted is None else ideal_floor(lobe, args.n, fitted=fitted)
+            floors.append((case, thesis_floor, fitted_floor))
+            print(f"[lobe kernel] {case}: ideal-read floor {100 * thesis_floor:.1f} % (thesis pattern)"
+                  + ("" if fitted_floor is None else f", {100 * fitted_floor:.1f} % (fitted)"))  # fmt: skip
     stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     arguments = argv if argv is not None else __import__("sys").argv[1:]
     command = "python -m lobeview.bench.lobe_kernel " + " ".join(arguments)
     path = out / f"lobe-kernel-{stamp}.md"
-    path.write_text(markdown(rows, args.n, stamp, command.strip(), floors))
+    path.write_text(markdown(rows, args.n, stamp, command.strip(), floors, fitted_rows))
     print(f"[lobe kernel] wrote {path}")
     return 0
 
