@@ -9,12 +9,12 @@ node's kernel came to its lobe.
 from __future__ import annotations
 
 import argparse
-import datetime
 import time
 from pathlib import Path
 
 import numpy as np
 
+from lobeview.bench.report import stamped_report_path
 from lobeview.materials import fitted_pattern as fp
 
 KINDS = ("beckmann", "ggx")
@@ -59,13 +59,8 @@ def main(argv=None) -> int:
     seconds = time.perf_counter() - start
     fp.save_tables(list(tables.values()), path)
     fp.load_table.cache_clear()
-    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    arguments = argv if argv is not None else __import__("sys").argv[1:]
-    command = "python -m lobeview.bench.fitted_patterns " + " ".join(arguments)
-    report = out / f"fitted-patterns-{stamp}.md"
-    report.write_text(summary([tables[c] for c in counts], stamp, command.strip(), seconds))
+    report, stamp, command = stamped_report_path(args.out, "fitted-patterns", "fitted_patterns", argv)
+    report.write_text(summary([tables[c] for c in counts], stamp, command, seconds))
     print(f"[fitted patterns] wrote {path} and {report}")
     return 0
 

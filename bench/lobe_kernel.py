@@ -4,23 +4,24 @@ lobe-N+norm is linear in its lookups: its result is sum_j w_j L_j, each L_j a re
 MIP chain at level lod_j, i.e. the environment blurred around direction d_j. So the method is
 one kernel, K_eff = sum_j w_j G_j, against the lobe's f cos; how far apart the two are bounds the
 error on any environment. This module finds the weights w_j by linearity
-(:func:`lookup_weights`), models each read as a Gaussian (:data:`MIP_KERNEL_SIGMA`, measured on
-the GPU by :func:`measure_mip_kernel_sigma`) and reports, per lobe and view angle:
+(:func:`lookup_weights`), models each read as a Gaussian (its sigma measured on the GPU by
+:func:`measure_mip_kernel_sigma`) and reports, per lobe and view angle:
 
 - the kernel's relative L2 and L1 distance to f cos over the sphere of directions;
 - with ``--floor``, lobe-N with *ideal* Gaussian reads against exact quadrature on issue 45's sky
   without its sun (the sky and its six rectangles, bench/mitsuba.py): what a perfect MIP chain would
-  leave. 2026-11-29 (sky, 32 x 32 pixels of the preview sphere, lobe-7+norm): GGX 0.3 7.9 %,
-  Beckmann 0.15 3.7 %, Beckmann 0.5 7.2 %, against 8.0 / 5.7 / 8.9 % for the GPU against Mitsuba:
+  leave. 2026-11-29 (sky, 32 x 32 pixels of the preview sphere, lobe-7+norm): GGX 0.3 7.2 %,
+  Beckmann 0.15 4.0 %, Beckmann 0.5 6.9 %, against 8.1 / 5.7 / 9.0 % for the GPU against Mitsuba:
   the MIP chain is not what keeps lobe-7 above issue 45's 5 %; the pattern's kernel is
-  (docs/measurements.md "lobe-7's kernel").
+  (docs/measurements.md "lobe-7's kernel"). The fitted pattern's reads, the same way: 1.0 / 1.5 /
+  1.1 %.
 
-The model of one read: the tent chain (viewer/mip_chain.py) filters each level from the one
-above with [1 3 3 1] / 8 (variance 3/4 of a source texel^2), which sums to 1/4 of a level-L texel^2;
-the bilinear read adds a tent of one level-L texel (1/6): sigma = sqrt(1/4 + 1/6) = 0.645 level-L
-texels, i.e. 0.645 2^lod base texels, each (2 / face_size) max|d|^1.5 radians wide (the solid angle
-of a texel is (2 / face_size)^2 max|d|^3, cube_map_lod). Trilinear reads between levels blend two
-such kernels; the model takes the geometric mean (2^lod).
+The model of one read (materials/fitted_pattern.py read_sigma_texels): the tent chain
+(viewer/mip_chain.py) filters each level from the one above with [1 3 3 1] / 8 (3/4 of a source
+texel^2), which sums to 1/4 (4^L - 1) base texels^2 at level L; the bilinear read adds a tent of one
+level-L texel (4^L / 6); a trilinear read between two levels blends their variances. Each base texel
+is (2 / face_size) max|d|^1.5 radians wide (the solid angle of a texel is (2 / face_size)^2 max|d|^3,
+cube_map_lod). :func:`measure_mip_kernel_sigma` measures it on the GPU.
 
     .venv/bin/python -m lobeview.bench.lobe_kernel [--cases ggx:0.3 beckmann:0.15] [--n 7] [--floor]
 """
@@ -28,15 +29,14 @@ such kernels; the model takes the geometric mean (2^lod).
 from __future__ import annotations
 
 import argparse
-import datetime
 from pathlib import Path
 
 import numpy as np
 
+from lobeview.bench.report import stamped_report_path
 from lobeview.materials import fitted_pattern, patterns
 from lobeview.materials.microfacet import MicrofacetDistribution
 
-MIP_KERNEL_SIGMA = float(np.sqrt(0.25 + 1.0 / 6.0))  # level-L texels per read of a deep level L (tent chain)
 FACE_SIZE = 256
 VIEWS_DEG = (0.0, 30.0, 50.0, 70.0, 80.0)
 CASES = ("ggx:0.05", "ggx:0.15", "ggx:0.3", "ggx:0.5", "beckmann:0.15", "beckmann:0.5")
@@ -274,9 +274,9 @@ def fitted_table_for(lobe, n: int):
 
 def markdown(rows, n: int, stamp: str, command: str, floors=None, fitted_rows=None) -> str:
     lines = [f"# lobe-{n}+norm's kernel against its lobe ({stamp})", "", f"`{command}`", "",
-             f"Relative L2 / L1 distance between sum_j w_j G_j (each read a Gaussian of sigma {MIP_KERNEL_SIGMA:.3f}"
-             f" 2^lod texels, cube faces {FACE_SIZE}^2) and f cos, by view angle from the normal "
-             "(bench/lobe_kernel.py).", "",
+             "Relative L2 / L1 distance between sum_j w_j G_j (each read a Gaussian of the trilinear read's "
+             f"sigma, fitted_pattern.read_sigma_texels; cube faces {FACE_SIZE}^2) and f cos, by view angle from the "
+             "normal (bench/lobe_kernel.py).", "",
              "| case | " + " | ".join(f"{v:g} deg" for v in VIEWS_DEG) + " |",
              "|---|" + "---|" * len(VIEWS_DEG)]  # fmt: skip
     for case, cells in rows:
@@ -325,13 +325,8 @@ def main(argv=None) -> int:
             floors.append((case, thesis_floor, fitted_floor))
             print(f"[lobe kernel] {case}: ideal-read floor {100 * thesis_floor:.1f} % (thesis pattern)"
                   + ("" if fitted_floor is None else f", {100 * fitted_floor:.1f} % (fitted)"))  # fmt: skip
-    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    arguments = argv if argv is not None else __import__("sys").argv[1:]
-    command = "python -m lobeview.bench.lobe_kernel " + " ".join(arguments)
-    path = out / f"lobe-kernel-{stamp}.md"
-    path.write_text(markdown(rows, args.n, stamp, command.strip(), floors, fitted_rows))
+    path, stamp, command = stamped_report_path(args.out, "lobe-kernel", "lobe_kernel", argv)
+    path.write_text(markdown(rows, args.n, stamp, command, floors, fitted_rows))
     print(f"[lobe kernel] wrote {path}")
     return 0
 

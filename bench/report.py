@@ -120,6 +120,20 @@ def write_plots(base: Path, cells, sweep, references) -> list[Path]:
     return paths
 
 
+def stamped_report_path(folder, prefix: str, module: str, argv) -> tuple[Path, str, str]:
+    """(folder / prefix-STAMP.md, the stamp, the command line that made it) for a bench run as
+    ``python -m lobeview.bench.<module>`` with ``argv`` (None: the process's); the folder is made."""
+    import datetime
+    import sys
+
+    stamp = datetime.datetime.now().strftime("%Y%m%d-%H%M%S")
+    arguments = argv if argv is not None else sys.argv[1:]
+    command = f"python -m lobeview.bench.{module} " + " ".join(arguments)
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder / f"{prefix}-{stamp}.md", stamp, command.strip()
+
+
 def write_markdown_report(folder: Path, name: str, lines: list[str]) -> Path:
     """Write a bench's Markdown ``lines`` to folder/name (the folder made if missing), print them
     and the path; returns the path."""

@@ -52,9 +52,13 @@ NORMALIZE_SUFFIX = "+norm"
 WEIGHTINGS = ("eq4.25", "eq4.24")
 EQ424_SUFFIX = "+eq4.24"
 #: lobe-N pattern choices: auto = the thesis' ring below N = 11 and a double ring from 11 on
-#: (materials/patterns.py DOUBLE_RING_MIN_SAMPLES), ring = the thesis' ring at every N
-LOBE_PATTERNS = ("auto", "ring")
+#: (materials/patterns.py DOUBLE_RING_MIN_SAMPLES), ring = the thesis' ring at every N, fitted =
+#: reads fitted to the lobe (materials/fitted_pattern.py; isotropic microfacet lobes, +norm only,
+#: the N with a committed table; other lobes keep auto). Experimental: not the default yet.
+LOBE_PATTERNS = ("auto", "ring", "fitted")
 RING_SUFFIX = "+ring"
+FIT_SUFFIX = "+fit"
+PATTERN_SUFFIXES = {"auto": "", "ring": RING_SUFFIX, "fitted": FIT_SUFFIX}
 # A reference is the pixel's integral under a box filter: each pass shades at another sub-pixel
 # position (viewer/camera.py pixel_offset), so a reference of spp samples takes at least
 # min(spp, MIN_PIXEL_POSITIONS) passes (smaller batches) to resolve what a pixel covers.
@@ -79,12 +83,14 @@ DEFAULT_LOBE_LOD_BIAS = -1.0
 BOX_CHAIN_LOBE_LOD_BIAS = -0.5  # lobe-N's default on the box chain (--mip-filter box: as before the tent)
 
 _GRAMMAR = re.compile(
-    r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?:(?P<norm>\+norm)|(?P<eq424>\+eq4\.24))?(?P<ring>\+ring)?"
+    r"^(?:(?P<kind>lobe|fis|mc)-(?P<n>\d+)(?:(?P<norm>\+norm)|(?P<eq424>\+eq4\.24))?(?P<ring>\+ring)?(?P<fit>\+fit)?"
     r"|(?P<reference>reference)"
     r"|prefiltered(?:-(?P<mode>[a-z0-9]+))?)$"
 )
 GRAMMAR_HELP = (
-    "lobe-N[+norm|+eq4.24][+ring], fis-N, mc-N, reference or prefiltered[-" + "|-".join(PREFILTER_MODES[1:]) + "]"
+    "lobe-N[+norm|+eq4.24][+ring], lobe-N+norm+fit, fis-N, mc-N, reference or prefiltered[-"
+    + "|-".join(PREFILTER_MODES[1:])
+    + "]"
 )
 
 
@@ -117,7 +123,10 @@ class Method:
         if self.pattern not in LOBE_PATTERNS:
             raise MethodError(f"unknown lobe-N pattern {self.pattern!r}; use one of {', '.join(LOBE_PATTERNS)}")
         if self.pattern != "auto" and self.kind != "lobe":
-            raise MethodError(f"{RING_SUFFIX} (the thesis' ring) applies to lobe-N only, not {self.kind}")
+            raise MethodError(f"{PATTERN_SUFFIXES[self.pattern]} (a pattern) applies to lobe-N only, not {self.kind}")
+        if self.pattern == "fitted" and not self.normalize:
+            raise MethodError(f"{FIT_SUFFIX} (fitted reads) is exact under uniform light through the albedo: "
+                              f"write lobe-{self.samples}{NORMALIZE_SUFFIX}{FIT_SUFFIX}")  # fmt: skip
         if self.weighting == "eq4.24" and self.normalize:
             raise MethodError(f"{NORMALIZE_SUFFIX} normalises Eq. 4.25; {EQ424_SUFFIX} is Eq. 4.24 as printed")
         if self.kind == "prefiltered":
@@ -141,16 +150,18 @@ class Method:
                 raise MethodError(f"unknown method {text!r}; use {GRAMMAR_HELP}")
             return cls("prefiltered", 1, mode=mode)
         kind = m.group("kind")
-        norm, eq424, ring = (bool(m.group(name)) for name in ("norm", "eq424", "ring"))
-        if (norm or eq424 or ring) and kind != "lobe":
-            suffix = NORMALIZE_SUFFIX if norm else EQ424_SUFFIX if eq424 else RING_SUFFIX
+        norm, eq424, ring, fit = (bool(m.group(name)) for name in ("norm", "eq424", "ring", "fit"))
+        if (norm or eq424 or ring or fit) and kind != "lobe":
+            suffix = NORMALIZE_SUFFIX if norm else EQ424_SUFFIX if eq424 else RING_SUFFIX if ring else FIT_SUFFIX
             raise MethodError(f"{text!r}: {suffix} applies to lobe-N only")
+        if ring and fit:
+            raise MethodError(f"{text!r}: {RING_SUFFIX} and {FIT_SUFFIX} are two patterns; choose one")
         return cls(
             kind,
             int(m.group("n")),
             normalize=norm,
             weighting="eq4.24" if eq424 else "eq4.25",
-            pattern="ring" if ring else "auto",
+            pattern="ring" if ring else "fitted" if fit else "auto",
         )
 
     def __str__(self) -> str:
@@ -159,15 +170,14 @@ class Method:
         if self.kind == "prefiltered":
             return "prefiltered" if self.mode == "auto" else f"prefiltered-{self.mode}"
         suffix = NORMALIZE_SUFFIX if self.normalize else EQ424_SUFFIX if self.weighting == "eq4.24" else ""
-        if self.pattern == "ring":
-            suffix += RING_SUFFIX
+        suffix += PATTERN_SUFFIXES[self.pattern]
         return f"{self.kind}-{self.samples}" + suffix
 
     @property
     def family(self) -> str:
         """The benchmark's plot family: 'lobe', 'lobe+norm', 'lobe+eq4.24', each with '+ring' for
         the thesis' ring at every N, 'fis', 'mc', 'reference', 'prefiltered'."""
-        ring = RING_SUFFIX if self.pattern == "ring" else ""
+        ring = PATTERN_SUFFIXES[self.pattern]
         if self.weighting == "eq4.24":
             return "lobe" + EQ424_SUFFIX + ring
         return ("lobe+norm" if self.normalize else self.kind) + ring
@@ -184,7 +194,8 @@ class Method:
         none), unchanged."""
         if self.kind != "lobe" or self.weighting == "eq4.24":
             return self
-        return dataclasses.replace(self, normalize=bool(normalize))
+        pattern = "auto" if self.pattern == "fitted" and not normalize else self.pattern  # +fit needs +norm
+        return dataclasses.replace(self, normalize=bool(normalize), pattern=pattern)
 
     def default_lod_bias(self, mip_filter: str = "tent") -> float:
         """The measured best bias of this method on MIP chains made by ``mip_filter``

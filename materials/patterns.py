@@ -86,6 +86,7 @@ import numpy as np
 
 from lobeview.core.methods import DEFAULT_LOBE_LOD_BIAS, LOBE_PATTERNS
 
+from . import fitted_pattern
 from .bsdf import BSDF, HalfVectorLobe
 from .conductor import MicrofacetReflection
 from .microfacet import MicrofacetDistribution
@@ -165,8 +166,10 @@ def choose_pattern(
         return "line_y" if alpha_y > alpha_x else "line_x"
     if planar:
         return "multi_ring"
-    if pattern != "auto" or n is None:
+    if pattern == "ring" or n is None:
         return "ring"
+    # "fitted" (fitted_pattern.py) reads a table instead of a pattern where a lobe has one; the
+    # lobes without one take the automatic choice
     return "double_ring" if n >= DOUBLE_RING_MIN_SAMPLES else "ring"
 
 
@@ -400,6 +403,9 @@ def integrate_lobe(
     """
     if getattr(lobe, "sampled_pattern", False):
         return integrate_sampled_lobe(lobe, wo, radiance, n, face_size, frame, albedo_table)
+    if pattern == "fitted" and albedo_table is not None and fitted_pattern.has_fitted_pattern(lobe):
+        table = fitted_pattern.load_table(lobe.distribution.kind, fitted_pattern.read_count(lobe.distribution.kind, n))
+        return fitted_pattern.integrate_fitted(lobe, wo, radiance, table, face_size, frame, albedo_table)
     samples = lobe_samples(lobe, wo, n, face_size, frame, kind, pattern=pattern)
     valid = samples.valid
     if not np.any(valid):

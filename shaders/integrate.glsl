@@ -121,9 +121,16 @@ vec3 integrate_sampled_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
 }
 #endif
 
+#if defined(LOBE_FITTED) && defined(LOBE_NORMALIZE)
+#include "fitted.glsl"
+#endif
+
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
 #if defined(HAS_RATIONAL)
     if (l.type == LOBE_RATIONAL) return integrate_sampled_lobe(l, lobe_index, wo, tbn);
+#endif
+#if defined(LOBE_FITTED) && defined(LOBE_NORMALIZE)
+    if (fitted_lobe(l)) return integrate_fitted(l, lobe_index, wo, tbn);
 #endif
     int n = u_samples;
     float area = lobe_sample_area(l, wo, n);

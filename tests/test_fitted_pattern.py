@@ -58,11 +58,12 @@ def test_a_fit_beats_the_thesis_pattern_at_grazing():
 def test_lod_for_sigma_inverts_the_read_model():
     directions = np.array([[0.0, 0.0, 1.0], [0.6, 0.6, 0.53], [1.0, 0.2, -0.1]])
     directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    for level in (0.0, 0.7, 2.0, 4.5):
+    for level in (0.0, 0.3, 0.7, 2.0, 2.5, 4.9):
         sigma = fp.read_sigma_texels(level) * fp.texel_angle(directions, 128)
         np.testing.assert_allclose(fp.lod_for_sigma(directions, sigma, 128), level, atol=1e-9)
-    # level 0 is the sharpest read: the bilinear tent alone, sqrt(1/6) texel
+    # level 0 is the sharpest read: the bilinear tent alone, sqrt(1/6) texel; sharper asks give 0
     assert fp.read_sigma_texels(0.0) == pytest.approx(np.sqrt(1.0 / 6.0))
+    assert fp.lod_for_sigma(directions[:1], np.array([1e-6]), 128)[0] == 0.0
 
 
 @pytest.fixture(scope="module")
@@ -97,8 +98,29 @@ def test_the_table_fits_between_its_nodes(ggx_table):
 
 def test_fitted_reads_beat_the_thesis_pattern_on_the_sky(ggx_table):
     """Issue 45's sky without its sun, ideal reads, 16 x 16 pixels: the fitted pattern's floor is a
-    fraction of the thesis pattern's (0.7 against 8.0 % at 32 x 32, bench/results/lobe-kernel-*.md)."""
+    fraction of the thesis pattern's (1.0 against 7.2 % at 32 x 32, bench/results/lobe-kernel-*.md)."""
     lobe = lk.lobe_of("ggx:0.3")
     thesis = lk.ideal_floor(lobe, 7, pixels=16)
     fitted = lk.ideal_floor(lobe, 7, pixels=16, fitted=ggx_table)
     assert fitted < 0.3 * thesis and thesis > 0.05
+
+
+def test_the_fit_suffix_parses_back_and_needs_the_normalisation():
+    from lobeview.core.methods import Method, MethodError
+
+    method = Method.parse("lobe-7+norm+fit")
+    assert method.pattern == "fitted" and method.normalize and str(method) == "lobe-7+norm+fit"
+    with pytest.raises(MethodError, match="lobe-7\\+norm\\+fit"):
+        Method.parse("lobe-7+fit")
+    with pytest.raises(MethodError, match="choose one"):
+        Method.parse("lobe-7+norm+ring+fit")
+    assert str(method.with_normalize(False)) == "lobe-7"  # the fitted reads need the albedo
+
+
+def test_a_sample_count_without_a_table_names_the_command_that_makes_it():
+    from lobeview.viewer.fitted_gpu import fitted_texture_data
+
+    data = fitted_texture_data(7)
+    assert data.shape[2] == 1 + fp.read_count("ggx", 7) and np.isfinite(data).all()
+    with pytest.raises(ValueError, match="bench.fitted_patterns --n 4"):
+        fitted_texture_data(4)

@@ -57,8 +57,9 @@ def test_kernel_distance_grows_at_grazing():
 
 
 def test_mip_chain_reads_have_the_modelled_sigma():
-    """The model of a read of level L of the tent chain against the driver's own filtering."""
+    """The model of a read of the tent chain against the driver's own filtering, at levels and
+    between them (trilinear: the two levels' variances blend)."""
     with headless_gl() as ctx:
-        measured = lk.measure_mip_kernel_sigma(ctx, levels=(1, 2, 3, 4), face_size=128)
+        measured = lk.measure_mip_kernel_sigma(ctx, levels=(1, 2, 2.5, 3, 3.25, 4), face_size=128)
     for level, sigma in measured.items():
-        assert sigma == pytest.approx(float(fp.read_sigma_texels(level)) / 2**level, rel=0.02), level
+        assert sigma == pytest.approx(float(fp.read_sigma_texels(level)) / 2**level, rel=0.01), level

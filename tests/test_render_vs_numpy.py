@@ -35,6 +35,7 @@ RATIONAL_GOLD = str(Path(__file__).parent / "data" / "gold-ggx-rational.json")
 ROUGH_GGX = '{"model": "microfacet", "distribution": "ggx", "alpha_u": 0.5, "alpha_v": 0.5, "scale": 1.0}'
 # Anisotropic by 3.2: the line pattern, whose footprints at N = 19 are held to the lobe's width.
 LINE_GGX = '{"model": "microfacet", "distribution": "ggx", "alpha_u": 0.1, "alpha_v": 0.32, "scale": 1.0}'
+BECKMANN_02 = '{"model": "microfacet", "distribution": "beckmann", "alpha_u": 0.2, "alpha_v": 0.2, "scale": 1.0}'
 SIZE = (72, 72)
 CAMERA = Camera(position=(0.4, 0.6, 3.0), target=(0.0, 0.0, 0.0), fov_y=45.0)
 
@@ -126,7 +127,10 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     + [(p, n, "eq4.24") for p, n in (("gold-ggx", 15), ("alanod-2000gs-2lobe", 15), ("frosted-glass", 5),
                                      ("lacquer", 7), (RATIONAL_GOLD, 7))]
     # lobe-N+ring: the thesis' ring where the spiral is the default (N >= 11).
-    + [(p, 15, "ring") for p in ("gold-ggx", "frosted-glass")],
+    + [(p, 15, "ring") for p in ("gold-ggx", "frosted-glass")]
+    # lobe-N+norm+fit: the fitted reads (materials/fitted_pattern.py) on isotropic microfacet lobes,
+    # the thesis pattern on the others (anisotropic Beckmann, frosted glass's thesis lobes).
+    + [(p, 7, "fit") for p in ("gold-ggx", ROUGH_GGX, BECKMANN_02, "brushed-steel-beckmann", "frosted-glass")],
 )  # fmt: skip
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     from lobeview.core.methods import Method
@@ -135,8 +139,8 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     renderer, lookup = gl
     bsdf = build_bsdf(load_material(preset))
     weighting = "eq4.24" if normalize == "eq4.24" else "eq4.25"
-    pattern = "ring" if normalize == "ring" else "auto"
-    normalize = normalize is True
+    pattern = {"ring": "ring", "fit": "fitted"}.get(normalize, "auto")
+    normalize = normalize is True or normalize == "fit"
     method = Method("lobe", n, normalize, weighting=weighting, pattern=pattern)
     result = renderer.render(CAMERA, bsdf, method, background=False)
     assert not result.invalid.any()

@@ -26,6 +26,7 @@ import numpy as np
 
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN, PREFILTER_LOOKUPS, Method
 from lobeview.materials.banks import BANKS_AZIMUTHS
+from lobeview.materials.fitted_pattern import TABLE_ALPHAS, TABLE_VIEWS_DEG
 from lobeview.materials.gltf import SHEEN_TABLE_SIZE
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
 from lobeview.materials.measured import DEFENSIVE_COSINE
@@ -250,6 +251,11 @@ SHADER_CONSTANTS: dict = {
     "LOBE_SLICES": LOBE_SLICES,
     "LOBE_TABLE_ROWS": LOBE_TABLE_ROWS,
     "LOBE_DIRECT_AREA_PER_MEDIAN2": LOBE_DIRECT_AREA_PER_MEDIAN2,
+    # lobe-N+norm+fit (materials/fitted_pattern.py): the table's nodes, alpha log-spaced by hand
+    "FITTED_ALPHAS": len(TABLE_ALPHAS),
+    "FITTED_ALPHA_NODES": "float[](" + ", ".join(repr(float(a)) for a in TABLE_ALPHAS) + ")",
+    "FITTED_VIEWS": len(TABLE_VIEWS_DEG),
+    "FITTED_VIEW_STEP_DEG": float(TABLE_VIEWS_DEG[1] - TABLE_VIEWS_DEG[0]),
     # scenes/self_visibility.py: the horizon seen through a lookup's footprint
     "HORIZON_MIN_COS": float(HORIZON_MIN_COS),
     "HORIZON_SECTORS": HORIZON_SECTORS,  # at vertices
@@ -338,6 +344,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     "u_albedo_array": 44,
     "u_measured_table": 45,  # a measured BRDF's table (shaders/measured.glsl)
     "u_horizon_map": 46,  # the horizons per lightmap texel (scenes/horizon_maps.py)
+    "u_fitted_patterns": 47,  # lobe-N+norm+fit: the fitted reads (materials/fitted_pattern.py, viewer/fitted_gpu.py)
 }
 
 
@@ -356,6 +363,7 @@ def method_defines(method: Method) -> dict:
         "ENV_SAMPLING": method.kind == "reference",
         "LOBE_NORMALIZE": method.kind == "lobe" and method.normalize,
         "LOBE_EQ424": method.kind == "lobe" and method.weighting == "eq4.24",
+        "LOBE_FITTED": method.kind == "lobe" and method.pattern == "fitted",
         "METHOD_PREFILTERED": method.kind == "prefiltered",
     }
 

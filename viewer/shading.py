@@ -88,6 +88,15 @@ class ShadingBinder:
         )
         set_uniform(program, "u_sobol_count", self.sobol_count)
         set_uniform(program, "u_seed", int(seed))
+        if method.kind == "lobe" and method.pattern == "fitted" and has_uniform(program, "u_fitted_patterns"):
+
+            def fitted():
+                from .fitted_gpu import fitted_texture
+
+                return fitted_texture(self.ctx, method.samples), None
+
+            table = self.material_texture(("fitted patterns", method.samples), fitted)[0]
+            bind_sampler(program, "u_fitted_patterns", table)
 
     def set_material_state(self, program, material: PackedMaterial, method: Method, planar=False) -> None:
         """The material's lobes, patterns (for ``method`` and a ``planar`` reflector), colours and
