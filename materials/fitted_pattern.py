@@ -302,13 +302,16 @@ def kernel_distance(pattern: FittedPattern, target: LobeTarget) -> float:
 
 def has_fitted_pattern(lobe) -> bool:
     """Whether lobe-N+norm+fit reads a lobe through the fitted table: an isotropic GGX or Beckmann
-    microfacet reflection (conductor.py MicrofacetReflection; shaders: LOBE_MICROFACET). The glTF
-    lobes, anisotropic and transmission lobes keep the thesis pattern for now."""
+    microfacet reflection (conductor.py MicrofacetReflection and its glTF specular and clearcoat
+    lobes, whose f is D G times factors of the view alone; shaders: LOBE_MICROFACET,
+    LOBE_GLTF_SPECULAR, LOBE_GLTF_CLEARCOAT). Anisotropic and transmission lobes keep the thesis
+    pattern for now."""
     from .conductor import MicrofacetReflection
 
     dist = getattr(lobe, "distribution", None)
     return (
         isinstance(lobe, MicrofacetReflection)
+        and not getattr(lobe, "transmission", False)
         and dist is not None
         and dist.kind in ("ggx", "beckmann")
         and dist.alpha_x == dist.alpha_y

@@ -7,8 +7,11 @@
 
 uniform sampler3D u_fitted_patterns;  // x: slot (0 the lobe's shape), y: view node, z: distribution x alpha node
 
+// fitted_pattern.has_fitted_pattern: isotropic microfacet reflections (the glTF specular and
+// clearcoat lobes too: D G times factors of the view alone); transmission keeps the thesis pattern.
 bool fitted_lobe(Lobe l) {
-    return l.type == LOBE_MICROFACET && l.ax == l.ay;
+    bool reflection = l.type == LOBE_MICROFACET || l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_CLEARCOAT;
+    return reflection && l.ax == l.ay;
 }
 
 vec4 fitted_node(int slot, int view, int alpha_node, int dist) {

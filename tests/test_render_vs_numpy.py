@@ -36,6 +36,11 @@ ROUGH_GGX = '{"model": "microfacet", "distribution": "ggx", "alpha_u": 0.5, "alp
 # Anisotropic by 3.2: the line pattern, whose footprints at N = 19 are held to the lobe's width.
 LINE_GGX = '{"model": "microfacet", "distribution": "ggx", "alpha_u": 0.1, "alpha_v": 0.32, "scale": 1.0}'
 BECKMANN_02 = '{"model": "microfacet", "distribution": "beckmann", "alpha_u": 0.2, "alpha_v": 0.2, "scale": 1.0}'
+# glTF lobes read through the fitted table too: a rough metal under a clearcoat, and a thin
+# transmissive pane (its transmission lobe keeps the thesis pattern).
+GLTF_COATED = ('{"model": "gltf", "base_color": [0.9, 0.6, 0.3], "metallic": 1.0, "roughness": 0.45, '
+               '"clearcoat": 0.8, "clearcoat_roughness": 0.1}')  # fmt: skip
+GLTF_PANE = '{"model": "gltf", "base_color": [0.9, 0.9, 0.9], "metallic": 0.0, "roughness": 0.3, "transmission": 1.0}'
 SIZE = (72, 72)
 CAMERA = Camera(position=(0.4, 0.6, 3.0), target=(0.0, 0.0, 0.0), fov_y=45.0)
 
@@ -130,7 +135,8 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     + [(p, 15, "ring") for p in ("gold-ggx", "frosted-glass")]
     # lobe-N+norm+fit: the fitted reads (materials/fitted_pattern.py) on isotropic microfacet lobes,
     # the thesis pattern on the others (anisotropic Beckmann, frosted glass's thesis lobes).
-    + [(p, 7, "fit") for p in ("gold-ggx", ROUGH_GGX, BECKMANN_02, "brushed-steel-beckmann", "frosted-glass")],
+    + [(p, 7, "fit") for p in ("gold-ggx", ROUGH_GGX, BECKMANN_02, GLTF_COATED, GLTF_PANE, "gltf-red-plastic",
+                               "brushed-steel-beckmann", "frosted-glass")],
 )  # fmt: skip
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     from lobeview.core.methods import Method
