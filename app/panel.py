@@ -15,6 +15,7 @@ from lobeview.app.fit_job import FIT_MODELS, lockable_parameters
 from lobeview.app.frame_pacing import scaled_size
 from lobeview.app.walk import WalkCamera
 from lobeview.core.methods import MAX_PATTERN, method_choice, method_from_choice, realtime_choices
+from lobeview.materials.fitted_pattern import fitted_sample_counts
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.tonemap import TONEMAPS
 
@@ -140,8 +141,20 @@ def _rendering(window) -> None:
     c3, window.lobe_normalize = imgui.checkbox("lobe-N energy normalisation", window.lobe_normalize)
     # lobe-N+ring: the thesis' ring at every N instead of the double ring from N = 11 (for comparison)
     c_ring, ring = imgui.checkbox("lobe-N: thesis ring at every N", window.method.pattern == "ring")
-    if c or c2 or c3 or c_ring:
-        window.set_method(method_from_choice(kinds[k], n, window.lobe_normalize, "ring" if ring else "auto"))
+    # lobe-N+norm+fit: reads fitted to the lobe (materials/fitted_pattern.py), for the N with a table
+    fitted_counts = fitted_sample_counts()
+    c_fit, fit = imgui.checkbox("lobe-N: fitted reads", window.method.pattern == "fitted")
+    if imgui.is_item_hovered():
+        counts = ", ".join(str(x) for x in fitted_counts) or "none"
+        imgui.set_tooltip(f"lobe-N+norm+fit (experimental): reads fitted to each lobe, for N = {counts}\n"
+                          "with the energy normalisation; other N keep the thesis pattern")  # fmt: skip
+    if c_fit and fit:
+        ring = False
+    if c_ring and ring:
+        fit = False
+    if c or c2 or c3 or c_ring or c_fit:
+        pattern = "ring" if ring else "fitted" if fit and n in fitted_counts else "auto"
+        window.set_method(method_from_choice(kinds[k], n, window.lobe_normalize, pattern))
     _, window.progressive = imgui.checkbox("refine when still", window.progressive)
     c4, mirrors = imgui.checkbox("planar mirror passes", renderer.settings.mirrors)
     c5, scale = imgui.slider_float("mirror resolution", renderer.settings.mirror_scale, 0.1, 1.0)

@@ -246,11 +246,16 @@ def method_choice(method: Method) -> str:
 
 def method_from_choice(choice: str, samples: int, normalize: bool, pattern: str = "auto") -> Method:
     """The method a combo entry + sample slider + normalisation checkbox (+ for lobe-N the
-    thesis-ring checkbox, ``pattern``) select."""
+    thesis-ring or fitted-reads checkbox, ``pattern``) select; the fitted reads need the
+    normalisation, without it lobe-N keeps its automatic pattern."""
     if choice.startswith("prefiltered"):
         return Method.parse(choice)
     method = Method(choice, 1).with_samples(samples).with_normalize(normalize)
-    return dataclasses.replace(method, pattern=pattern) if method.kind == "lobe" else method
+    if method.kind != "lobe":
+        return method
+    if pattern == "fitted" and not method.normalize:
+        pattern = "auto"
+    return dataclasses.replace(method, pattern=pattern)
 
 
 def resolve_cli_method(text: str, lobe_normalize: bool | None) -> Method:

@@ -451,6 +451,19 @@ def integrate_fitted(lobe, wo, radiance, table: PatternTable, face_size: int, fr
     return albedo_table.lookup(np.asarray(wo, dtype=np.float64).reshape(3)) * (weight @ values)
 
 
+@lru_cache(maxsize=2)
+def fitted_sample_counts(path: Path = TABLE_PATH) -> tuple[int, ...]:
+    """The lobe-N sample counts with a fitted table for both distributions (lobe-N+norm+fit)."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            keys = set(data.files)
+    except OSError:
+        return ()
+    kinds = ("beckmann", "ggx")
+    counts = range(1, max(TOPOLOGIES) + 1)
+    return tuple(n for n in counts if all(f"{kind}_{read_count(kind, n)}_reads" in keys for kind in kinds))
+
+
 def save_tables(tables: list[PatternTable], path: Path = TABLE_PATH) -> None:
     arrays = {}
     for table in tables:

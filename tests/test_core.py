@@ -76,6 +76,8 @@ def test_the_names_the_program_uses_are_canonical():
     assert Method.parse("lobe-15+norm+ring").with_samples(7).pattern == "ring"
     assert method_from_choice("lobe", 15, True, "ring") == Method.parse("lobe-15+norm+ring")
     assert method_from_choice("fis", 16, True, "ring") == Method.parse("fis-16")  # the checkbox is lobe-N's
+    assert method_from_choice("lobe", 7, True, "fitted") == Method.parse("lobe-7+norm+fit")
+    assert method_from_choice("lobe", 7, False, "fitted") == Method.parse("lobe-7")  # fitted reads need +norm
 
 
 @pytest.mark.parametrize(

@@ -120,6 +120,7 @@ def test_the_fit_suffix_parses_back_and_needs_the_normalisation():
 def test_a_sample_count_without_a_table_names_the_command_that_makes_it():
     from lobeview.viewer.fitted_gpu import fitted_texture_data
 
+    assert 7 in fp.fitted_sample_counts() and 4 not in fp.fitted_sample_counts()  # the panel's list
     data = fitted_texture_data(7)
     assert data.shape[2] == 1 + fp.read_count("ggx", 7) and np.isfinite(data).all()
     with pytest.raises(ValueError, match="bench.fitted_patterns --n 4"):
