@@ -136,7 +136,8 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
     # lobe-N+norm+fit: the fitted reads (materials/fitted_pattern.py) on isotropic microfacet lobes,
     # the thesis pattern on the others (anisotropic Beckmann, frosted glass's thesis lobes).
     + [(p, 7, "fit") for p in ("gold-ggx", ROUGH_GGX, BECKMANN_02, GLTF_COATED, GLTF_PANE, "gltf-red-plastic",
-                               "brushed-steel-beckmann", "frosted-glass")],
+                               "brushed-steel-beckmann", "frosted-glass")]
+    + [(p, n, "fit") for p, n in ((ROUGH_GGX, 19), (BECKMANN_02, 3), ("gold-ggx", 11))],
 )  # fmt: skip
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     from lobeview.core.methods import Method
