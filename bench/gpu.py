@@ -26,19 +26,26 @@ refinement against the CPU ray tracer took 290 s of it, and the bakes (CPU) anot
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 import traceback
 from pathlib import Path
 
+# The real-time methods' cost on the preview sphere (issue 45: what lobe-N+norm+fit's fitted reads
+# cost beside the thesis pattern and the other methods, where llvmpipe's numbers say little).
+METHODS = ("lobe-7", "lobe-7+norm", "lobe-7+norm+fit", "lobe-15+norm", "lobe-15+norm+fit", "fis-16", "prefiltered",
+           "prefiltered-rsibr")  # fmt: skip
 FULL = {"size": (1680, 1050), "fps_samples": (3, 7, 11, 19), "mirror_sizes": ((1680, 1050),),
         "mirror_samples": (3, 7, 11, 19), "walk_size": (1680, 1050), "frames": 24, "rooms": 12,
         "count_rooms": (1, 18), "draw_sizes": ((64, 40), (160, 100), (1680, 1050)), "draw_frames": 16,
-        "face_size": 256, "repeats": 9, "spp": 256, "refinement": False}  # fmt: skip
+        "face_size": 256, "repeats": 9, "spp": 256, "refinement": False,
+        "method_materials": ("ggx:0.3", "beckmann:0.15"), "methods": METHODS}  # fmt: skip
 SMALL = {"size": (160, 100), "fps_samples": (3, 7), "mirror_sizes": ((160, 100),), "mirror_samples": (3,),
          "walk_size": (160, 100), "frames": 3, "rooms": 1, "count_rooms": (1,), "draw_sizes": ((64, 40),),
-         "draw_frames": 3, "face_size": 32, "repeats": 1, "spp": 16, "refinement": True}  # fmt: skip
-PARTS = ("fps", "draw-cost", "walkthrough", "mirrors")  # in order of what a short lease must not miss
+         "draw_frames": 3, "face_size": 32, "repeats": 1, "spp": 16, "refinement": True,
+         "method_materials": ("ggx:0.3",), "methods": ("lobe-7+norm", "lobe-7+norm+fit")}  # fmt: skip
+PARTS = ("fps", "methods", "draw-cost", "walkthrough", "mirrors")  # in order of what a short lease must not miss
 
 
 def _say(text: str) -> None:
@@ -65,6 +72,49 @@ def fps_rows(ctx, plan: dict, timer: str) -> list[str]:
             f"{'-' if thesis is None else f'{thesis[0]} / {thesis[1]}'} "
             f"| {row['full']['wall_ms']:.2f} / {row['half']['wall_ms']:.2f} |"
         )
+    return lines
+
+
+def method_rows(ctx, plan: dict, timer: str) -> list[str]:
+    """Frame time of each method in ``plan['methods']`` on a sphere that fills the frame's height
+    (camera 2.2 units from a unit sphere, fov 60) under the interior capture, its bright sources
+    separated as the viewer does, per material (``bench.mitsuba`` case names)."""
+    import warnings
+
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.preview import PreviewRenderer
+
+    from .light import build_material
+    from .targets import resolve_environment, time_frames
+
+    size = plan["size"]
+    camera = Camera(position=(0.0, 0.0, 2.2), target=(0.0, 0.0, 0.0), fov_y=60.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        env = resolve_environment("interior")
+        renderer = PreviewRenderer(ctx, env, uv_sphere(1.0), size=size, face_size=plan["face_size"],
+                                   bright_sources=True)  # fmt: skip
+    lines = [
+        f"## The methods on a sphere, {size[0]}x{size[1]}, interior capture with its lights separated",
+        "",
+        "| material | method | ms | fps | wall ms | sphere share of the frame |",
+        "|---|---|---|---|---|---|",
+    ]
+    try:
+        for case in plan["method_materials"]:
+            bsdf = build_material(case)
+            for method in plan["methods"]:
+                result, ms, _, wall_ms, _ = time_frames(
+                    functools.partial(renderer.render, camera, bsdf, method, background=False),
+                    plan["repeats"],
+                    timer,
+                )
+                lines.append(f"| {case} | {method} | {ms:.2f} | {1000 / ms:.1f} | {wall_ms:.2f} "
+                             f"| {float(result.mask.mean()):.2f} |")  # fmt: skip
+                _say(f"methods: {case} {method}: {ms:.2f} ms")
+    finally:
+        renderer.release()
     return lines
 
 
@@ -97,6 +147,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     parts = {
         "fps": lambda: fps_rows(ctx, plan, timer),
+        "methods": lambda: method_rows(ctx, plan, timer),
         "mirrors": lambda: _mirrors(ctx, device, out, stamp, plan),
         "draw-cost": lambda: _draw_cost(ctx, device, out, stamp, plan, cache_dir(args.cache)),
         "walkthrough": lambda: _walkthrough(ctx, device, out, stamp, plan, cache_dir(args.cache), args.small),

@@ -25,6 +25,10 @@ def test_the_gpu_bench_writes_every_table_at_small_sizes(tmp_path):
     )  # fmt: skip
     assert [int(row[0]) for row in rows] == [3, 7], text  # Table 4.1 at the small plan's N
     assert all(float(row[1]) > 0 and float(row[3]) > 0 and float(row[7]) > 0 for row in rows)
+    cells = rf"{number} \| {number} \| {number} \| {number}"
+    methods = re.findall(rf"^\| ggx:0.3 \| (lobe-7\+norm(?:\+fit)?) \| {cells} \|$", text, re.M)
+    assert [row[0] for row in methods] == ["lobe-7+norm", "lobe-7+norm+fit"], text  # the methods' cost
+    assert all(float(row[1]) > 0 and 0.2 < float(row[4]) <= 1 for row in methods), text
     linked = re.findall(r"\]\(((?:mirrors|walkthrough|draw-cost)-[^)]+\.md)\)", text)
     assert sorted(name.split("-")[0] for name in linked) == ["draw", "mirrors", "walkthrough"], text
     assert all((tmp_path / name).exists() for name in linked), text
