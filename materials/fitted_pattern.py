@@ -439,15 +439,23 @@ def fitted_reads(table: PatternTable, alpha: float, wo: np.ndarray):
     return local @ turn.T, weight, sigma
 
 
-def integrate_fitted(lobe, wo, radiance, table: PatternTable, face_size: int, frame, albedo_table) -> np.ndarray:
+def integrate_fitted(
+    lobe, wo, radiance, table: PatternTable, face_size: int, frame, albedo_table, stack=None
+) -> np.ndarray:
     """lobe-N with the fitted pattern: albedo(wo) sum_j w_j L(d_j, lod_j), each read at the level
     that blurs by its sigma (:func:`lod_for_sigma`); exact under uniform light. ``radiance`` as
-    patterns.integrate_lobe takes it; the lobe must be an isotropic GGX or Beckmann reflection."""
+    patterns.integrate_lobe takes it; the lobe must be an isotropic GGX or Beckmann reflection.
+    ``stack`` (materials/blur_stack.py StackReads, or None): reads of sigma >= its ``sigma0`` read
+    it (``stack(world, sigma)``) instead of the MIP chain, as the preview renderer does."""
     dist = lobe.distribution
     dirs, weight, sigma = fitted_reads(table, float(dist.alpha_x), wo)
     world = dirs if frame is None else dirs @ np.asarray(frame, dtype=np.float64).T  # patterns.to_world
     lod = lod_for_sigma(world, sigma, face_size)
     values = np.asarray(radiance(world, lod), dtype=np.float64)
+    if stack is not None:
+        coarse = sigma >= stack.sigma0
+        if np.any(coarse):
+            values[coarse] = stack(world[coarse] / np.linalg.norm(world[coarse], axis=1, keepdims=True), sigma[coarse])
     return albedo_table.lookup(np.asarray(wo, dtype=np.float64).reshape(3)) * (weight @ values)
 
 

@@ -384,6 +384,7 @@ def integrate_lobe(
     weighting: str = "eq4.25",
     albedo_table: AlbedoTable | None = None,
     pattern: str = "auto",
+    stack=None,
 ) -> np.ndarray:
     """Outgoing radiance of one lobe by the deterministic pattern quadrature.
 
@@ -396,7 +397,8 @@ def integrate_lobe(
     lobes wider than their pattern or cut by the horizon keep their true energy.
 
     ``pattern`` ('auto' or 'ring', the method suffix +ring) is the pattern choice of
-    :func:`lobe_samples` when ``kind`` is None.
+    :func:`lobe_samples` when ``kind`` is None; 'fitted' (+fit) reads the fitted pattern
+    (materials/fitted_pattern.py), its coarse reads from ``stack`` where one is given.
 
     A lobe with ``sampled_pattern`` (the Rational BRDF) uses step 6 of the module docstring:
     ``kind``, ``pattern`` and ``weighting`` do not apply to it.
@@ -405,7 +407,7 @@ def integrate_lobe(
         return integrate_sampled_lobe(lobe, wo, radiance, n, face_size, frame, albedo_table)
     if pattern == "fitted" and albedo_table is not None and fitted_pattern.has_fitted_pattern(lobe):
         table = fitted_pattern.load_table(lobe.distribution.kind, fitted_pattern.read_count(lobe.distribution.kind, n))
-        return fitted_pattern.integrate_fitted(lobe, wo, radiance, table, face_size, frame, albedo_table)
+        return fitted_pattern.integrate_fitted(lobe, wo, radiance, table, face_size, frame, albedo_table, stack)
     samples = lobe_samples(lobe, wo, n, face_size, frame, kind, pattern=pattern)
     valid = samples.valid
     if not np.any(valid):

@@ -10,6 +10,19 @@ float cube_lod(vec3 dir, float area, float face) {
     return 0.5 * log2(max(texels, 1e-30));
 }
 
+// materials/fitted_pattern.py lod_for_sigma: the MIP level whose read blurs by `sigma` (rad) in
+// `dir` on faces of size `face`: the integer level L below (4^L 5/12 - 1/4 base texels^2 <= s^2)
+// and the trilinear blend of L + 1 that makes up the rest; never sharper than level 0 (1/6).
+float lod_for_sigma(vec3 dir, float sigma, float face) {
+    vec3 m = abs(normalize(dir));
+    float texel2 = 4.0 / (face * face) * pow(max(max(m.x, m.y), m.z), 3.0);
+    float s2 = max(sigma * sigma / texel2, 1.0 / 6.0);
+    float low = floor(0.5 * log2((s2 + 0.25) * 2.4) + 1e-6);
+    float v_low = exp2(2.0 * low) * (5.0 / 12.0) - 0.25;
+    float v_high = exp2(2.0 * low + 2.0) * (5.0 / 12.0) - 0.25;
+    return low + clamp((s2 - v_low) / (v_high - v_low), 0.0, 1.0);
+}
+
 // Direction through (sc, tc) in [-1, 1]^2 of a face (OpenGL table 8.19; scenes/cube_layout.py).
 vec3 cube_face_direction(int face, float sc, float tc) {
     if (face == 0) return vec3(1.0, -tc, -sc);

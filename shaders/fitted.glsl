@@ -3,8 +3,13 @@
 // at theta_o takes the table's reads, bilinear between the four nodes around (log alpha, theta_o)
 // (table_reads), each a direction at tangent-plane offset (a, b) from the mirror direction (a in the
 // plane of incidence towards the normal, b across it; the exponential map) read at the MIP level
-// whose blur is its sigma (lod_for_sigma), weighted by its weight; times the lobe's albedo.
+// whose blur is its sigma (lod_for_sigma), weighted by its weight; times the lobe's albedo. With
+// BLUR_STACK a read of sigma >= BLUR_STACK_SIGMA0 reads the cube's blur stack instead
+// (materials/blur_stack.py: the chain's coarse levels are undersampled for their blur).
 
+#if defined(BLUR_STACK)
+#include "blur_stack.glsl"
+#endif
 uniform sampler3D u_fitted_patterns;  // x: slot (0 the lobe's shape), y: view node, z: distribution x alpha node
 
 // fitted_pattern.has_fitted_pattern: isotropic microfacet reflections (the glTF specular and
@@ -61,19 +66,29 @@ vec3 integrate_fitted(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         vec3 d = cos(rho) * r + (a * e_a + b * e_b) * sinc;
         vec3 world = tbn * d;
         float sigma = read.w * narrow;
-        // lod_for_sigma: the integer level whose read's variance (4^L 5/12 - 1/4 base texels^2) is
-        // below sigma^2 and the trilinear blend of the next that makes up the rest; passed through
-        // incident()'s solid angle (cube_lod: 0.5 log2(area / m^3 face^2 / 4), plus the method's LOD
-        // bias, taken back out: the sigma is the blur wanted).
+        // lod_for_sigma (cube.glsl): passed through incident()'s solid angle (cube_lod: 0.5 log2(area
+        // / m^3 face^2 / 4), plus the method's LOD bias, taken back out: the sigma is the blur wanted).
+        float lod = lod_for_sigma(world, sigma, u_face_size);
         vec3 m = abs(normalize(world));
-        float m3 = pow(max(max(m.x, m.y), m.z), 3.0);
-        float texel2 = cube_texel2 * m3;
-        float s2 = max(sigma * sigma / texel2, 1.0 / 6.0);
-        float low = floor(0.5 * log2((s2 + 0.25) * 2.4) + 1e-6);
-        float v_low = exp2(2.0 * low) * (5.0 / 12.0) - 0.25;
-        float v_high = exp2(2.0 * low + 2.0) * (5.0 / 12.0) - 0.25;
-        float lod = low + clamp((s2 - v_low) / (v_high - v_low), 0.0, 1.0);
+        float texel2 = cube_texel2 * pow(max(max(m.x, m.y), m.z), 3.0);
         float area = exp2(2.0 * (lod - u_lod_bias)) * texel2;
+#if defined(BLUR_STACK)
+        // a read the MIP chain's coarse levels would make lumpy: the blur stack (blur_stack.glsl)
+        vec3 stack_dir = normalize(world);
+        float stack_sigma = sigma;
+#if defined(PARALLAX)
+        // the proxy's hit seen from the cube's centre, and the read's angle from there (lookup()'s
+        // lod_offset: log2 of the distance ratio, one level per doubling of an angle)
+        float lod_offset;
+        stack_dir = proxy_direction(world, lod_offset);
+        stack_sigma *= exp2(lod_offset);
+#endif
+        if (stack_sigma >= BLUR_STACK_SIGMA0) {
+            sum += read.z * self_occluded(world, blur_stack_read(stack_dir, stack_sigma), area);
+            weight_sum += read.z;
+            continue;
+        }
+#endif
         sum += read.z * incident(world, area);
         weight_sum += read.z;
     }

@@ -141,6 +141,8 @@ def test_reference_method_matches_numpy_monte_carlo(gl, preset):
 )  # fmt: skip
 def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     from lobeview.core.methods import Method
+    from lobeview.materials.blur_stack import StackReads
+    from lobeview.viewer.blur_stack_gpu import read_blur_stack
     from lobeview.viewer.material_gpu import albedo_table_for
 
     renderer, lookup = gl
@@ -152,6 +154,8 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
     result = renderer.render(CAMERA, bsdf, method, background=False)
     assert not result.invalid.any()
     cube = renderer.cubes.radiance
+    # +fit's coarse reads come from the environment's blur stack in the preview (materials/blur_stack.py)
+    stack = StackReads(read_blur_stack(renderer.cubes.blur_stack())) if pattern == "fitted" else None
     for y, x in _pixels(result, count=10, seed=n):
         frame, wo = _frame(result, y, x)
 
@@ -171,6 +175,7 @@ def test_lobe_method_matches_numpy_pattern_quadrature(gl, preset, n, normalize):
                 weighting=weighting,
                 albedo_table=table,
                 pattern=pattern,
+                stack=stack,
             )
         kd = diffuse_albedo(bsdf)
         if np.any(kd > 0):

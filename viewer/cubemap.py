@@ -88,7 +88,17 @@ class RadianceCube:
         self.importance_size = min(int(importance_size), self.face_size)
         self._importance: tuple | None = None  # (CubeImportance, env_cdf, env_pdf) once built
         self._prefiltered = None
+        self._blur_stack = None  # lobe-N+norm+fit's coarse reads (viewer/blur_stack_gpu.py), on first use
         self.cache_dir = None  # where prefiltered maps are cached (set by the owner)
+
+    def blur_stack(self) -> moderngl.TextureArray:
+        """The blur stack of ``residual`` (materials/blur_stack.py), built on first use (a few
+        hundred thousand texture reads: milliseconds on a GPU, about a second on llvmpipe)."""
+        if self._blur_stack is None:
+            from .blur_stack_gpu import build_blur_stack
+
+            self._blur_stack = build_blur_stack(self.residual.ctx, self.residual, self.face_size)
+        return self._blur_stack
 
     @property
     def faces(self) -> np.ndarray:
@@ -170,6 +180,8 @@ class RadianceCube:
     def release(self):
         if self._prefiltered is not None:
             self._prefiltered.release()
+        if self._blur_stack is not None:
+            self._blur_stack.release()
         if self.residual is not self.radiance:
             self.residual.release()
         self.radiance.release()

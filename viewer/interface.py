@@ -26,6 +26,7 @@ import numpy as np
 
 from lobeview.core.methods import MAX_LOBES, MAX_PATTERN, PREFILTER_LOOKUPS, Method
 from lobeview.materials.banks import BANKS_AZIMUTHS
+from lobeview.materials.blur_stack import BUILD_TAPS, STACK_FACE, STACK_LAYERS, STACK_PAD, stack_sigmas
 from lobeview.materials.fitted_pattern import TABLE_ALPHAS, TABLE_VIEWS_DEG
 from lobeview.materials.gltf import SHEEN_TABLE_SIZE
 from lobeview.materials.lobe_fit import LOBE_SLICES, MAP_LOBES
@@ -256,6 +257,12 @@ SHADER_CONSTANTS: dict = {
     "FITTED_ALPHA_NODES": "float[](" + ", ".join(repr(float(a)) for a in TABLE_ALPHAS) + ")",
     "FITTED_VIEWS": len(TABLE_VIEWS_DEG),
     "FITTED_VIEW_STEP_DEG": float(TABLE_VIEWS_DEG[1] - TABLE_VIEWS_DEG[0]),
+    # materials/blur_stack.py: the preview's blur stack (its layout; shaders/blur_stack.comp's taps)
+    "BLUR_STACK_FACE": STACK_FACE,
+    "BLUR_STACK_PAD": STACK_PAD,
+    "BLUR_STACK_LAYERS": STACK_LAYERS,
+    "BLUR_STACK_SIGMA0": float(stack_sigmas()[0]),
+    "BLUR_STACK_TAPS": BUILD_TAPS,
     # scenes/self_visibility.py: the horizon seen through a lookup's footprint
     "HORIZON_MIN_COS": float(HORIZON_MIN_COS),
     "HORIZON_SECTORS": HORIZON_SECTORS,  # at vertices
@@ -345,6 +352,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     "u_measured_table": 45,  # a measured BRDF's table (shaders/measured.glsl)
     "u_horizon_map": 46,  # the horizons per lightmap texel (scenes/horizon_maps.py)
     "u_fitted_patterns": 47,  # lobe-N+norm+fit: the fitted reads (materials/fitted_pattern.py, viewer/fitted_gpu.py)
+    "u_blur_stack": 48,  # lobe-N+norm+fit's coarse reads in the preview (materials/blur_stack.py)
 }
 
 
@@ -352,6 +360,13 @@ def unit(name: str, index: int = 0) -> int:
     """Texture unit of sampler uniform ``name`` (element ``index`` of a sampler array)."""
     units = TEXTURE_UNITS[name]
     return units[index] if isinstance(units, tuple) else units
+
+
+def uses_blur_stack(method: Method) -> bool:
+    """lobe-N+norm+fit reads its coarse reads from the cube's blur stack (materials/blur_stack.py):
+    the variant's BLUR_STACK where one cube is bound (the preview, per-object draws of the scene;
+    not the mirror buffers nor the multi-draws' cube-map arrays)."""
+    return method.kind == "lobe" and method.pattern == "fitted"
 
 
 def method_defines(method: Method) -> dict:

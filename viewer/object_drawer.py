@@ -18,7 +18,7 @@ from lobeview.scenes.scene import Scene
 from .camera import box_corners, outside_frustum_many
 from .cube_arrays import direct_gl
 from .cubemap import RadianceCube
-from .interface import DrawRecorder, method_defines, set_uniform
+from .interface import DrawRecorder, method_defines, set_uniform, uses_blur_stack
 from .lobe_batches import BATCHED_METHOD_KINDS, LobeBatches
 from .material_gpu import PackedMaterial
 from .object_batches import ObjectBatches, SceneGeometry
@@ -195,6 +195,9 @@ class ObjectDrawer:
             # The cube's importance map samples directions seen from its centre, which the proxy
             # remaps: the reference then samples the BSDF only (still unbiased).
             defines.update(PARALLAX=True, ENV_SAMPLING=False)
+        # lobe-N+norm+fit's coarse reads from the object's cube's blur stack (one cube bound: not
+        # the mirror buffers, not the multi-draws' arrays, which lobe-N+norm+fit does not use)
+        defines["BLUR_STACK"] = specular and not mirror and not records and uses_blur_stack(method)
         return self.programs.program("scene.vert", "scene.frag", defines)
 
     def object_method(self, index: int, method: Method) -> Method:
@@ -470,6 +473,8 @@ class ObjectDrawer:
         multi-draws (viewer/lobe_batches.py); returns which objects were handled here."""
         n = len(self.objects)
         handled = np.zeros(n, dtype=bool)
+        if uses_blur_stack(method):  # each object reads its own cube's blur stack: drawn one by one
+            return handled
         batches = self._lobe_batches()
         if batches is None:
             return handled

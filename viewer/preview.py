@@ -20,7 +20,7 @@ from lobeview.scenes.meshes import Mesh
 
 from .camera import Camera, jittered
 from .cubemap import EnvironmentCubes
-from .interface import bind_sampler, method_defines, set_uniform
+from .interface import bind_sampler, method_defines, set_uniform, uses_blur_stack
 from .material_gpu import pack_material
 from .mip_chain import DEFAULT_MIP_FILTER
 from .render_base import RendererBase, RenderResult
@@ -58,6 +58,8 @@ class PreviewRenderer(RendererBase):
         defines = {
             **method_defines(method), "HAS_DIFFUSE": has_diffuse, "HAS_RATIONAL": has_rational,
             "HAS_MEASURED": has_measured,
+            # lobe-N+norm+fit's coarse reads from the environment's blur stack (materials/blur_stack.py)
+            "BLUR_STACK": uses_blur_stack(method),
         }  # fmt: skip
         program = self.programs.program("mesh.vert", "preview.frag", defines)
         key = id(program)

@@ -27,6 +27,7 @@ from .interface import (
     set_uniform,
     unit,
     use_unit,
+    uses_blur_stack,
     write_uniform,
 )
 from .material_gpu import PackedMaterial, albedo_texture_data, pack_patterns
@@ -181,6 +182,9 @@ class ShadingBinder:
         prefiltered maps and lobe table (prefiltered only, built on first use for this cube and
         material; ``per_pixel_lobes``: textures change the lobes, so none is baked into RSIBR
         maps). Units: viewer/interface.py TEXTURE_UNITS."""
+        # lobe-N+norm+fit's coarse reads: the cube's blur stack, built (a compute pass with its own
+        # texture and image units) before anything of this draw is bound
+        stack = cube.blur_stack() if uses_blur_stack(method) and has_uniform(program, "u_blur_stack") else None
         if method.kind == "prefiltered":
             self.bind_prefiltered(program, cube, material, method, per_pixel_lobes)
         # Bright sources (viewer/cubemap.py): the reference integrates the whole radiance, every
@@ -198,6 +202,8 @@ class ShadingBinder:
             write_uniform(program, "u_cap_light_radiance", radiance)
         bind_sampler(program, "u_sobol", self.sobol)
         set_uniform(program, "u_face_size", float(cube.face_size))
+        if stack is not None:
+            bind_sampler(program, "u_blur_stack", stack)
         if method.kind == "reference":
             bind_sampler(program, "u_env_cdf", cube.env_cdf)
             bind_sampler(program, "u_env_pdf", cube.env_pdf)
