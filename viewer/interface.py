@@ -257,7 +257,7 @@ SHADER_CONSTANTS: dict = {
     "FITTED_ALPHA_NODES": "float[](" + ", ".join(repr(float(a)) for a in TABLE_ALPHAS) + ")",
     "FITTED_VIEWS": len(TABLE_VIEWS_DEG),
     "FITTED_VIEW_STEP_DEG": float(TABLE_VIEWS_DEG[1] - TABLE_VIEWS_DEG[0]),
-    # materials/blur_stack.py: the preview's blur stack (its layout; shaders/blur_stack.comp's taps)
+    # materials/blur_stack.py: every blur stack (its layout; shaders/blur_stack.comp's taps)
     "BLUR_STACK_FACE": STACK_FACE,
     "BLUR_STACK_PAD": STACK_PAD,
     "BLUR_STACK_LAYERS": STACK_LAYERS,
@@ -352,7 +352,7 @@ TEXTURE_UNITS: dict[str, int | tuple[int, ...]] = {
     "u_measured_table": 45,  # a measured BRDF's table (shaders/measured.glsl)
     "u_horizon_map": 46,  # the horizons per lightmap texel (scenes/horizon_maps.py)
     "u_fitted_patterns": 47,  # lobe-N+norm+fit: the fitted reads (materials/fitted_pattern.py, viewer/fitted_gpu.py)
-    "u_blur_stack": 48,  # lobe-N+norm+fit's coarse reads in the preview (materials/blur_stack.py)
+    "u_blur_stack": 48,  # lobe-N+norm+fit's coarse reads: the bound cube's blur stack (materials/blur_stack.py)
 }
 
 
