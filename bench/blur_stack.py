@@ -48,30 +48,30 @@ CASES = ("ggx:0.15", "ggx:0.3", "ggx:0.5", "beckmann:0.15", "beckmann:0.5")
 stack_sigmas, vmf_blur = blur_stack.stack_sigmas, blur_stack.vmf_blur
 
 
-def stack_reads(lookup, chain, stack: np.ndarray, face_size: int = FACE_SIZE):
-    """Reads of sigma (rad): ``stack`` (materials/blur_stack.py layout) from its first sigma up,
-    the tent chain through the GPU's filtering below, as the preview's lobe-N+norm+fit reads."""
-    twin = blur_stack.StackReads(stack)
+class Reads:
+    """One way of reading the sky: the tent chain through the GPU's filtering (CubeLookup), its
+    reads of sigma >= the stack's first from ``stack`` (materials/blur_stack.py StackReads) where
+    one is given, as the renderers read them."""
 
-    def read(world, sigma):
-        world = np.asarray(world, dtype=np.float64).reshape(-1, 3)
-        sigma = np.broadcast_to(np.asarray(sigma, dtype=np.float64), (len(world),))
-        out = chain_reads(lookup, chain, face_size)(world, sigma)
-        coarse = sigma >= twin.sigma0
-        if np.any(coarse):
-            out[coarse] = twin(world[coarse], sigma[coarse])
+    def __init__(self, lookup, chain, stack=None, face_size: int = FACE_SIZE):
+        self.lookup, self.cube, self.stack, self.face_size = lookup, chain, stack, face_size
+
+    def chain(self, world, lod):
+        return self.lookup(self.cube, world, lod)
+
+    def by_lod(self, world, lod):
+        """Reads at MIP levels (the thesis pattern asks so): the stack for those whose read's sigma
+        is the stack's."""
+        out = self.chain(world, lod)
+        if self.stack is not None:
+            sigma = lobe_kernel.lookup_sigmas(world, lod, self.face_size)
+            coarse = sigma >= self.stack.sigma0
+            if np.any(coarse):
+                out[coarse] = self.stack(world[coarse], sigma[coarse])
         return out
 
-    return read
-
-
-def chain_reads(lookup, chain, face_size: int = FACE_SIZE):
-    """Reads of sigma (rad) from the tent chain alone, at :func:`fitted_pattern.lod_for_sigma`."""
-
-    def read(world, sigma):
-        return lookup(chain, world, fitted_pattern.lod_for_sigma(world, sigma, face_size))
-
-    return read
+    def by_sigma(self, world, sigma):
+        return self.by_lod(world, fitted_pattern.lod_for_sigma(world, sigma, self.face_size))
 
 
 def single_read_errors(reads: dict, quadrature, count: int = 200, seed: int = 1) -> list[tuple]:
@@ -85,7 +85,7 @@ def single_read_errors(reads: dict, quadrature, count: int = 200, seed: int = 1)
     for degrees in SINGLE_SIGMAS_DEG:
         sigma = np.full(count, np.radians(degrees))
         exact = vmf_blur(axes, sigma, dirs, solid, radiance)
-        errors = {name: relative_rms(read(axes, sigma), exact) for name, read in reads.items()}
+        errors = {name: relative_rms(read.by_sigma(axes, sigma), exact) for name, read in reads.items()}
         rows.append((degrees, errors))
     return rows
 
@@ -100,7 +100,6 @@ def image_errors(lobe, n: int, reads: dict, pixels: int, face_size: int = FACE_S
     dirs, solid, radiance = lobe_kernel.sky_quadrature()
     albedo = patterns.AlbedoTable.build(lobe)
     fitted = lobe_kernel.fitted_table_for(lobe, n)
-    alpha = float(lobe.distribution.alpha_x)
     truth, estimates = [], {}
     for wo, frame in lobe_kernel.sphere_views(pixels):
         local = dirs @ frame
@@ -108,18 +107,13 @@ def image_errors(lobe, n: int, reads: dict, pixels: int, face_size: int = FACE_S
         f = lobe.eval(local[above], np.broadcast_to(wo, (int(above.sum()), 3)))
         truth.append(np.sum(f * (local[above, 2] * solid[above])[:, None] * radiance[above], axis=0))
         for name, read in reads.items():
-
-            def by_lod(world, lod, read=read):  # the thesis pattern asks by level: its read's sigma
-                return read(world, fitted_pattern.read_sigma_texels(lod) * fitted_pattern.texel_angle(world, face_size))
-
-            thesis = patterns.integrate_lobe(lobe, wo, by_lod, n, face_size, frame, albedo_table=albedo)
+            thesis = patterns.integrate_lobe(lobe, wo, read.by_lod, n, face_size, frame, albedo_table=albedo)
             estimates.setdefault(f"lobe-{n}+norm, {name}", []).append(thesis)
             if fitted is not None:
-                local_dirs, weight, sigma = fitted_pattern.fitted_reads(fitted, alpha, wo)
-                world = local_dirs @ np.asarray(frame).T
-                estimates.setdefault(f"lobe-{n}+norm+fit, {name}", []).append(
-                    albedo.lookup(wo) * (weight @ read(world, sigma))
+                fit = fitted_pattern.integrate_fitted(
+                    lobe, wo, read.chain, fitted, face_size, frame, albedo, read.stack
                 )
+                estimates.setdefault(f"lobe-{n}+norm+fit, {name}", []).append(fit)
     truth = np.array(truth)
     return {name: relative_rms(np.array(values), truth) for name, values in estimates.items()}
 
@@ -186,9 +180,9 @@ def main(argv=None) -> int:
         gpu_stack.release()
         lookup = CubeLookup(ctx)
         reads = {
-            "MIP chain": chain_reads(lookup, chain),
-            "exact stack": stack_reads(lookup, chain, exact),
-            "GPU stack": stack_reads(lookup, chain, built),
+            "MIP chain": Reads(lookup, chain),
+            "exact stack": Reads(lookup, chain, blur_stack.StackReads(exact)),
+            "GPU stack": Reads(lookup, chain, blur_stack.StackReads(built)),
         }
         singles = single_read_errors(reads, quadrature)
         for degrees, errors in singles:

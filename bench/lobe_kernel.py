@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.bench.report import stamped_report_path
-from lobeview.materials import fitted_pattern, patterns
+from lobeview.materials import blur_stack, fitted_pattern, patterns
 from lobeview.materials.microfacet import MicrofacetDistribution
 
 FACE_SIZE = 256
@@ -208,12 +208,9 @@ def ideal_floor(lobe, n: int, pixels: int = FLOOR_PIXELS, sigma_scale: float = 1
     table = patterns.AlbedoTable.build(lobe)
 
     def gaussian_reads(world, lod):
-        sigmas = sigma_scale * lookup_sigmas(world, lod)
-        out = np.zeros((len(world), 3))
-        for k, (axis, sigma) in enumerate(zip(world, sigmas, strict=True)):
-            weight = np.exp(np.minimum((dirs @ axis - 1.0) / max(sigma * sigma, 1e-12), 0.0)) * solid
-            out[k] = weight @ radiance / np.sum(weight)
-        return out
+        return blur_stack.vmf_blur(
+            world, np.maximum(sigma_scale * lookup_sigmas(world, lod), 1e-6), dirs, solid, radiance
+        )
 
     truth, estimate = [], []
     for wo, frame in sphere_views(pixels):

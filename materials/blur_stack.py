@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from lobeview.core.cube_layout import face_point_directions
+from lobeview.core.cube_layout import direction_to_face, face_point_directions
+
+from .fitted_pattern import texel_angle
 
 STACK_FACE = 32
 STACK_PAD = 1
@@ -40,15 +42,10 @@ def stack_sigmas(layers: int = STACK_LAYERS) -> np.ndarray:
     return SIGMA0_TEXELS * np.radians(90.0 / STACK_FACE) * np.sqrt(2.0) ** np.arange(layers)
 
 
-def texel_angle(directions: np.ndarray, face: int = STACK_FACE) -> np.ndarray:
-    """Angular width (rad) of a texel of a ``face``-sized cube face seen in ``directions``."""
-    return 2.0 / face * np.max(np.abs(directions), axis=-1) ** 1.5
-
-
 def texel_blur(sigma: float, directions: np.ndarray) -> np.ndarray:
     """The blur a layer's texels hold so that a bilinear read of the layer blurs by ``sigma``:
     sigma^2 less a tent of one texel (texel^2 / 6), at least 0.3 sigma."""
-    texel = texel_angle(directions)
+    texel = texel_angle(directions, STACK_FACE)
     return np.sqrt(np.maximum(sigma * sigma - texel * texel / 6.0, (0.3 * sigma) ** 2))
 
 
@@ -87,25 +84,11 @@ def exact_stack(dirs: np.ndarray, solid: np.ndarray, radiance: np.ndarray, layer
     return out
 
 
-def face_coordinates(directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(face, sc, tc) of unit ``directions``: the major axis (x before y before z on ties, as
-    shaders/blur_stack.glsl) and the face coordinates of core/cube_layout.py."""
-    d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-    a = np.abs(d)
-    x, y, z = d[:, 0], d[:, 1], d[:, 2]
-    on_x = (a[:, 0] >= a[:, 1]) & (a[:, 0] >= a[:, 2])
-    on_y = ~on_x & (a[:, 1] >= a[:, 2])
-    face = np.where(on_x, np.where(x > 0, 0, 1), np.where(on_y, np.where(y > 0, 2, 3), np.where(z > 0, 4, 5)))
-    major = np.where(on_x, a[:, 0], np.where(on_y, a[:, 1], a[:, 2]))
-    sc = np.choose(face, [-z, z, x, x, x, -x]) / major
-    tc = np.choose(face, [-y, -y, z, -z, -y, -y]) / major
-    return face, sc, tc
-
-
 def read_layer(stack: np.ndarray, layer: np.ndarray, directions: np.ndarray) -> np.ndarray:
     """Bilinear reads of ``stack`` (layers, 6, S + 2 P, S + 2 P, C) at integer ``layer`` in
     ``directions``, as GL's LINEAR filter of the padded face (clamped to its edge)."""
-    face, sc, tc = face_coordinates(directions)
+    # the major axis as shaders/blur_stack.glsl takes it (x before y before z on ties)
+    face, sc, tc = direction_to_face(np.asarray(directions, dtype=np.float64).reshape(-1, 3))
     size = STACK_FACE + 2 * STACK_PAD
     u = (sc + 1.0) * 0.5 * STACK_FACE + STACK_PAD - 0.5  # texel-centre coordinates of the padded face
     v = (tc + 1.0) * 0.5 * STACK_FACE + STACK_PAD - 0.5

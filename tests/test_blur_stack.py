@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from lobeview.bench import blur_stack as bench_blur_stack
-from lobeview.core.cube_layout import face_directions, face_point_directions, texel_solid_angles
+from lobeview.core.cube_layout import direction_to_face, face_directions, face_point_directions, texel_solid_angles
 from lobeview.materials import blur_stack as bs
 
 
@@ -46,11 +46,12 @@ def test_stack_layers_are_sqrt2_apart_from_their_first_sigma():
     assert np.degrees(sigmas[-1]) > 60.0  # wider than any lobe's widest read
 
 
-def test_face_coordinates_invert_the_cube_layout():
+def test_the_face_of_a_read_inverts_the_cube_layout():
+    # read_layer's face and face coordinates (core/cube_layout.py direction_to_face)
     rng = np.random.default_rng(5)
     for face in range(6):
         sc, tc = rng.uniform(-0.999, 0.999, size=(2, 200))
-        got_face, got_sc, got_tc = bs.face_coordinates(face_point_directions(face, sc, tc))
+        got_face, got_sc, got_tc = direction_to_face(face_point_directions(face, sc, tc))
         assert np.all(got_face == face)
         np.testing.assert_allclose(got_sc, sc, atol=1e-12)
         np.testing.assert_allclose(got_tc, tc, atol=1e-12)
