@@ -66,6 +66,17 @@ class DriverWorkTimer:
 
 
 DEFAULT_SIZES = ("64x40", "160x100")
+# (multi-draws, reflectors in one plane share its pass) per measured path: one draw per object,
+# the multi-draws with a mirror pass per reflector (as before issue 42's plane sharing), and today's.
+PATHS = ((False, True), (True, False), (True, True))
+
+
+def path_label(indirect: bool, shared: bool = True) -> str:
+    if not indirect:
+        return "per object"
+    return "multi-draw" if shared else "multi-draw, a pass per reflector"
+
+
 FACE_SIZE = 64
 
 
@@ -104,6 +115,7 @@ def walk(renderer, path, method, frames: int, timer: DriverWorkTimer) -> list[di
                 "multi_draws": int(multi),
                 "cull_passes": int(culls),
                 "objects_drawn": renderer.draw_counts.of("camera").drawn + renderer.draw_counts.of("mirror").drawn,
+                "mirror_passes": renderer.mirror_passes.drawn_passes,
             }
         )
     return rows
@@ -132,9 +144,9 @@ def measure(ctx, rooms: int, sizes, frames: int, cache: Path, method: str) -> li
                 settings=RenderSettings(cube_face_size=FACE_SIZE),
             )  # fmt: skip
         try:
-            for indirect in (False, True):
-                renderer.configure(indirect_draws=indirect)
-                _say(f"apartment-{rooms} {size[0]}x{size[1]}: {'multi-draws' if indirect else 'per-object draws'}")
+            for indirect, shared in PATHS:
+                renderer.configure(indirect_draws=indirect, mirror_plane_sharing=shared)
+                _say(f"apartment-{rooms} {size[0]}x{size[1]}: {path_label(indirect, shared)}")
                 timer = DriverWorkTimer()
                 try:
                     rows = walk(renderer, path, Method.parse(method), frames, timer)
@@ -146,6 +158,7 @@ def measure(ctx, rooms: int, sizes, frames: int, cache: Path, method: str) -> li
                         "objects": len(scene.objects),
                         "size": list(size),
                         "indirect": indirect,
+                        "shared_planes": shared,
                         "frames": rows,
                     }
                 )
@@ -171,6 +184,7 @@ def summary(run: dict) -> dict:
         "multi_draws": mean("multi_draws"),
         "cull_passes": mean("cull_passes"),
         "objects_drawn": mean("objects_drawn"),
+        "mirror_passes": mean("mirror_passes") if all("mirror_passes" in r for r in rows) else float("nan"),
     }
 
 
@@ -186,8 +200,8 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         f"Medians over the frames; draw calls are means per frame. Whole run {elapsed / 60:.1f} min.",
         "",
         "| rooms | objects | size | path | submit ms | Python + state ms | finished ms | per-object draws "
-        "| multi-draws | culling passes | objects drawn (camera + mirror) | submit vs per-object |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| multi-draws | culling passes | mirror passes | objects drawn (camera + mirror) | submit vs per-object |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     base = {}
     for run in runs:
@@ -198,15 +212,16 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         ratio = s["submit_ms"] / base[key] if key in base and base[key] > 0 else float("nan")
         lines.append(
             f"| {run['rooms']} | {run['objects']} | {run['size'][0]}x{run['size'][1]} "
-            f"| {'multi-draw' if run['indirect'] else 'per object'} | {s['submit_ms']:.1f} | {s['python_ms']:.1f} "
-            f"| {s['finished_ms']:.1f} "
-            f"| {s['single_draws']:.0f} | {s['multi_draws']:.0f} | {s['cull_passes']:.0f} | {s['objects_drawn']:.0f} "
+            f"| {path_label(run['indirect'], run.get('shared_planes', True))} | {s['submit_ms']:.1f} "
+            f"| {s['python_ms']:.1f} | {s['finished_ms']:.1f} "
+            f"| {s['single_draws']:.0f} | {s['multi_draws']:.0f} | {s['cull_passes']:.0f} | {s['mirror_passes']:.1f} "
+            f"| {s['objects_drawn']:.0f} "
             f"| {ratio:.2f} |"
         )
     for column, label in (("submit_ms", "submit"), ("python_ms", "Python + state")):
         by_size: dict = {}
         for run in runs:
-            if run["indirect"]:
+            if run["indirect"] and run.get("shared_planes", True):
                 by_size.setdefault(tuple(run["size"]), []).append((run["rooms"], summary(run)[column]))
         lines += ["", f"Growth with the scene (multi-draw path, {label} ms against the smallest apartment):", ""]
         for size, values in by_size.items():

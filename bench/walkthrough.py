@@ -170,7 +170,8 @@ def walk_path(renderer, path, method, frames: int) -> list[dict]:
                 "camera_culled": camera_culled,
                 "mirror_draws": mirror_draws,
                 "mirror_culled": mirror_culled,
-                "mirror_passes": len(renderer.mirror_passes.drawn),
+                "mirror_passes": len(renderer.mirror_passes.drawn),  # reflectors given buffers
+                "mirror_buffers": renderer.mirror_passes.drawn_passes,  # passes drawn (one per plane)
                 "mirror_skipped": len(renderer.mirror_passes.skipped),
                 "skip_reasons": reasons,
             }
@@ -256,6 +257,7 @@ def _summary(result: dict) -> dict:
         "camera_drawn_mean": mean("camera_drawn"),
         "camera_culled_mean": mean("camera_culled"),
         "mirror_passes_mean": mean("mirror_passes"),
+        "mirror_buffers_mean": mean("mirror_buffers") if all("mirror_buffers" in r for r in rows) else float("nan"),
         "mirror_skipped_mean": mean("mirror_skipped"),
         "frame_ms_without_records_mean": mean("frame_ms_without_records"),
         "frame_ms_mean": mean("frame_ms"),
@@ -368,7 +370,8 @@ def _scene_markdown(result: dict) -> list[str]:
         f" against {s['frame_ms_mean']:.0f} ms (means).",
         "",
         "| frame | t (s) | frame ms | mirror passes ms | of which occlusion test ms | camera pass ms "
-        "| camera draws / culled | mirror-pass draws / culled | mirror passes drawn / skipped | skipped because "
+        "| camera draws / culled | mirror-pass draws / culled | reflectors with buffers / skipped (passes drawn) "
+        "| skipped because "
         "| without the test: passes, ms | without the scissor: ms | pixels scissored away "
         "| full-size buffers: ms |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
@@ -379,7 +382,7 @@ def _scene_markdown(result: dict) -> list[str]:
             f"| {r['frame']} | {r['t']:.1f} | {r['frame_ms']:.0f} | {r['mirror_ms']:.0f} "
             f"| {r['occlusion_test_ms']:.0f} | {r['camera_ms']:.0f} "
             f"| {r['camera_drawn']} / {r['camera_culled']} | {r['mirror_draws']} / {r['mirror_culled']} "
-            f"| {r['mirror_passes']} / {r['mirror_skipped']} | {reasons} "
+            f"| {r['mirror_passes']} / {r['mirror_skipped']} ({r.get('mirror_buffers', '-')}) | {reasons} "
             f"| {r['mirror_passes_without_test']}, {r['mirror_ms_without_test']:.0f} "
             f"| {r['mirror_ms_without_scissor']:.0f} | {_share(r['mirror_pixels_scissored'], r['mirror_pixels'])} "
             f"| {r['mirror_ms_full_buffers']:.0f} |"
@@ -400,7 +403,8 @@ def _count_markdown(rows: list[dict]) -> list[str]:
         "| rooms | objects | reflectors | cube maps | cube memory MB (all at full size) | start-up cold s (all at full "
         "size) | cube-face draws / culled "
         "| start-up warm s | frame ms (median) | mirror ms (mean) | camera ms (mean) | camera draws / culled (mean) "
-        "| mirror passes drawn / skipped (mean) | without the occlusion test: mirror passes, ms (mean) "
+        "| reflectors with buffers / skipped (passes drawn; mean) | without the occlusion test: reflectors with "
+        "buffers, ms (mean) "
         "| mirror ms without the scissor (mean) | pass pixels scissored away "
         "| mirror ms with full-size buffers (mean; buffer pixels kept) "
         "| camera ms without the depth pre-pass (mean) | draws, uniform values set / sent (mean) "
@@ -416,7 +420,7 @@ def _count_markdown(rows: list[dict]) -> list[str]:
             f"| {r['cube_face_draws']} / {r['cube_face_culled']} | {r['startup_warm_s']:.1f} "
             f"| {s['frame_ms_median']:.0f} | {s['mirror_ms_mean']:.0f} | {s['camera_ms_mean']:.0f} "
             f"| {s['camera_drawn_mean']:.0f} / {s['camera_culled_mean']:.0f} "
-            f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} "
+            f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} ({s['mirror_buffers_mean']:.1f}) "
             f"| {s['mirror_passes_without_test_mean']:.1f}, {s['mirror_ms_without_test_mean']:.0f} "
             f"| {s['mirror_ms_without_scissor_mean']:.0f} | {100 * s['scissored_fraction']:.0f} % "
             f"| {s['mirror_ms_full_buffers_mean']:.0f} ({100 * s['buffer_pixel_share']:.0f} %) "

@@ -163,6 +163,32 @@ def reflector_decision(mesh, lobes, scene_diagonal: float, mode="auto") -> tuple
     return reflector, what
 
 
+def coplanar_groups(reflectors: dict, scene_diagonal: float, tolerance: float = PLANAR_TOLERANCE) -> list[tuple]:
+    """Reflectors that can share one mirror pass (thesis 4.5: a mirror render per plane, not per
+    object): the same plane seen from the same side (normals within ``tolerance`` radians, offsets
+    within ``tolerance`` * ``scene_diagonal``, the flatness a reflector itself may have: the shared
+    buffer's image then moves by at most twice that) and the same passes. ``reflectors``: index ->
+    PlanarReflector; returns tuples of indices, each ascending, in the order of their first index.
+    The floors of an apartment's rooms share one pass instead of one each."""
+    distance = tolerance * max(float(scene_diagonal), 1e-9)
+    cos_tolerance = np.cos(tolerance)
+    groups: list[list[int]] = []
+    for index in sorted(reflectors):
+        reflector = reflectors[index]
+        for group in groups:
+            first = reflectors[group[0]]
+            if (
+                first.passes == reflector.passes
+                and float(first.plane[:3] @ reflector.plane[:3]) >= cos_tolerance
+                and abs(float(first.plane[3] - reflector.plane[3])) <= distance
+            ):
+                group.append(index)
+                break
+        else:
+            groups.append([index])
+    return [tuple(group) for group in groups]
+
+
 # -- the mirror camera ---------------------------------------------------------------------------
 def reflection_matrix(plane) -> np.ndarray:
     """4x4 reflection about the plane n.x + d = 0 (n unit): x' = x - 2 (n.x + d) n."""
@@ -284,12 +310,24 @@ def reflector_max_view_angle(reflector: PlanarReflector, eye) -> float:
     its surface, rounded up to MIRROR_VIEW_ANGLE_STEP (at most MIRROR_FOOTPRINT_MAX_VIEW_ANGLE):
     at a point x of the plane cos(theta) = h / |eye - x| with h the eye's distance from the
     plane, and no point of the reflector lies farther from the eye than its farthest box corner."""
+    return float(reflector_max_view_angles([reflector], eye)[0])
+
+
+def reflector_max_view_angles(reflectors: list, eye) -> np.ndarray:
+    """:func:`reflector_max_view_angle` of many reflectors at once (one numpy pass a frame, not
+    one per reflector); the farthest box corner is |eye - x| with each coordinate at the box's
+    farther face."""
     eye = np.asarray(eye, dtype=np.float64)
-    height = abs(float(reflector.side(eye)))
-    farthest = float(np.max(np.linalg.norm(reflector.corners() - eye, axis=1)))
-    angle = float(np.arccos(np.clip(height / max(farthest, 1e-30), 0.0, 1.0)))
-    return float(min(np.ceil(angle / MIRROR_VIEW_ANGLE_STEP - 1e-9) * MIRROR_VIEW_ANGLE_STEP,
-                     MIRROR_FOOTPRINT_MAX_VIEW_ANGLE))  # fmt: skip
+    if not reflectors:
+        return np.zeros(0)
+    planes = np.array([reflector.plane for reflector in reflectors], dtype=np.float64)
+    low = np.array([reflector.box_min for reflector in reflectors], dtype=np.float64)
+    high = np.array([reflector.box_max for reflector in reflectors], dtype=np.float64)
+    height = np.abs(planes[:, :3] @ eye + planes[:, 3])
+    farthest = np.linalg.norm(np.maximum(np.abs(eye - low), np.abs(eye - high)), axis=1)
+    angle = np.arccos(np.clip(height / np.maximum(farthest, 1e-30), 0.0, 1.0))
+    steps = np.ceil(angle / MIRROR_VIEW_ANGLE_STEP - 1e-9) * MIRROR_VIEW_ANGLE_STEP
+    return np.minimum(steps, MIRROR_FOOTPRINT_MAX_VIEW_ANGLE)
 
 
 def mirror_buffer_levels(
@@ -316,18 +354,18 @@ def box_screen_rect(corners: np.ndarray, view_projection: np.ndarray, size) -> t
     corners = np.asarray(corners, dtype=np.float64)
     clip = np.concatenate([corners, np.ones((len(corners), 1))], axis=1) @ np.asarray(view_projection).T
     near = 1e-6
-    points = [c for c in clip if c[3] > near]
-    for i in range(len(corners)):  # box edges: corners differing in one coordinate
-        for j in range(i + 1, len(corners)):
-            if np.count_nonzero(corners[i] != corners[j]) != 1:
-                continue
-            wi, wj = clip[i, 3], clip[j, 3]
-            if (wi > near) != (wj > near):
-                t = (near - wi) / (wj - wi)
-                points.append(clip[i] + t * (clip[j] - clip[i]))
-    if not points:
+    # Box edges: pairs of corners differing in one coordinate (all pairs at once: the mirror
+    # passes ask for every drawn reflector's rectangle each frame).
+    first, second = np.triu_indices(len(corners), k=1)
+    edge = np.count_nonzero(corners[first] != corners[second], axis=1) == 1
+    first, second = first[edge], second[edge]
+    w_first, w_second = clip[first, 3], clip[second, 3]
+    crossing = (w_first > near) != (w_second > near)
+    t = (near - w_first[crossing]) / (w_second[crossing] - w_first[crossing])
+    cut = clip[first[crossing]] + t[:, None] * (clip[second[crossing]] - clip[first[crossing]])
+    points = np.concatenate([clip[clip[:, 3] > near], cut])
+    if not len(points):
         return None
-    points = np.array(points)
     ndc = points[:, :2] / points[:, 3:4]
     width, height = size
     xy = (np.clip(ndc, -1e6, 1e6) * 0.5 + 0.5) * np.array([width, height], dtype=np.float64)

@@ -9,7 +9,14 @@ import warnings
 import numpy as np
 import pytest
 
-from lobeview.viewer.camera import Camera, box_corners, outside_frustum, outside_frustum_many, perspective
+from lobeview.viewer.camera import (
+    Camera,
+    box_corners,
+    outside_frustum,
+    outside_frustum_boxes,
+    outside_frustum_many,
+    perspective,
+)
 from lobeview.viewer.camera import look_at as camera_look_at
 
 
@@ -23,11 +30,12 @@ def test_box_test_never_drops_a_box_with_a_point_in_view_and_drops_far_away_boxe
     rng = np.random.default_rng(3)
     view_proj = perspective(60.0, 1.6, 0.1, 50.0) @ camera_look_at((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), (0, 1, 0))
     culled = kept_empty = 0
-    boxes, verdicts = [], []
+    boxes, verdicts, extents = [], [], []
     for _ in range(3000):
         centre = rng.uniform(-30.0, 30.0, 3)
         half = rng.uniform(0.05, 6.0, 3)
         corners = box_corners(centre - half, centre + half)
+        extents.append((centre - half, centre + half))
         points = centre + half * rng.uniform(-1.0, 1.0, (400, 3))
         visible = _points_in_frustum(np.vstack([points, corners]), view_proj).any()
         boxes.append(corners)
@@ -41,11 +49,33 @@ def test_box_test_never_drops_a_box_with_a_point_in_view_and_drops_far_away_boxe
     assert culled > 1500 and kept_empty < 0.2 * culled, (culled, kept_empty)
     # The per-pass batch (every object of a pass in one product) gives the same verdicts.
     np.testing.assert_array_equal(outside_frustum_many(np.array(boxes), view_proj), verdicts)
+    # ... and so does the boxes' plane test (no corners: the drawer's and occlusion test's cull).
+    lows, highs = np.array(extents).transpose(1, 0, 2)
+    np.testing.assert_array_equal(outside_frustum_boxes(lows, highs, view_proj), verdicts)
     # Behind the eye (w < 0 at every corner) and beyond the far plane.
     assert outside_frustum(box_corners((-1, -1, 2), (1, 1, 4)), view_proj)
     assert outside_frustum(box_corners((-1, -1, -80), (1, 1, -60)), view_proj)
     # A box around the eye is kept.
     assert not outside_frustum(box_corners((-1, -1, -1), (1, 1, 1)), view_proj)
+
+
+def test_box_plane_test_is_the_corner_test_for_oblique_and_flat_boxes():
+    """A mirror camera's oblique near plane (scenes/planar_mirror.py) and boxes flat in one axis
+    (floors, walls: what reflectors and quads have) give the same verdicts both ways."""
+    from lobeview.scenes.planar_mirror import PlanarReflector, mirror_camera
+
+    rng = np.random.default_rng(11)
+    view = camera_look_at((0.5, 1.6, 3.0), (0.0, 0.4, -2.0), (0, 1, 0))
+    floor = PlanarReflector(np.array([0.0, 1.0, 0.0, 0.0]), np.array([-5.0, 0.0, -5.0]), np.array([5.0, 0.0, 5.0]))
+    oblique = mirror_camera(view, perspective(55.0, 1.5, 0.05, 80.0), floor, (150, 100)).view_projection
+    low = rng.uniform(-12.0, 12.0, (4000, 3))
+    size = rng.uniform(0.0, 4.0, (4000, 3)) * (rng.uniform(size=(4000, 3)) > 0.2)  # a fifth flat per axis
+    high = low + size
+    corners = np.array([box_corners(a, b) for a, b in zip(low, high, strict=True)])
+    for view_proj in (oblique, perspective(70.0, 1.0, 0.1, 30.0) @ view):
+        expected = outside_frustum_many(corners, view_proj)
+        assert 0.1 < expected.mean() < 0.9
+        np.testing.assert_array_equal(outside_frustum_boxes(low, high, view_proj), expected)
 
 
 def test_culling_skips_objects_and_changes_no_pixel(ctx):

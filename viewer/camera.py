@@ -97,6 +97,20 @@ def outside_frustum_many(corners: np.ndarray, view_projection: np.ndarray) -> np
     return np.any(above | below, axis=-1)
 
 
+def outside_frustum_boxes(box_min: np.ndarray, box_max: np.ndarray, view_projection: np.ndarray) -> np.ndarray:
+    """:func:`outside_frustum_many` of axis-aligned boxes (n, 3) and (n, 3) -> (n,) bool, without
+    their corners: a clip plane's linear function p . (x, 1) is largest over a box at
+    p . centre + |p_xyz| . half-size, so the box lies wholly outside it when that is negative
+    (the same test as the corners', in one (n, 6) product: several times faster per pass)."""
+    low = np.asarray(box_min, dtype=np.float64)
+    high = np.asarray(box_max, dtype=np.float64)
+    view_projection = np.asarray(view_projection, dtype=np.float64)
+    # Inside means w - x_i >= 0 and w + x_i >= 0 for x_i = x, y, z: six rows of the matrix.
+    planes = np.concatenate([view_projection[3] - view_projection[:3], view_projection[3] + view_projection[:3]])
+    largest = 0.5 * (low + high) @ planes[:, :3].T + planes[:, 3] + 0.5 * (high - low) @ np.abs(planes[:, :3]).T
+    return np.any(largest < 0.0, axis=1)
+
+
 DEPTH_RANGE_RATIO = 5000.0  # far / near kept by fit_clip_planes: 24-bit depth resolves ~far/1e4 at far
 
 

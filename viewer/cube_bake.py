@@ -434,10 +434,12 @@ class CubeResidency:
         return released
 
     def wanted(self, corners: np.ndarray, view_projection: np.ndarray, exclude=None) -> list[int]:
-        """Evicted objects whose bounding box reaches the frustum of ``view_projection``."""
+        """Evicted objects whose bounding box reaches the frustum of ``view_projection``, but
+        ``exclude`` (an index or a collection of them)."""
         if not self.evicted:
             return []
-        indices = sorted(i for i in self.evicted if i != exclude)
+        excluded = set(exclude) if isinstance(exclude, frozenset | set | tuple | list) else {exclude}
+        indices = sorted(i for i in self.evicted if i not in excluded)
         inside = ~outside_frustum_many(corners[indices], view_projection)
         return [i for i, keep in zip(indices, inside, strict=True) if keep]
 

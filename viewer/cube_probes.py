@@ -231,7 +231,7 @@ class CubeProbes:
                 self.bake.build_one(self.objects, member, self.drawer.analysis.objects[member].cube_face, cached=False)
 
     # -- residency and cube maps on demand ------------------------------------------------------
-    def restore(self, view_projection, exclude: int | None = None) -> None:
+    def restore(self, view_projection, exclude=None) -> None:
         """Restore the evicted cube maps (``cube_budget_mb``) of objects a pass with this frustum
         may draw, before it binds its framebuffer (restoring renders or reads cube faces)."""
         wanted = self.residency.wanted(self.probe_corners, view_projection, exclude)

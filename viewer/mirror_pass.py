@@ -18,7 +18,7 @@ from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf
 from lobeview.scenes.planar_mirror import mirror_view_angle_bounds
 
-from .camera import Camera, outside_frustum, perspective
+from .camera import Camera, outside_frustum_boxes, perspective
 from .frame import begin_pass, new_framebuffer
 from .interface import TEXTURE_UNITS, bind_sampler, has_uniform, set_uniform
 from .mip_chain import DEFAULT_MIP_FILTER, build_mip_chain
@@ -52,15 +52,23 @@ class MirrorTargets:
             item.release()
 
 
-def skip_reason(reflector, camera: Camera, view_proj: np.ndarray) -> str | None:
-    """Why a reflector needs no buffers this frame (None: it needs them): the camera is behind
-    its plane (a reflector that transmits is seen from both sides), or its bounding box lies
-    outside the view frustum."""
-    if not reflector.transmission and reflector.side(np.asarray(camera.position, dtype=np.float64)) <= 1e-6:
-        return "seen from behind"
-    if outside_frustum(reflector.corners(), view_proj):
-        return "outside the view"
-    return None
+def skip_reasons(reflectors: dict, camera: Camera, view_proj: np.ndarray) -> dict:
+    """Why each reflector needs no buffers this frame (index -> reason, None: it needs them): the
+    camera is behind its plane (a reflector that transmits is seen from both sides), or its
+    bounding box lies outside the view frustum. One numpy pass for all of them."""
+    if not reflectors:
+        return {}
+    items = list(reflectors.values())
+    eye = np.asarray(camera.position, dtype=np.float64)
+    planes = np.array([reflector.plane for reflector in items], dtype=np.float64)
+    behind = (planes[:, :3] @ eye + planes[:, 3] <= 1e-6) & ~np.array([r.transmission for r in items], dtype=bool)
+    low = np.array([reflector.box_min for reflector in items], dtype=np.float64)
+    high = np.array([reflector.box_max for reflector in items], dtype=np.float64)
+    outside = outside_frustum_boxes(low, high, view_proj)
+    return {
+        index: "seen from behind" if back else ("outside the view" if out else None)
+        for index, back, out in zip(reflectors, behind, outside, strict=True)
+    }
 
 
 def sub_rect_projection(rect, size) -> np.ndarray:
@@ -83,6 +91,19 @@ def buffer_size(frame_size, scale: float) -> tuple[int, int]:
 
 HIDDEN = "hidden behind other objects"
 SCISSOR_NOTE = ", scissored to"  # how a report line says its pass was scissored
+SHARED_NOTE = "shared with"  # how a report line says its reflector reads another's pass (its plane's)
+
+
+def union_rect(rects: list) -> tuple[int, int, int, int] | None:
+    """The smallest pixel rectangle (x, y, width, height) holding every one of ``rects``; None
+    (the whole buffer) if any of them is None."""
+    if not rects or any(rect is None for rect in rects):
+        return None
+    x0 = min(rect[0] for rect in rects)
+    y0 = min(rect[1] for rect in rects)
+    x1 = max(rect[0] + rect[2] for rect in rects)
+    y1 = max(rect[1] + rect[3] for rect in rects)
+    return x0, y0, x1 - x0, y1 - y0
 
 
 def unscissored(report: list[str]) -> list[str]:
@@ -113,6 +134,8 @@ class MirrorPasses:
         self.occlusion_seconds = 0.0  # the last drawn frame's occlusion test (0: not run)
         self.scissored_pixels: dict[int, int] = {}  # reflector -> pixels the scissor saved, last frame
         self.coarse_levels: dict[int, int] = {}  # reflector -> times its buffers were halved, last frame
+        self._groups_key = None
+        self._groups: list[tuple] = []  # scenes/planar_mirror.py coplanar_groups of _groups_key's reflectors
 
     def invalidate(self) -> None:
         """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
@@ -123,6 +146,22 @@ class MirrorPasses:
         self.generation += 1
         self._spreads.clear()
         self._footprints.clear()
+
+    def plane_groups(self, reflectors: dict, share_planes: bool = True) -> list[tuple]:
+        """The reflectors that share a pass (scenes/planar_mirror.py coplanar_groups), made again
+        only when the reflectors change; each alone without ``share_planes``."""
+        from lobeview.scenes.planar_mirror import coplanar_groups
+
+        key = (tuple((index, id(reflector)) for index, reflector in sorted(reflectors.items())), share_planes)
+        if key != self._groups_key:
+            if share_planes:
+                corners = self.drawer.object_corners.reshape(-1, 3)
+                diagonal = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0))) if len(corners) else 1.0
+                self._groups = coplanar_groups(reflectors, diagonal)
+            else:
+                self._groups = [(index,) for index in sorted(reflectors)]
+            self._groups_key = key
+        return self._groups
 
     def lobe_spread(self, index: int, method: Method) -> tuple[float, float] | None:
         """How far the lobe-N lookups of reflector ``index`` reach (None: not lobe-N, unbounded)."""
@@ -176,6 +215,7 @@ class MirrorPasses:
         spreads: dict | None = None,
         lod_bias: float = 0.0,
         footprints: dict | None = None,
+        share_planes: bool = True,
     ) -> dict:
         """The buffers of the reflectors that need them for ``camera`` (index -> {'mirror' and/or
         'see-through': targets}); reused while the camera, the size, the options and the materials
@@ -187,7 +227,8 @@ class MirrorPasses:
         scissored to the region they can read (scenes/planar_mirror.py mirror_scissor).
         ``footprints``: reflector -> its lobe-N lookups' finest solid angle (finest_footprint; None
         or absent: full size): its buffers are halved as often as those lookups allow
-        (scenes/planar_mirror.py mirror_buffer_levels)."""
+        (scenes/planar_mirror.py mirror_buffer_levels). ``share_planes``: reflectors in one plane
+        share its passes (scenes/planar_mirror.py coplanar_groups); False: a pass per reflector."""
         from lobeview.scenes.planar_mirror import mirror_buffer_levels, mirror_camera, mirror_scissor
 
         spreads = spreads or {}
@@ -197,15 +238,15 @@ class MirrorPasses:
         key = (
             tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y, camera.near, camera.far,
             tuple(frame_size), scale, specular, tuple(sorted(reflectors)), self.generation, occlusion,
-            tuple(sorted(spreads.items())), lod_bias, tuple(sorted(footprints.items())),
+            tuple(sorted(spreads.items())), lod_bias, tuple(sorted(footprints.items())), share_planes,
         )  # fmt: skip
         if key == self._key:
             return self._active
-        report, active, skipped, scissored, coarse = [], {}, {}, {}, {}
+        active, skipped, scissored, coarse = {}, {}, {}, {}
         full_size = buffer_size(frame_size, scale)
         full_focal = full_size[1] / 2.0 / np.tan(np.radians(camera.fov_y) / 2.0)
         projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
-        reasons = {index: skip_reason(reflector, camera, view_proj) for index, reflector in reflectors.items()}
+        reasons = skip_reasons(reflectors, camera, view_proj)
         candidates = [index for index, reason in reasons.items() if reason is None]
         self.occlusion_seconds = 0.0
         if occlusion and candidates:
@@ -215,47 +256,69 @@ class MirrorPasses:
             )  # reading the queries waits for the GPU
             self.occlusion_seconds = time.perf_counter() - t0
             reasons.update({index: HIDDEN for index in candidates if samples[index] == 0})
-        for index, reflector in reflectors.items():
-            reason = reasons[index]
-            if reason is not None:
-                report.append(f"{names[index]}: no mirror pass ({reason})")
-                skipped[index] = reason
+        lines: dict[int, list[str]] = {index: [] for index in reflectors}
+        for group in self.plane_groups(reflectors, share_planes):
+            drawn = [index for index in group if reasons[index] is None]
+            for index in group:
+                if reasons[index] is not None:
+                    lines[index].append(f"{names[index]}: no mirror pass ({reasons[index]})")
+                    skipped[index] = reasons[index]
+            if not drawn:
                 continue
-            active[index] = {}
-            coarse[index] = mirror_buffer_levels(footprints.get(index), full_focal, lod_bias)
-            size = buffer_size(frame_size, scale / 2.0 ** coarse[index])
-            for kind in reflector.passes:
-                targets = self.targets.get((index, kind))
+            # One pass for the group's plane: at the finest size any of its drawn members' lookups
+            # need, scissored to the union of their regions, without any of its members (they lie
+            # in the pass's oblique near plane: nothing of them is in front of it). The buffers
+            # are the group's, kept under its first index whichever members are drawn.
+            first, owner = drawn[0], group[0]
+            level = min(mirror_buffer_levels(footprints.get(index), full_focal, lod_bias) for index in drawn)
+            size = buffer_size(frame_size, scale / 2.0**level)
+            buffers = {}
+            for kind in reflectors[owner].passes:
+                targets = self.targets.get((owner, kind))
                 if targets is None or targets.size != size:
                     if targets is not None:
                         targets.release()
-                    targets = self.targets[(index, kind)] = MirrorTargets(self.ctx, size)
-                buffer_camera = mirror_camera(camera.view(), projection, reflector, size, see_through=kind != "mirror")
-                rect = mirror_scissor(reflector, buffer_camera, spreads.get(index), lod_bias)
+                    targets = self.targets[(owner, kind)] = MirrorTargets(self.ctx, size)
+                buffer_camera = mirror_camera(
+                    camera.view(), projection, reflectors[owner], size, see_through=kind != "mirror"
+                )
+                rect = union_rect(
+                    [mirror_scissor(reflectors[index], buffer_camera, spreads.get(index), lod_bias) for index in drawn]
+                )
+                if rect is not None and rect[2] * rect[3] >= size[0] * size[1]:
+                    rect = None  # the members' regions cover the whole buffer
                 cull_view_projection = None
                 if rect is not None:
                     cull_view_projection = sub_rect_projection(rect, size) @ buffer_camera.view_projection
                 if self.probes is not None:
                     self.probes.restore(
-                        buffer_camera.view_projection if cull_view_projection is None else cull_view_projection, index
+                        buffer_camera.view_projection if cull_view_projection is None else cull_view_projection,
+                        frozenset(group),
                     )
                 begin_pass(self.ctx, targets.fbo, size)
                 self.drawer.draw_background(self.environment, buffer_camera.plain_view_projection)
-                if rect is not None:  # the scene only where the reflector's lookups read
+                if rect is not None:  # the scene only where the reflectors' lookups read
                     self.ctx.scissor = rect
                 self.drawer.draw(
-                    buffer_camera.view_projection, buffer_camera.position, MIRROR_BOUNCE_METHOD, specular, index,
-                    pass_kind="mirror", cull_view_projection=cull_view_projection,
+                    buffer_camera.view_projection, buffer_camera.position, MIRROR_BOUNCE_METHOD, specular,
+                    frozenset(group), pass_kind="mirror", cull_view_projection=cull_view_projection,
                 )  # fmt: skip
                 self.ctx.scissor = None
                 build_mip_chain(self.ctx, targets.radiance, self.mip_filter, allocated=True)
                 targets.camera = buffer_camera
-                active[index][kind] = targets
+                buffers[kind] = targets
                 pixels = size[0] * size[1] if rect is None else rect[2] * rect[3]
-                scissored.setdefault(index, 0)
-                scissored[index] += size[0] * size[1] - pixels
+                scissored[first] = scissored.get(first, 0) + size[0] * size[1] - pixels
                 where = "" if rect is None else f"{SCISSOR_NOTE} {rect[2]}x{rect[3]} at ({rect[0]}, {rect[1]})"
-                report.append(f"{names[index]}: {kind} pass {size[0]}x{size[1]}{where}")
+                lines[first].append(f"{names[first]}: {kind} pass {size[0]}x{size[1]}{where}")
+                for index in drawn[1:]:
+                    lines[index].append(
+                        f"{names[index]}: {kind} pass {size[0]}x{size[1]} ({SHARED_NOTE} {names[first]})"
+                    )
+            for index in drawn:
+                active[index] = buffers
+                coarse[index] = level
+        report = [line for index in reflectors for line in lines[index]]
         self.ctx.viewport = (0, 0, width, height)
         self._key, self._active, self.report = key, active, report
         self.drawn, self.skipped = list(active), skipped
@@ -266,14 +329,19 @@ class MirrorPasses:
     @property
     def drawn_pixels(self) -> int:
         """Buffer pixels of the last frame's passes (each at its own size, scissor not counted)."""
-        if not self.drawn:
-            return 0
-        return sum(t.size[0] * t.size[1] for kinds in self._active.values() for t in kinds.values())
+        return sum(t.size[0] * t.size[1] for t in self._drawn_targets())
 
     @property
     def drawn_passes(self) -> int:
-        """Mirror and see-through passes of the last frame."""
-        return sum(len(kinds) for kinds in self._active.values()) if self.drawn else 0
+        """Mirror and see-through passes of the last frame (a pass its plane's reflectors share
+        counted once)."""
+        return len(self._drawn_targets())
+
+    def _drawn_targets(self) -> list:
+        if not self.drawn:
+            return []
+        unique = {id(t): t for kinds in self._active.values() for t in kinds.values()}
+        return list(unique.values())
 
     def skip_all(self, reflectors, names: list, reason: str) -> None:
         """No pass for any reflector this frame (the prefiltered method reads cube maps); the

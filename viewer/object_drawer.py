@@ -15,7 +15,7 @@ import numpy as np
 from lobeview.core.methods import Method
 from lobeview.scenes.scene import Scene
 
-from .camera import box_corners, outside_frustum_many
+from .camera import box_corners, outside_frustum_boxes
 from .cube_arrays import direct_gl
 from .cubemap import RadianceCube
 from .interface import DrawRecorder, method_defines, set_uniform, uses_blur_stack
@@ -154,12 +154,12 @@ class ObjectDrawer:
             for i, obj in enumerate(scene.objects)
         ]
         self.object_corners = np.array([obj.corners for obj in self.objects]).reshape(len(self.objects), 8, 3)
+        self.object_boxes = np.array([obj.box for obj in self.objects], dtype=np.float64).reshape(-1, 2, 3)
         self.object_methods: dict[int, Method] = {}  # the panel's per-object real-time methods
         self.draw_counts = DrawCounts()
         self.draw_calls = DrawCalls()
-        self.occlusion = OcclusionTest(ctx, self.programs, self.geometry, self.draw_calls)
-        boxes = np.array([obj.box for obj in self.objects], dtype=np.float64).reshape(len(self.objects), 2, 3)
-        self.batches = ObjectBatches(ctx, self.programs, self.geometry, boxes)
+        self.occlusion = OcclusionTest(ctx, self.programs, self.geometry, self.draw_calls, self.object_boxes)
+        self.batches = ObjectBatches(ctx, self.programs, self.geometry, self.object_boxes)
         self.lobe_batches: LobeBatches | None = None  # made on the first lobe-shaded multi-draw
         self.lobe_batches_unavailable = ""  # why lobe-shaded objects are drawn one by one, if so
         self.residency = None
@@ -277,7 +277,7 @@ class ObjectDrawer:
         cull_view_projection = view_proj if cull_view_projection is None else cull_view_projection
         culled = None
         if self.settings.frustum_culling:
-            culled = outside_frustum_many(self.object_corners, cull_view_projection)
+            culled = outside_frustum_boxes(self.object_boxes[:, 0], self.object_boxes[:, 1], cull_view_projection)
         mirrors = mirrors or {}
         counts = self.draw_counts.of(pass_kind)
         view_proj_values = tuple(view_proj.T.astype("f4").ravel())

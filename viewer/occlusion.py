@@ -24,7 +24,7 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from .camera import outside_frustum_many
+from .camera import outside_frustum_boxes
 from .frame import new_framebuffer
 from .interface import set_uniform
 
@@ -33,8 +33,9 @@ class OcclusionTest:
     """``geometry``: the scene's vertex and index buffers (viewer/object_batches.py SceneGeometry);
     ``draw_calls``: the drawer's counters (viewer/object_drawer.py DrawCalls)."""
 
-    def __init__(self, ctx: moderngl.Context, programs, geometry, draw_calls):
+    def __init__(self, ctx: moderngl.Context, programs, geometry, draw_calls, boxes: np.ndarray):
         self.ctx = ctx
+        self.boxes = np.asarray(boxes, dtype=np.float64)  # (n, 2, 3) every object's world bounding box
         self.programs = programs
         self.geometry = geometry
         self.size: tuple[int, int] | None = None
@@ -42,6 +43,8 @@ class OcclusionTest:
         self.fbo = None
         self._vao = None
         self._queries: list = []  # one samples-passed query per queried object, reused
+        self._objects = None  # the last objects list draw_depth was given, and its arrays:
+        self._object_arrays = None  # (indices, enabled, single-sided) made once per list, not per pass
         self.draw_calls = draw_calls
 
     def _targets(self, size) -> None:
@@ -77,13 +80,9 @@ class OcclusionTest:
         ctx.enable(moderngl.DEPTH_TEST)
         ctx.depth_func = "<"
         drawn = culled = 0
-        outside = outside_frustum_many(np.array([obj.corners for obj, _ in objects]), view_proj) if objects else []
+        indices, enabled, single_sided = self._arrays(objects)
+        outside = outside_frustum_boxes(self.boxes[indices, 0], self.boxes[indices, 1], view_proj)
         if batches is not None:
-            enabled = np.zeros(self.geometry.first_index.size, dtype=bool)
-            single_sided = np.zeros_like(enabled)
-            for obj, one_sided in objects:
-                enabled[obj.index] = True
-                single_sided[obj.index] = one_sided
             hidden = int(np.count_nonzero(outside))
             if hidden < len(objects):
                 vao = self._positions(program)
@@ -102,6 +101,18 @@ class OcclusionTest:
             drawn += 1
         ctx.disable(moderngl.CULL_FACE)
         return drawn, culled
+
+    def _arrays(self, objects: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(object indices, enabled per object, single-sided per object) of ``objects``: the
+        drawer hands the same cached list every pass until its materials change."""
+        if objects is not self._objects:
+            indices = np.fromiter((obj.index for obj, _ in objects), dtype=np.int64, count=len(objects))
+            enabled = np.zeros(self.geometry.first_index.size, dtype=bool)
+            single_sided = np.zeros_like(enabled)
+            enabled[indices] = True
+            single_sided[indices] = np.fromiter((one for _, one in objects), dtype=bool, count=len(objects))
+            self._objects, self._object_arrays = objects, (indices, enabled, single_sided)
+        return self._object_arrays
 
     def visible_samples(
         self, view_proj: np.ndarray, size, occluders: list, queried: dict, batches=None

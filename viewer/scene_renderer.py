@@ -277,20 +277,18 @@ class SceneRenderer(RendererBase):
             }
         footprints = {}
         if method is not None and settings.mirror_lobe_sizes:
-            from lobeview.scenes.planar_mirror import reflector_max_view_angle
+            from lobeview.scenes.planar_mirror import reflector_max_view_angles
 
-            eye = camera.position
+            angles = reflector_max_view_angles(list(reflectors.values()), camera.position)
             footprints = {
-                index: self.mirror_passes.finest_footprint(
-                    index, self.drawer.object_method(index, method), reflector_max_view_angle(reflector, eye)
-                )
-                for index, reflector in reflectors.items()
+                index: self.mirror_passes.finest_footprint(index, self.drawer.object_method(index, method), angle)
+                for index, angle in zip(reflectors, angles, strict=True)
             }
         bias = Method("lobe", 1).default_lod_bias(self.mip_filter) if lod_bias is None else float(lod_bias)
         occlusion = settings.mirror_occlusion and not jitters
         return self.mirror_passes.render(
             camera, self.size, reflectors, names, settings.mirror_scale, settings.mirror_specular, occlusion,
-            spreads, bias, footprints,
+            spreads, bias, footprints, settings.mirror_plane_sharing,
         )  # fmt: skip
 
     def invalidate_mirrors(self) -> None:

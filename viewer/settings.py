@@ -55,6 +55,9 @@ class RenderSettings:
     # A lobe-N reflector's buffers at 1/2 or 1/4 of mirror_scale where its finest lookups read that
     # much coarser (scenes/planar_mirror.py mirror_buffer_levels); False: every buffer at mirror_scale.
     mirror_lobe_sizes: bool = True
+    # Reflectors in one plane (an apartment's floors) share its passes (scenes/planar_mirror.py
+    # coplanar_groups); False: a pass per reflector (for comparison).
+    mirror_plane_sharing: bool = True
     frustum_culling: bool = True  # objects outside a pass's frustum are not drawn
     depth_prepass: bool = True  # opaque depth first: the camera pass shades once per pixel
     # Per-object draw state recorded once and replayed per draw (viewer/interface.py DrawRecorder).
