@@ -318,6 +318,28 @@ def has_fitted_pattern(lobe) -> bool:
     )
 
 
+def may_read_fitted(lobes, per_pixel_lobes: bool = False) -> bool:
+    """Whether lobe-N+norm+fit may read any of ``lobes`` through the fitted table, i.e. needs the
+    cube's blur stack (materials/blur_stack.py). With ``per_pixel_lobes`` (glTF textures) the
+    shader decides per pixel (an anisotropy texture may be zero there): every GGX or Beckmann
+    microfacet reflection counts, isotropic or not."""
+    from .conductor import MicrofacetReflection
+
+    for lobe in lobes:
+        if has_fitted_pattern(lobe):
+            return True
+        dist = getattr(lobe, "distribution", None)
+        if (
+            per_pixel_lobes
+            and isinstance(lobe, MicrofacetReflection)
+            and not getattr(lobe, "transmission", False)
+            and dist is not None
+            and dist.kind in ("ggx", "beckmann")
+        ):
+            return True
+    return False
+
+
 def read_count(kind: str, n: int) -> int:
     """The reads of lobe-N's fitted pattern: N for Beckmann, N + 4 for GGX (its tail's budget)."""
     return n + 4 if kind == "ggx" else n

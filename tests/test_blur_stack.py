@@ -197,3 +197,46 @@ def test_the_stack_is_read_through_the_reflection_proxy(rough_sphere_in_a_scene)
     plain = frames["none"].radiance[mask]
     assert _relative_rms(frames["far"].radiance[mask], plain) < 2e-3
     assert _relative_rms(frames["room"].radiance[mask], plain) > 0.02
+
+
+def test_no_stack_is_built_for_lobes_the_fitted_path_does_not_read():
+    # An anisotropic GGX lobe keeps the thesis pattern under +fit (materials/fitted_pattern.py
+    # has_fitted_pattern): its object's cube gets no blur stack and the frame is lobe-7+norm's.
+    import warnings
+
+    from lobeview.bench.mitsuba import material
+    from lobeview.materials.fitted_pattern import may_read_fitted
+    from lobeview.materials.patterns import specular_lobes
+    from lobeview.materials.spec import build_bsdf, validate
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    anisotropic = specular_lobes(build_bsdf(validate(material("ggx:0.05x0.3"))))
+    isotropic = specular_lobes(build_bsdf(validate(material("ggx:0.3"))))
+    assert not may_read_fitted(anisotropic) and may_read_fitted(isotropic)
+    assert may_read_fitted(anisotropic, per_pixel_lobes=True)  # a texture may make it isotropic
+    desc = validate(material("ggx:0.05x0.3"))
+    scene = Scene([SceneObject("sphere", uv_sphere(rings=32, segments=64), 0)], [SceneMaterial("brushed", desc)])
+    scene.objects[0].planar_reflector = False
+    ctx = create_headless_context()
+    env = EnvironmentMap.from_function(lambda d: 0.5 + 2.0 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no lightmap: the unbaked path
+        renderer = SceneRenderer(ctx, scene, env, size=(48, 48), progress=False,
+                                 settings=RenderSettings(cube_face_size=32))  # fmt: skip
+    try:
+        camera = Camera(position=CAMERA[0], target=CAMERA[1], fov_y=40.0)
+        fit = renderer.render(camera, "lobe-7+norm+fit")
+        assert renderer.objects[0].cube is not None and renderer.objects[0].cube._blur_stack is None
+        plain = renderer.render(camera, "lobe-7+norm")
+        mask = fit.object_id == 0
+        assert mask.sum() > 300 and not fit.invalid.any()
+        np.testing.assert_allclose(fit.radiance[mask], plain.radiance[mask], rtol=1e-5, atol=1e-6)
+    finally:
+        renderer.release()
+        ctx.release()

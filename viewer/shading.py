@@ -13,6 +13,7 @@ from scipy.stats import qmc
 
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_REFERENCE_SPP, Method
+from lobeview.materials.fitted_pattern import may_read_fitted
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS, split_sum_is_line
 from lobeview.scenes.bright_sources import MAX_LIGHTS as MAX_CAP_LIGHTS
 
@@ -183,8 +184,12 @@ class ShadingBinder:
         material; ``per_pixel_lobes``: textures change the lobes, so none is baked into RSIBR
         maps). Units: viewer/interface.py TEXTURE_UNITS."""
         # lobe-N+norm+fit's coarse reads: the cube's blur stack, built (a compute pass with its own
-        # texture and image units) before anything of this draw is bound
-        stack = cube.blur_stack() if uses_blur_stack(method) and has_uniform(program, "u_blur_stack") else None
+        # texture and image units) before anything of this draw is bound; a material none of whose
+        # lobes can take the fitted path gets a 1-texel stand-in instead (no stack built for it)
+        stack = None
+        if uses_blur_stack(method) and has_uniform(program, "u_blur_stack"):
+            fitted = material is None or may_read_fitted(material.lobe_components, per_pixel_lobes)
+            stack = cube.blur_stack() if fitted else self.dummy_texture("array")
         if method.kind == "prefiltered":
             self.bind_prefiltered(program, cube, material, method, per_pixel_lobes)
         # Bright sources (viewer/cubemap.py): the reference integrates the whole radiance, every
