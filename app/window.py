@@ -50,6 +50,7 @@ from lobeview.viewer.refinement import REFINEMENT_TEXTURE_FOOTPRINT, Refinement,
 from lobeview.viewer.tonemap import to_uint8, tonemap
 
 FRAME_TIME_SMOOTHING = 0.2  # exponential smoothing of the shown frame interval
+STACK_BUILD_BUDGET_S = 0.1  # of a frame spent building blur stacks (at least one a frame)
 CUBE_REFRESH_MAX_DEFERRED = 8  # moving frames a stale cube map waits at most for room in the budget
 
 
@@ -524,7 +525,13 @@ class LobeviewWindow(mglw.WindowConfig):
         if self.renderer.size != size:
             self.renderer.resize(size)
         self.scene_passes += 1
+        # lobe-N+norm+fit's blur stacks: built within the frame's budget, the others read through
+        # their MIP chains until a later frame builds them (a CPU renderer takes ~0.5 s a cube)
+        self.renderer.shading.stack_budget(STACK_BUILD_BUDGET_S)
         self.renderer.draw_frame(camera, self.method)
+        if self.renderer.shading.stacks_pending:
+            self.message = f"building blur stacks ({self.renderer.shading.stacks_pending} objects read the MIP chain)"
+            self.dirty = True  # the next frame builds more
         self.realtime.reset()
         self.realtime.add(self.renderer.radiance_target, 1.0)
         self.ctx.finish()

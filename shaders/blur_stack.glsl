@@ -5,6 +5,7 @@
 #error "the blur stack is one cube's: not for the mirror buffers or the multi-draws' cube-map arrays"
 #endif
 uniform sampler2DArray u_blur_stack;
+uniform bool u_has_blur_stack;  // false: not built yet (a budgeted frame) or no fitted lobe: the chain
 
 int blur_stack_face(vec3 d, out vec2 st) {
     vec3 a = abs(d);

@@ -91,6 +91,11 @@ class RadianceCube:
         self._blur_stack = None  # lobe-N+norm+fit's coarse reads (viewer/blur_stack_gpu.py), on first use
         self.cache_dir = None  # where prefiltered maps are cached (set by the owner)
 
+    @property
+    def has_blur_stack(self) -> bool:
+        """Whether the blur stack is built (blur_stack() then costs nothing)."""
+        return self._blur_stack is not None
+
     def blur_stack(self) -> moderngl.TextureArray:
         """The blur stack of ``residual`` (materials/blur_stack.py), built on first use (a few
         hundred thousand texture reads: milliseconds on a GPU, about a second on llvmpipe)."""

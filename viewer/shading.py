@@ -5,6 +5,7 @@ renderer and the scene renderer shade through it; the RSIBR bake (viewer/rsibr.p
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import moderngl
@@ -73,6 +74,31 @@ class ShadingBinder:
         # (kind, ..., lobes_key) -> (texture, derived data); live material edits make new ones
         self.material_textures = BoundedCache(MAX_MATERIAL_TEXTURES, on_evict=lambda item: item[0].release())
         self._dummy_textures: dict = {}
+        # Blur stacks built per frame (lobe-N+norm+fit): None builds every one a draw needs (shot,
+        # tests: exact frames); the window gives each frame a time budget (stack_budget), and a
+        # cube whose stack does not fit is read through its MIP chain that frame (pending).
+        self.stack_budget_s: float | None = None
+        self._stack_budget_start = 0.0
+        self._stack_built_this_frame = False
+        self.stacks_pending = 0  # draws of the budgeted frame that read the chain for want of a stack
+
+    def stack_budget(self, seconds: float | None) -> None:
+        """Start a frame whose blur-stack builds stop once it has run ``seconds`` (at least one is
+        built a frame; None: no limit) and reset the pending count."""
+        self.stack_budget_s = seconds
+        self._stack_budget_start = time.perf_counter()
+        self._stack_built_this_frame = False
+        self.stacks_pending = 0
+
+    def _stack_fits(self, cube: RadianceCube) -> bool:
+        """Whether ``cube``'s blur stack is there or may be built within this frame's budget."""
+        if self.stack_budget_s is None or cube.has_blur_stack:
+            return True
+        if self._stack_built_this_frame and time.perf_counter() - self._stack_budget_start >= self.stack_budget_s:
+            self.stacks_pending += 1
+            return False
+        self._stack_built_this_frame = True
+        return True
 
     def set_material(
         self, program, material: PackedMaterial, method: Method, lod_bias: float | None, seed: int, planar=False
@@ -189,7 +215,8 @@ class ShadingBinder:
         stack = None
         if uses_blur_stack(method) and has_uniform(program, "u_blur_stack"):
             fitted = material is None or may_read_fitted(material.lobe_components, per_pixel_lobes)
-            stack = cube.blur_stack() if fitted else self.dummy_texture("array")
+            stack = cube.blur_stack() if fitted and self._stack_fits(cube) else self.dummy_texture("array")
+            set_uniform(program, "u_has_blur_stack", int(stack is not self.dummy_texture("array")))
         if method.kind == "prefiltered":
             self.bind_prefiltered(program, cube, material, method, per_pixel_lobes)
         # Bright sources (viewer/cubemap.py): the reference integrates the whole radiance, every
