@@ -398,6 +398,11 @@ def _face_sizes(result: dict) -> str:
     return ", ".join(f"{n} x {f}^2" for f, n in sorted(result["cube_face_sizes"].items(), key=lambda kv: -int(kv[0])))
 
 
+def _mean_or_dash(value: float) -> str:
+    """A mean to one decimal, or '-' where the runs did not record it (results of older runs)."""
+    return "-" if value != value else f"{value:.1f}"
+
+
 def _count_markdown(rows: list[dict]) -> list[str]:
     lines = [
         "| rooms | objects | reflectors | cube maps | cube memory MB (all at full size) | start-up cold s (all at full "
@@ -420,7 +425,8 @@ def _count_markdown(rows: list[dict]) -> list[str]:
             f"| {r['cube_face_draws']} / {r['cube_face_culled']} | {r['startup_warm_s']:.1f} "
             f"| {s['frame_ms_median']:.0f} | {s['mirror_ms_mean']:.0f} | {s['camera_ms_mean']:.0f} "
             f"| {s['camera_drawn_mean']:.0f} / {s['camera_culled_mean']:.0f} "
-            f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} ({s['mirror_buffers_mean']:.1f}) "
+            f"| {s['mirror_passes_mean']:.1f} / {s['mirror_skipped_mean']:.1f} "
+            f"({_mean_or_dash(s['mirror_buffers_mean'])}) "
             f"| {s['mirror_passes_without_test_mean']:.1f}, {s['mirror_ms_without_test_mean']:.0f} "
             f"| {s['mirror_ms_without_scissor_mean']:.0f} | {100 * s['scissored_fraction']:.0f} % "
             f"| {s['mirror_ms_full_buffers_mean']:.0f} ({100 * s['buffer_pixel_share']:.0f} %) "

@@ -299,7 +299,8 @@ def test_walkthrough_report_tables(tmp_path):
     from lobeview.bench.walkthrough import _count_markdown, _scene_markdown
 
     row = {"frame": 0, "t": 0.0, "mirror_ms": 3.0, "camera_ms": 5.0, "frame_ms": 8.0, "camera_drawn": 4,
-           "camera_culled": 2, "mirror_draws": 7, "mirror_culled": 1, "mirror_passes": 1, "mirror_skipped": 2,
+           "camera_culled": 2, "mirror_draws": 7, "mirror_culled": 1, "mirror_passes": 2, "mirror_skipped": 2,
+           "mirror_buffers": 1,
            "skip_reasons": {"outside the view": 2}, "occlusion_test_ms": 1.0, "mirror_ms_without_test": 9.0,
            "mirror_passes_without_test": 2, "camera_ms_without_prepass": 6.0, "mirror_ms_without_scissor": 4.0,
            "mirror_pixels_scissored": 300, "mirror_pixels": 1200, "frame_ms_without_records": 11.0, "draws": 11,
@@ -312,11 +313,15 @@ def test_walkthrough_report_tables(tmp_path):
               "warm_stages": {"cube maps": 0.1}, "cube_face_draws": 40, "cube_face_culled": 20,
               "frames": [row], "rooms": 1}  # fmt: skip
     text = "\n".join(_scene_markdown(result) + _count_markdown([result]))
-    assert "| 0 | 0.0 | 8 | 3 | 1 | 5 | 4 / 2 | 7 / 1 | 1 / 2 | outside the view: 2 | 2, 9 | 4 | 25 % | 7 |" in text
+    # two reflectors in one plane: 2 with buffers from 1 pass drawn
+    assert "| 0 | 0.0 | 8 | 3 | 1 | 5 | 4 / 2 | 7 / 1 | 2 / 2 (1) | outside the view: 2 | 2, 9 | 4 | 25 % | 7 |" in text
     assert (
-        "| 1 | 6 | 3 | 2 | 16 (20) | 2.0 (2.5) | 40 / 20 | 0.5 | 8 | 3 | 5 | 4 / 2 | 1.0 / 2.0 | 2.0, 9 | 4 "
+        "| 1 | 6 | 3 | 2 | 16 (20) | 2.0 (2.5) | 40 / 20 | 0.5 | 8 | 3 | 5 | 4 / 2 | 2.0 / 2.0 (1.0) | 2.0, 9 | 4 "
         "| 25 % | 7 (25 %) | 6 | 11, 400 / 90 | 11 (8) |" in text
     )
+    del row["mirror_buffers"]  # a result of an older run: the passes drawn unknown
+    older = "\n".join(_count_markdown([result]))
+    assert "| 2.0 / 2.0 (-) |" in older
     assert "with every buffer at the mirror scale (no lobe sizes) 7 ms (the lobe sizes keep 25 %" in text
     assert "11 draws a frame set 400 uniform values, of which 90 were not already" in text
     assert "faces 1 x 256^2, 1 x 64^2" in text
