@@ -160,15 +160,21 @@ def _rendering(window) -> None:
     c5, scale = imgui.slider_float("mirror resolution", renderer.settings.mirror_scale, 0.1, 1.0)
     # lobe-N reflectors whose lookups read coarse levels get 1/2 or 1/4 of that (--mirror-sizes)
     c5b, lobe_sizes = imgui.checkbox("mirror buffers sized by their lobes", renderer.settings.mirror_lobe_sizes)
+    # reflectors in one plane (room floors) share its pass (scenes/planar_mirror.py coplanar_groups)
+    c5d, sharing = imgui.checkbox("one mirror pass per plane", renderer.settings.mirror_plane_sharing)
     # an object's own surface hiding its specular lookups (--self-occlusion)
     c5c, self_occlusion = imgui.checkbox("specular self-occlusion", renderer.settings.self_occlusion)
-    if c4 or c5 or c5b or c5c:
+    if c4 or c5 or c5b or c5c or c5d:
         renderer.configure(
-            mirrors=mirrors, mirror_scale=scale, mirror_lobe_sizes=lobe_sizes, self_occlusion=self_occlusion
-        )
+            mirrors=mirrors, mirror_scale=scale, mirror_lobe_sizes=lobe_sizes, self_occlusion=self_occlusion,
+            mirror_plane_sharing=sharing,
+        )  # fmt: skip
         window.dirty = True
     passes = renderer.mirror_passes
-    _report_lines(f"mirror passes: {len(passes.drawn)} reflectors drawn, {len(passes.skipped)} skipped", passes.report)
+    _report_lines(
+        f"mirror passes: {passes.drawn_passes} for {len(passes.drawn)} reflectors, {len(passes.skipped)} skipped",
+        passes.report,
+    )
     c6, culling = imgui.checkbox("frustum culling", renderer.settings.frustum_culling)
     if c6:
         renderer.configure(frustum_culling=culling)

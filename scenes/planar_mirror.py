@@ -372,6 +372,37 @@ def box_screen_rect(corners: np.ndarray, view_projection: np.ndarray, size) -> t
     return float(xy[:, 0].min()), float(xy[:, 1].min()), float(xy[:, 0].max()), float(xy[:, 1].max())
 
 
+# The 12 edges of a box given by box_corners' order (corner 4 ix + 2 iy + iz): corners whose
+# indices differ in one bit. A box flat in an axis repeats corners; its edges are then the same
+# points twice (box_screen_rect's pairwise test finds the same ones).
+BOX_EDGES = np.array([(i, i | bit) for bit in (4, 2, 1) for i in range(8) if not i & bit])
+
+
+def box_screen_rects(box_min: np.ndarray, box_max: np.ndarray, view_projection: np.ndarray, size) -> np.ndarray:
+    """:func:`box_screen_rect` of many axis-aligned boxes (m, 3) at once: (m, 4) rows (x0, y0, x1,
+    y1), NaN where nothing of a box lies in front of the eye."""
+    low = np.asarray(box_min, dtype=np.float64).reshape(-1, 3)
+    high = np.asarray(box_max, dtype=np.float64).reshape(-1, 3)
+    bits = (np.arange(8)[:, None] >> np.array([2, 1, 0])) & 1  # corner k's (ix, iy, iz)
+    corners = np.where(bits[None] == 1, high[:, None], low[:, None])  # (m, 8, 3)
+    clip = corners @ np.asarray(view_projection, dtype=np.float64)[:, :3].T + np.asarray(view_projection)[:, 3]
+    near = 1e-6
+    a, b = clip[:, BOX_EDGES[:, 0]], clip[:, BOX_EDGES[:, 1]]  # (m, 12, 4)
+    crossing = (a[..., 3] > near) != (b[..., 3] > near)
+    t = np.where(crossing, (near - a[..., 3]) / np.where(crossing, b[..., 3] - a[..., 3], 1.0), 0.0)
+    cut = a + t[..., None] * (b - a)
+    points = np.concatenate([clip, cut], axis=1)  # (m, 20, 4)
+    usable = np.concatenate([clip[..., 3] > near, crossing], axis=1)
+    w = np.where(usable, points[..., 3], 1.0)
+    width, height = size
+    xy = (np.clip(points[..., :2] / w[..., None], -1e6, 1e6) * 0.5 + 0.5) * np.array([width, height], dtype=np.float64)
+    lowest = np.where(usable[..., None], xy, np.inf).min(axis=1)
+    highest = np.where(usable[..., None], xy, -np.inf).max(axis=1)
+    rects = np.concatenate([lowest, highest], axis=1)
+    rects[~usable.any(axis=1)] = np.nan
+    return rects
+
+
 def mirror_scissor(
     reflector: PlanarReflector, camera: MirrorCamera, spread: tuple[float, float] | None, lod_bias: float
 ) -> tuple[int, int, int, int] | None:
@@ -379,32 +410,46 @@ def mirror_scissor(
     reflector's pixels can read, from its lobes' ``spread`` (materials/lobe_spread.py:
     largest angle off the mirror direction, largest lookup solid angle); None: the whole buffer
     (no bound: unknown spread, the region reaches the buffer's edges or too far off-axis)."""
-    if spread is None:
-        return None
-    angle, solid_angle = spread
+    return mirror_scissors([reflector], camera, [spread], lod_bias)[0]
+
+
+def mirror_scissors(reflectors: list, camera: MirrorCamera, spreads: list, lod_bias: float) -> list:
+    """:func:`mirror_scissor` of several reflectors read from one buffer (the members of a plane's
+    shared pass), in one numpy pass."""
+    out: list = [None] * len(reflectors)
+    bounded = [k for k, spread in enumerate(spreads) if spread is not None]
+    if not bounded:
+        return out
     width, height = camera.size
-    rect = box_screen_rect(reflector.corners(), camera.plain_view_projection, camera.size)
-    if rect is None:
-        return None
-    x0, y0, x1, y1 = np.clip(rect, [0, 0, 0, 0], [width, height, width, height])
+    low = np.array([reflectors[k].box_min for k in bounded], dtype=np.float64)
+    high = np.array([reflectors[k].box_max for k in bounded], dtype=np.float64)
+    rects = box_screen_rects(low, high, camera.plain_view_projection, camera.size)
+    seen = ~np.isnan(rects[:, 0])
+    x0, y0, x1, y1 = np.clip(np.where(seen[:, None], rects, 0.0), 0.0, [width, height, width, height]).T
+    angle, solid_angle = np.array([spreads[k] for k in bounded], dtype=np.float64).T
     focal = camera.focal_pixels
     # Largest off-axis angle of the rectangle, and how far the reach carries beyond it.
-    tangents = np.array([[x - width / 2.0, y - height / 2.0] for x in (x0, x1) for y in (y0, y1)]) / focal
-    off_axis = float(np.arctan(np.max(np.linalg.norm(tangents, axis=1))))
+    corner_x = np.maximum(np.abs(x0 - width / 2.0), np.abs(x1 - width / 2.0))
+    corner_y = np.maximum(np.abs(y0 - height / 2.0), np.abs(y1 - height / 2.0))
+    off_axis = np.arctan(np.hypot(corner_x, corner_y) / focal)
     outer = off_axis + angle
-    if outer >= SCISSOR_MAX_ANGLE:
-        return None
+    near_axis = outer < SCISSOR_MAX_ANGLE
+    cos_outer = np.cos(np.where(near_axis, outer, 0.0))
     # Gnomonic projection: at most 1 / cos^2 pixels per radian along the way (radially).
-    reach = focal * angle / np.cos(outer) ** 2
-    lod = 0.5 * np.log2(max(solid_angle * focal**2 / np.cos(outer) ** 3, 1e-30)) + lod_bias + SCISSOR_LOD_SLACK
+    reach = focal * angle / cos_outer**2
+    lod = 0.5 * np.log2(np.maximum(solid_angle * focal**2 / cos_outer**3, 1e-30)) + lod_bias + SCISSOR_LOD_SLACK
     # A bilinear read at level L uses the texel holding it and the neighbour nearer to it: pixels
     # up to 1.5 texels (of 2^ceil(L) pixels at the coarser of the two trilinear levels) away.
-    reach += 1.5 * 2.0 ** np.ceil(max(lod, 0.0)) + 1.0
-    x0, y0 = max(int(np.floor(x0 - reach)), 0), max(int(np.floor(y0 - reach)), 0)
-    x1, y1 = min(int(np.ceil(x1 + reach)), width), min(int(np.ceil(y1 + reach)), height)
-    if x1 <= x0 or y1 <= y0 or (x1 - x0) * (y1 - y0) >= width * height:
-        return None
-    return x0, y0, x1 - x0, y1 - y0
+    reach = reach + 1.5 * 2.0 ** np.ceil(np.maximum(lod, 0.0)) + 1.0
+    left = np.maximum(np.floor(x0 - reach), 0.0)
+    bottom = np.maximum(np.floor(y0 - reach), 0.0)
+    right = np.minimum(np.ceil(x1 + reach), width)
+    top = np.minimum(np.ceil(y1 + reach), height)
+    keep = seen & near_axis & (right > left) & (top > bottom) & ((right - left) * (top - bottom) < width * height)
+    for row, k in enumerate(bounded):
+        if keep[row]:
+            out[k] = (int(left[row]), int(bottom[row]), int(right[row] - left[row]), int(top[row] - bottom[row]))
+    return out
 
 
 # -- sampling the buffer (4.5.2-4.5.3) -----------------------------------------------------------

@@ -48,6 +48,27 @@ def test_box_screen_rect_bounds_every_visible_point_of_the_box(eye):
         assert xy[:, 0].min() - x0 < 2.0 and x1 - xy[:, 0].max() < 2.0
 
 
+def test_box_rects_of_many_boxes_are_the_single_ones():
+    """box_screen_rects (the shared passes' members at once) against box_screen_rect's pairwise
+    edges: boxes in front, around and behind the eye, some flat in an axis."""
+    from lobeview.viewer.camera import box_corners
+
+    rng = np.random.default_rng(4)
+    low = rng.uniform(-6.0, 6.0, (500, 3))
+    high = low + rng.uniform(0.0, 4.0, (500, 3)) * (rng.uniform(size=(500, 3)) > 0.25)
+    view_projection = perspective(60.0, 1.6, 0.05, 100.0) @ look_at((0.5, 1.0, 2.0), (0.0, 0.0, -2.0), (0, 1, 0))
+    rects = planar_mirror.box_screen_rects(low, high, view_projection, (320, 200))
+    behind = 0
+    for a, b, rect in zip(low, high, rects, strict=True):
+        single = planar_mirror.box_screen_rect(box_corners(a, b), view_projection, (320, 200))
+        if single is None:
+            behind += 1
+            assert np.isnan(rect).all()
+        else:
+            np.testing.assert_allclose(rect, single, rtol=1e-9, atol=1e-9)  # 1e-11 apart near the eye
+    assert 20 < behind < 480
+
+
 @pytest.mark.parametrize("preset", ["lacquer", "plastic", "gold-ggx", "frosted-glass", "alanod-2000gs-2lobe"])
 @pytest.mark.parametrize("n", [3, 7, 15])
 def test_lobe_spread_covers_every_lookup(preset, n):
@@ -125,17 +146,24 @@ def test_scissor_without_the_lookups_margin_changes_the_frame(far_floor, monkeyp
     changes pixels of the glossy floor (its lookups read the buffer beyond its own image)."""
     whole, _, _ = _frame(far_floor, "lobe-7+norm", False)
 
-    def bare(reflector, camera, spread, lod_bias):
-        x0, y0, x1, y1 = planar_mirror.box_screen_rect(reflector.corners(), camera.plain_view_projection, camera.size)
-        x0, y0 = max(int(x0), 0), max(int(y0), 0)
-        return (
-            x0,
-            y0,
-            max(min(int(np.ceil(x1)), camera.size[0]) - x0, 1),
-            max(min(int(np.ceil(y1)), camera.size[1]) - y0, 1),
-        )
+    def bare(reflectors, camera, spreads, lod_bias):  # mirror_scissors without the reach
+        rects = []
+        for reflector in reflectors:
+            x0, y0, x1, y1 = planar_mirror.box_screen_rect(
+                reflector.corners(), camera.plain_view_projection, camera.size
+            )
+            x0, y0 = max(int(x0), 0), max(int(y0), 0)
+            rects.append(
+                (
+                    x0,
+                    y0,
+                    max(min(int(np.ceil(x1)), camera.size[0]) - x0, 1),
+                    max(min(int(np.ceil(y1)), camera.size[1]) - y0, 1),
+                )
+            )
+        return rects
 
-    monkeypatch.setattr(planar_mirror, "mirror_scissor", bare)
+    monkeypatch.setattr(planar_mirror, "mirror_scissors", bare)
     bare_frame, _, _ = _frame(far_floor, "lobe-7+norm", True)
     changed = np.abs(bare_frame - whole).max(axis=-1) > 1e-3 * np.maximum(whole.max(axis=-1), 1e-3)
     assert changed.sum() > 20

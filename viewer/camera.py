@@ -11,7 +11,17 @@ from scipy.stats import qmc
 
 
 def look_at(eye, target, up) -> np.ndarray:
-    eye, target, up = (np.asarray(v, dtype=np.float64) for v in (eye, target, up))
+    """The view matrix of a camera at ``eye`` looking at ``target`` (a new array each call; the
+    matrix is made once per distinct camera: a frame asks for it in every mirror pass)."""
+    key = tuple(float(x) for v in (eye, target, up) for x in np.ravel(v))
+    if len(key) != 9:
+        raise ValueError("look_at takes three 3-vectors")
+    return _look_at(key).copy()
+
+
+@lru_cache(maxsize=64)
+def _look_at(key: tuple) -> np.ndarray:
+    eye, target, up = (np.array(key[k : k + 3], dtype=np.float64) for k in (0, 3, 6))
     forward = target - eye
     if np.linalg.norm(forward) < 1e-12:
         raise ValueError("camera position and target coincide")

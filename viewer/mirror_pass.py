@@ -229,7 +229,7 @@ class MirrorPasses:
         or absent: full size): its buffers are halved as often as those lookups allow
         (scenes/planar_mirror.py mirror_buffer_levels). ``share_planes``: reflectors in one plane
         share its passes (scenes/planar_mirror.py coplanar_groups); False: a pass per reflector."""
-        from lobeview.scenes.planar_mirror import mirror_buffer_levels, mirror_camera, mirror_scissor
+        from lobeview.scenes.planar_mirror import mirror_buffer_levels, mirror_camera, mirror_scissors
 
         spreads = spreads or {}
         footprints = footprints or {}
@@ -283,7 +283,9 @@ class MirrorPasses:
                     camera.view(), projection, reflectors[owner], size, see_through=kind != "mirror"
                 )
                 rect = union_rect(
-                    [mirror_scissor(reflectors[index], buffer_camera, spreads.get(index), lod_bias) for index in drawn]
+                    mirror_scissors(
+                        [reflectors[index] for index in drawn], buffer_camera, [spreads.get(i) for i in drawn], lod_bias
+                    )
                 )
                 if rect is not None and rect[2] * rect[3] >= size[0] * size[1]:
                     rect = None  # the members' regions cover the whole buffer
