@@ -529,8 +529,9 @@ class LobeviewWindow(mglw.WindowConfig):
         # their MIP chains until a later frame builds them (a CPU renderer takes ~0.5 s a cube)
         self.renderer.shading.stack_budget(STACK_BUILD_BUDGET_S)
         self.renderer.draw_frame(camera, self.method)
-        if self.renderer.shading.stacks_pending:
-            self.message = f"building blur stacks ({self.renderer.shading.stacks_pending} objects read the MIP chain)"
+        pending = self.renderer.shading.stacks_pending
+        if pending:
+            self.message = f"building blur stacks ({pending} cube maps read their MIP chains meanwhile)"
             self.dirty = True  # the next frame builds more
         self.realtime.reset()
         self.realtime.add(self.renderer.radiance_target, 1.0)

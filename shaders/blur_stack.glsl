@@ -1,11 +1,16 @@
 // lobe-N+norm+fit's coarse reads from the blur stack (materials/blur_stack.py, twin of read_stack;
 // built by shaders/blur_stack.comp): the padded face of a direction's major axis, read bilinearly,
 // two layers blended linearly in variance (layer k holds sigma_0^2 2^k).
-#if defined(MIRROR) || defined(OBJECT_RECORDS)
-#error "the blur stack is one cube's: not for the mirror buffers or the multi-draws' cube-map arrays"
+#if defined(MIRROR)
+#error "the blur stack is a cube's: not for the mirror buffers"
 #endif
+#if !defined(OBJECT_RECORDS)
+// One object's draw: its cube's stack. Multi-draws (object_records.glsl) declare the group's array
+// of stacks instead, and each object's record holds these two.
 uniform sampler2DArray u_blur_stack;
-uniform bool u_has_blur_stack;  // false: not built yet (a budgeted frame) or no fitted lobe: the chain
+uniform int u_has_blur_stack;  // 0: not built yet (a budgeted frame) or no fitted lobe: the chain
+uniform float u_stack_layer;  // the stack's first layer in u_blur_stack (0: the cube's own)
+#endif
 
 int blur_stack_face(vec3 d, out vec2 st) {
     vec3 a = abs(d);
@@ -33,7 +38,7 @@ vec3 blur_stack_layer(vec3 d, int k) {
     int face = blur_stack_face(d, st);
     vec2 uv = ((st + 1.0) * (0.5 * float(BLUR_STACK_FACE)) + float(BLUR_STACK_PAD))
               / float(BLUR_STACK_FACE + 2 * BLUR_STACK_PAD);
-    return textureLod(u_blur_stack, vec3(uv, float(6 * k + face)), 0.0).rgb;
+    return textureLod(u_blur_stack, vec3(uv, u_stack_layer + float(6 * k + face)), 0.0).rgb;
 }
 
 vec3 blur_stack_read(vec3 d, float sigma) {

@@ -83,7 +83,7 @@ vec3 integrate_fitted(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         stack_dir = proxy_direction(world, lod_offset);
         stack_sigma *= exp2(lod_offset);
 #endif
-        if (u_has_blur_stack && stack_sigma >= BLUR_STACK_SIGMA0) {
+        if (u_has_blur_stack != 0 && stack_sigma >= BLUR_STACK_SIGMA0) {
             sum += read.z * self_occluded(world, blur_stack_read(stack_dir, stack_sigma), area);
             weight_sum += read.z;
             continue;

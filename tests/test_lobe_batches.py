@@ -205,6 +205,65 @@ def test_apartment_lobe_shaded_frames_and_cube_faces(ctx):
         renderer.release()
 
 
+def _rough_spheres_scene():
+    """Three spheres under the sunless sky's cube maps: GGX 0.3 and Beckmann 0.5 (fitted reads,
+    wide enough for the blur stack), anisotropic GGX 0.05 x 0.3 (the thesis pattern: no stack)."""
+    from lobeview.bench.mitsuba import material
+    from lobeview.materials.spec import validate
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
+
+    cases = ("ggx:0.3", "beckmann:0.5", "ggx:0.05x0.3")
+    objects, materials = [], []
+    for k, case in enumerate(cases):
+        mesh = uv_sphere(rings=24, segments=48)
+        mesh.positions = mesh.positions + np.array([2.2 * (k - 1), 0.0, 0.0], dtype=mesh.positions.dtype)
+        materials.append(SceneMaterial(case, validate(material(case))))
+        objects.append(SceneObject(f"sphere {case}", mesh, k))
+        objects[-1].planar_reflector = False
+    return Scene(objects, materials)
+
+
+def test_fitted_reads_multi_draw_with_the_stacks_in_arrays(ctx):
+    """lobe-N+norm+fit in the multi-draws: each object's blur stack copied into a shared array
+    (StackArrays), its first layer in the record: the frame equals the per-object path's within
+    rounding with the spheres' draws gone, and the stacks matter in it (the MIP chain's reads
+    give another frame); the anisotropic sphere's record names no stack."""
+    from lobeview.bench.lobe_kernel import sunless_sky
+    from lobeview.scenes.envmap import EnvironmentMap
+    from lobeview.viewer.camera import Camera
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    _gl(ctx)
+    env = EnvironmentMap.from_function(sunless_sky, height=64, name="sunless-sky")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no lightmap: the unbaked path
+        renderer = SceneRenderer(ctx, _rough_spheres_scene(), env, size=(120, 48), progress=False,
+                                 settings=RenderSettings(cube_face_size=32))  # fmt: skip
+    try:
+        camera = Camera(position=(0.0, 0.0, 7.5), target=(0.0, 0.0, 0.0), fov_y=40.0)
+        frames = _frames(renderer, camera, "lobe-7+norm+fit")
+        (single, calls_single), (multi, calls_multi) = frames[False], frames[True]
+        assert_within_rounding(multi, single, "spheres lobe-7+norm+fit")
+        batches = renderer.drawer.lobe_batches
+        assert int(np.count_nonzero(batches.members)) == 3 and calls_multi[0] <= calls_single[0] - 3
+        assert batches.current.uses_stacks and batches.stacks.copies == 2  # not the anisotropic one
+        assert sorted(len(g.objects) for g in batches.current.groups if g.stack_array is not None) == [2]
+        # the stacks matter: the per-object frame without them (u_has_blur_stack 0: the chain)
+        renderer.configure(indirect_draws=False)
+        renderer.shading.stack_budget(0.0)
+        for obj in renderer.objects:  # as if not built yet: this frame builds one, reads one chain
+            if obj.cube.has_blur_stack:
+                obj.cube._blur_stack.release()
+                obj.cube._blur_stack = None
+        chain = renderer.render(camera, "lobe-7+norm+fit", spp=1).radiance
+        renderer.shading.stack_budget(None)
+        assert np.abs(chain - single).max() > 0.01 * np.abs(single).max()
+    finally:
+        renderer.release()
+
+
 def test_lobe_records_hold_every_per_object_value(ctx):
     """Every uniform a lobe-shaded object's draw sets (material, lights, cube size, proxy) is a
     record field or a texture unit: a missed one would shade a group with one object's value."""
@@ -215,7 +274,8 @@ def test_lobe_records_hold_every_per_object_value(ctx):
         try:
             drawer = renderer.drawer
             checked = 0
-            for method in (Method.parse("lobe-7"), Method.parse("lobe-11+norm"), Method.parse("fis-8")):
+            methods = ("lobe-7", "lobe-11+norm", "fis-8", "lobe-7+norm+fit")
+            for method in (Method.parse(m) for m in methods):
                 for obj in drawer.objects:
                     owner = drawer.objects[obj.probe_owner]
                     if owner.cube is None:

@@ -54,6 +54,10 @@ def equirect_to_cube_faces(env: EnvironmentMap, size: int, supersample: int = 2)
     return faces
 
 
+# Blur stacks built so far (the multi-draws' records name stacks: a new one makes them again).
+BLUR_STACK_BUILDS = [0]
+
+
 class RadianceCube:
     """Incident radiance as a cube map with a full MIP chain, plus its importance map (texel CDF
     + per-texel density cube) for the reference method's environment sampling, built on first use
@@ -103,6 +107,7 @@ class RadianceCube:
             from .blur_stack_gpu import build_blur_stack
 
             self._blur_stack = build_blur_stack(self.residual.ctx, self.residual, self.face_size)
+            BLUR_STACK_BUILDS[0] += 1
         return self._blur_stack
 
     @property

@@ -13,8 +13,12 @@ of one draw call each.
 - Normalised lobe-N's albedo tables (one small texture per material) lie in one 2D texture
   array (AlbedoTableArray), a record holding its layer: bound per group, they had split the
   mirror passes' lobe-3+norm into one group per material (10 on the 18-room apartment).
-- Groups: the same program variant (with or without a reflection proxy), cube-map array, texture
-  bindings (lightmap, glTF maps) and face culling. The commands' instance counts
+- lobe-N+norm+fit's blur stacks (materials/blur_stack.py, one per cube) are copied into shared 2D
+  arrays of up to STACKS_PER_ARRAY stacks (StackArrays), a record holding its stack's first layer
+  and whether it has one (objects without a fitted lobe, or whose stack a budgeted frame has not
+  built yet, read their MIP chains).
+- Groups: the same program variant (with or without a reflection proxy), cube-map array, stack
+  array, texture bindings (lightmap, glTF maps) and face culling. The commands' instance counts
   come from the diffuse batches' frustum-culling compute pass (viewer/object_batches.py).
 
 Left to one draw per object (viewer/object_drawer.py): reflectors drawn from their mirror
@@ -30,6 +34,8 @@ from dataclasses import dataclass
 
 import moderngl
 import numpy as np
+
+from lobeview.materials.blur_stack import STACK_FACE, STACK_LAYERS, STACK_PAD
 
 from .cube_arrays import CubeMapArrays
 from .interface import TEXTURE_UNITS, bind_storage
@@ -108,6 +114,80 @@ class AlbedoTableArray:
             self.texture = None
 
 
+# Stacks per array: GL 4.5 guarantees 2048 layers, a stack takes 6 x STACK_LAYERS of them.
+STACKS_PER_ARRAY = 2048 // (6 * STACK_LAYERS)
+GL_TEXTURE_2D_ARRAY = 0x8C1A
+
+
+class StackArrays:
+    """lobe-N+norm+fit's blur stacks (materials/blur_stack.py; one 2D texture array of 6 x
+    STACK_LAYERS layers per cube, viewer/blur_stack_gpu.py) copied into shared 2D arrays of up to
+    STACKS_PER_ARRAY stacks each (glCopyImageSubData, on the GPU), so that a multi-draw reads every
+    object's stack from one bound array: an object's record holds its stack's first layer. A slot
+    keeps the stack texture it holds (identity: a rebuilt cube is a new texture, copied again)."""
+
+    def __init__(self, ctx: moderngl.Context, gl):
+        self.ctx = ctx
+        self.gl = gl
+        self.arrays: list[moderngl.TextureArray] = []
+        self.slot_of: dict[int, tuple[int, int]] = {}  # owner (object index) -> (array, slot)
+        self.held: list[list] = []  # array -> slot -> the stack texture copied there (or None)
+        self.copies = 0
+
+    def update(self, stacks: dict[int, moderngl.TextureArray]) -> dict[int, tuple[int, int]]:
+        """``stacks``: owner -> its cube's stack. Returns owner -> (array index, first layer)."""
+        for owner in [o for o in self.slot_of if o not in stacks]:  # left: its slot is free again
+            array, slot = self.slot_of.pop(owner)
+            self.held[array][slot] = None
+        missing = [owner for owner in stacks if owner not in self.slot_of]
+        free = [(a, k) for a, slots in enumerate(self.held) for k, held in enumerate(slots) if held is None]
+        free = [place for place in free if place not in set(self.slot_of.values())]
+        while len(free) < len(missing):
+            free += self._allocate(min(len(missing) - len(free), STACKS_PER_ARRAY))
+        for owner, place in zip(missing, free, strict=False):
+            self.slot_of[owner] = place
+        placed = {}
+        for owner, stack in stacks.items():
+            array, slot = self.slot_of[owner]
+            if self.held[array][slot] is not stack:
+                self._copy(stack, array, slot)
+                self.held[array][slot] = stack
+            placed[owner] = (array, slot * 6 * STACK_LAYERS)
+        return placed
+
+    def _allocate(self, capacity: int) -> list[tuple[int, int]]:
+        side = STACK_FACE + 2 * STACK_PAD
+        texture = self.ctx.texture_array((side, side, 6 * STACK_LAYERS * capacity), 4, dtype="f4")
+        texture.filter = (moderngl.LINEAR, moderngl.LINEAR)  # as each stack (blur_stack_gpu.py)
+        texture.repeat_x = texture.repeat_y = False
+        self.arrays.append(texture)
+        self.held.append([None] * capacity)
+        return [(len(self.arrays) - 1, k) for k in range(capacity)]
+
+    def _copy(self, stack: moderngl.TextureArray, array: int, slot: int) -> None:
+        gl = self.gl
+        gl.clear_errors()
+        side, _, layers = stack.size
+        gl.glCopyImageSubData(
+            stack.glo, GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0,
+            self.arrays[array].glo, GL_TEXTURE_2D_ARRAY, 0, 0, 0, slot * layers,
+            side, side, layers,
+        )  # fmt: skip
+        gl.check(f"copying a blur stack into slot {slot} of stack array {array}")
+        self.copies += 1
+
+    def bind(self, array: int | None, unit: int, empty: moderngl.TextureArray) -> None:
+        """Bind stack array ``array`` (None: ``empty``, a group whose objects have no stack)."""
+        (empty if array is None else self.arrays[array]).use(location=unit)
+
+    def release(self) -> None:
+        for texture in self.arrays:
+            texture.release()
+        self.arrays.clear()
+        self.held.clear()
+        self.slot_of.clear()
+
+
 @dataclass
 class LobeGroup:
     """Objects drawn by one multi-draw of the lobe-shaded program."""
@@ -118,6 +198,7 @@ class LobeGroup:
     parallax: bool  # the program variant with the reflection proxy
     face_size: int  # the cube-map array bound
     representative: object  # a GpuObject whose draw state binds the group's textures
+    stack_array: int | None = None  # lobe-N+norm+fit: StackArrays array bound (None: no stacks)
 
 
 @dataclass
@@ -138,6 +219,7 @@ class MethodBatch:
     command_count: int
     groups: list
     members: np.ndarray  # which objects the groups hold
+    uses_stacks: bool = False  # lobe-N+norm+fit: each group binds its StackArrays array
 
     def release(self) -> None:
         self.records.release()
@@ -155,6 +237,8 @@ class LobeBatches:
         self.batches = batches
         self.arrays = CubeMapArrays(gl)
         self.albedo_tables = AlbedoTableArray(ctx)
+        self.stacks = StackArrays(ctx, gl)
+        self._no_stacks = None  # a 1-texel array bound for groups without stacks (made on first use)
         self._records: dict[tuple, _ObjectRecord] = {}  # (method, object index) -> its record
         self._methods: dict = {}  # method -> MethodBatch, least recently prepared first
         self.current: MethodBatch | None = None  # the batch prepared last
@@ -165,12 +249,13 @@ class LobeBatches:
         """Which objects the last prepared batch holds."""
         return self.current.members if self.current is not None else np.zeros(0, dtype=bool)
 
-    def prepare(self, method, key, objects: list, members, record_state, single_sided) -> MethodBatch:
+    def prepare(self, method, key, objects: list, members, record_state, single_sided, stack_of=None) -> MethodBatch:
         """The batch of ``method``, made again when ``key`` changed; ``key[0]``: what every
         record depends on (material generation, texture evictions). ``members``: the objects to
         batch (each reads the cube map of ``objects[obj.probe_owner]``); ``record_state(obj)``
-        records an object's per-object draw state: (DrawRecorder, parallax). An object's record
-        is made again only when ``key[0]``, its cube or its layer changed."""
+        records an object's per-object draw state: (DrawRecorder, parallax). ``stack_of(obj)``
+        (lobe-N+norm+fit): the blur stack the object reads (its owner's), or None. An object's
+        record is made again only when ``key[0]``, its cube, its layer or its stack's changed."""
         batch = self._methods.pop(method, None)
         if batch is not None and batch.key == key:
             self._methods[method] = batch  # most recently used last
@@ -186,14 +271,21 @@ class LobeBatches:
             self._methods.clear()
         cubes = {objects[i].probe_owner: objects[objects[i].probe_owner].cube for i in np.flatnonzero(members)}
         placed = self.arrays.update({owner: cube.residual for owner, cube in cubes.items()})
+        # lobe-N+norm+fit: each object's stack (its owner's; None where it reads none, or where the
+        # frame's budget left it unbuilt), the stacks copied into the shared arrays
+        object_stacks = {int(i): stack_of(objects[i]) for i in np.flatnonzero(members)} if stack_of else {}
+        owner_stacks = {objects[i].probe_owner: t for i, t in object_stacks.items() if t is not None}
+        placed_stacks = self.stacks.update(owner_stacks) if stack_of else {}
         grouped: dict[tuple, list] = {}
         records = bytearray(LOBE_RECORDS.size * max(len(objects), 1))
         radiance_unit, albedo_unit = TEXTURE_UNITS["u_radiance"], TEXTURE_UNITS["u_albedo"]
+        stack_unit = TEXTURE_UNITS["u_blur_stack"]
         for index in np.flatnonzero(members):
             obj = objects[index]
             face_size, layer = placed[obj.probe_owner]
             cube = cubes[obj.probe_owner]
-            object_key = (key[0], face_size, layer)
+            stack_place = placed_stacks.get(obj.probe_owner) if object_stacks.get(int(index)) is not None else None
+            object_key = (key[0], face_size, layer, stack_place)
             entry = self._records.get((method, index))
             if entry is None or entry.key != object_key or entry.cube is not cube:
                 recorder, parallax = record_state(obj)
@@ -203,9 +295,12 @@ class LobeBatches:
                 table = bound_texture(record, albedo_unit)  # normalised lobe-N only
                 albedo_layer = self.albedo_tables.layer_of(table) if table is not None else 0
                 uniforms["u_albedo_layer"] = struct.pack("f", float(albedo_layer))
-                # the cube and the albedo table come from their arrays
-                binds = binding_key(record, skip_units=(radiance_unit, albedo_unit))
-                group_key = (parallax, face_size, binds, bool(single_sided[index]))
+                uniforms["u_has_blur_stack"] = struct.pack("i", int(stack_place is not None))
+                uniforms["u_stack_layer"] = struct.pack("f", float(stack_place[1] if stack_place else 0))
+                # the cube, the albedo table and the blur stack come from their arrays
+                binds = binding_key(record, skip_units=(radiance_unit, albedo_unit, stack_unit))
+                stack_array = stack_place[0] if stack_place else None
+                group_key = (parallax, face_size, stack_array, binds, bool(single_sided[index]))
                 entry = _ObjectRecord(object_key, cube, LOBE_RECORDS.pack(uniforms), group_key)
                 self._records[(method, index)] = entry
                 self.record_builds += 1
@@ -215,13 +310,15 @@ class LobeBatches:
         for record_key in [k for k in self._records if k[0] == method and k[1] not in kept]:
             del self._records[record_key]
         groups, first = [], 0
-        for (parallax, face_size, _, one_sided), group in grouped.items():
+        for (parallax, face_size, stack_array, _, one_sided), group in grouped.items():
             indices = np.array([obj.index for obj in group], dtype=np.int64)
-            groups.append(LobeGroup(indices, first, one_sided, parallax, face_size, group[0]))
+            groups.append(LobeGroup(indices, first, one_sided, parallax, face_size, group[0], stack_array))
             first += len(indices)
         ordered = [group.objects for group in groups]
         commands, count = self.batches.command_buffer(np.concatenate(ordered) if ordered else [])
-        batch = MethodBatch(key, self.ctx.buffer(bytes(records)), commands, count, groups, members.copy())
+        batch = MethodBatch(
+            key, self.ctx.buffer(bytes(records)), commands, count, groups, members.copy(), stack_of is not None
+        )
         self._methods[method] = batch
         while len(self._methods) > MAX_METHOD_BATCHES:
             oldest = next(iter(self._methods))
@@ -240,6 +337,10 @@ class LobeBatches:
         textures by the caller."""
         self.arrays.bind(group.face_size, TEXTURE_UNITS["u_radiance_array"])
         self.albedo_tables.bind(TEXTURE_UNITS["u_albedo_array"])
+        if batch.uses_stacks:
+            if self._no_stacks is None:
+                self._no_stacks = self.ctx.texture_array((1, 1, 1), 4, b"\0" * 16, dtype="f4")
+            self.stacks.bind(group.stack_array, TEXTURE_UNITS["u_blur_stack"], self._no_stacks)
         bind_storage(program, batch.records, OBJECT_RECORDS_BINDING)
         vao.render_indirect(batch.commands, moderngl.TRIANGLES, count=len(group.objects), first=group.first_command)
 
@@ -250,4 +351,8 @@ class LobeBatches:
         self.current = None
         self.arrays.release()
         self.albedo_tables.release()
+        self.stacks.release()
+        if self._no_stacks is not None:
+            self._no_stacks.release()
+            self._no_stacks = None
         self._records.clear()

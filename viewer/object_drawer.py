@@ -17,7 +17,7 @@ from lobeview.scenes.scene import Scene
 
 from .camera import box_corners, outside_frustum_boxes
 from .cube_arrays import direct_gl
-from .cubemap import RadianceCube
+from .cubemap import BLUR_STACK_BUILDS, RadianceCube
 from .interface import DrawRecorder, method_defines, set_uniform, uses_blur_stack
 from .lobe_batches import BATCHED_METHOD_KINDS, LobeBatches
 from .material_gpu import PackedMaterial
@@ -195,9 +195,9 @@ class ObjectDrawer:
             # The cube's importance map samples directions seen from its centre, which the proxy
             # remaps: the reference then samples the BSDF only (still unbiased).
             defines.update(PARALLAX=True, ENV_SAMPLING=False)
-        # lobe-N+norm+fit's coarse reads from the object's cube's blur stack (one cube bound: not
-        # the mirror buffers, not the multi-draws' arrays, which lobe-N+norm+fit does not use)
-        defines["BLUR_STACK"] = specular and not mirror and not records and uses_blur_stack(method)
+        # lobe-N+norm+fit's coarse reads from the object's cube's blur stack (multi-draws: from the
+        # group's array of stacks; not the mirror buffers)
+        defines["BLUR_STACK"] = specular and not mirror and uses_blur_stack(method)
         return self.programs.program("scene.vert", "scene.frag", defines)
 
     def object_method(self, index: int, method: Method) -> Method:
@@ -473,8 +473,6 @@ class ObjectDrawer:
         multi-draws (viewer/lobe_batches.py); returns which objects were handled here."""
         n = len(self.objects)
         handled = np.zeros(n, dtype=bool)
-        if uses_blur_stack(method):  # each object reads its own cube's blur stack: drawn one by one
-            return handled
         batches = self._lobe_batches()
         if batches is None:
             return handled
@@ -491,7 +489,9 @@ class ObjectDrawer:
             shading.material_textures.evictions,
             id(self.analysis),
         )
-        key = (base_key, CUBE_ASSIGNMENTS[0], members.tobytes(), owners.tobytes())
+        stacks = uses_blur_stack(method)
+        # lobe-N+norm+fit: a stack built since (a budgeted frame left it out) changes the records
+        key = (base_key, CUBE_ASSIGNMENTS[0], members.tobytes(), owners.tobytes(), stacks and BLUR_STACK_BUILDS[0])
 
         def record_state(obj):
             proxy = self.scene.objects[obj.index].reflection_proxy
@@ -501,8 +501,14 @@ class ObjectDrawer:
             shading.bind_cube(recorder, owner.cube, method, obj.material, per_pixel_lobes(self.material_of(obj.index)))
             return recorder, proxy is not None
 
+        def stack_of(obj):
+            owner = self.objects[obj.probe_owner]
+            return shading.blur_stack_for(owner.cube, obj.material, per_pixel_lobes(self.material_of(obj.index)))
+
         try:
-            batch = batches.prepare(method, key, self.objects, members, record_state, single_sided)
+            batch = batches.prepare(
+                method, key, self.objects, members, record_state, single_sided, stack_of if stacks else None
+            )
         except RuntimeError as exc:  # a GL error of the cube-map arrays: the per-object path still works
             self._stop_lobe_batches(str(exc))
             return handled

@@ -80,7 +80,7 @@ class ShadingBinder:
         self.stack_budget_s: float | None = None
         self._stack_budget_start = 0.0
         self._stack_built_this_frame = False
-        self.stacks_pending = 0  # draws of the budgeted frame that read the chain for want of a stack
+        self._pending: set = set()  # ids of the cubes whose stacks the budgeted frame left unbuilt
 
     def stack_budget(self, seconds: float | None) -> None:
         """Start a frame whose blur-stack builds stop once it has run ``seconds`` (at least one is
@@ -88,14 +88,27 @@ class ShadingBinder:
         self.stack_budget_s = seconds
         self._stack_budget_start = time.perf_counter()
         self._stack_built_this_frame = False
-        self.stacks_pending = 0
+        self._pending = set()
+
+    @property
+    def stacks_pending(self) -> int:
+        """Cube maps read through their MIP chains in this frame for want of a built stack."""
+        return len(self._pending)
+
+    def blur_stack_for(self, cube: RadianceCube, material: PackedMaterial | None, per_pixel_lobes: bool = False):
+        """The blur stack an object of ``material`` reads from ``cube`` under lobe-N+norm+fit, built
+        now if the frame's budget allows; None where none of its lobes takes the fitted path
+        (materials/fitted_pattern.py may_read_fitted) or the budget is spent (it reads the chain)."""
+        if material is not None and not may_read_fitted(material.lobe_components, per_pixel_lobes):
+            return None
+        return cube.blur_stack() if self._stack_fits(cube) else None
 
     def _stack_fits(self, cube: RadianceCube) -> bool:
         """Whether ``cube``'s blur stack is there or may be built within this frame's budget."""
         if self.stack_budget_s is None or cube.has_blur_stack:
             return True
         if self._stack_built_this_frame and time.perf_counter() - self._stack_budget_start >= self.stack_budget_s:
-            self.stacks_pending += 1
+            self._pending.add(id(cube))
             return False
         self._stack_built_this_frame = True
         return True
@@ -214,9 +227,10 @@ class ShadingBinder:
         # lobes can take the fitted path gets a 1-texel stand-in instead (no stack built for it)
         stack = None
         if uses_blur_stack(method) and has_uniform(program, "u_blur_stack"):
-            fitted = material is None or may_read_fitted(material.lobe_components, per_pixel_lobes)
-            stack = cube.blur_stack() if fitted and self._stack_fits(cube) else self.dummy_texture("array")
-            set_uniform(program, "u_has_blur_stack", int(stack is not self.dummy_texture("array")))
+            own = self.blur_stack_for(cube, material, per_pixel_lobes)
+            stack = own if own is not None else self.dummy_texture("array")
+            set_uniform(program, "u_has_blur_stack", int(own is not None))
+            set_uniform(program, "u_stack_layer", 0.0)  # the cube's own stack (multi-draws: the record's)
         if method.kind == "prefiltered":
             self.bind_prefiltered(program, cube, material, method, per_pixel_lobes)
         # Bright sources (viewer/cubemap.py): the reference integrates the whole radiance, every
