@@ -118,31 +118,48 @@ def test_the_bench_reads_the_same_stack_as_the_renderer():
     assert bench_blur_stack.stack_sigmas is bs.stack_sigmas and bench_blur_stack.vmf_blur is bs.vmf_blur
 
 
+def spheres_in_a_scene(ctx, cases, env, size, face_size=32, rings=32, spacing=2.2):
+    """A SceneRenderer of one unit sphere per Mitsuba-bench case (bench/mitsuba.py material:
+    'ggx:0.3', 'ggx:0.05x0.3', ...) side by side along x, ``spacing`` apart, no reflectors, no
+    lightmap (the unbaked path), each with its own cube of ``face_size``."""
+    import warnings
+
+    from lobeview.bench.mitsuba import material
+    from lobeview.materials.spec import validate
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    objects, materials = [], []
+    for k, case in enumerate(cases):
+        mesh = uv_sphere(rings=rings, segments=2 * rings)
+        offset = spacing * (k - (len(cases) - 1) / 2.0)
+        mesh.positions = mesh.positions + np.array([offset, 0.0, 0.0], dtype=mesh.positions.dtype)
+        materials.append(SceneMaterial(case, validate(material(case))))
+        objects.append(SceneObject(f"sphere {case} {k}", mesh, k))
+        objects[-1].planar_reflector = False
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no lightmap: the unbaked path
+        return SceneRenderer(ctx, Scene(objects, materials), env, size=size, progress=False,
+                             settings=RenderSettings(cube_face_size=face_size))  # fmt: skip
+
+
 @pytest.fixture(scope="module")
 def rough_sphere_in_a_scene():
     """A GGX 0.3 sphere under issue 45's sunless sky, in a scene (its own cube) and in the preview."""
-    import warnings
-
     from lobeview.bench.lobe_kernel import sunless_sky
     from lobeview.bench.mitsuba import material
     from lobeview.materials.spec import validate
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.scenes.meshes import uv_sphere
-    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
     from lobeview.viewer.context import create_headless_context
     from lobeview.viewer.preview import PreviewRenderer
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
 
     desc = validate(material("ggx:0.3"))
-    scene = Scene([SceneObject("sphere", uv_sphere(rings=64, segments=128), 0)], [SceneMaterial("metal", desc)])
-    scene.objects[0].planar_reflector = False
     ctx = create_headless_context()
     env = EnvironmentMap.from_function(sunless_sky, height=128, name="sunless-sky")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # no lightmap: the unbaked path
-        in_scene = SceneRenderer(ctx, scene, env, size=(64, 64), progress=False,
-                                 settings=RenderSettings(cube_face_size=64))  # fmt: skip
+    in_scene = spheres_in_a_scene(ctx, ["ggx:0.3"], env, (64, 64), face_size=64, rings=64)
     preview = PreviewRenderer(ctx, env, uv_sphere(rings=64, segments=128), size=(64, 64), face_size=64)
     yield in_scene, preview, desc
     in_scene.release()
@@ -202,33 +219,21 @@ def test_the_stack_is_read_through_the_reflection_proxy(rough_sphere_in_a_scene)
 def test_no_stack_is_built_for_lobes_the_fitted_path_does_not_read():
     # An anisotropic GGX lobe keeps the thesis pattern under +fit (materials/fitted_pattern.py
     # has_fitted_pattern): its object's cube gets no blur stack and the frame is lobe-7+norm's.
-    import warnings
-
     from lobeview.bench.mitsuba import material
     from lobeview.materials.fitted_pattern import may_read_fitted
     from lobeview.materials.patterns import specular_lobes
     from lobeview.materials.spec import build_bsdf, validate
     from lobeview.scenes.envmap import EnvironmentMap
-    from lobeview.scenes.meshes import uv_sphere
-    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
 
     anisotropic = specular_lobes(build_bsdf(validate(material("ggx:0.05x0.3"))))
     isotropic = specular_lobes(build_bsdf(validate(material("ggx:0.3"))))
     assert not may_read_fitted(anisotropic) and may_read_fitted(isotropic)
     assert may_read_fitted(anisotropic, per_pixel_lobes=True)  # a texture may make it isotropic
-    desc = validate(material("ggx:0.05x0.3"))
-    scene = Scene([SceneObject("sphere", uv_sphere(rings=32, segments=64), 0)], [SceneMaterial("brushed", desc)])
-    scene.objects[0].planar_reflector = False
     ctx = create_headless_context()
     env = EnvironmentMap.from_function(lambda d: 0.5 + 2.0 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 32)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # no lightmap: the unbaked path
-        renderer = SceneRenderer(ctx, scene, env, size=(48, 48), progress=False,
-                                 settings=RenderSettings(cube_face_size=32))  # fmt: skip
+    renderer = spheres_in_a_scene(ctx, ["ggx:0.05x0.3"], env, (48, 48))
     try:
         camera = Camera(position=CAMERA[0], target=CAMERA[1], fov_y=40.0)
         fit = renderer.render(camera, "lobe-7+norm+fit")
@@ -246,32 +251,14 @@ def test_a_frame_budget_builds_stacks_over_frames_and_reads_the_chain_meanwhile(
     # The window's frames (app/window.py STACK_BUILD_BUDGET_S): a frame builds at least one missing
     # stack and stops at its budget; the other objects read their MIP chains (u_has_blur_stack off)
     # until a later frame builds theirs, and the last frame is the unbudgeted one exactly.
-    import warnings
-
     from lobeview.bench.lobe_kernel import sunless_sky
-    from lobeview.bench.mitsuba import material
-    from lobeview.materials.spec import validate
     from lobeview.scenes.envmap import EnvironmentMap
-    from lobeview.scenes.meshes import uv_sphere
-    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
 
-    objects = []
-    for k, x in enumerate((-1.1, 1.1)):
-        mesh = uv_sphere(rings=32, segments=64)
-        mesh.positions = mesh.positions + np.array([x, 0.0, 0.0], dtype=mesh.positions.dtype)
-        objects.append(SceneObject(f"sphere {k}", mesh, 0))
-        objects[-1].planar_reflector = False
-    scene = Scene(objects, [SceneMaterial("metal", validate(material("ggx:0.3")))])
     ctx = create_headless_context()
     env = EnvironmentMap.from_function(sunless_sky, height=64, name="sunless-sky")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # no lightmap: the unbaked path
-        renderer = SceneRenderer(ctx, scene, env, size=(96, 48), progress=False,
-                                 settings=RenderSettings(cube_face_size=32))  # fmt: skip
+    renderer = spheres_in_a_scene(ctx, ["ggx:0.3", "ggx:0.3"], env, (96, 48))
     camera = Camera(position=(0.0, 0.0, 5.0), target=(0.0, 0.0, 0.0), fov_y=40.0)
     try:
         frames, pending = [], []

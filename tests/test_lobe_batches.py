@@ -205,42 +205,21 @@ def test_apartment_lobe_shaded_frames_and_cube_faces(ctx):
         renderer.release()
 
 
-def _rough_spheres_scene():
-    """Three spheres under the sunless sky's cube maps: GGX 0.3 and Beckmann 0.5 (fitted reads,
-    wide enough for the blur stack), anisotropic GGX 0.05 x 0.3 (the thesis pattern: no stack)."""
-    from lobeview.bench.mitsuba import material
-    from lobeview.materials.spec import validate
-    from lobeview.scenes.meshes import uv_sphere
-    from lobeview.scenes.scene import Scene, SceneMaterial, SceneObject
-
-    cases = ("ggx:0.3", "beckmann:0.5", "ggx:0.05x0.3")
-    objects, materials = [], []
-    for k, case in enumerate(cases):
-        mesh = uv_sphere(rings=24, segments=48)
-        mesh.positions = mesh.positions + np.array([2.2 * (k - 1), 0.0, 0.0], dtype=mesh.positions.dtype)
-        materials.append(SceneMaterial(case, validate(material(case))))
-        objects.append(SceneObject(f"sphere {case}", mesh, k))
-        objects[-1].planar_reflector = False
-    return Scene(objects, materials)
-
-
 def test_fitted_reads_multi_draw_with_the_stacks_in_arrays(ctx):
     """lobe-N+norm+fit in the multi-draws: each object's blur stack copied into a shared array
     (StackArrays), its first layer in the record: the frame equals the per-object path's within
     rounding with the spheres' draws gone, and the stacks matter in it (the MIP chain's reads
     give another frame); the anisotropic sphere's record names no stack."""
+    from test_blur_stack import spheres_in_a_scene
+
     from lobeview.bench.lobe_kernel import sunless_sky
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.viewer.camera import Camera
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
 
     _gl(ctx)
     env = EnvironmentMap.from_function(sunless_sky, height=64, name="sunless-sky")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # no lightmap: the unbaked path
-        renderer = SceneRenderer(ctx, _rough_spheres_scene(), env, size=(120, 48), progress=False,
-                                 settings=RenderSettings(cube_face_size=32))  # fmt: skip
+    # GGX 0.3 and Beckmann 0.5 read fitted (wide enough for the stack), the anisotropic one not
+    renderer = spheres_in_a_scene(ctx, ["ggx:0.3", "beckmann:0.5", "ggx:0.05x0.3"], env, (120, 48), rings=24)
     try:
         camera = Camera(position=(0.0, 0.0, 7.5), target=(0.0, 0.0, 0.0), fov_y=40.0)
         frames = _frames(renderer, camera, "lobe-7+norm+fit")
