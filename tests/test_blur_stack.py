@@ -268,6 +268,9 @@ def test_a_frame_budget_builds_stacks_over_frames_and_reads_the_chain_meanwhile(
             pending.append(renderer.shading.stacks_pending)
             built = [obj.cube is not None and obj.cube.has_blur_stack for obj in renderer.objects]
         assert pending == [1, 0, 0] and all(built), pending
+        # the multi-draws' stack arrays: the first frame's array had room for the stack built later
+        stacks = renderer.drawer.lobe_batches.stacks
+        assert len(stacks.arrays) == 1 and stacks.copies == 2
         renderer.shading.stack_budget(None)
         exact = renderer.render(camera, "lobe-7+norm+fit").radiance[..., :3].astype(np.float64)
         ids = renderer.render(camera, "lobe-7+norm+fit").object_id

@@ -134,8 +134,10 @@ class StackArrays:
         self.held: list[list] = []  # array -> slot -> the stack texture copied there (or None)
         self.copies = 0
 
-    def update(self, stacks: dict[int, moderngl.TextureArray]) -> dict[int, tuple[int, int]]:
-        """``stacks``: owner -> its cube's stack. Returns owner -> (array index, first layer)."""
+    def update(self, stacks: dict[int, moderngl.TextureArray], wanted: int = 0) -> dict[int, tuple[int, int]]:
+        """``stacks``: owner -> its cube's stack; ``wanted``: how many owners will have one once
+        every stack is built (a budgeted frame builds a few: a new array then has room for the
+        rest, not one array per frame). Returns owner -> (array index, first layer)."""
         for owner in [o for o in self.slot_of if o not in stacks]:  # left: its slot is free again
             array, slot = self.slot_of.pop(owner)
             self.held[array][slot] = None
@@ -143,7 +145,8 @@ class StackArrays:
         free = [(a, k) for a, slots in enumerate(self.held) for k, held in enumerate(slots) if held is None]
         free = [place for place in free if place not in set(self.slot_of.values())]
         while len(free) < len(missing):
-            free += self._allocate(min(len(missing) - len(free), STACKS_PER_ARRAY))
+            room = sum(len(slots) for slots in self.held)
+            free += self._allocate(min(max(len(missing) - len(free), wanted - room), STACKS_PER_ARRAY))
         for owner, place in zip(missing, free, strict=False):
             self.slot_of[owner] = place
         placed = {}
@@ -254,8 +257,9 @@ class LobeBatches:
         record depends on (material generation, texture evictions). ``members``: the objects to
         batch (each reads the cube map of ``objects[obj.probe_owner]``); ``record_state(obj)``
         records an object's per-object draw state: (DrawRecorder, parallax). ``stack_of(obj)``
-        (lobe-N+norm+fit): the blur stack the object reads (its owner's), or None. An object's
-        record is made again only when ``key[0]``, its cube, its layer or its stack's changed."""
+        (lobe-N+norm+fit): (the blur stack the object reads, its owner's, or None; whether it
+        reads one once built). An object's record is made again only when ``key[0]``, its cube,
+        its layer or its stack's changed."""
         batch = self._methods.pop(method, None)
         if batch is not None and batch.key == key:
             self._methods[method] = batch  # most recently used last
@@ -273,9 +277,11 @@ class LobeBatches:
         placed = self.arrays.update({owner: cube.residual for owner, cube in cubes.items()})
         # lobe-N+norm+fit: each object's stack (its owner's; None where it reads none, or where the
         # frame's budget left it unbuilt), the stacks copied into the shared arrays
-        object_stacks = {int(i): stack_of(objects[i]) for i in np.flatnonzero(members)} if stack_of else {}
+        stacks_wanted = {int(i): stack_of(objects[i]) for i in np.flatnonzero(members)} if stack_of else {}
+        object_stacks = {i: stack for i, (stack, _) in stacks_wanted.items()}
         owner_stacks = {objects[i].probe_owner: t for i, t in object_stacks.items() if t is not None}
-        placed_stacks = self.stacks.update(owner_stacks) if stack_of else {}
+        wanted = len({objects[i].probe_owner for i, (_, wants) in stacks_wanted.items() if wants})
+        placed_stacks = self.stacks.update(owner_stacks, wanted) if stack_of else {}
         grouped: dict[tuple, list] = {}
         records = bytearray(LOBE_RECORDS.size * max(len(objects), 1))
         radiance_unit, albedo_unit = TEXTURE_UNITS["u_radiance"], TEXTURE_UNITS["u_albedo"]

@@ -13,6 +13,7 @@ import moderngl
 import numpy as np
 
 from lobeview.core.methods import Method
+from lobeview.materials.fitted_pattern import may_read_fitted
 from lobeview.scenes.scene import Scene
 
 from .camera import box_corners, outside_frustum_boxes
@@ -503,7 +504,9 @@ class ObjectDrawer:
 
         def stack_of(obj):
             owner = self.objects[obj.probe_owner]
-            return shading.blur_stack_for(owner.cube, obj.material, per_pixel_lobes(self.material_of(obj.index)))
+            per_pixel = per_pixel_lobes(self.material_of(obj.index))
+            wants = may_read_fitted(obj.material.lobe_components, per_pixel)
+            return (shading.blur_stack_for(owner.cube, obj.material, per_pixel) if wants else None), wants
 
         try:
             batch = batches.prepare(
