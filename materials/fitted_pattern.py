@@ -300,12 +300,8 @@ def kernel_distance(pattern: FittedPattern, target: LobeTarget) -> float:
     return float(np.sqrt(np.sum(residual**2 * target.area) / np.sum(target.values**2 * target.area)))
 
 
-def has_fitted_pattern(lobe) -> bool:
-    """Whether lobe-N+norm+fit reads a lobe through the fitted table: an isotropic GGX or Beckmann
-    microfacet reflection (conductor.py MicrofacetReflection and its glTF specular and clearcoat
-    lobes, whose f is D G times factors of the view alone; shaders: LOBE_MICROFACET,
-    LOBE_GLTF_SPECULAR, LOBE_GLTF_CLEARCOAT). Anisotropic and transmission lobes keep the thesis
-    pattern for now."""
+def _microfacet_reflection(lobe) -> bool:
+    """A GGX or Beckmann microfacet reflection, isotropic or not (the fitted table's lobe family)."""
     from .conductor import MicrofacetReflection
 
     dist = getattr(lobe, "distribution", None)
@@ -314,8 +310,16 @@ def has_fitted_pattern(lobe) -> bool:
         and not getattr(lobe, "transmission", False)
         and dist is not None
         and dist.kind in ("ggx", "beckmann")
-        and dist.alpha_x == dist.alpha_y
     )
+
+
+def has_fitted_pattern(lobe) -> bool:
+    """Whether lobe-N+norm+fit reads a lobe through the fitted table: an isotropic GGX or Beckmann
+    microfacet reflection (conductor.py MicrofacetReflection and its glTF specular and clearcoat
+    lobes, whose f is D G times factors of the view alone; shaders: LOBE_MICROFACET,
+    LOBE_GLTF_SPECULAR, LOBE_GLTF_CLEARCOAT). Anisotropic and transmission lobes keep the thesis
+    pattern for now."""
+    return _microfacet_reflection(lobe) and lobe.distribution.alpha_x == lobe.distribution.alpha_y
 
 
 def may_read_fitted(lobes, per_pixel_lobes: bool = False) -> bool:
@@ -323,21 +327,8 @@ def may_read_fitted(lobes, per_pixel_lobes: bool = False) -> bool:
     cube's blur stack (materials/blur_stack.py). With ``per_pixel_lobes`` (glTF textures) the
     shader decides per pixel (an anisotropy texture may be zero there): every GGX or Beckmann
     microfacet reflection counts, isotropic or not."""
-    from .conductor import MicrofacetReflection
-
-    for lobe in lobes:
-        if has_fitted_pattern(lobe):
-            return True
-        dist = getattr(lobe, "distribution", None)
-        if (
-            per_pixel_lobes
-            and isinstance(lobe, MicrofacetReflection)
-            and not getattr(lobe, "transmission", False)
-            and dist is not None
-            and dist.kind in ("ggx", "beckmann")
-        ):
-            return True
-    return False
+    test = _microfacet_reflection if per_pixel_lobes else has_fitted_pattern
+    return any(test(lobe) for lobe in lobes)
 
 
 def read_count(kind: str, n: int) -> int:

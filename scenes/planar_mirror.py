@@ -163,6 +163,16 @@ def reflector_decision(mesh, lobes, scene_diagonal: float, mode="auto") -> tuple
     return reflector, what
 
 
+def reflector_arrays(reflectors: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(planes (n, 4), box minima (n, 3), box maxima (n, 3)) of ``reflectors``: what the frame's
+    per-reflector tests (viewer/mirror_pass.py skip_reasons, reflector_max_view_angles,
+    mirror_scissors) take in one numpy pass."""
+    planes = np.array([reflector.plane for reflector in reflectors], dtype=np.float64).reshape(-1, 4)
+    low = np.array([reflector.box_min for reflector in reflectors], dtype=np.float64).reshape(-1, 3)
+    high = np.array([reflector.box_max for reflector in reflectors], dtype=np.float64).reshape(-1, 3)
+    return planes, low, high
+
+
 def coplanar_groups(reflectors: dict, scene_diagonal: float, tolerance: float = PLANAR_TOLERANCE) -> list[tuple]:
     """Reflectors that can share one mirror pass (thesis 4.5: a mirror render per plane, not per
     object): the same plane seen from the same side (normals within ``tolerance`` radians, offsets
@@ -320,9 +330,7 @@ def reflector_max_view_angles(reflectors: list, eye) -> np.ndarray:
     eye = np.asarray(eye, dtype=np.float64)
     if not reflectors:
         return np.zeros(0)
-    planes = np.array([reflector.plane for reflector in reflectors], dtype=np.float64)
-    low = np.array([reflector.box_min for reflector in reflectors], dtype=np.float64)
-    high = np.array([reflector.box_max for reflector in reflectors], dtype=np.float64)
+    planes, low, high = reflector_arrays(reflectors)
     height = np.abs(planes[:, :3] @ eye + planes[:, 3])
     farthest = np.linalg.norm(np.maximum(np.abs(eye - low), np.abs(eye - high)), axis=1)
     angle = np.arccos(np.clip(height / np.maximum(farthest, 1e-30), 0.0, 1.0))
@@ -354,18 +362,18 @@ def box_screen_rect(corners: np.ndarray, view_projection: np.ndarray, size) -> t
     corners = np.asarray(corners, dtype=np.float64)
     clip = np.concatenate([corners, np.ones((len(corners), 1))], axis=1) @ np.asarray(view_projection).T
     near = 1e-6
-    # Box edges: pairs of corners differing in one coordinate (all pairs at once: the mirror
-    # passes ask for every drawn reflector's rectangle each frame).
-    first, second = np.triu_indices(len(corners), k=1)
-    edge = np.count_nonzero(corners[first] != corners[second], axis=1) == 1
-    first, second = first[edge], second[edge]
-    w_first, w_second = clip[first, 3], clip[second, 3]
-    crossing = (w_first > near) != (w_second > near)
-    t = (near - w_first[crossing]) / (w_second[crossing] - w_first[crossing])
-    cut = clip[first[crossing]] + t[:, None] * (clip[second[crossing]] - clip[first[crossing]])
-    points = np.concatenate([clip[clip[:, 3] > near], cut])
-    if not len(points):
+    points = [c for c in clip if c[3] > near]
+    for i in range(len(corners)):  # box edges: corners differing in one coordinate
+        for j in range(i + 1, len(corners)):
+            if np.count_nonzero(corners[i] != corners[j]) != 1:
+                continue
+            wi, wj = clip[i, 3], clip[j, 3]
+            if (wi > near) != (wj > near):
+                t = (near - wi) / (wj - wi)
+                points.append(clip[i] + t * (clip[j] - clip[i]))
+    if not points:
         return None
+    points = np.array(points)
     ndc = points[:, :2] / points[:, 3:4]
     width, height = size
     xy = (np.clip(ndc, -1e6, 1e6) * 0.5 + 0.5) * np.array([width, height], dtype=np.float64)
@@ -421,8 +429,7 @@ def mirror_scissors(reflectors: list, camera: MirrorCamera, spreads: list, lod_b
     if not bounded:
         return out
     width, height = camera.size
-    low = np.array([reflectors[k].box_min for k in bounded], dtype=np.float64)
-    high = np.array([reflectors[k].box_max for k in bounded], dtype=np.float64)
+    _, low, high = reflector_arrays([reflectors[k] for k in bounded])
     rects = box_screen_rects(low, high, camera.plain_view_projection, camera.size)
     seen = ~np.isnan(rects[:, 0])
     x0, y0, x1, y1 = np.clip(np.where(seen[:, None], rects, 0.0), 0.0, [width, height, width, height]).T

@@ -364,8 +364,8 @@ def unit(name: str, index: int = 0) -> int:
 
 def uses_blur_stack(method: Method) -> bool:
     """lobe-N+norm+fit reads its coarse reads from the cube's blur stack (materials/blur_stack.py):
-    the variant's BLUR_STACK where one cube is bound (the preview, per-object draws of the scene;
-    not the mirror buffers nor the multi-draws' cube-map arrays)."""
+    the variant's BLUR_STACK (the preview, the scene's per-object draws and its multi-draws, which
+    read copies from viewer/lobe_batches.py StackArrays; not the mirror buffers)."""
     return method.kind == "lobe" and method.pattern == "fitted"
 
 

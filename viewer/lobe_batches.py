@@ -142,8 +142,8 @@ class StackArrays:
             array, slot = self.slot_of.pop(owner)
             self.held[array][slot] = None
         missing = [owner for owner in stacks if owner not in self.slot_of]
+        # every assigned slot holds its stack (set below): the empty ones are free
         free = [(a, k) for a, slots in enumerate(self.held) for k, held in enumerate(slots) if held is None]
-        free = [place for place in free if place not in set(self.slot_of.values())]
         while len(free) < len(missing):
             room = sum(len(slots) for slots in self.held)
             free += self._allocate(min(max(len(missing) - len(free), wanted - room), STACKS_PER_ARRAY))

@@ -16,7 +16,7 @@ from lobeview.core.methods import Method
 from lobeview.materials.lobe_spread import finest_sample_solid_angle, finest_sample_solid_angles, lobe_spread
 from lobeview.materials.patterns import specular_lobes
 from lobeview.materials.spec import build_bsdf
-from lobeview.scenes.planar_mirror import mirror_view_angle_bounds
+from lobeview.scenes.planar_mirror import mirror_view_angle_bounds, reflector_arrays
 
 from .camera import Camera, outside_frustum_boxes, perspective
 from .frame import begin_pass, new_framebuffer
@@ -60,10 +60,8 @@ def skip_reasons(reflectors: dict, camera: Camera, view_proj: np.ndarray) -> dic
         return {}
     items = list(reflectors.values())
     eye = np.asarray(camera.position, dtype=np.float64)
-    planes = np.array([reflector.plane for reflector in items], dtype=np.float64)
+    planes, low, high = reflector_arrays(items)
     behind = (planes[:, :3] @ eye + planes[:, 3] <= 1e-6) & ~np.array([r.transmission for r in items], dtype=bool)
-    low = np.array([reflector.box_min for reflector in items], dtype=np.float64)
-    high = np.array([reflector.box_max for reflector in items], dtype=np.float64)
     outside = outside_frustum_boxes(low, high, view_proj)
     return {
         index: "seen from behind" if back else ("outside the view" if out else None)
@@ -154,10 +152,9 @@ class MirrorPasses:
 
         key = (tuple((index, id(reflector)) for index, reflector in sorted(reflectors.items())), share_planes)
         if key != self._groups_key:
-            if share_planes:
-                corners = self.drawer.object_corners.reshape(-1, 3)
-                diagonal = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0))) if len(corners) else 1.0
-                self._groups = coplanar_groups(reflectors, diagonal)
+            if share_planes:  # the scene diagonal the analysis found the reflectors flat against
+                low, high = self.drawer.scene.bounds
+                self._groups = coplanar_groups(reflectors, float(np.linalg.norm(high - low)))
             else:
                 self._groups = [(index,) for index in sorted(reflectors)]
             self._groups_key = key

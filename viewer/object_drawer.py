@@ -506,7 +506,7 @@ class ObjectDrawer:
             owner = self.objects[obj.probe_owner]
             per_pixel = per_pixel_lobes(self.material_of(obj.index))
             wants = may_read_fitted(obj.material.lobe_components, per_pixel)
-            return (shading.blur_stack_for(owner.cube, obj.material, per_pixel) if wants else None), wants
+            return (shading.budgeted_blur_stack(owner.cube) if wants else None), wants
 
         try:
             batch = batches.prepare(

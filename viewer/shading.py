@@ -101,6 +101,11 @@ class ShadingBinder:
         (materials/fitted_pattern.py may_read_fitted) or the budget is spent (it reads the chain)."""
         if material is not None and not may_read_fitted(material.lobe_components, per_pixel_lobes):
             return None
+        return self.budgeted_blur_stack(cube)
+
+    def budgeted_blur_stack(self, cube: RadianceCube):
+        """``cube``'s blur stack, built now if it is not and the frame's budget allows; None (and
+        counted as pending) where the budget is spent."""
         return cube.blur_stack() if self._stack_fits(cube) else None
 
     def _stack_fits(self, cube: RadianceCube) -> bool:
