@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.core.errors import OptionError
-from lobeview.core.methods import GRAMMAR_HELP, Method, method_cli_flags
+from lobeview.core.methods import GRAMMAR_HELP, Method, method_cli_flags, resolve_cli_method
 from lobeview.core.paths import lobeview_program
 from lobeview.scenes.setup import (
     BUILTIN_SCENES,
@@ -45,6 +45,22 @@ def add_method_arguments(p, default: str = "lobe-11", what: str = "") -> None:
         help="lobe-N: rescale Eq. 4.25 by each lobe's directional albedo, exact under uniform light"
         " (default on, lobe-N+norm; --no-lobe-normalize: Eq. 4.25 as printed; lobe-N+eq4.24 is never normalised)",
     )
+    p.add_argument(
+        "--lobe-fit",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="normalised lobe-N: reads fitted to each isotropic GGX/Beckmann lobe, from the cube's blur stack"
+        " (default on where N has a fitted table, N = 3, 5, 7, 11, 15, 19: lobe-N+norm+fit; --no-lobe-fit:"
+        " the thesis pattern, lobe-N+norm)",
+    )
+
+
+def resolve_method_args(args) -> Method:
+    """The method that ``--method``, ``--lobe-normalize`` and ``--lobe-fit`` select together
+    (core/methods.py resolve_cli_method, with the fitted tables lobeview ships)."""
+    from lobeview.materials.fitted_pattern import fitted_sample_counts
+
+    return resolve_cli_method(args.method, args.lobe_normalize, args.lobe_fit, fitted_sample_counts())
 
 
 def add_scene_arguments(p) -> None:

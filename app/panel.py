@@ -141,19 +141,22 @@ def _rendering(window) -> None:
     c3, window.lobe_normalize = imgui.checkbox("lobe-N energy normalisation", window.lobe_normalize)
     # lobe-N+ring: the thesis' ring at every N instead of the double ring from N = 11 (for comparison)
     c_ring, ring = imgui.checkbox("lobe-N: thesis ring at every N", window.method.pattern == "ring")
-    # lobe-N+norm+fit: reads fitted to the lobe (materials/fitted_pattern.py), for the N with a table
+    # lobe-N+norm+fit: reads fitted to the lobe (materials/fitted_pattern.py), for the N with a
+    # table; kept apart from the method (like the normalisation) so an N without a table and back
+    # keeps the choice. On by default (--lobe-fit).
     fitted_counts = fitted_sample_counts()
-    c_fit, fit = imgui.checkbox("lobe-N: fitted reads", window.method.pattern == "fitted")
+    c_fit, window.lobe_fit = imgui.checkbox("lobe-N: fitted reads", window.lobe_fit and not ring)
     if imgui.is_item_hovered():
         counts = ", ".join(str(x) for x in fitted_counts) or "none"
-        imgui.set_tooltip(f"lobe-N+norm+fit (experimental): reads fitted to each lobe, for N = {counts}\n"
-                          "with the energy normalisation; other N keep the thesis pattern")  # fmt: skip
-    if c_fit and fit:
-        ring = False
+        imgui.set_tooltip(f"lobe-N+norm+fit (default): reads fitted to each isotropic GGX/Beckmann lobe,\n"
+                          f"for N = {counts} with the energy normalisation; other N and lobes keep\n"
+                          "the thesis pattern")  # fmt: skip
     if c_ring and ring:
-        fit = False
+        window.lobe_fit = False
+    if c_fit and window.lobe_fit:
+        ring = False
     if c or c2 or c3 or c_ring or c_fit:
-        pattern = "ring" if ring else "fitted" if fit and n in fitted_counts else "auto"
+        pattern = "ring" if ring else "fitted" if window.lobe_fit and n in fitted_counts else "auto"
         window.set_method(method_from_choice(kinds[k], n, window.lobe_normalize, pattern))
     _, window.progressive = imgui.checkbox("refine when still", window.progressive)
     c4, mirrors = imgui.checkbox("planar mirror passes", renderer.settings.mirrors)
@@ -232,8 +235,9 @@ def _material(window) -> None:
     shown = override or window.method
     c2, n = _sample_slider("object N", shown.kind, shown.samples)
     if c or c2:
-        # The override keeps the panel's normalisation choice, as the global method does.
-        chosen = None if choices[k] == "global" else method_from_choice(choices[k], n, window.lobe_normalize)
+        # The override keeps the panel's normalisation and fitted-reads choices, as the global method does.
+        pattern = "fitted" if window.lobe_fit and n in fitted_sample_counts() else "auto"
+        chosen = None if choices[k] == "global" else method_from_choice(choices[k], n, window.lobe_normalize, pattern)
         renderer.set_object_method(index, chosen)
         window.dirty = True
     needs = renderer.analysis.objects[index]

@@ -34,8 +34,9 @@ from pathlib import Path
 
 import numpy as np
 
-from lobeview.core.methods import Method
+from lobeview.core.methods import Method, with_default_fit
 from lobeview.core.viewer_script import ACTIONS, ScriptError, load_script  # noqa: F401 (the script format)
+from lobeview.materials.fitted_pattern import fitted_sample_counts
 
 # Actions after which the image is unchanged (no reset of the refinement).
 _KEEP_IMAGE = ("screenshot", "save_materials", "stats", "refine", "refinement")
@@ -107,8 +108,11 @@ def run_due_steps(window, steps: list[dict]) -> None:
             window.message = window.editor.apply(window.selected, desc) or ""
         elif action == "method":
             method = Method.parse(step["value"])
-            if not method.normalize:  # lobe-N follows the panel's checkbox unless it says +norm
+            # A bare lobe-N follows the panel's two checkboxes; a suffix is taken as written.
+            if method.kind == "lobe" and not method.normalize and method.weighting == "eq4.25":
                 method = method.with_normalize(window.lobe_normalize)
+                if method.pattern == "auto":
+                    method = with_default_fit(method, window.lobe_fit, fitted_sample_counts())
             window.set_method(method)
         elif action == "screenshot":
             window.save_screenshot(step["name"])

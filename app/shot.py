@@ -23,11 +23,12 @@ from lobeview.app.options import (
     camera_from_args,
     check_scene_options,
     read_material_edits,
+    resolve_method_args,
     scene_renderer_from_args,
 )
 from lobeview.core.errors import MAX_RENDER_EDGE, OptionError, check_output_folder, parse_size
 from lobeview.core.images import box_downsample
-from lobeview.core.methods import MAX_REFERENCE_SPP, PIXEL_FILTERS, Method, resolve_cli_method
+from lobeview.core.methods import MAX_REFERENCE_SPP, PIXEL_FILTERS, Method
 from lobeview.materials.spec import build_bsdf, load_material
 from lobeview.scenes.builtin_env import load_environment
 from lobeview.scenes.hdrio import write_hdr_image
@@ -142,7 +143,7 @@ def run(args) -> int:
     check_output_folder(out)
     if args.object is not None and args.scene is not None:
         raise ShotError("give either a SCENE or --object, not both")
-    method = resolve_cli_method(args.method, args.lobe_normalize)
+    method = resolve_method_args(args)
     if not 1 <= args.spp <= MAX_REFERENCE_SPP:
         raise ShotError(f"--spp must be in [1, {MAX_REFERENCE_SPP}] (the Sobol table: more would repeat its points)")
     check_scene_options(args)

@@ -32,9 +32,9 @@ from lobeview.app.options import (
     check_scene_options,
     read_material_edits,
     renderer_cache_folder,
+    resolve_method_args,
 )
 from lobeview.core.errors import MAX_RENDER_EDGE, OptionError, parse_size
-from lobeview.core.methods import resolve_cli_method
 from lobeview.scenes.setup import default_environment, is_builtin, load_scene_and_environment, unbaked_builtin_scene
 
 MAX_VIEW_SUPERSAMPLE = 4
@@ -196,7 +196,7 @@ def run(args) -> int:
         from lobeview.core.errors import check_output_folder
 
         check_output_folder(args.stats, "--stats")
-    method = resolve_cli_method(args.method, args.lobe_normalize)
+    method = resolve_method_args(args)
     check_scene_options(args)
     if method.kind == "reference":
         raise OptionError(

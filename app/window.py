@@ -42,6 +42,7 @@ from lobeview.app.script import run_due_steps
 from lobeview.app.walk import WalkCamera, walk_speed_for
 from lobeview.core import progress
 from lobeview.core.methods import Method
+from lobeview.materials.fitted_pattern import fitted_sample_counts
 from lobeview.scenes.hdrio import write_hdr_image
 from lobeview.scenes.setup import scene_view
 from lobeview.viewer.camera import Camera
@@ -133,6 +134,10 @@ class LobeviewWindow(mglw.WindowConfig):
         self.method = session.method
         # kept apart from the method so switching to fis-N and back keeps the choice
         self.lobe_normalize = self.args.lobe_normalize
+        # the fitted reads (+fit) where N has a table: off when --method names another pattern for one
+        method = self.method
+        named_other = method.kind == "lobe" and method.normalize and method.pattern != "fitted"
+        self.lobe_fit = self.args.lobe_fit and not (named_other and method.samples in fitted_sample_counts())
         self.exposure = 0.0
         self.tonemap = "aces"
         self.progressive = True

@@ -38,6 +38,8 @@ def _all_methods():
         yield Method("lobe", n, weighting="eq4.24")
     for n, normalize, weighting in ((3, False, "eq4.25"), (15, True, "eq4.25"), (19, False, "eq4.24")):
         yield Method("lobe", n, normalize, weighting=weighting, pattern="ring")
+    for n in (7, 11):
+        yield Method("lobe", n, normalize=True, pattern="fitted")
     yield Method.parse("reference")
     for mode in PREFILTER_MODES:
         yield Method("prefiltered", 1, mode=mode)
@@ -102,9 +104,43 @@ def test_invalid_methods_cannot_be_constructed():
             Method(**bad)
 
 
+def _resolve_args(args) -> Method:
+    from lobeview.app.options import resolve_method_args
+
+    return resolve_method_args(args)
+
+
+def test_command_line_fitted_reads_rule():
+    """A bare lobe-N is lobe-N+norm+fit where N has a fitted table (issue 45: the default), the
+    thesis pattern with --no-lobe-fit or where N has none; a suffix is taken as written."""
+    counts = (3, 7, 11)
+    fitted = Method("lobe", 11, normalize=True, pattern="fitted")
+    assert resolve_cli_method("lobe-11", None, None, counts) == fitted
+    assert resolve_cli_method("lobe-11", True, True, counts) == fitted
+    assert resolve_cli_method("lobe-11+norm+fit", None, None, counts) == fitted
+    assert resolve_cli_method("lobe-11", None, False, counts) == Method("lobe", 11, normalize=True)
+    assert resolve_cli_method("lobe-9", None, None, counts) == Method("lobe", 9, normalize=True)  # no table
+    assert resolve_cli_method("lobe-11+norm", None, None, counts) == Method("lobe", 11, normalize=True)
+    assert resolve_cli_method("lobe-11+ring", None, None, counts) == Method("lobe", 11, True, pattern="ring")
+    assert resolve_cli_method("lobe-11", False, None, counts) == Method("lobe", 11)  # +fit needs +norm
+    assert resolve_cli_method("fis-11", None, None, counts) == Method("fis", 11)
+    with pytest.raises(MethodError, match="--no-lobe-fit"):
+        resolve_cli_method("lobe-11+norm+fit", None, False, counts)
+    with pytest.raises(MethodError, match="N = 3, 7, 11 only"):
+        resolve_cli_method("lobe-9+norm+fit", None, None, counts)
+    # The parser's defaults and the shipped tables: `lobeview shot` renders lobe-11+norm+fit.
+    from lobeview.app.cli import build_parser
+    from lobeview.materials.fitted_pattern import fitted_sample_counts
+
+    assert 11 in fitted_sample_counts()
+    assert _resolve_args(build_parser().parse_args(["shot", "--out=x.png"])) == fitted
+    no_fit = build_parser().parse_args(["shot", "--out=x.png", "--no-lobe-fit"])
+    assert _resolve_args(no_fit) == Method("lobe", 11, normalize=True)
+
+
 def test_command_line_normalisation_rule_and_its_inverse():
     # --lobe-normalize is on by default; lobe-N+norm says it explicitly; a contradiction is refused.
-    assert resolve_cli_method("lobe-11", True) == Method("lobe", 11, normalize=True)
+    assert resolve_cli_method("lobe-11", True, False) == Method("lobe", 11, normalize=True)
     assert resolve_cli_method("lobe-11", False) == Method("lobe", 11)
     assert resolve_cli_method("lobe-11+norm", True) == Method("lobe", 11, normalize=True)
     assert resolve_cli_method("fis-16", False) == Method("fis", 16)
@@ -118,7 +154,7 @@ def test_command_line_normalisation_rule_and_its_inverse():
     for method in _all_methods():
         argv = ["shot", "--out=x.png", *shlex.split(method_cli_flags(method))]
         args = build_parser().parse_args(argv)
-        assert resolve_cli_method(args.method, args.lobe_normalize) == method
+        assert _resolve_args(args) == method
 
 
 def test_panel_choices_keep_the_normalisation_for_global_and_per_object_methods():
@@ -154,7 +190,7 @@ def test_shot_command_pastes_back_to_the_same_view(tmp_path):
         assert argv[:start] == lobeview_program()  # pastes anywhere: no reliance on PATH (issue 41)
         args = build_parser().parse_args(argv[start:])
         assert args.scene == "my scene.glb" and args.out == str(tmp_path / "out dir" / "s.png")
-        assert resolve_cli_method(args.method, args.lobe_normalize) == method
+        assert _resolve_args(args) == method
         assert parse_size(args.size) == (320, 200) and (args.spp == spp if spp else True)
         assert (args.env, args.face_size, args.reflection_proxy, args.mirrors, args.mirror_scale, args.cache) == (
             "my env.exr", 64, "room", False, 0.5, str(tmp_path / "a cache"))  # fmt: skip

@@ -4,13 +4,14 @@ stored in tests/data/stored-frames.npz.
 
 The frames were first stored on 06d6647, before the renderer's redesign (issue 38), which left
 them bit-identical; they were written again with the GGX tail fix of lobe-N+norm (issue 45),
-which changed the frames of wide GGX lobes. The stored frames were rendered on llvmpipe; on the
-same GL renderer and CPU the frames must be equal bit for bit. A different renderer (another
-llvmpipe build or CPU vector width, a GPU) or another CPU rounds differently, so there the bound
-is a relative RMSE of 1e-3 per frame (a changed formula or a lost texture moves a frame by more than 1e-2). A change
-meant to alter frames writes them again in the same commit, with
-``LOBEVIEW_WRITE_FRAMES=1 pytest tests/test_frames_unchanged.py``, and says in its message
-which frames changed and why.
+which changed the frames of wide GGX lobes, and with lobe-N+norm+fit added (the default lobe-N
+from the twenty-ninth session: lobe-11 on the demo, lobe-7 on the apartment and the models). The
+stored frames were rendered on llvmpipe; on the same GL renderer and CPU the frames must be equal
+bit for bit. A different renderer (another llvmpipe build or CPU vector width, a GPU) or another
+CPU rounds differently, so there the bound is a relative RMSE of 1e-3 per frame (a changed
+formula or a lost texture moves a frame by more than 1e-2). A change meant to alter frames writes
+them again in the same commit, with ``LOBEVIEW_WRITE_FRAMES=1 pytest
+tests/test_frames_unchanged.py``, and says in its message which frames changed and why.
 """
 
 from __future__ import annotations
@@ -35,12 +36,13 @@ OTHER_RENDERER_RELATIVE_RMSE = 1e-3
 # Every method kind and option of the grammar (core/methods.py), each prefiltered mode: multi and
 # rsibr on the textured quad (on the demo's lobes their maps take 60 and 95 s to make here).
 DEMO_METHODS = (
-    "lobe-7", "lobe-7+norm", "lobe-11+eq4.24", "lobe-15+ring", "lobe-15+norm", "fis-8", "mc-4", "reference",
+    "lobe-7", "lobe-7+norm", "lobe-11+norm+fit", "lobe-11+eq4.24", "lobe-15+ring", "lobe-15+norm", "fis-8", "mc-4",
+    "reference",
     "prefiltered", "prefiltered-splitsum", "prefiltered-lobe", "prefiltered-lobe2d", "prefiltered-phong",
     "prefiltered-banks",
 )  # fmt: skip
 QUAD_METHODS = ("lobe-5", "lobe-5+norm", "prefiltered", "prefiltered-multi", "prefiltered-rsibr", "reference")
-MODEL_METHODS = ("lobe-7+norm", "fis-8", "prefiltered", "reference")
+MODEL_METHODS = ("lobe-7+norm", "lobe-7+norm+fit", "fis-8", "prefiltered", "reference")
 
 
 def _spp(method: str) -> int:
@@ -104,7 +106,8 @@ def _render(renderer, camera, method: str) -> np.ndarray:
 def _cases():
     """(scene builder, camera maker, methods) per case; the scene is built once per case."""
     cases = {"demo": (_demo_scene, lambda s: _scene_camera(s, "overview"), DEMO_METHODS)}
-    cases["apartment-1"] = (_apartment_scene, _scene_camera, ("lobe-7+norm", "fis-8", "prefiltered", "reference"))
+    cases["apartment-1"] = (_apartment_scene, _scene_camera, ("lobe-7+norm", "lobe-7+norm+fit", "fis-8", "prefiltered",
+                                                               "reference"))  # fmt: skip
     cases["textured-quad"] = (_textured_quad_scene, lambda s: Camera((0.0, 1.2, 1.4), (0, 0, 0), (0, 1, 0), 50.0),
                               QUAD_METHODS)  # fmt: skip
     cases["WaterBottle"] = (lambda: _model("WaterBottle"), _model_camera, MODEL_METHODS)
