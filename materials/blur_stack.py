@@ -30,6 +30,8 @@ from .fitted_pattern import texel_angle
 STACK_FACE = 32
 STACK_PAD = 1
 STACK_LAYERS = 10  # sigma_0 x 22.6 at the last: 95 degrees from a 32^2 face
+#: bytes of one cube's stack on the GPU: 6 x STACK_LAYERS padded faces, RGBA32F (viewer/blur_stack_gpu.py)
+STACK_BYTES = 6 * STACK_LAYERS * (STACK_FACE + 2 * STACK_PAD) ** 2 * 4 * 4
 SIGMA0_TEXELS = 1.5
 # shaders/blur_stack.comp: taps a side of the tangent-plane grid (2 BUILD_TAPS + 1)^2 out to 3.5
 # sigma; the build against the exact blur is tests/test_blur_stack.py's

@@ -10,6 +10,7 @@ import pytest
 
 from lobeview.bench import blur_stack as bench_blur_stack
 from lobeview.core.cube_layout import direction_to_face, face_directions, face_point_directions, texel_solid_angles
+from lobeview.core.methods import Method
 from lobeview.materials import blur_stack as bs
 
 
@@ -94,6 +95,8 @@ def test_the_gpu_build_matches_the_exact_blur_of_the_cubes_texels():
         cube = RadianceCube(ctx, faces)
         gpu = read_blur_stack(cube.blur_stack())
         assert cube.blur_stack() is cube.blur_stack()  # built once
+        width, height, layers = cube.blur_stack().size
+        assert width * height * layers * 16 == bs.STACK_BYTES  # what the benches' memory column counts
         cube.release()
     finally:
         ctx.release()
@@ -226,6 +229,7 @@ def test_no_stack_is_built_for_lobes_the_fitted_path_does_not_read():
     from lobeview.scenes.envmap import EnvironmentMap
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.material_gpu import pack_material
 
     anisotropic = specular_lobes(build_bsdf(validate(material("ggx:0.05x0.3"))))
     isotropic = specular_lobes(build_bsdf(validate(material("ggx:0.3"))))
@@ -238,6 +242,13 @@ def test_no_stack_is_built_for_lobes_the_fitted_path_does_not_read():
         camera = Camera(position=CAMERA[0], target=CAMERA[1], fov_y=40.0)
         fit = renderer.render(camera, "lobe-7+norm+fit")
         assert renderer.objects[0].cube is not None and renderer.objects[0].cube._blur_stack is None
+        memory = renderer.shading.method_memory(renderer.objects[0].cube, renderer.objects[0].material,
+                                                Method.parse("lobe-7+norm+fit"))  # fmt: skip
+        assert "blur stack" not in memory and "albedo table" in memory  # the bench counts what is built
+        isotropic_bsdf = build_bsdf(validate(material("ggx:0.3")))
+        memory = renderer.shading.method_memory(renderer.objects[0].cube, pack_material(isotropic_bsdf),
+                                                Method.parse("lobe-7+norm+fit"))  # fmt: skip
+        assert memory["blur stack"] == bs.STACK_BYTES
         plain = renderer.render(camera, "lobe-7+norm")
         mask = fit.object_id == 0
         assert mask.sum() > 300 and not fit.invalid.any()

@@ -14,6 +14,7 @@ from scipy.stats import qmc
 
 from lobeview.core.cache import BoundedCache
 from lobeview.core.methods import MAX_LOBES, MAX_REFERENCE_SPP, Method
+from lobeview.materials.blur_stack import STACK_BYTES
 from lobeview.materials.fitted_pattern import may_read_fitted
 from lobeview.materials.prefilter import SPLIT_SUM_LEVELS, split_sum_is_line
 from lobeview.scenes.bright_sources import MAX_LIGHTS as MAX_CAP_LIGHTS
@@ -345,14 +346,17 @@ class ShadingBinder:
     def method_memory(self, cube: RadianceCube, material: PackedMaterial, method: Method) -> dict[str, int]:
         """Bytes of the GPU resources that shading ``material`` with ``method`` reads from one
         cube (the bench's memory column): the radiance cube with its MIP chain, plus the
-        importance tables (reference), the albedo table (normalised lobe-N) or the prefiltered
-        maps (prefiltered)."""
+        importance tables (reference), the albedo table (normalised lobe-N) and the blur stack
+        (lobe-N+norm+fit, where a lobe takes the fitted path; a multi-draw holds a second copy in
+        its stack arrays), or the prefiltered maps (prefiltered)."""
         face = cube.face_size
         memory = {"radiance cube": cube_bytes(face, int(np.log2(face)) + 1)}
         if method.kind == "reference":
             memory["importance tables"] = cube.importance_memory()
         if method.kind == "lobe" and method.normalize:
             memory["albedo table"] = int(albedo_texture_data(material).size * 4)
+        if method.kind == "lobe" and method.pattern == "fitted" and may_read_fitted(material.lobe_components):
+            memory["blur stack"] = STACK_BYTES
         if method.kind == "prefiltered":
             memory.update(prefiltered_memory(material, method.mode, face, self.table_cache_root))
         return memory
