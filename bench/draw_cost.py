@@ -37,26 +37,37 @@ DRIVER_WORK_CALLS = (("VertexArray", "render"), ("VertexArray", "render_indirect
 
 
 class DriverWorkTimer:
-    """Seconds spent inside DRIVER_WORK_CALLS while installed (moderngl's Python wrappers timed)."""
+    """Seconds spent inside DRIVER_WORK_CALLS while installed (moderngl's Python wrappers timed),
+    and apart from them (``wait_seconds``) in reading query results: the mirror passes' occlusion
+    test waits there for the device to finish its depth pass and queries (on llvmpipe: the
+    rasterising itself, done on the CPU's cores; on a GPU: the round trip, a sync point that keeps
+    CPU and GPU from overlapping)."""
 
     def __init__(self):
         import moderngl
 
         self.seconds = 0.0
+        self.wait_seconds = 0.0
         self._originals = []
         for class_name, method in DRIVER_WORK_CALLS:
             cls = getattr(moderngl, class_name)
             original = getattr(cls, method)
             self._originals.append((cls, method, original))
             setattr(cls, method, self._timed(original))
+        samples = moderngl.Query.samples  # a property
+        self._originals.append((moderngl.Query, "samples", samples))
+        moderngl.Query.samples = property(self._timed(samples.fget, wait=True))
 
-    def _timed(self, original):
+    def _timed(self, original, wait: bool = False):
         def timed(*args, **kwargs):
             t0 = time.perf_counter()
             try:
                 return original(*args, **kwargs)
             finally:
-                self.seconds += time.perf_counter() - t0
+                if wait:
+                    self.wait_seconds += time.perf_counter() - t0
+                else:
+                    self.seconds += time.perf_counter() - t0
 
         return timed
 
@@ -97,11 +108,12 @@ def walk(renderer, path, method, frames: int, timer: DriverWorkTimer) -> list[di
         renderer.invalidate_mirrors()
         ctx.finish()
         calls = renderer.drawer.draw_calls.total()
-        driver_before = timer.seconds
+        driver_before, wait_before = timer.seconds, timer.wait_seconds
         t0 = time.perf_counter()
         renderer.draw_frame(camera, method)
         submitted = time.perf_counter()
         driver = timer.seconds - driver_before
+        wait = timer.wait_seconds - wait_before
         ctx.finish()
         finished = time.perf_counter()
         single, multi, culls = np.subtract(renderer.drawer.draw_calls.total(), calls)
@@ -109,7 +121,8 @@ def walk(renderer, path, method, frames: int, timer: DriverWorkTimer) -> list[di
             {
                 "t": float(t),
                 "submit_ms": (submitted - t0) * 1e3,
-                "python_ms": (submitted - t0 - driver) * 1e3,
+                "python_ms": (submitted - t0 - driver - wait) * 1e3,
+                "wait_ms": wait * 1e3,
                 "finished_ms": (finished - t0) * 1e3,
                 "single_draws": int(single),
                 "multi_draws": int(multi),
@@ -179,6 +192,7 @@ def summary(run: dict) -> dict:
     return {
         "submit_ms": median("submit_ms"),
         "python_ms": median("python_ms"),
+        "wait_ms": median("wait_ms") if all("wait_ms" in r for r in rows) else float("nan"),
         "finished_ms": median("finished_ms"),
         "single_draws": mean("single_draws"),
         "multi_draws": mean("multi_draws"),
@@ -196,12 +210,16 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         "recorded path, mirror passes redrawn every frame. *submit*: milliseconds until `draw_frame` returns "
         "(Python, GL calls, driver submission; llvmpipe also shades vertices there), *Python + state*: submit "
         "minus the time inside the draw, dispatch and barrier calls (where llvmpipe does the pass's work and a "
-        "GPU's driver only queues it: the CPU cost a GPU does not take away), *finished*: until glFinish. "
+        "GPU's driver only queues it: the CPU cost a GPU does not take away) and in *occlusion wait*, "
+        "*occlusion wait*: reading the mirror passes' occlusion queries, which waits for the device to "
+        "finish the test's depth pass (llvmpipe: its rasterising, on the CPU; a GPU: a round trip that stalls "
+        "the CPU), *finished*: until glFinish. "
         f"Medians over the frames; draw calls are means per frame. Whole run {elapsed / 60:.1f} min.",
         "",
-        "| rooms | objects | size | path | submit ms | Python + state ms | finished ms | per-object draws "
-        "| multi-draws | culling passes | mirror passes | objects drawn (camera + mirror) | submit vs per-object |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| rooms | objects | size | path | submit ms | Python + state ms | occlusion wait ms | finished ms "
+        "| per-object draws | multi-draws | culling passes | mirror passes | objects drawn (camera + mirror) "
+        "| submit vs per-object |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     base = {}
     for run in runs:
@@ -213,7 +231,7 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         lines.append(
             f"| {run['rooms']} | {run['objects']} | {run['size'][0]}x{run['size'][1]} "
             f"| {path_label(run['indirect'], run.get('shared_planes', True))} | {s['submit_ms']:.1f} "
-            f"| {s['python_ms']:.1f} | {s['finished_ms']:.1f} "
+            f"| {s['python_ms']:.1f} | {s['wait_ms']:.1f} | {s['finished_ms']:.1f} "
             f"| {s['single_draws']:.0f} | {s['multi_draws']:.0f} | {s['cull_passes']:.0f} | {s['mirror_passes']:.1f} "
             f"| {s['objects_drawn']:.0f} "
             f"| {ratio:.2f} |"

@@ -36,3 +36,26 @@ def test_the_gpu_bench_writes_every_table_at_small_sizes(tmp_path):
     # one apartment room: per-object, multi-draw with a pass per reflector, multi-draw (planes shared)
     assert draw_cost.count("| 1 | ") == 3, draw_cost
     assert "| multi-draw, a pass per reflector |" in draw_cost and "| multi-draw |" in draw_cost, draw_cost
+
+
+def test_the_draw_cost_timer_counts_query_waits_apart_and_restores_moderngl():
+    """bench/draw_cost.py: reading a query's result (the occlusion test's wait for the device) is
+    timed as the wait, not as Python + state, and removing the timer puts moderngl back."""
+    import moderngl
+
+    from lobeview.bench.draw_cost import DriverWorkTimer
+    from lobeview.viewer.context import create_headless_context
+
+    original = moderngl.Query.__dict__["samples"]
+    ctx = create_headless_context()
+    timer = DriverWorkTimer()
+    try:
+        query = ctx.query(samples=True)
+        with query:
+            pass
+        assert query.samples == 0
+        assert timer.wait_seconds > 0.0 and timer.seconds == 0.0
+    finally:
+        timer.remove()
+        ctx.release()
+    assert moderngl.Query.__dict__["samples"] is original

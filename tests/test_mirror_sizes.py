@@ -186,3 +186,38 @@ def test_mirror_passes_footprint_table_matches_one_bound_at_a_time(context):
             assert passes.finest_footprint(index, Method.parse("fis-16"), 1.0) is None
     finally:
         renderer.release()
+
+
+def test_a_planes_buffers_of_each_size_are_reused_and_the_frame_is_the_same(context):
+    """Switching a pass between sizes (its lobes' level, the window's render scale) takes the
+    buffers of the size it had before instead of allocating new ones (viewer/mirror_pass.py
+    SPARE_SIZES), and a frame drawn in reused buffers is the frame drawn in new ones."""
+    from lobeview.viewer.mirror_pass import SPARE_SIZES
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    sky = EnvironmentMap.from_function(lambda d: 0.5 + 3.0 * np.clip(d[..., 1:2], 0, 1) * np.ones(3), 32)
+    renderer = SceneRenderer(context, mirror_floor_scene(0.3), sky, size=SIZE, progress=False,
+                             settings=RenderSettings(cube_face_size=32))  # fmt: skip
+    passes = renderer.mirror_passes
+    try:
+
+        def frame(sized: bool):
+            renderer.configure(mirror_lobe_sizes=sized)
+            renderer.invalidate_mirrors()
+            image = renderer.render(CAMERA, Method.parse("lobe-7")).radiance.copy()
+            return image, {key: (t, t.size) for key, t in passes.targets.items()}
+
+        first, small = frame(True)
+        _, full = frame(False)
+        again, small_again = frame(True)
+        assert small and all(small[key][1] != full[key][1] for key in small)  # the sizes did change
+        assert all(small_again[key][0] is small[key][0] for key in small)  # the same buffers, not new ones
+        np.testing.assert_array_equal(again, first)
+        for scale in (0.9, 0.8, 0.7, 0.6, 0.5):  # a render scale's many sizes: the spares stay bounded
+            renderer.configure(mirror_scale=scale)
+            frame(True)
+        assert all(len(spare) <= SPARE_SIZES for spare in passes._spare.values())
+    finally:
+        renderer.release()
+    assert not passes.targets and not passes._spare

@@ -29,6 +29,10 @@ MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # glossy objects insid
 BUFFER_PREFIXES = {"mirror": "u_mirror", "see-through": "u_through"}
 
 
+# Mirror buffers of other sizes a plane keeps for reuse (its levels 1/2 and 1/4, a render scale).
+SPARE_SIZES = 3
+
+
 class MirrorTargets:
     """One reflector's mirror buffer (thesis 4.5.1): radiance with a MIP chain, world position
     (w = 1 geometry, 0 environment), normal, depth."""
@@ -123,6 +127,11 @@ class MirrorPasses:
         self._spreads: dict = {}  # (reflector, N, normalize, pattern) -> materials.lobe_spread.lobe_spread
         self._footprints: dict = {}  # (reflector, N) -> {view-angle bound: finest lookup solid angle or None} or None
         self.targets: dict[tuple[int, str], MirrorTargets] = {}  # (index, 'mirror' | 'see-through')
+        # Buffers of other sizes kept for reuse, most recent last: a plane's pass changes size with
+        # its lobes' level (1/2, 1/4) and the window's render scale as the camera moves, and
+        # allocating four textures and a framebuffer each time cost ~0.4 ms a frame in the
+        # apartment (18 rooms, llvmpipe). SPARE_SIZES per (index, kind); the oldest is released.
+        self._spare: dict[tuple[int, str], list[MirrorTargets]] = {}
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
         self.generation = 0  # bumped when what the buffers show changes (material edits)
@@ -271,11 +280,7 @@ class MirrorPasses:
             size = buffer_size(frame_size, scale / 2.0**level)
             buffers = {}
             for kind in reflectors[owner].passes:
-                targets = self.targets.get((owner, kind))
-                if targets is None or targets.size != size:
-                    if targets is not None:
-                        targets.release()
-                    targets = self.targets[(owner, kind)] = MirrorTargets(self.ctx, size)
+                targets = self._targets_of((owner, kind), size)
                 buffer_camera = mirror_camera(
                     camera.view(), projection, reflectors[owner], size, see_through=kind != "mirror"
                 )
@@ -379,7 +384,25 @@ class MirrorPasses:
             for name in ("u_plane_point_state", "u_plane_normal_state"):
                 set_uniform(program, name, list(TEXTURE_UNITS[name]))
 
+    def _targets_of(self, key: tuple[int, str], size: tuple[int, int]) -> MirrorTargets:
+        """The buffers of ``key`` at ``size``: the current ones, a spare of that size, or new; the
+        current ones of another size become a spare."""
+        current = self.targets.get(key)
+        if current is not None and current.size == size:
+            return current
+        spare = self._spare.setdefault(key, [])
+        if current is not None:
+            spare.append(current)
+        reuse = next((t for t in spare if t.size == size), None)
+        if reuse is not None:
+            spare.remove(reuse)
+        while len(spare) > SPARE_SIZES:
+            spare.pop(0).release()
+        self.targets[key] = reuse if reuse is not None else MirrorTargets(self.ctx, size)
+        return self.targets[key]
+
     def release(self) -> None:
-        for targets in self.targets.values():
+        for targets in [*self.targets.values(), *(t for spare in self._spare.values() for t in spare)]:
             targets.release()
         self.targets.clear()
+        self._spare.clear()
