@@ -62,8 +62,9 @@ class FrameTargets:
         self.parity = 0
         self.fbo = self.plain_fbo  # the framebuffer the last pass drew into
 
-    def begin(self, averages_planes: bool = False):
-        """Bind and clear the framebuffer of the next pass (see the module doc) and return it."""
+    def begin(self, averages_planes: bool = False, keep_depth: bool = False):
+        """Bind and clear the framebuffer of the next pass (see the module doc) and return it.
+        ``keep_depth``: clear the colour targets only (the depth pre-pass is drawn already)."""
         if averages_planes:
             if not self.plane_state:
                 raise ValueError("these frame targets have no plane-state targets")
@@ -71,7 +72,11 @@ class FrameTargets:
             self.fbo = self.state_fbos[self.parity]
         else:
             self.fbo = self.plain_fbo
-        begin_pass(self.ctx, self.fbo, self.size)
+        self.fbo.depth_mask = not keep_depth  # a framebuffer's clear leaves a masked depth alone
+        try:
+            begin_pass(self.ctx, self.fbo, self.size)
+        finally:
+            self.fbo.depth_mask = True
         return self.fbo
 
     def previous_plane_states(self) -> list:

@@ -222,6 +222,7 @@ class MirrorPasses:
         lod_bias: float = 0.0,
         footprints: dict | None = None,
         share_planes: bool = True,
+        camera_depth=None,
     ) -> dict:
         """The buffers of the reflectors that need them for ``camera`` (index -> {'mirror' and/or
         'see-through': targets}); reused while the camera, the size, the options and the materials
@@ -234,7 +235,9 @@ class MirrorPasses:
         ``footprints``: reflector -> its lobe-N lookups' finest solid angle (finest_footprint; None
         or absent: full size): its buffers are halved as often as those lookups allow
         (scenes/planar_mirror.py mirror_buffer_levels). ``share_planes``: reflectors in one plane
-        share its passes (scenes/planar_mirror.py coplanar_groups); False: a pass per reflector."""
+        share its passes (scenes/planar_mirror.py coplanar_groups); False: a pass per reflector.
+        ``camera_depth``: a framebuffer of ``frame_size`` holding the camera pass's depth pre-pass
+        for ``camera``, which the occlusion test reads instead of drawing its own (None: it does)."""
         from lobeview.scenes.planar_mirror import mirror_buffer_levels, mirror_camera, mirror_scissors
 
         spreads = spreads or {}
@@ -257,9 +260,8 @@ class MirrorPasses:
         self.occlusion_seconds = 0.0
         if occlusion and candidates:
             t0 = time.perf_counter()
-            samples = self.drawer.visible_samples(
-                view_proj, frame_size, candidates
-            )  # reading the queries waits for the GPU
+            # reading the queries waits for the GPU
+            samples = self.drawer.visible_samples(view_proj, frame_size, candidates, camera_depth)
             self.occlusion_seconds = time.perf_counter() - t0
             reasons.update({index: HIDDEN for index in candidates if samples[index] == 0})
         lines: dict[int, list[str]] = {index: [] for index in reflectors}

@@ -230,13 +230,13 @@ class ObjectDrawer:
         self._opaque_cache[occluders_only] = (self.analysis, self.shading.record_generation, found)
         return found
 
-    def visible_samples(self, view_proj, size, indices: list) -> dict[int, int]:
+    def visible_samples(self, view_proj, size, indices: list, depth_fbo=None) -> dict[int, int]:
         """Pixels of a frame of ``size`` in which each reflector in ``indices`` is not hidden by an
-        opaque object (viewer/occlusion.py)."""
+        opaque object (viewer/occlusion.py); ``depth_fbo``: the camera pass's depth pre-pass,
+        already drawn, to test against."""
         batches = self.batches if self.settings.indirect_draws else None
-        return self.occlusion.visible_samples(
-            view_proj, size, self.opaque_objects(True), {index: self.objects[index] for index in indices}, batches
-        )
+        queried = {index: self.objects[index] for index in indices}
+        return self.occlusion.visible_samples(view_proj, size, self.opaque_objects(True), queried, batches, depth_fbo)
 
     def draw_depth(self, view_proj) -> tuple[int, int]:
         """The opaque objects' depth (the camera pass's pre-pass): (drawn, culled)."""

@@ -12,12 +12,18 @@ depth-only pre-pass at the frame's resolution), then each candidate reflector is
 inside a samples-passed query; a reflector none of whose fragments passes is hidden (a floor
 behind the corridor wall, a room behind a closed door).
 
-Only what certainly hides is an occluder: opaque, single-layer materials (no alphaMode MASK or
-BLEND, no transmission lobes) and no reflector (a reflector never hides another here, so its own
-depth can never hide itself). Single-sided occluders lose their back faces as in the camera
-pass. The test is exact at pixel centres, which is where the real-time methods shade; the
-jittered reference is not tested (a reflector seen between pixel centres would lose its buffer
-there)."""
+A real-time frame (unjittered, with the depth pre-pass on) draws its pre-pass before the mirror
+passes, and the test reads that depth (SceneRenderer.draw_frame): one depth pass of the scene less
+a frame. Its occluders are then everything the camera pass draws opaquely, reflectors and glass
+included (a wall hidden behind a glass pane is seen through the pane's see-through buffer, never
+shaded in the camera pass), and the queried reflectors are drawn with a small polygon offset
+towards the camera, since their own depth is in the pre-pass, drawn by another path. Otherwise
+(the pre-pass off) the test draws its own depth, and only what certainly hides is an occluder:
+opaque, single-layer materials (no alphaMode MASK or BLEND, no transmission lobes) and no
+reflector (so that a reflector's own depth never hides itself). Single-sided occluders lose their
+back faces as in the camera pass. The test is exact at pixel centres, which is where the
+real-time methods shade; the jittered reference is not tested (a reflector seen between pixel
+centres would lose its buffer there)."""
 
 from __future__ import annotations
 
@@ -115,20 +121,37 @@ class OcclusionTest:
         return self._object_arrays
 
     def visible_samples(
-        self, view_proj: np.ndarray, size, occluders: list, queried: dict, batches=None
+        self, view_proj: np.ndarray, size, occluders: list, queried: dict, batches=None, depth_fbo=None
     ) -> dict[int, int]:
         """Samples of each ``queried`` object (index -> GPU object) that no occluder hides from
         the camera of ``view_proj``. ``occluders``: (GPU object, single-sided) pairs;
-        ``batches``: as in draw_depth."""
-        self._targets(size)
+        ``batches``: as in draw_depth. ``depth_fbo``: a framebuffer of ``size`` whose depth
+        already holds the camera pass's depth pre-pass for ``view_proj`` (every opaque object,
+        the queried ones too): the queries run against it, and the test draws no depth of its own
+        (one depth pass of the scene less a frame); ``occluders`` are then not drawn."""
         ctx = self.ctx
         ctx.scissor = None
-        self.fbo.use()
-        ctx.viewport = (0, 0, *self.size)
-        self.fbo.clear(depth=1.0)
-        self.draw_depth(view_proj, occluders, batches)
+        if depth_fbo is None:
+            self._targets(size)
+            fbo = self.fbo
+            fbo.use()
+            ctx.viewport = (0, 0, *self.size)
+            fbo.clear(depth=1.0)
+            self.draw_depth(view_proj, occluders, batches)
+        else:
+            fbo = depth_fbo
+            fbo.use()
+            ctx.viewport = (0, 0, int(size[0]), int(size[1]))
+            ctx.disable(moderngl.BLEND)
+            ctx.enable(moderngl.DEPTH_TEST)
+            # The queried object's own depth is in the pre-pass, drawn by another path (a
+            # multi-draw): a small offset towards the camera keeps its fragments from failing
+            # against their own depth by rounding. (An object just behind a surface within that
+            # offset counts as visible: the test stays conservative.)
+            ctx.polygon_offset = (-1.0, -4.0)
         program = self.programs.program("depth.vert", "depth.frag", {})
-        self.fbo.depth_mask = False
+        set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
+        fbo.depth_mask = False
         ctx.depth_func = "<="  # a reflector lying on an occluder (a floor under a wall) is not hidden by it
         # Every object's query is issued before any result is read: reading one waits for the
         # GPU to finish it, so one wait a frame instead of one per reflector.
@@ -139,8 +162,9 @@ class OcclusionTest:
             with query:
                 self._draw(program, obj)
         samples = {index: int(query.samples) for query, index in zip(queries, queried, strict=True)}
-        self.fbo.depth_mask = True
+        fbo.depth_mask = True
         ctx.depth_func = "<"
+        ctx.polygon_offset = (0.0, 0.0)
         return samples
 
     def release_targets(self) -> None:

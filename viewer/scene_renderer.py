@@ -259,13 +259,19 @@ class SceneRenderer(RendererBase):
         return found
 
     def render_mirror_passes(
-        self, camera: Camera, jitters: bool = False, method: Method | None = None, lod_bias: float | None = None
+        self,
+        camera: Camera,
+        jitters: bool = False,
+        method: Method | None = None,
+        lod_bias: float | None = None,
+        camera_depth=None,
     ) -> dict:
         """This frame's mirror and see-through buffers (viewer/mirror_pass.py). ``jitters``: the
         frame's passes move off the pixel centres (box-filtered reference), where the occlusion
         test, exact at pixel centres, does not apply. ``method`` (the frame's) and ``lod_bias``:
         reflectors shaded by lobe-N get passes scissored to where their lookups read
-        (``mirror_scissor``; None: every pass whole)."""
+        (``mirror_scissor``; None: every pass whole). ``camera_depth``: the frame's depth
+        pre-pass, drawn already, for the occlusion test to read."""
         settings = self._settings
         names = [obj.name for obj in self.objects]
         reflectors = self.reflectors()
@@ -288,7 +294,7 @@ class SceneRenderer(RendererBase):
         occlusion = settings.mirror_occlusion and not jitters
         return self.mirror_passes.render(
             camera, self.size, reflectors, names, settings.mirror_scale, settings.mirror_specular, occlusion,
-            spreads, bias, footprints, settings.mirror_plane_sharing,
+            spreads, bias, footprints, settings.mirror_plane_sharing, camera_depth,
         )  # fmt: skip
 
     def invalidate_mirrors(self) -> None:
@@ -322,22 +328,30 @@ class SceneRenderer(RendererBase):
         # Planar reflectors read this frame's mirror buffers; the prefiltered method is one cube
         # lookup per lobe, so there they keep their cube maps and no mirror pass is drawn.
         self.probes.restore(view_proj)
+        drawer = self.drawer
+        settings = self._settings
+        # The depth pre-pass first where the mirror passes' occlusion test can read it (an
+        # unjittered real-time frame): the test then draws no depth pass of its own.
+        early_depth = (
+            settings.depth_prepass and settings.mirror_occlusion and method.kind not in ("prefiltered", "reference")
+            and tuple(jitter) == (0.0, 0.0) and bool(self.reflectors())
+        )  # fmt: skip
+        if early_depth:
+            self._depth_prepass(view_proj, clear=True)
         if method.kind == "prefiltered":
             mirrors = {}
             names = [obj.name for obj in self.objects]
             self.mirror_passes.skip_all(self.reflectors(), names, "cube map (prefiltered method)")
         else:
-            mirrors = self.render_mirror_passes(camera, method.kind == "reference", method, lod_bias)
+            camera_depth = self.frame.depth_fbo if early_depth else None
+            mirrors = self.render_mirror_passes(camera, method.kind == "reference", method, lod_bias, camera_depth)
         self.probes.reflector_cubes_for(method, self.reflectors())
-        drawer = self.drawer
-        self.frame.begin(averages_planes=any(drawer.averages_planes(drawer.object_method(i, method)) for i in mirrors))
+        averages = any(drawer.averages_planes(drawer.object_method(i, method)) for i in mirrors)
+        self.frame.begin(averages_planes=averages, keep_depth=early_depth)
         self.draw_background(self.environment, view_proj)
-        if self._settings.depth_prepass:
-            # Opaque depth first (viewer/occlusion.py): the shading pass then integrates the lobes
-            # once per pixel, not once per overlapping surface.
-            self.frame.depth_fbo.use()
-            counts = self.draw_counts.of("depth pre-pass")
-            counts.drawn, counts.culled = drawer.draw_depth(view_proj)
+        if settings.depth_prepass:
+            if not early_depth:
+                self._depth_prepass(view_proj)
             self.frame.fbo.use()
             self.ctx.depth_func = "<="
         self.shading.texture_footprint = float(texture_footprint)
@@ -349,6 +363,19 @@ class SceneRenderer(RendererBase):
         self.ctx.depth_func = "<"
         self.probes.residency.evict(self.objects)
         self.frame_draw_calls = tuple(int(x) for x in np.subtract(self.drawer.draw_calls.total(), calls_before))
+
+    def _depth_prepass(self, view_proj: np.ndarray, clear: bool = False) -> None:
+        """Opaque depth first (viewer/occlusion.py): the shading pass then integrates the lobes
+        once per pixel, not once per overlapping surface. ``clear``: clear the depth first (drawn
+        before the frame's own clear, which then keeps it)."""
+        fbo = self.frame.depth_fbo
+        fbo.use()
+        if clear:
+            self.ctx.scissor = None
+            self.ctx.viewport = (0, 0, *self.frame.size)
+            fbo.clear(depth=1.0)
+        counts = self.draw_counts.of("depth pre-pass")
+        counts.drawn, counts.culled = self.drawer.draw_depth(view_proj)
 
     def pick(self, x: int, y: int) -> int | None:
         """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
