@@ -50,6 +50,22 @@ class MirrorTargets:
         self.depth = ctx.depth_renderbuffer(size)
         self.fbo = new_framebuffer(ctx, [self.radiance, self.position, self.normal], self.depth)
         self.camera = None  # scenes.planar_mirror.MirrorCamera of the last pass
+        self._uniforms = (None, {})  # (camera, its uniform values), made once a pass, bound per reflector
+
+    def camera_uniforms(self) -> dict:
+        """The last pass's camera as the shaders' mirror uniforms (name suffix -> value), converted
+        once per pass: every reflector of a shared plane binds the same values."""
+        camera, values = self._uniforms
+        if camera is not self.camera:
+            camera = self.camera
+            values = {
+                "_view": tuple(camera.view.T.astype("f4").ravel()),
+                "_view_projection": tuple(camera.plain_view_projection.T.astype("f4").ravel()),
+                "_eye": tuple(float(x) for x in camera.position),
+                "_focal_px": float(camera.focal_pixels),
+            }
+            self._uniforms = (camera, values)
+        return values
 
     def release(self):
         for item in (self.fbo, self.radiance, self.position, self.normal, self.depth):
@@ -372,13 +388,8 @@ class MirrorPasses:
                 bind_sampler(program, f"{prefix}_{name}", tex)
             if targets is None:
                 continue
-            camera = targets.camera
-            set_uniform(program, f"{prefix}_view", tuple(camera.view.T.astype("f4").ravel()))
-            set_uniform(
-                program, f"{prefix}_view_projection", tuple(camera.plain_view_projection.T.astype("f4").ravel())
-            )
-            set_uniform(program, f"{prefix}_eye", tuple(float(x) for x in camera.position))
-            set_uniform(program, f"{prefix}_focal_px", float(camera.focal_pixels))
+            for suffix, value in targets.camera_uniforms().items():
+                set_uniform(program, prefix + suffix, value)
         if has_uniform(program, "u_plane_point_state"):
             # Points (mirror, see-through), then normals: the order of the state attachments.
             for k, tex in enumerate(previous_plane_states):
