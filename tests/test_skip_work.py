@@ -321,3 +321,27 @@ def test_progress_lines_for_slow_steps_and_quiet_mode(capsys, monkeypatch):
     with progress.timed_step("albedo", "a table", announce=True):
         pass
     assert capsys.readouterr().err == ""
+
+
+def test_the_frames_clear_keeps_a_depth_pre_pass_drawn_before_it():
+    """SceneRenderer.draw_frame draws the depth pre-pass before the mirror passes (their occlusion
+    test reads it) and then clears the frame's colour targets only (FrameTargets.begin keep_depth)."""
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.frame import FrameTargets
+
+    ctx = create_headless_context()
+    try:
+        frame = FrameTargets(ctx, (8, 8))
+        frame.depth_fbo.use()
+        ctx.viewport = (0, 0, 8, 8)
+        frame.depth_fbo.clear(depth=0.25)
+
+        def depth(fbo):
+            return np.frombuffer(fbo.read(attachment=-1, components=1, dtype="f4"), dtype="f4")
+
+        np.testing.assert_allclose(depth(frame.begin(keep_depth=True)), 0.25, atol=1e-6)
+        assert frame.fbo.depth_mask  # restored for the shading pass
+        np.testing.assert_allclose(depth(frame.begin()), 1.0)
+        frame.release()
+    finally:
+        ctx.release()
