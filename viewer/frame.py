@@ -62,6 +62,15 @@ class FrameTargets:
         self.parity = 0
         self.fbo = self.plain_fbo  # the framebuffer the last pass drew into
 
+    def begin_depth(self, clear: bool) -> None:
+        """Bind the depth-only framebuffer (the depth pre-pass); ``clear``: clear its depth first
+        (a pre-pass drawn before ``begin``, which then keeps it)."""
+        self.depth_fbo.use()
+        if clear:
+            self.ctx.scissor = None
+            self.ctx.viewport = (0, 0, *self.size)
+            self.depth_fbo.clear(depth=1.0)
+
     def begin(self, averages_planes: bool = False, keep_depth: bool = False):
         """Bind and clear the framebuffer of the next pass (see the module doc) and return it.
         ``keep_depth``: clear the colour targets only (the depth pre-pass is drawn already)."""

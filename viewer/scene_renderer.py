@@ -336,8 +336,17 @@ class SceneRenderer(RendererBase):
             settings.depth_prepass and settings.mirror_occlusion and method.kind not in ("prefiltered", "reference")
             and tuple(jitter) == (0.0, 0.0) and bool(self.reflectors())
         )  # fmt: skip
+        counts = self.draw_counts.of("depth pre-pass")
+
+        def depth_prepass(clear: bool = False) -> None:
+            # Opaque depth first (viewer/occlusion.py): the shading pass then integrates the lobes
+            # once per pixel, not once per overlapping surface. ``clear``: drawn before the
+            # frame's own clear (FrameTargets.begin keep_depth), which then keeps it.
+            self.frame.begin_depth(clear)
+            counts.drawn, counts.culled = drawer.draw_depth(view_proj)
+
         if early_depth:
-            self._depth_prepass(view_proj, clear=True)
+            depth_prepass(clear=True)
         if method.kind == "prefiltered":
             mirrors = {}
             names = [obj.name for obj in self.objects]
@@ -351,7 +360,7 @@ class SceneRenderer(RendererBase):
         self.draw_background(self.environment, view_proj)
         if settings.depth_prepass:
             if not early_depth:
-                self._depth_prepass(view_proj)
+                depth_prepass()
             self.frame.fbo.use()
             self.ctx.depth_func = "<="
         self.shading.texture_footprint = float(texture_footprint)
@@ -363,19 +372,6 @@ class SceneRenderer(RendererBase):
         self.ctx.depth_func = "<"
         self.probes.residency.evict(self.objects)
         self.frame_draw_calls = tuple(int(x) for x in np.subtract(self.drawer.draw_calls.total(), calls_before))
-
-    def _depth_prepass(self, view_proj: np.ndarray, clear: bool = False) -> None:
-        """Opaque depth first (viewer/occlusion.py): the shading pass then integrates the lobes
-        once per pixel, not once per overlapping surface. ``clear``: clear the depth first (drawn
-        before the frame's own clear, which then keeps it)."""
-        fbo = self.frame.depth_fbo
-        fbo.use()
-        if clear:
-            self.ctx.scissor = None
-            self.ctx.viewport = (0, 0, *self.frame.size)
-            fbo.clear(depth=1.0)
-        counts = self.draw_counts.of("depth pre-pass")
-        counts.drawn, counts.culled = self.drawer.draw_depth(view_proj)
 
     def pick(self, x: int, y: int) -> int | None:
         """Object index under pixel (x, y) (y down) of the last drawn frame, or None."""
