@@ -14,7 +14,7 @@ from lobeview.app.editor import lobe_plot_values, material_widgets
 from lobeview.app.fit_job import FIT_MODELS, lockable_parameters
 from lobeview.app.frame_pacing import scaled_size
 from lobeview.app.walk import WalkCamera
-from lobeview.core.methods import MAX_PATTERN, method_choice, method_from_choice, realtime_choices
+from lobeview.core.methods import MAX_PATTERN, method_choice, method_from_choice, realtime_choices, with_default_fit
 from lobeview.materials.fitted_pattern import fitted_sample_counts
 from lobeview.viewer.camera import Camera
 from lobeview.viewer.tonemap import TONEMAPS
@@ -24,6 +24,7 @@ PANEL_MAX_SAMPLES = 256
 
 
 PANEL_WIDTH = 430  # wide enough for every label beside its widget (LABEL_WIDTH)
+STATUS_LINES = 11  # the status region's height: its longest usual content (refining and stopped, a message)
 LABEL_WIDTH = 170  # pixels right of each slider, combo and input for its label
 
 
@@ -38,9 +39,13 @@ def draw_panel(window) -> None:
     imgui.set_next_window_size((PANEL_WIDTH, height), imgui.Cond_.first_use_ever.value)
     imgui.begin("lobeview")
     imgui.push_item_width(-LABEL_WIDTH)
+    # The status lines come and go and wrap (refinement, cube maps, messages): in a region of a
+    # fixed height, so that the widgets below never move under a pointer about to click them.
+    imgui.begin_child("status", imgui.ImVec2(0, STATUS_LINES * imgui.get_text_line_height_with_spacing()))
     _status(window)
     if window.message:
         imgui.text_wrapped(window.message)
+    imgui.end_child()
     if imgui.begin_tab_bar("sections"):
         if imgui.begin_tab_item("Rendering")[0]:
             _rendering(window)
@@ -156,8 +161,8 @@ def _rendering(window) -> None:
     if c_fit and window.lobe_fit:
         ring = False
     if c or c2 or c3 or c_ring or c_fit:
-        pattern = "ring" if ring else "fitted" if window.lobe_fit and n in fitted_counts else "auto"
-        window.set_method(method_from_choice(kinds[k], n, window.lobe_normalize, pattern))
+        chosen = method_from_choice(kinds[k], n, window.lobe_normalize, "ring" if ring else "auto")
+        window.set_method(with_default_fit(chosen, window.lobe_fit, fitted_counts))
     _, window.progressive = imgui.checkbox("refine when still", window.progressive)
     c4, mirrors = imgui.checkbox("planar mirror passes", renderer.settings.mirrors)
     c5, scale = imgui.slider_float("mirror resolution", renderer.settings.mirror_scale, 0.1, 1.0)
@@ -236,8 +241,10 @@ def _material(window) -> None:
     c2, n = _sample_slider("object N", shown.kind, shown.samples)
     if c or c2:
         # The override keeps the panel's normalisation and fitted-reads choices, as the global method does.
-        pattern = "fitted" if window.lobe_fit and n in fitted_sample_counts() else "auto"
-        chosen = None if choices[k] == "global" else method_from_choice(choices[k], n, window.lobe_normalize, pattern)
+        chosen = None
+        if choices[k] != "global":
+            chosen = method_from_choice(choices[k], n, window.lobe_normalize)
+            chosen = with_default_fit(chosen, window.lobe_fit, fitted_sample_counts())
         renderer.set_object_method(index, chosen)
         window.dirty = True
     needs = renderer.analysis.objects[index]
