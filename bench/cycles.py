@@ -58,7 +58,9 @@ ENVIRONMENTS = {
     "studio": "env/blender_studiolights_1k/studio.exr",
 }
 DEFAULT_ENVS = ("white", "garden", "studio")
-DEFAULT_METHODS = ("lobe-7", "prefiltered")
+# Written out: `shot --method lobe-7` is lobe-7+norm+fit since the twenty-ninth session (the
+# command line's default lobe-N), and a table's column should say which pattern it measured.
+DEFAULT_METHODS = ("lobe-7+norm+fit", "prefiltered")
 SPHERE_MATERIALS = {
     "sphere-white": {"model": "gltf", "base_color": [1.0, 1.0, 1.0], "metallic": 0.0, "roughness": 1.0},
     "sphere-chrome": {"model": "gltf", "base_color": [1.0, 1.0, 1.0], "metallic": 1.0, "roughness": 0.0},

@@ -29,8 +29,8 @@ The table (:func:`build_table`, written by bench/fitted_patterns.py to fitted_pa
 the fit at 12 alphas x 24 views, each node started from its neighbour's solution so that the
 parameters move continuously; :func:`table_reads` interpolates it bilinearly in (log alpha,
 theta_o), :func:`integrate_fitted` is the estimator, reading each sample at the MIP level whose
-blur is its sigma (:func:`lod_for_sigma`). Not yet here: the GLSL twin, the renderer's use of it
-(lobe-N still reads the thesis pattern of patterns.py), anisotropic and transmission lobes.
+blur is its sigma (:func:`lod_for_sigma`). The GPU reads the same tables (viewer/fitted_gpu.py,
+shaders/fitted.glsl); anisotropic and transmission lobes keep the thesis pattern (patterns.py).
 """
 
 from __future__ import annotations

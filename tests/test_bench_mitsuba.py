@@ -62,6 +62,9 @@ def test_table_lists_every_case_and_method():
                "size": 32, "spp": 16, "mitsuba": "3.9.1", "device": "test"}  # fmt: skip
     text = bench.markdown(results, "stamp", "python -m lobeview.bench.mitsuba")
     assert "| ggx:0.5 | 2.1 | 14.7 |" in text and "lobe-7+norm" in text
+    results["rows"][0]["against reference"] = {"reference": 0.0, "lobe-7+norm": 0.1234}
+    text = bench.markdown(results, "stamp", "python -m lobeview.bench.mitsuba")
+    assert "| ggx:0.5 | - | 12.34 |" in text  # the methods' error without the model floor
 
 
 def test_lobeview_reference_agrees_with_mitsuba(tmp_path):
@@ -69,9 +72,11 @@ def test_lobeview_reference_agrees_with_mitsuba(tmp_path):
     hold, i.e. lobeview's converged reference is close to Mitsuba's path tracer on a rough
     isotropic and an anisotropic lobe (a mirrored map or turned frame gives tens of percent)."""
     pytest.importorskip("mitsuba")
-    results = bench.run(["ggx:0.3", "ggx:0.05x0.3"], [], 48, 256, tmp_path, progress=lambda _: None)
+    results = bench.run(["ggx:0.3", "ggx:0.05x0.3"], ["lobe-7"], 48, 256, tmp_path, progress=lambda _: None)
     for row in results["rows"]:
         assert row["reference"] < 0.2, row  # 256 spp under a sun of 50: ~10 % is noise
+        # lobe-7's error against lobeview's reference: what separates it from Mitsuba's, less the model floor
+        assert 0.0 < row["against reference"]["lobe-7"] < row["lobe-7"] + row["reference"], row
 
 
 def test_mitsuba_shadows_with_the_separable_smith_term():
