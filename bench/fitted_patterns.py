@@ -59,6 +59,7 @@ def main(argv=None) -> int:
     seconds = time.perf_counter() - start
     fp.save_tables(list(tables.values()), path)
     fp.load_table.cache_clear()
+    fp.fitted_sample_counts.cache_clear()
     report, stamp, command = stamped_report_path(args.out, "fitted-patterns", "fitted_patterns", argv)
     report.write_text(summary([tables[c] for c in counts], stamp, command, seconds))
     print(f"[fitted patterns] wrote {path} and {report}")
