@@ -4,10 +4,12 @@ A prefiltered map stores, per direction d, the environment convolved with a radi
 kernel around d:  M(d) = integral p(angle(d, l)) L(l) dl  with  integral p dl = 1.
 Every prefiltered mode of lobeview is such a map; only the kernel differs:
 
-* split-sum GGX/Beckmann (Karis 2013): with n = v = r the GGX importance-sampled prefilter
-  weighted by n.l has the kernel  p(psi) ~ D(cos(psi/2)) / 4 * max(cos psi, 0)  (pdf of the
-  reflected direction D cos(theta_h) / (4 v.h) with v.h = cos(theta_h) = cos(psi/2)), one map per
-  roughness level, times the DFG table  integral f cos = F0 A + B  (Schlick Fresnel);
+* split-sum GGX/Beckmann (Karis 2013): with n = v = r the importance-sampled prefilter weighted
+  by n.l has the kernel  p(psi) ~ D(cos(psi/2)) / 4 * max(cos psi, 0)  (pdf of the reflected
+  direction D cos(theta_h) / (4 v.h) with v.h = cos(theta_h) = cos(psi/2)); lobeview's GGX maps
+  use the lobe itself at normal incidence, D(cos(psi/2)) / 4 * G1(l) (f cos with v = n, exact
+  there; :func:`microfacet_kernel_values`), one map per roughness level, times the DFG table
+  integral f cos = F0 A + B  (Schlick Fresnel);
 * Kautz & McCool lobe maps (lobe_fit.py): the fitted radially symmetric lobe of each view
   elevation (seed 000, Eq. 1-2);
 * Phong maps (Heidrich & Seidel, seed 001 section 4): p ~ cos^n psi.
@@ -39,6 +41,10 @@ CELL_CORE_DIVISIONS = 6
 CELL_GROWTH = 0.3
 CELL_MASS_END = 1.0 - 1e-5
 CELL_DENSITY_DROP = 0.3
+# No ring wider than this (radians): GGX's kernel (its lobe, microfacet_kernel_values) keeps mass
+# out to the horizon, and one ring over 1.08-1.56 rad read at its median angle gave the tail's
+# second moment 2.3 % low at alpha 0.04.
+CELL_MAX_WIDTH = 0.2
 MAX_CELLS = 1024
 
 
@@ -149,7 +155,7 @@ class RadialProfile:
         while True:
             edges = [0.0, min(0.5 * width, end)]
             while edges[-1] < end:
-                step = max(width, growth * edges[-1])
+                step = min(max(width, growth * edges[-1]), max(width, CELL_MAX_WIDTH))
                 # narrower rings where the kernel falls fast (its horizon cut-off)
                 while step > width and self(edges[-1] + step) < CELL_DENSITY_DROP * self(edges[-1]):
                     step = max(0.5 * step, width)
@@ -181,10 +187,29 @@ class RadialProfile:
 
 
 def microfacet_kernel_values(kind: str, alpha: float, psi=PSI_GRID) -> np.ndarray:
-    """Split-sum kernel D(cos(psi/2)) / 4 max(cos psi, 0), unnormalised (see module doc)."""
+    """Split-sum kernel over the angle psi from the lookup direction, unnormalised: GGX's lobe at
+    normal incidence D(cos(psi/2)) G1(l) / 4 (n = v = r, height-correlated Smith with Lambda(v) =
+    0), Beckmann's Karis kernel D(cos(psi/2)) / 4 max(cos psi, 0) (see the module doc).
+
+    Why GGX differs (issue 45): Karis' n.l weight makes the kernel narrower than the lobe it
+    stands for (GGX 0.5: median angle 0.61 against the lobe's 0.70 rad), so on a sky brighter
+    above than below a sphere's upper half came out too bright and its lower half too dark
+    (Mitsuba sky without its sun, `prefiltered` at the sun's mirror pixel 1.05 x lobeview's
+    reference at GGX 0.5). The lobe itself is exact at normal incidence; over 48 pixels of the
+    Mitsuba sphere (exact alpha and albedo, quadrature of the true lobe) it cut the rel-RMS error
+    of GGX 0.15 / 0.3 / 0.5 / 1.0 from 6.6 / 9.8 / 12.6 / 9.1 % to 5.4 / 6.3 / 7.2 / 6.0 %.
+    Beckmann keeps Karis' kernel: its lobe at alpha 0.8 is nearly flat over the hemisphere, and
+    the oblique views' symmetric lookups then read the sky beyond the lobe's horizon cut on the
+    sphere's lower half (Beckmann 0.5 / 0.8: 4.6 / 5.6 % -> 4.8 / 10.6 %; the n.l weight happens
+    to mimic the cut); docs/measurements.md "Split-sum kernel"."""
     distribution = MicrofacetDistribution(kind, max(alpha, ALPHA_MIN), max(alpha, ALPHA_MIN))
-    half = 0.5 * np.asarray(psi)
+    psi = np.asarray(psi, dtype=np.float64)
+    half = 0.5 * psi
     h = np.stack([np.sin(half), np.zeros_like(half), np.cos(half)], axis=-1)
+    above = np.cos(psi) > 0.0
+    if kind == "ggx":
+        l = np.stack([np.sin(psi), np.zeros_like(psi), np.where(above, np.cos(psi), 1.0)], axis=-1)
+        return np.where(above, distribution.D(h) / 4.0 * distribution.G1(l), 0.0)
     return distribution.D(h) / 4.0 * np.maximum(np.cos(psi), 0.0)
 
 
@@ -208,9 +233,11 @@ def split_sum_alpha(level: int, levels: int = SPLIT_SUM_LEVELS) -> float:
 PEAK_MATCHED_FROM = 2.0  # split_sum_lod matches the kernel's peak from this level on
 
 
-def split_sum_lod(alpha, levels: int = SPLIT_SUM_LEVELS):
+def split_sum_lod(alpha, levels: int = SPLIT_SUM_LEVELS, kind: str = "beckmann"):
     """The MIP level of the split-sum cube a lobe of roughness ``alpha`` reads (shaders/
-    prefiltered.glsl split_sum_lod). Between levels l0 >= PEAK_MATCHED_FROM and l0 + 1 the weight
+    prefiltered.glsl split_sum_lod). GGX: the table SPLIT_SUM_LOD_GGX (:func:`split_sum_lod_table`,
+    the blend whose radial mass matches alpha's own kernel), linear in sqrt(alpha). Beckmann:
+    between levels l0 >= PEAK_MATCHED_FROM and l0 + 1 the weight
     w of the upper level makes the blend's peak the peak of alpha's own kernel, which is
     proportional to 1 / alpha^2 for both distributions: w = (1/a0^2 - 1/alpha^2) / (1/a0^2 -
     1/a1^2). The plain level sqrt(alpha) (levels - 1) blended too much of the narrower level: a
@@ -220,12 +247,95 @@ def split_sum_lod(alpha, levels: int = SPLIT_SUM_LEVELS):
     15.3 % rel-RMSE (and 0.15 from 11.9 to 12.7 %) against Mitsuba (issue 45)."""
     alpha = np.asarray(alpha, dtype=np.float64)
     top = levels - 1
+    if kind == "ggx" and levels == SPLIT_SUM_LEVELS:
+        table = np.asarray(SPLIT_SUM_LOD_GGX)
+        roughness = np.sqrt(np.clip(alpha, 0.0, 1.0))
+        return np.interp(roughness, np.linspace(0.0, 1.0, len(table)), table)
     lod = np.sqrt(alpha) * top
     lower = np.clip(np.floor(lod), PEAK_MATCHED_FROM, top - 1)
     inv_lower, inv_upper = (top / lower) ** 4, (top / (lower + 1.0)) ** 4
     inv = 1.0 / np.maximum(alpha, 1e-12) ** 2
     matched = lower + (inv_lower - inv) / (inv_lower - inv_upper)
     return np.where((lod <= PEAK_MATCHED_FROM) | (lod >= top), np.clip(lod, 0.0, top), matched)
+
+
+# GGX's level blend (issue 45). Its kernel is the lobe itself (microfacet_kernel_values), whose
+# tail the peak-matched blend of the Beckmann rule overweights: at GGX 0.3 (levels 0.16 / 0.36)
+# the blend held 0.46 of the mass within the lobe's median angle, too wide (the rectangles'
+# reflections on the Mitsuba sphere too dark: rel-RMSE against lobeview's reference 2.73 % with
+# Karis' kernel, 2.91 with the lobe and the peak rule, 2.55 with this table; GGX 0.5 2.58 / 1.81 /
+# 1.88). So the blend weight w of the two levels around alpha is the one whose
+# radial mass (the share of the kernel within each angle) is closest to alpha's own, in the mean
+# absolute difference over the angle (:func:`split_sum_lod_table`); over 60 pixels of the Mitsuba
+# sphere (numpy, the levels' exact kernels) it took GGX 0.05 / 0.1 / 0.3 / 0.7 from 12.6 / 6.7 /
+# 5.0 / 4.2 % (plain level) and 5.9 % (peak, 0.3) to 11.3 / 5.6 / 5.0 / 3.9 %. The same numbers in
+# shaders/prefiltered.glsl.
+SPLIT_SUM_LOD_NODES = 41  # sqrt(alpha) = k / 40: every level's roughness is a node
+SPLIT_SUM_LOD_GGX = (  # split_sum_lod_table("ggx")
+    0.0000,
+    0.0000,
+    0.0075,
+    0.0425,
+    0.1275,
+    0.2850,
+    0.5050,
+    0.7575,
+    1.0000,
+    1.0775,
+    1.1750,
+    1.2925,
+    1.4250,
+    1.5700,
+    1.7150,
+    1.8625,
+    2.0000,
+    2.1300,
+    2.2650,
+    2.4000,
+    2.5325,
+    2.6600,
+    2.7825,
+    2.8950,
+    3.0000,
+    3.1650,
+    3.3175,
+    3.4600,
+    3.5900,
+    3.7100,
+    3.8175,
+    3.9150,
+    4.0000,
+    4.1850,
+    4.3500,
+    4.4975,
+    4.6275,
+    4.7425,
+    4.8400,
+    4.9275,
+    5.0000,
+)
+
+
+def split_sum_lod_table(kind: str = "ggx", nodes: int = SPLIT_SUM_LOD_NODES, steps: int = 400) -> np.ndarray:
+    """The level (lower level + weight of the upper one) per roughness sqrt(alpha) = k / (nodes
+    - 1) whose blend of the two levels' normalised kernels has the radial mass closest to alpha's
+    own kernel (mean absolute difference over the angle, the weight on a grid of ``steps``)."""
+    top = SPLIT_SUM_LEVELS - 1
+    grid = np.diff(PSI_GRID, prepend=0.0)
+
+    def mass(alpha):
+        return RadialProfile.from_values(PSI_GRID, microfacet_kernel_values(kind, max(alpha, ALPHA_MIN))).radial_mass
+
+    level_mass = [mass(split_sum_alpha(level)) for level in range(SPLIT_SUM_LEVELS)]
+    weights = np.linspace(0.0, 1.0, steps + 1)
+    out = np.empty(nodes)
+    for k, roughness in enumerate(np.linspace(0.0, 1.0, nodes)):
+        lower = min(int(np.floor(roughness * top + 1e-9)), top - 1)
+        target = mass(roughness * roughness)
+        blend = (1.0 - weights[:, None]) * level_mass[lower][None] + weights[:, None] * level_mass[lower + 1][None]
+        distance = np.abs(blend - target[None]) @ grid
+        out[k] = lower + weights[int(np.argmin(distance))]
+    return out
 
 
 class _SchlickWeight(MicrofacetReflection):

@@ -94,9 +94,22 @@ float oblique_ratio(int dist, float alpha, float cos_o) {
     return mix(mix(r00, r01, tc), mix(r10, r11, tc), ta);
 }
 
-// materials/prefilter.py split_sum_lod: from level PEAK_MATCHED_FROM on, the blend whose peak is alpha's.
+// materials/prefilter.py split_sum_lod. GGX: SPLIT_SUM_LOD_GGX, the blend whose radial mass matches
+// the lobe kernel's, at sqrt(alpha) = k / 40 (the split-sum cube's SPLIT_SUM_LEVELS = 6 levels);
+// Beckmann: from level PEAK_MATCHED_FROM on, the blend whose peak is alpha's.
+#define SPLIT_SUM_LOD_NODES 41
+const float SPLIT_SUM_LOD_GGX[SPLIT_SUM_LOD_NODES] = float[SPLIT_SUM_LOD_NODES](
+    0.0000, 0.0000, 0.0075, 0.0425, 0.1275, 0.2850, 0.5050, 0.7575, 1.0000, 1.0775, 1.1750,
+    1.2925, 1.4250, 1.5700, 1.7150, 1.8625, 2.0000, 2.1300, 2.2650, 2.4000, 2.5325, 2.6600,
+    2.7825, 2.8950, 3.0000, 3.1650, 3.3175, 3.4600, 3.5900, 3.7100, 3.8175, 3.9150, 4.0000,
+    4.1850, 4.3500, 4.4975, 4.6275, 4.7425, 4.8400, 4.9275, 5.0000);
 #define PEAK_MATCHED_FROM 2.0
-float split_sum_lod(float alpha, float max_level) {
+float split_sum_lod(int dist, float alpha, float max_level) {
+    if (dist == DIST_GGX) {
+        float x = sqrt(clamp(alpha, 0.0, 1.0)) * float(SPLIT_SUM_LOD_NODES - 1);
+        int k = min(int(floor(x)), SPLIT_SUM_LOD_NODES - 2);
+        return min(mix(SPLIT_SUM_LOD_GGX[k], SPLIT_SUM_LOD_GGX[k + 1], x - float(k)), max_level);
+    }
     float lod = sqrt(alpha) * max_level;
     if (lod <= PEAK_MATCHED_FROM || lod >= max_level) return clamp(lod, 0.0, max_level);
     float lower = clamp(floor(lod), PEAK_MATCHED_FROM, max_level - 1.0);
@@ -134,7 +147,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         float spread = aniso_line ? sqrt(a_max * a_max - a_min * a_min)
                                   : sqrt(max(alpha * alpha - level_alpha * level_alpha, 0.0));
         vec2 major = oblique ? wo.xy / len_xy : (l.ax >= l.ay ? vec2(1.0, 0.0) : vec2(0.0, 1.0));
-        float lod = split_sum_lod(level_alpha, u_split_sum_max_level);
+        float lod = split_sum_lod(l.dist, level_alpha, u_split_sum_max_level);
         vec3 radiance = vec3(0.0);
         vec3 radiance_all = vec3(0.0);  // every node, for a view whose whole line lies below the surface
         float weight_sum = 0.0;
