@@ -94,7 +94,7 @@ float oblique_ratio(int dist, float alpha, float cos_o) {
     return mix(mix(r00, r01, tc), mix(r10, r11, tc), ta);
 }
 
-// materials/prefilter.py split_sum_lod. GGX: SPLIT_SUM_LOD_GGX, the blend whose radial mass matches
+// materials/split_sum_levels.py split_sum_lod. GGX: SPLIT_SUM_LOD_GGX, the blend whose radial mass matches
 // the lobe kernel's, at sqrt(alpha) = k / 40 (the split-sum cube's SPLIT_SUM_LEVELS = 6 levels);
 // Beckmann: from level PEAK_MATCHED_FROM on, the blend whose peak is alpha's.
 #define SPLIT_SUM_LOD_NODES 41
