@@ -195,14 +195,22 @@ def cached_mitsuba(
     return image, seconds
 
 
-def sun_pixel(size: int) -> tuple[int, int]:
-    """(row, column) of the pixel where the sphere mirrors the sun to the camera: the normal
-    that halves the angle between the sun and the direction to the camera (fixed point)."""
+def sun_mirror_normal() -> np.ndarray:
+    """The unit sphere's normal (= its point) that mirrors the sun to the camera: it halves the
+    angle between the sun and the direction to the camera (fixed point)."""
     position = np.array(CAMERA[0])
     normal = np.array([0.0, 0.0, 1.0])
     for _ in range(64):
         view = (position - normal) / np.linalg.norm(position - normal)
         normal = (view + SUN_DIRECTION) / np.linalg.norm(view + SUN_DIRECTION)
+    return normal
+
+
+def sun_pixel(size: int) -> tuple[int, int]:
+    """(row, column) of the pixel where the sphere mirrors the sun to the camera
+    (:func:`sun_mirror_normal`)."""
+    position = np.array(CAMERA[0])
+    normal = sun_mirror_normal()
     focal = 0.5 * size / np.tan(np.radians(0.5 * CAMERA[3]))
     depth = position[2] - normal[2]
     return int(0.5 * size - focal * normal[1] / depth), int(0.5 * size + focal * normal[0] / depth)

@@ -489,7 +489,6 @@ def integrate_fitted(
 
 
 @lru_cache(maxsize=2)
-@lru_cache(maxsize=8)
 def fitted_sample_counts(path: Path = TABLE_PATH) -> tuple[int, ...]:
     """The lobe-N sample counts with a fitted table for both distributions (lobe-N+norm+fit); read
     once (the panel asks every frame), cleared with load_table's cache when tables are written."""

@@ -471,11 +471,7 @@ def test_ggx_split_sum_kernel_is_the_lobe_on_a_sky(alpha):
     at most 0.8 x Karis' error."""
     from lobeview.bench import mitsuba as bench
 
-    camera = np.array(bench.CAMERA[0])
-    sun_normal = np.array([0.0, 0.0, 1.0])
-    for _ in range(64):
-        view = (camera - sun_normal) / np.linalg.norm(camera - sun_normal)
-        sun_normal = (view + bench.SUN_DIRECTION) / np.linalg.norm(view + bench.SUN_DIRECTION)
+    sun_normal = bench.sun_mirror_normal()
     rng = np.random.default_rng(3)
     facing = [p / np.linalg.norm(p) for p in rng.normal(size=(80, 3)) if p[2] > 0.4 * np.linalg.norm(p)]
     pixels = [sun_normal] + facing[:15]
