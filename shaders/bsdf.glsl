@@ -221,6 +221,14 @@ float gltf_coat_attenuation(Lobe l, float cos_o) {
     return base ? base_attenuation(l.coat, l.coat_cos, cos_o) : 1.0;
 }
 
+// The DFG table's nodes are k / (size - 1) in cos(theta_o) and roughness (materials/prefilter.py
+// dfg_table, dfg_lookup): [0, 1] maps onto the texel centres, so roughness 1 reads alpha 1 (clamped
+// at the last centre it read alpha 0.97: GGX 1.0's albedo 4.7 % too high).
+vec2 dfg_coordinates(float cos_o, float roughness, ivec2 size) {
+    vec2 n = vec2(size);
+    return (clamp(vec2(cos_o, roughness), 0.0, 1.0) * (n - 1.0) + 0.5) / n;
+}
+
 // A lobe's directional albedo from the DFG table's (A, B) at its roughness (split-sum and the
 // per-pixel glTF albedo): f0 A + f90 B times its scale; the clearcoat's Fresnel is at N.V, so
 // its albedo is clearcoat F_c(N.V) (A + B).

@@ -102,7 +102,7 @@ vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
     if (u_albedo_per_pixel == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
         // scene.frag's glTF lobe: alpha_y = roughness^2, alpha_x = mix(alpha_y, 1, strength^2)
         if (l.dist == DIST_GGX && l.ax != l.ay) return lobe_dfg_albedo(l, anisotropic_ggx_dfg(l, wo), wo.z);
-        vec4 dfg = textureLod(u_dfg, vec2(wo.z, sqrt(sqrt(l.ax * l.ay))), 0.0);  // roughness = sqrt(alpha)
+        vec4 dfg = textureLod(u_dfg, dfg_coordinates(wo.z, sqrt(sqrt(l.ax * l.ay)), textureSize(u_dfg, 0)), 0.0);
         vec2 ab = l.dist == DIST_GGX ? dfg.ba : dfg.rg;
         return lobe_dfg_albedo(l, ab, wo.z);
     }

@@ -176,7 +176,7 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // The albedo: an anisotropic GGX lobe's from the anisotropic table (the isotropic one at
         // the geometric-mean alpha was up to 9 % too bright on GGX 0.05 x 0.3), Beckmann's from
         // the isotropic table at that alpha (no anisotropic Beckmann table).
-        vec4 dfg = texture(u_dfg, vec2(wo.z, roughness));
+        vec4 dfg = textureLod(u_dfg, dfg_coordinates(wo.z, roughness, textureSize(u_dfg, 0)), 0.0);
         vec2 ab = l.dist == DIST_GGX ? (aniso_line ? anisotropic_ggx_dfg(l, wo) : dfg.ba) : dfg.rg;
         return radiance * lobe_dfg_albedo(l, ab, wo.z);
     }

@@ -75,7 +75,7 @@ def dfg_texture_data(size: int = DFG_SIZE, directory: Path | None = None) -> np.
     """(size, size, 4): Beckmann (A, B) in rg, GGX (A, B) in ba; rows = roughness. Computed
     once (~4 s) and kept in ``directory`` (the renderer's cache folder; default: the user cache
     folder of core/paths.py)."""
-    path = Path(directory or cache_dir()) / f"dfg-v1-{size}.npy"
+    path = Path(directory or cache_dir()) / f"dfg-v2-{size}.npy"  # v2: nodes at the ends (prefilter.py dfg_table)
     if size not in _DFG_CACHE:
 
         def read(file: Path) -> np.ndarray:
