@@ -53,7 +53,7 @@ float lobe_sample_area(Lobe l, vec3 wo, int n) {
 // glTF albedo below and prefiltered.glsl's split-sum of every anisotropic GGX lobe.
 uniform sampler3D u_dfg_anisotropic;    // rg: GGX (A, B); x = cos, y = azimuth, z = roughness, strength
 
-// Twin of materials/prefilter.py anisotropic_dfg_lookup: hardware-linear in sqrt(cos) (texel centres),
+// Twin of materials/prefilter.py anisotropic_dfg_lookup: hardware-linear in sqrt(cos) (nodes at the texel centres),
 // azimuth and strength (nodes, the strength inside one roughness block), by hand in roughness.
 vec2 anisotropic_dfg(float cos_o, vec2 azimuth, float roughness, float strength) {
     float folded = atan(abs(azimuth.y), abs(azimuth.x)) / (0.5 * PI);
@@ -62,7 +62,8 @@ vec2 anisotropic_dfg(float cos_o, vec2 azimuth, float roughness, float strength)
     float r0 = min(floor(r), float(ANISO_DFG_ROUGHNESS - 2));
     float s = clamp(strength, 0.0, 1.0) * float(ANISO_DFG_STRENGTH - 1) + 0.5;
     float depth = float(ANISO_DFG_ROUGHNESS * ANISO_DFG_STRENGTH);
-    float x = sqrt(max(cos_o, 0.0));  // the table is uniform in sqrt(cos theta_o)
+    // uniform in sqrt(cos theta_o), nodes k / (ANISO_DFG_COS - 1) at the texel centres
+    float x = (sqrt(clamp(cos_o, 0.0, 1.0)) * float(ANISO_DFG_COS - 1) + 0.5) / float(ANISO_DFG_COS);
     vec2 low = textureLod(u_dfg_anisotropic, vec3(x, y, (r0 * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
     vec2 high = textureLod(u_dfg_anisotropic, vec3(x, y, ((r0 + 1.0) * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
     return mix(low, high, r - r0);

@@ -43,6 +43,21 @@ def test_anisotropic_dfg_lookup_matches_quadrature_between_its_nodes(table):
         assert 0.04 * a + b == pytest.approx(specular, rel=0.04, abs=2e-3), (roughness, strength, wo)
 
 
+@pytest.mark.parametrize(("alpha_min", "alpha_max"), [(0.5, 1.0), (0.09, 1.0), (0.2, 0.8)])
+@pytest.mark.parametrize("cos_o", [1.0, 0.999, 0.002])
+def test_anisotropic_dfg_at_the_views_ends(table, alpha_min, alpha_max, cos_o):
+    """The table's sqrt(cos) nodes include normal incidence and grazing (texel centres read cos
+    0.94 at normal incidence: 0.5 x 1.0 2.7 % too bright there, 0.09 x 1.0 2.0 %)."""
+    from lobeview.materials.prefilter import split_sum_dfg
+
+    wo = np.array([np.sqrt(1.0 - cos_o * cos_o), 0.0, cos_o])
+    bsdf = build_bsdf(validate({"model": "microfacet", "distribution": "ggx", "alpha_u": alpha_max,
+                                "alpha_v": alpha_min, "fresnel": {"type": "none"}, "scale": 1.0}))  # fmt: skip
+    exact = bsdf.albedo(wo, order=96)[0][0]
+    looked_up = split_sum_dfg({"anisotropic": table}, "ggx", wo, alpha_max, alpha_min).sum()
+    assert looked_up == pytest.approx(exact, rel=0.01)
+
+
 def test_split_sum_dfg_of_any_anisotropic_ggx_matches_quadrature(table):
     """split_sum_dfg (shaders/prefiltered.glsl's albedo of an anisotropic GGX lobe): any alphas,
     the wider along x or along y, mapped onto the table's (roughness, strength), against the

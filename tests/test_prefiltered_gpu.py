@@ -197,12 +197,9 @@ def test_anisotropic_split_sum_render_matches_numpy_twin(gl):
         assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
 
 
-@pytest.mark.parametrize("alpha_u,alpha_v", [(0.05, 0.3), (0.4, 0.1)])
-def test_anisotropic_split_sum_under_a_uniform_sky_is_the_lobe_albedo(gl, alpha_u, alpha_v):
-    """White furnace: under radiance 1 from every direction `prefiltered` must give an
-    anisotropic GGX lobe's directional albedo (quadrature of f cos, BSDF.albedo). With the
-    isotropic DFG at the geometric-mean alpha it was 5-9 % too bright over most views of
-    0.05 x 0.3 (the albedo at normal incidence 0.982 against 0.934)."""
+def _white_furnace(gl, alpha_u: float, alpha_v: float):
+    """`prefiltered` of an anisotropic GGX conductor (no Fresnel) under radiance 1 from every
+    direction: (the BSDF, the pixels' views (12, 3), their rendered radiance (12, 3))."""
     env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=64, name="white")
     renderer = PreviewRenderer(gl[0].ctx, env, uv_sphere(rings=48, segments=96), size=(48, 48), face_size=32)
     try:
@@ -213,11 +210,29 @@ def test_anisotropic_split_sum_under_a_uniform_sky_is_the_lobe_albedo(gl, alpha_
         assert not result.invalid.any()
         pixels = _pixels(result, count=12, seed=3)
         wos = np.array([_frame(result, y, x)[1] for y, x in pixels])
-        albedo = bsdf.albedo_many(wos, order=96)[0]
-        rendered = np.array([result.radiance[y, x] for y, x in pixels])
-        np.testing.assert_allclose(rendered, albedo, rtol=0.025)
+        return bsdf, wos, np.array([result.radiance[y, x] for y, x in pixels])
     finally:
         renderer.release()
+
+
+@pytest.mark.parametrize("alpha_u,alpha_v", [(0.05, 0.3), (0.4, 0.1)])
+def test_anisotropic_split_sum_under_a_uniform_sky_is_the_lobe_albedo(gl, alpha_u, alpha_v):
+    """White furnace: under radiance 1 from every direction `prefiltered` must give an
+    anisotropic GGX lobe's directional albedo (quadrature of f cos, BSDF.albedo). With the
+    isotropic DFG at the geometric-mean alpha it was 5-9 % too bright over most views of
+    0.05 x 0.3 (the albedo at normal incidence 0.982 against 0.934)."""
+    bsdf, wos, rendered = _white_furnace(gl, alpha_u, alpha_v)
+    np.testing.assert_allclose(rendered, bsdf.albedo_many(wos, order=96)[0], rtol=0.025)
+
+
+def test_anisotropic_split_sum_albedo_reads_the_tables_nodes(gl):
+    """The shader's anisotropic DFG coordinates are pf.anisotropic_dfg_lookup's: its sqrt(cos)
+    nodes k / 15 at the texel centres (the raw sqrt(cos) as coordinate is half a texel off,
+    0.3-0.7 % on this wide lobe at the sphere's views)."""
+    _, wos, rendered = _white_furnace(gl, 1.0, 0.09)
+    tables = {"anisotropic": anisotropic_dfg_texture_data()}
+    expected = np.array([pf.split_sum_dfg(tables, "ggx", wo, 1.0, 0.09).sum() for wo in wos])
+    np.testing.assert_allclose(rendered, np.repeat(expected[:, None], 3, axis=1), rtol=2e-3)
 
 
 @pytest.mark.parametrize(

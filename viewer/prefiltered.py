@@ -112,7 +112,7 @@ def anisotropic_dfg_texture_data(directory: Path | None = None) -> np.ndarray:
     """materials/prefilter.py anisotropic_dfg_table, computed once (~20 s here) and kept in
     ``directory`` like the DFG table."""
     if not _ANISO_DFG_CACHE:
-        path = Path(directory or cache_dir()) / "dfg-anisotropic-v3.npy"
+        path = Path(directory or cache_dir()) / "dfg-anisotropic-v4.npy"  # v4: sqrt(cos) nodes at both ends
 
         def read(file: Path) -> np.ndarray:
             table = np.load(file, allow_pickle=False)
