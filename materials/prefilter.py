@@ -470,20 +470,12 @@ def anisotropic_dfg_lookup(table: np.ndarray, cos_theta_o: float, azimuth: float
     """(A, B) of :func:`anisotropic_dfg_table` as shaders/patterns.glsl reads its 3D texture:
     linear in sqrt(cos) between its nodes k / (ANISO_DFG_COS - 1) (clamped), linear between the
     azimuth, roughness and strength nodes; the azimuth folded into [0, pi/2]."""
-
-    def position(value, count):
-        t = float(np.clip(value, 0.0, 1.0)) * (count - 1)
-        low = min(int(np.floor(t)), count - 2)
-        return low, t - low
-
     folded = np.arctan2(abs(np.sin(azimuth)), abs(np.cos(azimuth))) / (np.pi / 2)
-    x = float(np.sqrt(np.clip(cos_theta_o, 0.0, 1.0))) * (ANISO_DFG_COS - 1)
-    x0 = min(int(np.floor(x)), ANISO_DFG_COS - 2)
-    fx = x - x0
+    x0, fx = node_position(np.sqrt(max(cos_theta_o, 0.0)), ANISO_DFG_COS)
     out = np.zeros(2)
-    r0, fr = position(roughness, ANISO_DFG_ROUGHNESS)
-    s0, fs = position(strength, ANISO_DFG_STRENGTH)
-    p0, fp = position(folded, ANISO_DFG_PHI)
+    r0, fr = node_position(roughness, ANISO_DFG_ROUGHNESS)
+    s0, fs = node_position(strength, ANISO_DFG_STRENGTH)
+    p0, fp = node_position(folded, ANISO_DFG_PHI)
     for dr, wr in ((0, 1 - fr), (1, fr)):
         for ds, ws in ((0, 1 - fs), (1, fs)):
             for dp, wp in ((0, 1 - fp), (1, fp)):
@@ -513,16 +505,21 @@ def split_sum_dfg(tables: dict, kind: str, wo: np.ndarray, alpha_x: float, alpha
     return dfg_lookup(tables[kind], wo[2], np.sqrt(np.sqrt(alpha_x * alpha_y)))
 
 
+def node_position(value, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(lower node, fraction towards the next) of ``value`` clamped to [0, 1] on a table axis of
+    ``count`` nodes k / (count - 1): GL_LINEAR at shaders/bsdf.glsl node_coordinate."""
+    t = np.clip(np.asarray(value, dtype=np.float64), 0.0, 1.0) * (count - 1)
+    low = np.minimum(np.floor(t).astype(int), count - 2)
+    return low, t - low
+
+
 def dfg_lookup(table: np.ndarray, cos_theta_o, roughness) -> np.ndarray:
-    """Bilinear between the table's nodes k / (size - 1), clamped to [0, 1]: GL_LINEAR at the
-    texture coordinates (x (size - 1) + 1/2) / size of shaders/bsdf.glsl dfg_coordinates."""
+    """Bilinear between the table's nodes k / (size - 1) (:func:`node_position`), as
+    shaders/bsdf.glsl dfg_coordinates reads the texture."""
     size = table.shape[0]
-    x = np.clip(np.asarray(cos_theta_o, dtype=np.float64), 0.0, 1.0) * (size - 1)
-    y = np.clip(np.asarray(roughness, dtype=np.float64), 0.0, 1.0) * (size - 1)
-    x0 = np.minimum(np.floor(x).astype(int), size - 2)
-    y0 = np.minimum(np.floor(y).astype(int), size - 2)
-    fx = (x - x0)[..., None]
-    fy = (y - y0)[..., None]
+    x0, fx = node_position(cos_theta_o, size)
+    y0, fy = node_position(roughness, size)
+    fx, fy = fx[..., None], fy[..., None]
     top = table[y0, x0] * (1 - fx) + table[y0, x0 + 1] * fx
     bottom = table[y0 + 1, x0] * (1 - fx) + table[y0 + 1, x0 + 1] * fx
     return top * (1 - fy) + bottom * fy

@@ -221,12 +221,16 @@ float gltf_coat_attenuation(Lobe l, float cos_o) {
     return base ? base_attenuation(l.coat, l.coat_cos, cos_o) : 1.0;
 }
 
-// The DFG table's nodes are k / (size - 1) in cos(theta_o) and roughness (materials/prefilter.py
-// dfg_table, dfg_lookup): [0, 1] maps onto the texel centres, so roughness 1 reads alpha 1 (clamped
-// at the last centre it read alpha 0.97: GGX 1.0's albedo 4.7 % too high).
+// The albedo tables' axes hold nodes k / (count - 1) (materials/prefilter.py node_position): [0, 1]
+// maps onto the texel centres, so roughness 1 reads alpha 1 (clamped at the last centre it read
+// alpha 0.97: GGX 1.0's albedo 4.7 % too high).
+float node_coordinate(float value, int count) {
+    return (clamp(value, 0.0, 1.0) * float(count - 1) + 0.5) / float(count);
+}
+
+// The DFG table (materials/prefilter.py dfg_table, dfg_lookup): cos(theta_o) along x, roughness along y.
 vec2 dfg_coordinates(float cos_o, float roughness, ivec2 size) {
-    vec2 n = vec2(size);
-    return (clamp(vec2(cos_o, roughness), 0.0, 1.0) * (n - 1.0) + 0.5) / n;
+    return vec2(node_coordinate(cos_o, size.x), node_coordinate(roughness, size.y));
 }
 
 // A lobe's directional albedo from the DFG table's (A, B) at its roughness (split-sum and the

@@ -57,13 +57,12 @@ uniform sampler3D u_dfg_anisotropic;    // rg: GGX (A, B); x = cos, y = azimuth,
 // azimuth and strength (nodes, the strength inside one roughness block), by hand in roughness.
 vec2 anisotropic_dfg(float cos_o, vec2 azimuth, float roughness, float strength) {
     float folded = atan(abs(azimuth.y), abs(azimuth.x)) / (0.5 * PI);
-    float y = (folded * float(ANISO_DFG_PHI - 1) + 0.5) / float(ANISO_DFG_PHI);
+    float y = node_coordinate(folded, ANISO_DFG_PHI);
     float r = clamp(roughness, 0.0, 1.0) * float(ANISO_DFG_ROUGHNESS - 1);
     float r0 = min(floor(r), float(ANISO_DFG_ROUGHNESS - 2));
     float s = clamp(strength, 0.0, 1.0) * float(ANISO_DFG_STRENGTH - 1) + 0.5;
     float depth = float(ANISO_DFG_ROUGHNESS * ANISO_DFG_STRENGTH);
-    // uniform in sqrt(cos theta_o), nodes k / (ANISO_DFG_COS - 1) at the texel centres
-    float x = (sqrt(clamp(cos_o, 0.0, 1.0)) * float(ANISO_DFG_COS - 1) + 0.5) / float(ANISO_DFG_COS);
+    float x = node_coordinate(sqrt(max(cos_o, 0.0)), ANISO_DFG_COS);  // uniform in sqrt(cos theta_o)
     vec2 low = textureLod(u_dfg_anisotropic, vec3(x, y, (r0 * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
     vec2 high = textureLod(u_dfg_anisotropic, vec3(x, y, ((r0 + 1.0) * float(ANISO_DFG_STRENGTH) + s) / depth), 0.0).rg;
     return mix(low, high, r - r0);
