@@ -4,6 +4,7 @@ resources and compiles only the shader variants in use."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -90,7 +91,12 @@ class SceneAnalysis:
 
     @property
     def reflectors(self) -> dict:
-        """Object index -> PlanarReflector for every object that gets a mirror pass."""
+        """Object index -> PlanarReflector for every object that gets a mirror pass (a copy: asked
+        several times a frame, the objects are scanned once per analysis)."""
+        return dict(self._reflector_map)
+
+    @cached_property
+    def _reflector_map(self) -> dict:
         return {i: o.reflector for i, o in enumerate(self.objects) if o.reflector is not None}
 
     @property

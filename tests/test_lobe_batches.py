@@ -356,3 +356,49 @@ def test_a_failing_array_falls_back_to_one_draw_per_object(ctx, monkeypatch):
         _assert_per_object_fallback(renderer, _scene_camera(scene, "overview"), "GL error 0x0505 (test)")
     finally:
         renderer.release()
+
+
+@pytest.mark.parametrize("method", ["lobe-7", "lobe-7+norm+fit", "fis-8"])
+def test_reflectors_multi_draw_one_group_per_shared_pass(ctx, method):
+    """Reflectors shaded from their mirror buffers: the split floor's halves (two
+    materials, one shared pass) take one multi-draw and the glossy wall (its own plane) another;
+    the frame equals the per-object path's within rounding, without their per-object draws. A
+    frame in which the wall has no pass (out of view) regroups the batch without recording
+    anything again."""
+    from test_mirror_sharing import _split_floor_scene
+
+    from lobeview.scenes.mirror_scene import CAMERA
+    from lobeview.viewer.camera import Camera
+
+    _gl(ctx)
+    scene = _split_floor_scene(right_roughness=0.01, wall=True)
+    names = [obj.name for obj in scene.objects]
+    left, right, wall = (names.index(name) for name in ("left floor", "right floor", "glossy wall"))
+    renderer = _renderer(ctx, scene)
+    try:
+        camera = Camera(tuple(CAMERA.position), tuple(CAMERA.target), tuple(CAMERA.up), CAMERA.fov_y)
+        frames = _frames(renderer, camera, method)
+        (single, calls_single), (multi, calls_multi) = frames[False], frames[True]
+        assert_within_rounding(multi, single, f"split floor and wall, {method}")
+        assert calls_multi[0] <= calls_single[0] - 3  # the reflectors' own draws are gone
+        counts = renderer.draw_counts.of("camera")  # each object counted once, drawn or culled
+        assert counts.drawn + counts.culled == len(scene.objects) and counts.drawn >= 3
+        assert any("shared with left floor" in line for line in renderer.mirror_report)
+        batches = renderer.drawer.lobe_batches
+        batch = batches.kept((Method.parse(method), "mirror"))
+        groups = sorted(sorted(int(i) for i in group.objects) for group in batch.groups)
+        assert groups == sorted([sorted([left, right]), [wall]])
+        assert batches.current is not batch  # the camera's own lobe batch stays the current one
+        # Looking down at the floor: the wall is out of view, gets no pass, and leaves the drawn groups.
+        builds, shares = batches.record_builds, batch.shares_key
+        down = Camera((0.0, 1.5, 3.0), (0.0, 0.0, 2.5), (0.0, 1.0, 0.0), CAMERA.fov_y)
+        renderer.render(down, method, spp=1)
+        assert wall in renderer.mirror_passes.skipped and left not in renderer.mirror_passes.skipped
+        assert batches.kept((Method.parse(method), "mirror")) is batch and batch.shares_key != shares
+        assert batches.record_builds == builds
+        counts = renderer.draw_counts.of("camera")
+        assert counts.drawn + counts.culled == len(scene.objects)
+        drawn = [sorted(int(i) for i in g.objects) for g in batch.groups if wall not in g.objects]
+        assert drawn == [sorted([left, right])]
+    finally:
+        renderer.release()

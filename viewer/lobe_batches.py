@@ -20,11 +20,14 @@ of one draw call each.
 - Groups: the same program variant (with or without a reflection proxy), cube-map array, stack
   array, texture bindings (lightmap, glTF maps) and face culling. The commands' instance counts
   come from the diffuse batches' frustum-culling compute pass (viewer/object_batches.py).
+- Reflectors shaded from their mirror buffers (thesis 4.5, viewer/mirror_pass.py) form batches
+  of their own (the MIRROR program variant, no cube-map array): a group per shared plane pass and
+  side, its buffers bound once, so the floors of a whole apartment take one multi-draw.
 
-Left to one draw per object (viewer/object_drawer.py): reflectors drawn from their mirror
-buffers, alphaMode BLEND, Rational materials, objects whose method the panel overrides, the
-prefiltered methods (per-object prefiltered maps), mc-N and the reference (per-object importance
-tables), any object while a cube-map memory budget is set (the arrays would hold copies of cubes
+Left to one draw per object (viewer/object_drawer.py): alphaMode BLEND, Rational materials,
+objects whose method the panel overrides, the prefiltered methods (per-object prefiltered maps),
+mc-N and the reference (per-object importance tables; on reflectors also the averaged tangent
+planes), any object while a cube-map memory budget is set (the arrays would hold copies of cubes
 the budget released), and everything where the direct GL calls are unavailable."""
 
 from __future__ import annotations
@@ -44,7 +47,8 @@ from .object_records import LOBE_RECORDS, OBJECT_RECORDS_BINDING
 
 #: method kinds whose per-object state is the cube, the material and the lights (batchable)
 BATCHED_METHOD_KINDS = ("lobe", "fis")
-MAX_METHOD_BATCHES = 4  # methods whose records are kept (the camera's, the mirror passes', switches)
+# methods whose records are kept (the camera pass's, its reflectors', the mirror passes', switches)
+MAX_METHOD_BATCHES = 6
 # Albedo-table layers before the array is started afresh (material edits each add a table; GL 4.5
 # guarantees 2048 array layers, one table is 52 KB).
 MAX_ALBEDO_LAYERS = 64
@@ -199,7 +203,7 @@ class LobeGroup:
     first_command: int
     single_sided: bool
     parallax: bool  # the program variant with the reflection proxy
-    face_size: int  # the cube-map array bound
+    face_size: int  # the cube-map array bound (0: none, reflectors drawn from mirror buffers)
     representative: object  # a GpuObject whose draw state binds the group's textures
     stack_array: int | None = None  # lobe-N+norm+fit: StackArrays array bound (None: no stacks)
 
@@ -223,6 +227,7 @@ class MethodBatch:
     groups: list
     members: np.ndarray  # which objects the groups hold
     uses_stacks: bool = False  # lobe-N+norm+fit: each group binds its StackArrays array
+    shares_key: tuple | None = None  # the mirror shares the groups were made for (reflectors)
 
     def release(self) -> None:
         self.records.release()
@@ -242,28 +247,45 @@ class LobeBatches:
         self.albedo_tables = AlbedoTableArray(ctx)
         self.stacks = StackArrays(ctx, gl)
         self._no_stacks = None  # a 1-texel array bound for groups without stacks (made on first use)
-        self._records: dict[tuple, _ObjectRecord] = {}  # (method, object index) -> its record
+        self._records: dict = {}  # method -> object index -> its record
         self._methods: dict = {}  # method -> MethodBatch, least recently prepared first
         self.current: MethodBatch | None = None  # the batch prepared last
         self.record_builds = 0  # object records made (tests: an unchanged object is not recorded again)
+
+    def kept(self, method) -> MethodBatch | None:
+        """The batch kept for ``method`` (the reflectors' batch of a method: ``(method, "mirror")``)."""
+        return self._methods.get(method)
 
     @property
     def members(self) -> np.ndarray:
         """Which objects the last prepared batch holds."""
         return self.current.members if self.current is not None else np.zeros(0, dtype=bool)
 
-    def prepare(self, method, key, objects: list, members, record_state, single_sided, stack_of=None) -> MethodBatch:
+    def prepare(
+        self, method, key, objects: list, members, record_state, single_sided, stack_of=None, mirror_shares=None
+    ) -> MethodBatch:
         """The batch of ``method``, made again when ``key`` changed; ``key[0]``: what every
         record depends on (material generation, texture evictions). ``members``: the objects to
         batch (each reads the cube map of ``objects[obj.probe_owner]``); ``record_state(obj)``
         records an object's per-object draw state: (DrawRecorder, parallax). ``stack_of(obj)``
         (lobe-N+norm+fit): (the blur stack the object reads, its owner's, or None; whether it
         reads one once built). An object's record is made again only when ``key[0]``, its cube,
-        its layer or its stack's changed."""
+        its layer or its stack's changed. ``mirror_shares`` (reflectors shaded from their mirror
+        buffers): object index -> what its draw binds beyond its record (the pass it shares, its
+        plane's side), which splits the groups; no cube map is read (none placed in the arrays,
+        the object may have none), and the batch does not become ``current``."""
+        shares_key = None if mirror_shares is None else tuple(mirror_shares.items())
         batch = self._methods.pop(method, None)
         if batch is not None and batch.key == key:
             self._methods[method] = batch  # most recently used last
-            self.current = batch
+            if batch.shares_key != shares_key:  # the records stand; only the groups and commands change
+                batch.commands.release()
+                batch.groups, batch.commands, batch.command_count = self._group(
+                    self._records[method], objects, batch.members, mirror_shares
+                )
+                batch.shares_key = shares_key
+            if mirror_shares is None:
+                self.current = batch
             return batch
         if batch is not None:
             batch.release()
@@ -274,7 +296,10 @@ class LobeBatches:
                 other.release()
             self._methods.clear()
         cubes = {objects[i].probe_owner: objects[objects[i].probe_owner].cube for i in np.flatnonzero(members)}
-        placed = self.arrays.update({owner: cube.residual for owner, cube in cubes.items()})
+        if mirror_shares is None:
+            placed = self.arrays.update({owner: cube.residual for owner, cube in cubes.items()})
+        else:  # under MIRROR the cube is bound (per-object path: the object's or the sky's), never read
+            placed = dict.fromkeys(cubes, (0, 0))
         # lobe-N+norm+fit: each object's stack (its owner's; None where it reads none, or where the
         # frame's budget left it unbuilt), the stacks copied into the shared arrays
         stacks_wanted = {int(i): stack_of(objects[i]) for i in np.flatnonzero(members)} if stack_of else {}
@@ -282,17 +307,18 @@ class LobeBatches:
         owner_stacks = {objects[i].probe_owner: t for i, t in object_stacks.items() if t is not None}
         wanted = len({objects[i].probe_owner for i, (_, wants) in stacks_wanted.items() if wants})
         placed_stacks = self.stacks.update(owner_stacks, wanted) if stack_of else {}
-        grouped: dict[tuple, list] = {}
+        known = self._records.get(method, {})
+        kept: dict[int, _ObjectRecord] = {}  # the method's records from now on: its members'
         records = bytearray(LOBE_RECORDS.size * max(len(objects), 1))
         radiance_unit, albedo_unit = TEXTURE_UNITS["u_radiance"], TEXTURE_UNITS["u_albedo"]
         stack_unit = TEXTURE_UNITS["u_blur_stack"]
-        for index in np.flatnonzero(members):
+        for index in np.flatnonzero(members).tolist():
             obj = objects[index]
             face_size, layer = placed[obj.probe_owner]
             cube = cubes[obj.probe_owner]
-            stack_place = placed_stacks.get(obj.probe_owner) if object_stacks.get(int(index)) is not None else None
+            stack_place = placed_stacks.get(obj.probe_owner) if object_stacks.get(index) is not None else None
             object_key = (key[0], face_size, layer, stack_place)
-            entry = self._records.get((method, index))
+            entry = known.get(index)
             if entry is None or entry.key != object_key or entry.cube is not cube:
                 recorder, parallax = record_state(obj)
                 record = recorder.record()
@@ -308,31 +334,39 @@ class LobeBatches:
                 stack_array = stack_place[0] if stack_place else None
                 group_key = (parallax, face_size, stack_array, binds, bool(single_sided[index]))
                 entry = _ObjectRecord(object_key, cube, LOBE_RECORDS.pack(uniforms), group_key)
-                self._records[(method, index)] = entry
                 self.record_builds += 1
+            kept[index] = entry
             records[index * LOBE_RECORDS.size : (index + 1) * LOBE_RECORDS.size] = entry.data
-            grouped.setdefault(entry.group_key, []).append(obj)
-        kept = {int(i) for i in np.flatnonzero(members)}
-        for record_key in [k for k in self._records if k[0] == method and k[1] not in kept]:
-            del self._records[record_key]
+        self._records[method] = kept
+        groups, commands, count = self._group(kept, objects, members, mirror_shares)
+        batch = MethodBatch(
+            key, self.ctx.buffer(bytes(records)), commands, count, groups, members.copy(), stack_of is not None,
+            shares_key,
+        )  # fmt: skip
+        self._methods[method] = batch
+        while len(self._methods) > MAX_METHOD_BATCHES:
+            oldest = next(iter(self._methods))
+            self._methods.pop(oldest).release()
+            self._records.pop(oldest, None)
+        if mirror_shares is None:
+            self.current = batch
+        return batch
+
+    def _group(self, records: dict, objects: list, members: np.ndarray, mirror_shares) -> tuple[list, object, int]:
+        """(groups, command buffer, command count) of ``members`` from their ``records``
+        (index -> _ObjectRecord), split further by ``mirror_shares`` where given."""
+        grouped: dict[tuple, list] = {}
+        for index in np.flatnonzero(members).tolist():
+            share = None if mirror_shares is None else mirror_shares[index]  # this frame's
+            grouped.setdefault((*records[index].group_key, share), []).append(objects[index])
         groups, first = [], 0
-        for (parallax, face_size, stack_array, _, one_sided), group in grouped.items():
+        for (parallax, face_size, stack_array, _, one_sided, _), group in grouped.items():
             indices = np.array([obj.index for obj in group], dtype=np.int64)
             groups.append(LobeGroup(indices, first, one_sided, parallax, face_size, group[0], stack_array))
             first += len(indices)
         ordered = [group.objects for group in groups]
         commands, count = self.batches.command_buffer(np.concatenate(ordered) if ordered else [])
-        batch = MethodBatch(
-            key, self.ctx.buffer(bytes(records)), commands, count, groups, members.copy(), stack_of is not None
-        )
-        self._methods[method] = batch
-        while len(self._methods) > MAX_METHOD_BATCHES:
-            oldest = next(iter(self._methods))
-            self._methods.pop(oldest).release()
-            for record_key in [k for k in self._records if k[0] == oldest]:
-                del self._records[record_key]
-        self.current = batch
-        return batch
+        return groups, commands, count
 
     def cull(self, batch: MethodBatch, enabled: np.ndarray, view_projection: np.ndarray, frustum_culling: bool) -> None:
         """Every command's instance count for this pass (the diffuse batches' compute pass)."""
@@ -340,8 +374,9 @@ class LobeBatches:
 
     def draw_group(self, batch: MethodBatch, program, vao, group: LobeGroup) -> None:
         """One multi-draw of ``group``: its cube-map array and the records bound here, its other
-        textures by the caller."""
-        self.arrays.bind(group.face_size, TEXTURE_UNITS["u_radiance_array"])
+        textures by the caller (a reflector's mirror buffers among them; no cube-map array)."""
+        if group.face_size:
+            self.arrays.bind(group.face_size, TEXTURE_UNITS["u_radiance_array"])
         self.albedo_tables.bind(TEXTURE_UNITS["u_albedo_array"])
         if batch.uses_stacks:
             if self._no_stacks is None:

@@ -29,6 +29,14 @@ MIRROR_BOUNCE_METHOD = Method("lobe", 3, normalize=True)  # glossy objects insid
 BUFFER_PREFIXES = {"mirror": "u_mirror", "see-through": "u_through"}
 
 
+def mirror_front(reflector, eye) -> tuple[float, float, float]:
+    """The reflector's plane normal on the side of ``eye`` (u_mirror_front): the reflectors of a
+    shared pass with the same value draw as one multi-draw (viewer/object_drawer.py)."""
+    plane = reflector.plane
+    front = plane[:3] if float(np.dot(plane[:3], eye) + plane[3]) >= 0.0 else -plane[:3]
+    return tuple(float(x) for x in front)
+
+
 # Mirror buffers of other sizes a plane keeps for reuse (its levels 1/2 and 1/4, a render scale).
 SPARE_SIZES = 3
 
@@ -377,9 +385,7 @@ class MirrorPasses:
         """The reflector's buffers (``dummy`` for a kind it does not have, flagged off in
         u_mirror_sides), its plane's normal on the camera's side and the previous pass's
         plane-state targets (averaged tangent planes)."""
-        plane = reflector.plane
-        front = plane[:3] if float(np.dot(plane[:3], eye) + plane[3]) >= 0.0 else -plane[:3]
-        set_uniform(program, "u_mirror_front", tuple(float(x) for x in front))
+        set_uniform(program, "u_mirror_front", mirror_front(reflector, eye))
         set_uniform(program, "u_mirror_sides", int("mirror" in buffers) | 2 * int("see-through" in buffers))
         for kind, prefix in BUFFER_PREFIXES.items():
             targets = buffers.get(kind)

@@ -22,6 +22,7 @@ from .cubemap import BLUR_STACK_BUILDS, RadianceCube
 from .interface import DrawRecorder, method_defines, set_uniform, uses_blur_stack
 from .lobe_batches import BATCHED_METHOD_KINDS, LobeBatches
 from .material_gpu import PackedMaterial
+from .mirror_pass import mirror_front
 from .object_batches import ObjectBatches, SceneGeometry
 from .occlusion import OcclusionTest
 from .render_base import draw_environment
@@ -295,6 +296,11 @@ class ObjectDrawer:
                     view_proj_values, eye_values, cull_view_projection, method, excluded, lod_bias,
                     sample_offset, seed, mirrors, cull, culled, counts,
                 )  # fmt: skip
+                if mirrors:
+                    batched = batched | self._draw_mirror_batched(
+                        view_proj_values, eye_values, eye, cull_view_projection, method, excluded, lod_bias,
+                        sample_offset, seed, mirrors, cull, culled, counts,
+                    )  # fmt: skip
         for obj, blended in self.draw_order(eye, batched):  # what the multi-draw did not draw
             if obj.index in excluded or (not specular and self.analysis.objects[obj.index].transmission_lobes):
                 # Thin transmissive panes are see-through in the diffuse pass that fills cube
@@ -339,7 +345,7 @@ class ObjectDrawer:
                 self.shading.bind_cube(program, cube, obj_method, obj.material, per_pixel_lobes(mat))
                 if mirror is not None:
                     self.mirror_passes.bind(
-                        program, self.analysis.reflectors[obj.index], mirror, eye, self.shading.white,
+                        program, self.analysis.objects[obj.index].reflector, mirror, eye, self.shading.white,
                         self.frame.previous_plane_states(),
                     )  # fmt: skip
             self._vao(program).render(moderngl.TRIANGLES, vertices=obj.index_count, first=obj.first_index)
@@ -521,10 +527,20 @@ class ObjectDrawer:
             return enabled
         batches.cull(batch, enabled, cull_view_projection, self.settings.frustum_culling)
         self.draw_calls.culls += 1
+        pass_values = (view_proj_values, eye_values, lod_bias, sample_offset, seed)
+        self._draw_lobe_groups(batches, batch, visible, method, pass_values, cull)
+        return enabled
+
+    def _draw_lobe_groups(self, batches, batch, visible, method, pass_values, cull, mirrors=None, eye=None) -> None:
+        """One multi-draw per group of ``batch`` with an object in ``visible``: the pass's
+        uniforms, the face culling and the group's textures (its representative's, as its own
+        draw binds them; ``mirrors``: the reflectors' buffers, seen from ``eye``)."""
+        view_proj_values, eye_values, lod_bias, sample_offset, seed = pass_values
+        shading = self.shading
         for group in batch.groups:
             if not visible[group.objects].any():
                 continue
-            program = self.program(method, True, group.parallax, records=True)
+            program = self.program(method, True, group.parallax, mirrors is not None, records=True)
             set_uniform(program, "u_view_projection", view_proj_values)
             set_uniform(program, "u_camera_position", eye_values)
             shading.set_pass_state(program, method, lod_bias, seed)
@@ -535,13 +551,82 @@ class ObjectDrawer:
                 self.ctx.disable(moderngl.CULL_FACE)
             rep = group.representative
             owner = self.objects[rep.probe_owner]
-            proxy = self.scene.objects[rep.index].reflection_proxy
+            proxy = self.scene.objects[rep.index].reflection_proxy if mirrors is None else None
             # The group's textures (its cube comes from the array: viewer/lobe_batches.py).
-            shading.object_state(program, rep, method, False, proxy, owner.probe_centre)
-            shading.bind_cube(program, owner.cube, method, rep.material, per_pixel_lobes(self.material_of(rep.index)))
+            shading.object_state(program, rep, method, mirrors is not None, proxy, owner.probe_centre)
+            cube = owner.cube if owner.cube is not None else self.environment  # bound, unread under MIRROR
+            shading.bind_cube(program, cube, method, rep.material, per_pixel_lobes(self.material_of(rep.index)))
+            if mirrors is not None:  # the group's shared buffers and plane side (its share key)
+                self.mirror_passes.bind(
+                    program, self.analysis.objects[rep.index].reflector, mirrors[rep.index], eye, shading.white, []
+                )  # fmt: skip
             batches.draw_group(batch, program, self._vao(program), group)
             self.draw_calls.multi += 1
-        return enabled
+
+    def _draw_mirror_batched(
+        self, view_proj_values, eye_values, eye, cull_view_projection, method, excluded, lod_bias, sample_offset,
+        seed, mirrors, cull, culled, counts,
+    ) -> np.ndarray:  # fmt: skip
+        """Draw the reflectors this pass shades from their mirror buffers (methods lobe-N and
+        fis-N) by one multi-draw per shared plane pass and side (viewer/lobe_batches.py): the
+        floors of an apartment share a few passes, and a draw each cost more Python than the
+        rest of the camera pass together (issue 42). Returns which objects were handled here."""
+        handled = np.zeros(len(self.objects), dtype=bool)
+        batches = self._lobe_batches()
+        if batches is None or self.averages_planes(method):  # plane states: per reflector
+            return handled
+        batchable, _, single_sided = self._batch_masks()
+        # Members: every batchable reflector (those without buffers this pass join no drawn group,
+        # so their records outlive a frame in which they are hidden); groups: the pass they share
+        # (named by its first member) and the plane's side.
+        members = np.zeros(len(self.objects), dtype=bool)
+        members[list(self.analysis.reflectors)] = True
+        members &= batchable
+        for index, override in self.object_methods.items():
+            if override != method:
+                members[index] = False
+        shares, first_of_pass = dict.fromkeys(np.flatnonzero(members).tolist()), {}
+        for index in sorted(mirrors):
+            if index in shares and index not in excluded:
+                first = first_of_pass.setdefault(tuple(id(t) for t in mirrors[index].values()), index)
+                shares[index] = (first, mirror_front(self.analysis.objects[index].reflector, eye))
+                handled[index] = True
+        if not handled.any():
+            return handled
+        shading = self.shading
+        base_key = (
+            shading.record_generation,
+            shading.textures.evictions,
+            shading.material_textures.evictions,
+            id(self.analysis),
+        )
+        key = (base_key, CUBE_ASSIGNMENTS[0], members.tobytes())  # the shares regroup, records stay
+
+        def record_state(obj):
+            owner = self.objects[obj.probe_owner]
+            recorder = DrawRecorder(self.program(method, True, mirror=True))
+            shading.set_object_state(recorder, obj, method, True, None, owner.probe_centre)
+            cube = owner.cube if owner.cube is not None else self.environment
+            shading.bind_cube(recorder, cube, method, obj.material, per_pixel_lobes(self.material_of(obj.index)))
+            return recorder, False
+
+        try:
+            batch = batches.prepare(
+                (method, "mirror"), key, self.objects, members, record_state, single_sided, mirror_shares=shares
+            )
+        except RuntimeError as exc:  # a GL error of the shared arrays: the per-object path still works
+            self._stop_lobe_batches(str(exc))
+            return np.zeros(len(self.objects), dtype=bool)
+        visible = handled if culled is None else handled & ~culled
+        drawn = int(np.count_nonzero(visible))
+        counts.drawn += drawn
+        counts.culled += int(np.count_nonzero(handled)) - drawn
+        if drawn:
+            batches.cull(batch, handled, cull_view_projection, self.settings.frustum_culling)
+            self.draw_calls.culls += 1
+            pass_values = (view_proj_values, eye_values, lod_bias, sample_offset, seed)
+            self._draw_lobe_groups(batches, batch, visible, method, pass_values, cull, mirrors, eye)
+        return handled
 
     def draw_order(self, eye, skip: np.ndarray | None = None) -> list:
         """(object, blended): opaque and masked objects first, then the alphaMode BLEND ones

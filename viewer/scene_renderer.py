@@ -112,6 +112,7 @@ class SceneRenderer(RendererBase):
         shading.draw_records = settings.draw_records
         shading.self_occlusion = settings.self_occlusion
         self.objects = self.drawer.objects
+        self.object_names = [obj.name for obj in self.objects]  # the mirror passes' report lines
         self.draw_counts = self.drawer.draw_counts  # objects drawn and culled per kind of pass
         self.frame_draw_calls = (0, 0, 0)  # the last draw_frame's: per-object, multi-draws, culling passes
         self._apply_method_rule()
@@ -273,7 +274,7 @@ class SceneRenderer(RendererBase):
         (``mirror_scissor``; None: every pass whole). ``camera_depth``: the frame's depth
         pre-pass, drawn already, for the occlusion test to read."""
         settings = self._settings
-        names = [obj.name for obj in self.objects]
+        names = self.object_names
         reflectors = self.reflectors()
         spreads = {}
         if method is not None and settings.mirror_scissor:
@@ -349,7 +350,7 @@ class SceneRenderer(RendererBase):
             depth_prepass(clear=True)
         if method.kind == "prefiltered":
             mirrors = {}
-            names = [obj.name for obj in self.objects]
+            names = self.object_names
             self.mirror_passes.skip_all(self.reflectors(), names, "cube map (prefiltered method)")
         else:
             camera_depth = self.frame.depth_fbo if early_depth else None
