@@ -38,10 +38,10 @@ DRIVER_WORK_CALLS = (("VertexArray", "render"), ("VertexArray", "render_indirect
 
 class DriverWorkTimer:
     """Seconds spent inside DRIVER_WORK_CALLS while installed (moderngl's Python wrappers timed),
-    and apart from them (``wait_seconds``) in reading query results: the mirror passes' occlusion
-    test waits there for the device to finish its depth pass and queries (on llvmpipe: the
-    rasterising itself, done on the CPU's cores; on a GPU: the round trip, a sync point that keeps
-    CPU and GPU from overlapping)."""
+    and apart from them (``wait_seconds``) in reading query results and buffers: the mirror
+    passes' occlusion test waits there for the device to finish its depth pass and its queries or
+    counting draw (viewer/occlusion.py; on llvmpipe: the rasterising itself, done on the CPU's
+    cores; on a GPU: the round trip, a sync point that keeps CPU and GPU from overlapping)."""
 
     def __init__(self):
         import moderngl
@@ -57,6 +57,9 @@ class DriverWorkTimer:
         samples = moderngl.Query.samples  # a property
         self._originals.append((moderngl.Query, "samples", samples))
         moderngl.Query.samples = property(self._timed(samples.fget, wait=True))
+        read = moderngl.Buffer.read  # the counted occlusion test's read-back
+        self._originals.append((moderngl.Buffer, "read", read))
+        moderngl.Buffer.read = self._timed(read, wait=True)
 
     def _timed(self, original, wait: bool = False):
         def timed(*args, **kwargs):
@@ -211,9 +214,9 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         "(Python, GL calls, driver submission; llvmpipe also shades vertices there), *Python + state*: submit "
         "minus the time inside the draw, dispatch and barrier calls (where llvmpipe does the pass's work and a "
         "GPU's driver only queues it: the CPU cost a GPU does not take away) and in *occlusion wait*, "
-        "*occlusion wait*: reading the mirror passes' occlusion queries, which waits for the device to "
-        "finish the test's depth pass (llvmpipe: its rasterising, on the CPU; a GPU: a round trip that stalls "
-        "the CPU), *finished*: until glFinish. "
+        "*occlusion wait*: reading the mirror passes' occlusion test (its queries or its counts), which waits "
+        "for the device to finish the test's depth pass (llvmpipe: its rasterising, on the CPU; a GPU: a round "
+        "trip that stalls the CPU), *finished*: until glFinish. "
         f"Medians over the frames; draw calls are means per frame. Whole run {elapsed / 60:.1f} min.",
         "",
         "| rooms | objects | size | path | submit ms | Python + state ms | occlusion wait ms | finished ms "

@@ -39,14 +39,15 @@ def test_the_gpu_bench_writes_every_table_at_small_sizes(tmp_path):
 
 
 def test_the_draw_cost_timer_counts_query_waits_apart_and_restores_moderngl():
-    """bench/draw_cost.py: reading a query's result (the occlusion test's wait for the device) is
-    timed as the wait, not as Python + state, and removing the timer puts moderngl back."""
+    """bench/draw_cost.py: reading a query's result or a buffer (the occlusion test's wait for
+    the device, per query or counted in a buffer) is timed as the wait, not as Python + state, and
+    removing the timer puts moderngl back."""
     import moderngl
 
     from lobeview.bench.draw_cost import DriverWorkTimer
     from lobeview.viewer.context import create_headless_context
 
-    original = moderngl.Query.__dict__["samples"]
+    original, original_read = moderngl.Query.__dict__["samples"], moderngl.Buffer.read
     ctx = create_headless_context()
     timer = DriverWorkTimer()
     try:
@@ -55,7 +56,10 @@ def test_the_draw_cost_timer_counts_query_waits_apart_and_restores_moderngl():
             pass
         assert query.samples == 0
         assert timer.wait_seconds > 0.0 and timer.seconds == 0.0
+        waited = timer.wait_seconds
+        assert ctx.buffer(bytes(8)).read() == bytes(8)
+        assert timer.wait_seconds > waited and timer.seconds == 0.0
     finally:
         timer.remove()
         ctx.release()
-    assert moderngl.Query.__dict__["samples"] is original
+    assert moderngl.Query.__dict__["samples"] is original and moderngl.Buffer.read is original_read

@@ -198,3 +198,41 @@ def test_materials_sharing_a_lightmap_share_one_image():
     images = {id(m.lightmap.image) for m in scene.materials if m.lightmap is not None}
     assert sum(m.lightmap is not None for m in scene.materials) > 3
     assert len(images) == 1
+
+
+def test_counted_occlusion_test_equals_one_query_per_reflector(ctx):
+    """The multi-drawn occlusion test (viewer/occlusion.py: one draw, each passing fragment adding
+    to its object's count) gives every reflector of the 4-room apartment exactly the samples a
+    samples-passed query per reflector counts, along the recorded path, against its own depth
+    pass and against the camera pass's depth pre-pass; some are hidden, some seen."""
+    from lobeview.scenes.apartment import apartment_geometry, apartment_path
+
+    scene = apartment_geometry(4)
+    renderer = _renderer(ctx, scene)
+    drawer = renderer.drawer
+    size = (96, 60)
+    path = apartment_path(4)
+    seen = hidden = 0
+    try:
+        candidates = sorted(renderer.reflectors())
+        assert len(candidates) >= 6
+        for t in path.frame_times(6):
+            camera = Camera.from_scene_camera(path.camera_at(float(t)))
+            view_proj = camera.view_projection(size[0] / size[1])
+            counted = {}
+            for indirect in (False, True):
+                renderer.configure(indirect_draws=indirect)
+                own = drawer.visible_samples(view_proj, size, candidates)
+                drawer.occlusion._targets(size)  # a pre-pass of the camera's opaque objects to read
+                fbo = drawer.occlusion.fbo
+                fbo.use()
+                ctx.viewport = (0, 0, *size)
+                fbo.clear(depth=1.0)
+                drawer.draw_depth(view_proj)
+                counted[indirect] = (own, drawer.visible_samples(view_proj, size, candidates, fbo))
+            assert counted[True] == counted[False], t
+            seen += sum(1 for n in counted[True][0].values() if n > 0)
+            hidden += sum(1 for n in counted[True][0].values() if n == 0)
+        assert seen > 0 and hidden > 0
+    finally:
+        renderer.release()

@@ -177,12 +177,14 @@ class ObjectBatches:
         self.commands, self.command_count = self.command_buffer(np.concatenate(ordered) if ordered else [])
         self._key = key
 
-    def command_buffer(self, objects) -> tuple[moderngl.Buffer, int]:
+    def command_buffer(self, objects, instances: int = 0) -> tuple[moderngl.Buffer, int]:
         """(buffer, count): one draw command per object of ``objects``, in that order, its
-        instance count 0 until a cull writes it, its baseInstance the object's index."""
+        instance count ``instances`` (0: until a cull writes it), its baseInstance the object's
+        index."""
         objects = np.asarray(objects, dtype=np.int64)
         data = np.zeros((len(objects), COMMAND_WORDS), dtype=np.uint32)
         data[:, 0] = self.geometry.index_count[objects]
+        data[:, 1] = instances
         data[:, 2] = self.geometry.first_index[objects]
         data[:, 4] = objects
         return self.ctx.buffer(data.tobytes() if len(data) else bytes(4 * COMMAND_WORDS)), len(data)

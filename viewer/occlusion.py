@@ -10,7 +10,9 @@ Occlusion test: a reflector whose mirror buffers no camera
 pixel would read needs no mirror pass. The opaque objects' depth is drawn from the camera (a
 depth-only pre-pass at the frame's resolution), then each candidate reflector is drawn against it
 inside a samples-passed query; a reflector none of whose fragments passes is hidden (a floor
-behind the corridor wall, a room behind a closed door).
+behind the corridor wall, a room behind a closed door). With the multi-draws on, the candidates
+are one multi-draw whose fragment shader counts each object's passing samples in a storage
+buffer (shaders/visible_samples.frag): the same counts without a draw and a query per reflector.
 
 A real-time frame (unjittered, with the depth pre-pass on) draws its pre-pass before the mirror
 passes, and the test reads that depth (SceneRenderer.draw_frame): one depth pass of the scene less
@@ -32,7 +34,9 @@ import numpy as np
 
 from .camera import outside_frustum_boxes
 from .frame import new_framebuffer
-from .interface import set_uniform
+from .interface import bind_storage, set_uniform
+
+GL_BUFFER_UPDATE_BARRIER_BIT = 0x00000200  # buffer reads (glGetBufferSubData) see shader writes after it
 
 
 class OcclusionTest:
@@ -52,6 +56,9 @@ class OcclusionTest:
         self._objects = None  # the last objects list draw_depth was given, and its arrays:
         self._object_arrays = None  # (indices, enabled, single-sided) made once per list, not per pass
         self.draw_calls = draw_calls
+        # The multi-drawn test (batches given): per-object counts, their vertex array, the commands
+        # of the last queried objects (indices, buffer).
+        self._counts = self._count_vao = self._count_commands = None
 
     def _targets(self, size) -> None:
         size = (int(size[0]), int(size[1]))
@@ -149,23 +156,56 @@ class OcclusionTest:
             # against their own depth by rounding. (An object just behind a surface within that
             # offset counts as visible: the test stays conservative.)
             ctx.polygon_offset = (-1.0, -4.0)
-        program = self.programs.program("depth.vert", "depth.frag", {})
-        set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
         fbo.depth_mask = False
         ctx.depth_func = "<="  # a reflector lying on an occluder (a floor under a wall) is not hidden by it
-        # Every object's query is issued before any result is read: reading one waits for the
-        # GPU to finish it, so one wait a frame instead of one per reflector.
-        while len(self._queries) < len(queried):
-            self._queries.append(ctx.query(samples=True))
-        queries = self._queries[: len(queried)]
-        for query, obj in zip(queries, queried.values(), strict=True):
-            with query:
-                self._draw(program, obj)
-        samples = {index: int(query.samples) for query, index in zip(queries, queried, strict=True)}
+        if batches is not None:
+            samples = self._counted_samples(view_proj, queried, batches)
+        else:
+            program = self.programs.program("depth.vert", "depth.frag", {})
+            set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
+            # Every object's query is issued before any result is read: reading one waits for the
+            # GPU to finish it, so one wait a frame instead of one per reflector.
+            while len(self._queries) < len(queried):
+                self._queries.append(ctx.query(samples=True))
+            queries = self._queries[: len(queried)]
+            for query, obj in zip(queries, queried.values(), strict=True):
+                with query:
+                    self._draw(program, obj)
+            samples = {index: int(query.samples) for query, index in zip(queries, queried, strict=True)}
         fbo.depth_mask = True
         ctx.depth_func = "<"
         ctx.polygon_offset = (0.0, 0.0)
         return samples
+
+    def _counted_samples(self, view_proj: np.ndarray, queried: dict, batches) -> dict[int, int]:
+        """The queried objects' visible samples by one multi-draw (``batches``: the drawer's
+        ObjectBatches, for its command layout) in which every fragment that passes the depth
+        test adds one to its object's count in a storage buffer (shaders/visible_samples.frag):
+        what a samples-passed query per object counts, without a draw and a query each. No face
+        culling, as the queries' draws. Reading the counts waits for the device, as reading the
+        queries did."""
+        ctx = self.ctx
+        program = self.programs.program("depth.vert", "visible_samples.frag", {"OBJECT_INDEX": True})
+        set_uniform(program, "u_view_projection", tuple(view_proj.T.astype("f4").ravel()))
+        indices = tuple(int(index) for index in queried)
+        if self._count_commands is None or self._count_commands[0] != indices:
+            if self._count_commands is not None:
+                self._count_commands[1].release()
+            self._count_commands = (indices, batches.command_buffer(np.array(indices, dtype=np.int64), 1)[0])
+        if self._counts is None:
+            self._counts = ctx.buffer(reserve=4 * max(len(self.boxes), 1))
+        if self._count_vao is None or self._count_vao[0] is not program:
+            if self._count_vao is not None:
+                self._count_vao[1].release()
+            self._count_vao = (program, self.geometry.vertex_array(ctx, program, position_only=True))
+        self._counts.clear()
+        bind_storage(program, self._counts, 0)
+        ctx.disable(moderngl.CULL_FACE)
+        self._count_vao[1].render_indirect(self._count_commands[1], moderngl.TRIANGLES, count=len(indices))
+        self.draw_calls.multi += 1
+        ctx.memory_barrier(GL_BUFFER_UPDATE_BARRIER_BIT)  # the shader's writes, before the read below
+        counts = np.frombuffer(self._counts.read(), dtype=np.uint32)
+        return {index: int(counts[index]) for index in indices}
 
     def release_targets(self) -> None:
         for item in (self.fbo, self.depth):
@@ -180,3 +220,11 @@ class OcclusionTest:
             self._vao.release()
             self._vao = None
         self._queries = []  # moderngl 5.13 queries have no release(): the context frees them
+        for item in (
+            self._counts,
+            self._count_vao[1] if self._count_vao else None,
+            self._count_commands[1] if self._count_commands else None,
+        ):
+            if item is not None:
+                item.release()
+        self._counts = self._count_vao = self._count_commands = None

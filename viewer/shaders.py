@@ -37,6 +37,7 @@ KNOWN_DEFINES = {
     "PARALLAX",
     "MIRROR",
     "OBJECT_RECORDS",
+    "OBJECT_INDEX",  # depth.vert: the object index for the counted occlusion test (viewer/occlusion.py)
 }
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
