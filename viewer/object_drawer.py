@@ -472,6 +472,22 @@ class ObjectDrawer:
             f"lobe-shaded objects are drawn one by one (the same frames, more draw calls): {why}", stacklevel=3
         )
 
+    def _lobe_records_key(self) -> tuple:
+        """What every lobe-shaded record depends on: material edits, texture evictions, the analysis."""
+        shading = self.shading
+        return (
+            shading.record_generation,
+            shading.textures.evictions,
+            shading.material_textures.evictions,
+            id(self.analysis),
+        )
+
+    def _drop_overridden(self, members: np.ndarray, method: Method) -> None:
+        """Clear from ``members`` (in place) the objects the panel shades with another method."""
+        for index, override in self.object_methods.items():
+            if override != method:
+                members[index] = False
+
     def _draw_lobe_batched(
         self, view_proj_values, eye_values, cull_view_projection, method, excluded, lod_bias, sample_offset, seed,
         mirrors, cull, culled, counts,
@@ -486,16 +502,9 @@ class ObjectDrawer:
         batchable, _, single_sided = self._batch_masks()
         owners, has_cube = self.owner_cubes()
         members = batchable & has_cube[owners]
-        for index, override in self.object_methods.items():  # the panel's per-object methods
-            if override != method:
-                members[index] = False
+        self._drop_overridden(members, method)
         shading = self.shading
-        base_key = (
-            shading.record_generation,
-            shading.textures.evictions,
-            shading.material_textures.evictions,
-            id(self.analysis),
-        )
+        base_key = self._lobe_records_key()
         stacks = uses_blur_stack(method)
         # lobe-N+norm+fit: a stack built since (a budgeted frame left it out) changes the records
         key = (base_key, CUBE_ASSIGNMENTS[0], members.tobytes(), owners.tobytes(), stacks and BLUR_STACK_BUILDS[0])
@@ -582,9 +591,7 @@ class ObjectDrawer:
         members = np.zeros(len(self.objects), dtype=bool)
         members[list(self.analysis.reflectors)] = True
         members &= batchable
-        for index, override in self.object_methods.items():
-            if override != method:
-                members[index] = False
+        self._drop_overridden(members, method)
         shares, first_of_pass = dict.fromkeys(np.flatnonzero(members).tolist()), {}
         for index in sorted(mirrors):
             if index in shares and index not in excluded:
@@ -594,12 +601,7 @@ class ObjectDrawer:
         if not handled.any():
             return handled
         shading = self.shading
-        base_key = (
-            shading.record_generation,
-            shading.textures.evictions,
-            shading.material_textures.evictions,
-            id(self.analysis),
-        )
+        base_key = self._lobe_records_key()
         key = (base_key, CUBE_ASSIGNMENTS[0], members.tobytes())  # the shares regroup, records stay
 
         def record_state(obj):
