@@ -15,16 +15,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from lobeview.scenes.self_visibility import horizon_frame
+
 CHUNK = 128  # shading points per batch of samples (memory: CHUNK x samples x 3 doubles a few times)
 
 
 def tangent_frames(normals: np.ndarray) -> np.ndarray:
-    """(n, 3, 3) orthonormal frames whose rows are tangent, bitangent, normal."""
+    """(n, 3, 3) orthonormal frames whose rows are tangent, bitangent, normal (the tangents of
+    scenes/self_visibility.py horizon_frame: any will do for an isotropic lobe)."""
     normals = normals / np.linalg.norm(normals, axis=-1, keepdims=True)
-    helper = np.where(np.abs(normals[:, 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
-    tangents = np.cross(helper, normals)
-    tangents /= np.linalg.norm(tangents, axis=-1, keepdims=True)
-    return np.stack([tangents, np.cross(normals, tangents), normals], axis=1)
+    tangents, bitangents = horizon_frame(normals)
+    return np.stack([tangents, bitangents, normals], axis=1)
 
 
 def separable_smith_ratio(

@@ -341,8 +341,7 @@ class ObjectDrawer:
                 program, obj, obj_method, mirror is not None, proxy, self.objects[obj.probe_owner].probe_centre
             )
             if use_specular:
-                cube = own_cube if own_cube is not None else self.environment  # bound, unread under MIRROR
-                self.shading.bind_cube(program, cube, obj_method, obj.material, per_pixel_lobes(mat))
+                self.shading.bind_cube(program, self._cube_to_bind(obj), obj_method, obj.material, per_pixel_lobes(mat))
                 if mirror is not None:
                     self.mirror_passes.bind(
                         program, self.analysis.objects[obj.index].reflector, mirror, eye, self.shading.white,
@@ -472,6 +471,12 @@ class ObjectDrawer:
             f"lobe-shaded objects are drawn one by one (the same frames, more draw calls): {why}", stacklevel=3
         )
 
+    def _cube_to_bind(self, obj):
+        """The cube map ``obj``'s specular draw binds: its probe owner's, or the sky's for a
+        reflector without one (drawn from its mirror buffers, whose MIRROR program never reads it)."""
+        own = self.objects[obj.probe_owner].cube
+        return own if own is not None else self.environment
+
     def _lobe_records_key(self) -> tuple:
         """What every lobe-shaded record depends on: material edits, texture evictions, the analysis."""
         shading = self.shading
@@ -563,8 +568,8 @@ class ObjectDrawer:
             proxy = self.scene.objects[rep.index].reflection_proxy if mirrors is None else None
             # The group's textures (its cube comes from the array: viewer/lobe_batches.py).
             shading.object_state(program, rep, method, mirrors is not None, proxy, owner.probe_centre)
-            cube = owner.cube if owner.cube is not None else self.environment  # bound, unread under MIRROR
-            shading.bind_cube(program, cube, method, rep.material, per_pixel_lobes(self.material_of(rep.index)))
+            per_pixel = per_pixel_lobes(self.material_of(rep.index))
+            shading.bind_cube(program, self._cube_to_bind(rep), method, rep.material, per_pixel)
             if mirrors is not None:  # the group's shared buffers and plane side (its share key)
                 self.mirror_passes.bind(
                     program, self.analysis.objects[rep.index].reflector, mirrors[rep.index], eye, shading.white, []
@@ -608,8 +613,8 @@ class ObjectDrawer:
             owner = self.objects[obj.probe_owner]
             recorder = DrawRecorder(self.program(method, True, mirror=True))
             shading.set_object_state(recorder, obj, method, True, None, owner.probe_centre)
-            cube = owner.cube if owner.cube is not None else self.environment
-            shading.bind_cube(recorder, cube, method, obj.material, per_pixel_lobes(self.material_of(obj.index)))
+            per_pixel = per_pixel_lobes(self.material_of(obj.index))
+            shading.bind_cube(recorder, self._cube_to_bind(obj), method, obj.material, per_pixel)
             return recorder, False
 
         try:
