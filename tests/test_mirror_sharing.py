@@ -153,3 +153,40 @@ def test_a_shared_pass_never_shows_its_own_plane(ctx):
         for name, image in (("shared", shared), ("unshared", unshared))
     }
     assert error["shared"] < 1e-4 and error["unshared"] > 0.03, error  # measured 2e-6 / 0.09
+
+
+def test_only_the_reflectors_given_a_pass_have_their_lookups_bounded(ctx, monkeypatch):
+    """A frame finds the lobe-N lookups' reach (scissor) and finest footprint (buffer size) for
+    the reflectors that get a pass, not for every reflector of the scene (a per-object Python
+    loop in an otherwise per-pass frame, issue 42); the report still names the others and why."""
+    from lobeview.viewer.mirror_pass import MirrorPasses
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    asked = []
+    for name in ("lobe_spread", "finest_footprint"):
+        original = getattr(MirrorPasses, name)
+
+        def counted(self, index, *args, _original=original, _name=name):
+            asked.append((_name, index))
+            return _original(self, index, *args)
+
+        monkeypatch.setattr(MirrorPasses, name, counted)
+    scene = _split_floor_scene(right_roughness=0.01, wall=True)
+    names = [obj.name for obj in scene.objects]
+    left, right, wall = (names.index(name) for name in ("left floor", "right floor", "glossy wall"))
+    sky = EnvironmentMap.from_function(lambda d: np.full(d.shape[:-1] + (3,), 0.5), height=16, name="grey")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        renderer = SceneRenderer(ctx, scene, sky, size=SIZE, progress=False, settings=RenderSettings(cube_face_size=16))
+    try:
+        down = Camera((0.0, 1.5, 3.0), (0.0, 0.0, 2.5), (0.0, 1.0, 0.0), CAMERA.fov_y)  # the wall out of view
+        renderer.render(down, Method.parse("lobe-7"), spp=1)
+        assert set(renderer.mirror_passes.drawn) == {left, right}
+        assert {index for _, index in asked} == {left, right}
+        assert {name for name, _ in asked} == {"lobe_spread", "finest_footprint"}
+        assert renderer.mirror_passes.skipped == {wall: "outside the view"}
+        assert "glossy wall: no mirror pass (outside the view)" in renderer.mirror_report
+        assert renderer.mirror_report[0] == "left floor: mirror pass " + renderer.mirror_report[0].split(" pass ")[1]
+    finally:
+        renderer.release()

@@ -247,11 +247,17 @@ class CubeProbes:
         prefiltered method, globally or as their override, or their mirror pass turned off:
         not in ``enabled``)."""
         analysis = self.drawer.analysis
-        for index in analysis.reflectors:
+        reflectors = analysis.reflectors
+        if method.kind == "prefiltered":
+            wanted = reflectors.keys()
+        else:  # only those without a pass or overridden to prefiltered: not a scan of all, each frame
+            overridden = {
+                i for i in self.drawer.object_methods
+                if i in reflectors and self.drawer.object_method(i, method).kind == "prefiltered"
+            }  # fmt: skip
+            wanted = (reflectors.keys() - enabled.keys()) | overridden
+        for index in sorted(wanted):
             if self.objects[index].cube is not None:
-                continue
-            own = self.drawer.object_method(index, method)
-            if index in enabled and method.kind != "prefiltered" and own.kind != "prefiltered":
                 continue
             # Read or written to the cache only over finished cube maps (not during a progressive build).
             self.bake.build_one(self.objects, index, analysis.objects[index].cube_face, cached=not self.building)

@@ -84,17 +84,69 @@ def skip_reasons(reflectors: dict, camera: Camera, view_proj: np.ndarray) -> dic
     """Why each reflector needs no buffers this frame (index -> reason, None: it needs them): the
     camera is behind its plane (a reflector that transmits is seen from both sides), or its
     bounding box lies outside the view frustum. One numpy pass for all of them."""
-    if not reflectors:
-        return {}
-    items = list(reflectors.values())
-    eye = np.asarray(camera.position, dtype=np.float64)
-    planes, low, high = reflector_arrays(items)
-    behind = (planes[:, :3] @ eye + planes[:, 3] <= 1e-6) & ~np.array([r.transmission for r in items], dtype=bool)
-    outside = outside_frustum_boxes(low, high, view_proj)
+    layout = ReflectorLayout(reflectors)
+    behind, outside = layout.tests(camera, view_proj)
     return {
         index: "seen from behind" if back else ("outside the view" if out else None)
-        for index, back, out in zip(reflectors, behind, outside, strict=True)
+        for index, back, out in zip(layout.indices.tolist(), behind, outside, strict=True)
     }
+
+
+class ReflectorLayout:
+    """The reflectors' arrays for the frame's tests in one numpy pass (planes, boxes, which
+    transmit), and their plane groups: made when the reflectors change, not every frame (a
+    frame's per-reflector Python loops grew with the scene, issue 42)."""
+
+    def __init__(self, reflectors: dict, groups: list[tuple] | None = None):
+        items = list(reflectors.values())
+        self.indices = np.fromiter(reflectors, dtype=np.int64, count=len(items))
+        self.planes, self.low, self.high = reflector_arrays(items)
+        self.transmits = np.array([r.transmission for r in items], dtype=bool)
+        self.groups = groups if groups is not None else [(index,) for index in reflectors]
+        self.group_of = {index: order for order, group in enumerate(self.groups) for index in group}
+
+    def tests(self, camera: Camera, view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(seen from behind, outside the view) per reflector, in the layout's order."""
+        if not len(self.indices):
+            return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
+        eye = np.asarray(camera.position, dtype=np.float64)
+        behind = (self.planes[:, :3] @ eye + self.planes[:, 3] <= 1e-6) & ~self.transmits
+        return behind, outside_frustum_boxes(self.low, self.high, view_proj)
+
+
+class PassOutcome:
+    """What the last frame's passes did: the reflectors drawn and, built only when asked (the
+    panel, the benches), why each other one got none and the report's lines."""
+
+    def __init__(self, order: list, names: list, reasons: dict | None = None, lines: dict | None = None,
+                 tests=None, skip_format: str = "{name}: no mirror pass ({reason})"):  # fmt: skip
+        self.order, self.names = order, names
+        self._reasons = reasons or {}  # index -> reason, where the tests' arrays do not say
+        self._lines = lines or {}  # index -> its pass lines (drawn reflectors)
+        self._tests = tests  # (indices, behind, outside) of the frame's tests, or None
+        self._skip_format = skip_format
+
+    @property
+    def skipped(self) -> dict[int, str]:
+        reasons = {}
+        if self._tests is not None:
+            indices, behind, outside = self._tests
+            for index, back, out in zip(indices.tolist(), behind.tolist(), outside.tolist(), strict=True):
+                if back or out:
+                    reasons[index] = "seen from behind" if back else "outside the view"
+        reasons.update(self._reasons)
+        return {index: reasons[index] for index in self.order if index in reasons and index not in self._lines}
+
+    @property
+    def report(self) -> list[str]:
+        skipped = self.skipped
+        lines = []
+        for index in self.order:
+            if index in self._lines:
+                lines += self._lines[index]
+            elif index in skipped:
+                lines.append(self._skip_format.format(name=self.names[index], reason=skipped[index]))
+        return lines
 
 
 def sub_rect_projection(rect, size) -> np.ndarray:
@@ -159,14 +211,13 @@ class MirrorPasses:
         self._key = None
         self._active: dict = {}  # index -> {kind: targets} drawn for _key
         self.generation = 0  # bumped when what the buffers show changes (material edits)
-        self.report: list[str] = []  # what the last frame's passes did, one line per pass or skip
+        self.outcome = PassOutcome([], [])  # the last frame's passes: report, skipped
         self.drawn: list[int] = []  # reflectors that got their passes in the last frame
-        self.skipped: dict[int, str] = {}  # reflector -> why it got none in the last frame
         self.occlusion_seconds = 0.0  # the last drawn frame's occlusion test (0: not run)
         self.scissored_pixels: dict[int, int] = {}  # reflector -> pixels the scissor saved, last frame
         self.coarse_levels: dict[int, int] = {}  # reflector -> times its buffers were halved, last frame
-        self._groups_key = None
-        self._groups: list[tuple] = []  # scenes/planar_mirror.py coplanar_groups of _groups_key's reflectors
+        self._layout_key = None
+        self._layout = ReflectorLayout({})  # of _layout_key's reflectors, with their plane groups
 
     def invalidate(self) -> None:
         """Draw the buffers again on the next frame even if nothing changed (benchmarks)."""
@@ -178,20 +229,35 @@ class MirrorPasses:
         self._spreads.clear()
         self._footprints.clear()
 
-    def plane_groups(self, reflectors: dict, share_planes: bool = True) -> list[tuple]:
-        """The reflectors that share a pass (scenes/planar_mirror.py coplanar_groups), made again
-        only when the reflectors change; each alone without ``share_planes``."""
+    @property
+    def report(self) -> list[str]:
+        """What the last frame's passes did, one line per pass or skipped reflector."""
+        return self.outcome.report
+
+    @property
+    def skipped(self) -> dict[int, str]:
+        """Reflector -> why it got no pass in the last frame."""
+        return self.outcome.skipped
+
+    def layout(self, reflectors: dict, share_planes: bool = True) -> ReflectorLayout:
+        """The reflectors' arrays and the groups that share a pass (scenes/planar_mirror.py
+        coplanar_groups; each alone without ``share_planes``), made again only when the
+        reflectors change."""
         from lobeview.scenes.planar_mirror import coplanar_groups
 
-        key = (tuple((index, id(reflector)) for index, reflector in sorted(reflectors.items())), share_planes)
-        if key != self._groups_key:
+        key = (tuple(reflectors), tuple(map(id, reflectors.values())), share_planes)
+        if key != self._layout_key:
+            groups = None
             if share_planes:  # the scene diagonal the analysis found the reflectors flat against
                 low, high = self.drawer.scene.bounds
-                self._groups = coplanar_groups(reflectors, float(np.linalg.norm(high - low)))
-            else:
-                self._groups = [(index,) for index in sorted(reflectors)]
-            self._groups_key = key
-        return self._groups
+                groups = coplanar_groups(reflectors, float(np.linalg.norm(high - low)))
+            self._layout = ReflectorLayout(dict(sorted(reflectors.items())), groups)
+            self._layout_key = key
+        return self._layout
+
+    def plane_groups(self, reflectors: dict, share_planes: bool = True) -> list[tuple]:
+        """The reflectors that share a pass (:meth:`layout`)."""
+        return self.layout(reflectors, share_planes).groups
 
     def lobe_spread(self, index: int, method: Method) -> tuple[float, float] | None:
         """How far the lobe-N lookups of reflector ``index`` reach (None: not lobe-N, unbounded)."""
@@ -242,9 +308,9 @@ class MirrorPasses:
         scale: float,
         specular: bool,
         occlusion: bool = True,
-        spreads: dict | None = None,
+        scissor_for: Method | None = None,
         lod_bias: float = 0.0,
-        footprints: dict | None = None,
+        sizes_for: Method | None = None,
         share_planes: bool = True,
         camera_depth=None,
     ) -> dict:
@@ -253,56 +319,72 @@ class MirrorPasses:
         stay the same (refinement passes). ``specular``: glossy objects seen in a mirror are shaded
         from their cube maps (lobe-3) instead of the thesis' diffuse-only mirror pass.
         ``occlusion``: a reflector that opaque objects hide at every pixel centre gets no pass.
-        ``spreads``: reflector -> how far its lobe-N lookups reach (materials/patterns.py
-        lobe_spread; None or absent: unbounded), with the lookups' ``lod_bias``: each pass is
-        scissored to the region they can read (scenes/planar_mirror.py mirror_scissor).
-        ``footprints``: reflector -> its lobe-N lookups' finest solid angle (finest_footprint; None
-        or absent: full size): its buffers are halved as often as those lookups allow
-        (scenes/planar_mirror.py mirror_buffer_levels). ``share_planes``: reflectors in one plane
+        ``scissor_for``: the frame's method; each pass is scissored to the region that its
+        reflectors' lookups in that method (or their override) can read, with the lookups'
+        ``lod_bias`` (lobe_spread, scenes/planar_mirror.py mirror_scissor; None: every pass whole).
+        ``sizes_for``: the frame's method; each pass's buffers are halved as often as its
+        reflectors' lookups in it allow (finest_footprint, scenes/planar_mirror.py
+        mirror_buffer_levels; None: full size). Both are found for the reflectors that get a pass
+        only. ``share_planes``: reflectors in one plane
         share its passes (scenes/planar_mirror.py coplanar_groups); False: a pass per reflector.
         ``camera_depth``: a framebuffer of ``frame_size`` holding the camera pass's depth pre-pass
         for ``camera``, which the occlusion test reads instead of drawing its own (None: it does)."""
-        from lobeview.scenes.planar_mirror import mirror_buffer_levels, mirror_camera, mirror_scissors
+        from lobeview.scenes.planar_mirror import (
+            mirror_buffer_levels,
+            mirror_camera,
+            mirror_scissors,
+            reflector_max_view_angles,
+        )
 
-        spreads = spreads or {}
-        footprints = footprints or {}
         width, height = frame_size
         view_proj = camera.view_projection(width / height)
         key = (
             tuple(camera.position), tuple(camera.target), tuple(camera.up), camera.fov_y, camera.near, camera.far,
             tuple(frame_size), scale, specular, tuple(sorted(reflectors)), self.generation, occlusion,
-            tuple(sorted(spreads.items())), lod_bias, tuple(sorted(footprints.items())), share_planes,
+            scissor_for, lod_bias, sizes_for, share_planes,
+            tuple(sorted(self.drawer.object_methods.items())) if scissor_for or sizes_for else (),
         )  # fmt: skip
         if key == self._key:
             return self._active
-        active, skipped, scissored, coarse = {}, {}, {}, {}
+        active, scissored, coarse = {}, {}, {}
         full_size = buffer_size(frame_size, scale)
         full_focal = full_size[1] / 2.0 / np.tan(np.radians(camera.fov_y) / 2.0)
         projection = perspective(camera.fov_y, width / height, camera.near, camera.far)
-        reasons = skip_reasons(reflectors, camera, view_proj)
-        candidates = [index for index, reason in reasons.items() if reason is None]
+        layout = self.layout(reflectors, share_planes)
+        behind, outside = layout.tests(camera, view_proj)
+        candidates = layout.indices[~(behind | outside)].tolist()
+        reasons = {}
         self.occlusion_seconds = 0.0
         if occlusion and candidates:
             t0 = time.perf_counter()
             # reading the queries waits for the GPU
             samples = self.drawer.visible_samples(view_proj, frame_size, candidates, camera_depth)
             self.occlusion_seconds = time.perf_counter() - t0
-            reasons.update({index: HIDDEN for index in candidates if samples[index] == 0})
-        lines: dict[int, list[str]] = {index: [] for index in reflectors}
-        for group in self.plane_groups(reflectors, share_planes):
-            drawn = [index for index in group if reasons[index] is None]
-            for index in group:
-                if reasons[index] is not None:
-                    lines[index].append(f"{names[index]}: no mirror pass ({reasons[index]})")
-                    skipped[index] = reasons[index]
-            if not drawn:
-                continue
+            reasons = {index: HIDDEN for index in candidates if samples[index] == 0}
+        passing = [index for index in candidates if index not in reasons]
+        # Only the groups with a member to draw are visited: the rest of the scene's reflectors
+        # cost nothing here (their reasons are the tests' arrays, read when a report is asked for).
+        lines: dict[int, list[str]] = {index: [] for index in passing}
+        for order in sorted({layout.group_of[index] for index in passing}):
+            group = layout.groups[order]
+            drawn = [index for index in group if index in lines]
             # One pass for the group's plane: at the finest size any of its drawn members' lookups
             # need, scissored to the union of their regions, without any of its members (they lie
             # in the pass's oblique near plane: nothing of them is in front of it). The buffers
             # are the group's, kept under its first index whichever members are drawn.
             first, owner = drawn[0], group[0]
-            level = min(mirror_buffer_levels(footprints.get(index), full_focal, lod_bias) for index in drawn)
+            spreads = [None] * len(drawn)
+            if scissor_for is not None:
+                spreads = [self.lobe_spread(i, self.drawer.object_method(i, scissor_for)) for i in drawn]
+            level = 0
+            if sizes_for is not None:
+                angles = reflector_max_view_angles([reflectors[i] for i in drawn], camera.position)
+                level = min(
+                    mirror_buffer_levels(
+                        self.finest_footprint(i, self.drawer.object_method(i, sizes_for), angle), full_focal, lod_bias
+                    )
+                    for i, angle in zip(drawn, angles, strict=True)
+                )
             size = buffer_size(frame_size, scale / 2.0**level)
             buffers = {}
             for kind in reflectors[owner].passes:
@@ -311,9 +393,7 @@ class MirrorPasses:
                     camera.view(), projection, reflectors[owner], size, see_through=kind != "mirror"
                 )
                 rect = union_rect(
-                    mirror_scissors(
-                        [reflectors[index] for index in drawn], buffer_camera, [spreads.get(i) for i in drawn], lod_bias
-                    )
+                    mirror_scissors([reflectors[index] for index in drawn], buffer_camera, spreads, lod_bias)
                 )
                 if rect is not None and rect[2] * rect[3] >= size[0] * size[1]:
                     rect = None  # the members' regions cover the whole buffer
@@ -348,10 +428,10 @@ class MirrorPasses:
             for index in drawn:
                 active[index] = buffers
                 coarse[index] = level
-        report = [line for index in reflectors for line in lines[index]]
         self.ctx.viewport = (0, 0, width, height)
-        self._key, self._active, self.report = key, active, report
-        self.drawn, self.skipped = list(active), skipped
+        self._key, self._active = key, active
+        self.outcome = PassOutcome(list(reflectors), names, reasons, lines, (layout.indices, behind, outside))
+        self.drawn = list(active)
         self.scissored_pixels = scissored  # reflector -> buffer pixels its passes did not shade
         self.coarse_levels = coarse
         return active
@@ -376,8 +456,10 @@ class MirrorPasses:
     def skip_all(self, reflectors, names: list, reason: str) -> None:
         """No pass for any reflector this frame (the prefiltered method reads cube maps); the
         next render draws the buffers again rather than trusting ones kept from before."""
-        self.report = [f"{names[index]}: {reason}" for index in reflectors]
-        self.drawn, self.skipped = [], {index: reason for index in reflectors}
+        self.outcome = PassOutcome(
+            list(reflectors), names, dict.fromkeys(reflectors, reason), None, None, "{name}: {reason}"
+        )
+        self.drawn = []
         self.scissored_pixels = {}
         self._key = None
 

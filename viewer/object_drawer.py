@@ -551,14 +551,17 @@ class ObjectDrawer:
         draw binds them; ``mirrors``: the reflectors' buffers, seen from ``eye``)."""
         view_proj_values, eye_values, lod_bias, sample_offset, seed = pass_values
         shading = self.shading
+        passed = set()  # programs given this pass's state: a program keeps its uniforms between groups
         for group in batch.groups:
             if not visible[group.objects].any():
                 continue
             program = self.program(method, True, group.parallax, mirrors is not None, records=True)
-            set_uniform(program, "u_view_projection", view_proj_values)
-            set_uniform(program, "u_camera_position", eye_values)
-            shading.set_pass_state(program, method, lod_bias, seed)
-            set_uniform(program, "u_sample_offset", int(sample_offset))
+            if id(program) not in passed:  # the groups' own state below never sets these
+                passed.add(id(program))
+                set_uniform(program, "u_view_projection", view_proj_values)
+                set_uniform(program, "u_camera_position", eye_values)
+                shading.set_pass_state(program, method, lod_bias, seed)
+                set_uniform(program, "u_sample_offset", int(sample_offset))
             if cull and group.single_sided:
                 self.ctx.enable(moderngl.CULL_FACE)  # glTF doubleSided false: back faces are not drawn
             else:

@@ -274,28 +274,15 @@ class SceneRenderer(RendererBase):
         (``mirror_scissor``; None: every pass whole). ``camera_depth``: the frame's depth
         pre-pass, drawn already, for the occlusion test to read."""
         settings = self._settings
-        names = self.object_names
-        reflectors = self.reflectors()
-        spreads = {}
-        if method is not None and settings.mirror_scissor:
-            spreads = {
-                index: self.mirror_passes.lobe_spread(index, self.drawer.object_method(index, method))
-                for index in reflectors
-            }
-        footprints = {}
-        if method is not None and settings.mirror_lobe_sizes:
-            from lobeview.scenes.planar_mirror import reflector_max_view_angles
-
-            angles = reflector_max_view_angles(list(reflectors.values()), camera.position)
-            footprints = {
-                index: self.mirror_passes.finest_footprint(index, self.drawer.object_method(index, method), angle)
-                for index, angle in zip(reflectors, angles, strict=True)
-            }
         bias = Method("lobe", 1).default_lod_bias(self.mip_filter) if lod_bias is None else float(lod_bias)
         occlusion = settings.mirror_occlusion and not jitters
+        # The lookups' reach and finest footprint are found inside, for the reflectors that get a
+        # pass (about one a frame): computed for every reflector of the scene each frame, they
+        # were a per-object Python loop in an otherwise per-pass frame (issue 42).
         return self.mirror_passes.render(
-            camera, self.size, reflectors, names, settings.mirror_scale, settings.mirror_specular, occlusion,
-            spreads, bias, footprints, settings.mirror_plane_sharing, camera_depth,
+            camera, self.size, self.reflectors(), self.object_names, settings.mirror_scale, settings.mirror_specular,
+            occlusion, method if settings.mirror_scissor else None, bias,
+            method if settings.mirror_lobe_sizes else None, settings.mirror_plane_sharing, camera_depth,
         )  # fmt: skip
 
     def invalidate_mirrors(self) -> None:
