@@ -48,6 +48,7 @@ class DriverWorkTimer:
 
         self.seconds = 0.0
         self.wait_seconds = 0.0
+        self.reads: list = []  # results of the reads (query samples, buffers), in order
         self._originals = []
         for class_name, method in DRIVER_WORK_CALLS:
             cls = getattr(moderngl, class_name)
@@ -65,14 +66,64 @@ class DriverWorkTimer:
         def timed(*args, **kwargs):
             t0 = time.perf_counter()
             try:
-                return original(*args, **kwargs)
+                result = original(*args, **kwargs)
             finally:
                 if wait:
                     self.wait_seconds += time.perf_counter() - t0
                 else:
                     self.seconds += time.perf_counter() - t0
+            if wait:  # what the frame read back, for DeviceIdle to give again
+                self.reads.append(result)
+            return result
 
         return timed
+
+    def remove(self) -> None:
+        for cls, method, original in self._originals:
+            setattr(cls, method, original)
+
+
+class DeviceIdle:
+    """While installed, the calls of DRIVER_WORK_CALLS do nothing and each read (a query's
+    samples, a buffer) returns what the measured flight read at that point of the same frame, so
+    a path flown again takes the same branches (the occlusion test's counts decide the mirror
+    passes) with no device work at all: the Python and state calls alone, without llvmpipe's
+    rasterising between them, whose cache traffic slows the Python in proportion to the scene's
+    pixels and vertices (a GPU's work leaves the CPU's caches alone). ``frames``: the reads of
+    each measured frame (DriverWorkTimer.reads per frame). ``missed``: reads asked for beyond the
+    recorded ones (then read for real), and frames whose draw calls or mirror passes differ from
+    the measured frame's (idle_walk): 0 when the flights took the same branches."""
+
+    def __init__(self, frames: list[list]):
+        import moderngl
+
+        self.frames = frames
+        self.missed = 0
+        self._pending: list = []
+        self._originals = []
+        for class_name, method in DRIVER_WORK_CALLS:
+            cls = getattr(moderngl, class_name)
+            self._originals.append((cls, method, getattr(cls, method)))
+            setattr(cls, method, lambda *args, **kwargs: None)
+        samples = moderngl.Query.samples
+        self._originals.append((moderngl.Query, "samples", samples))
+        moderngl.Query.samples = property(self._replayed(samples.fget))
+        read = moderngl.Buffer.read
+        self._originals.append((moderngl.Buffer, "read", read))
+        moderngl.Buffer.read = self._replayed(read)
+
+    def frame(self, k: int) -> None:
+        """The next reads are frame ``k``'s."""
+        self._pending = list(self.frames[k])
+
+    def _replayed(self, original):
+        def replayed(*args, **kwargs):
+            if self._pending:
+                return self._pending.pop(0)
+            self.missed += 1
+            return original(*args, **kwargs)
+
+        return replayed
 
     def remove(self) -> None:
         for cls, method, original in self._originals:
@@ -112,6 +163,7 @@ def walk(renderer, path, method, frames: int, timer: DriverWorkTimer) -> list[di
         ctx.finish()
         calls = renderer.drawer.draw_calls.total()
         driver_before, wait_before = timer.seconds, timer.wait_seconds
+        timer.reads = []
         t0 = time.perf_counter()
         renderer.draw_frame(camera, method)
         submitted = time.perf_counter()
@@ -132,9 +184,44 @@ def walk(renderer, path, method, frames: int, timer: DriverWorkTimer) -> list[di
                 "cull_passes": int(culls),
                 "objects_drawn": renderer.draw_counts.of("camera").drawn + renderer.draw_counts.of("mirror").drawn,
                 "mirror_passes": renderer.mirror_passes.drawn_passes,
+                "reads": timer.reads,
             }
         )
     return rows
+
+
+IDLE_FLIGHTS = 5  # device-idle flights of a path; a frame's fastest is kept (noise only adds)
+
+
+def idle_walk(renderer, path, method, rows: list[dict], flights: int = IDLE_FLIGHTS) -> int:
+    """Fly ``rows``' frames again ``flights`` times with the device idle (DeviceIdle): each row
+    gets ``idle_ms``, the fewest milliseconds ``draw_frame`` took then (a millisecond's work, on
+    a shared machine). Returns DeviceIdle.missed (0: the same branches)."""
+    from lobeview.viewer.camera import Camera
+
+    idle = DeviceIdle([row["reads"] for row in rows])
+    try:
+        for k, row in [(k, row) for _ in range(flights) for k, row in enumerate(rows)]:
+            camera = Camera.from_scene_camera(path.camera_at(row["t"]))
+            renderer.invalidate_mirrors()
+            idle.frame(k)
+            calls = renderer.drawer.draw_calls.total()
+            t0 = time.perf_counter()
+            renderer.draw_frame(camera, method)
+            row["idle_ms"] = min(row.get("idle_ms", np.inf), (time.perf_counter() - t0) * 1e3)
+            single, multi, culls = np.subtract(renderer.drawer.draw_calls.total(), calls)
+            same = (single, multi, culls, renderer.mirror_passes.drawn_passes) == (
+                row["single_draws"],
+                row["multi_draws"],
+                row["cull_passes"],
+                row["mirror_passes"],
+            )
+            idle.missed += 0 if same else 1  # a frame that took other branches counts as a miss
+    finally:
+        idle.remove()
+    for row in rows:
+        del row["reads"]  # buffers' bytes: not for the JSON
+    return idle.missed
 
 
 def measure(ctx, rooms: int, sizes, frames: int, cache: Path, method: str) -> list[dict]:
@@ -168,6 +255,8 @@ def measure(ctx, rooms: int, sizes, frames: int, cache: Path, method: str) -> li
                     rows = walk(renderer, path, Method.parse(method), frames, timer)
                 finally:
                     timer.remove()
+                missed = idle_walk(renderer, path, Method.parse(method), rows)
+                renderer.ctx.finish()
                 out.append(
                     {
                         "rooms": rooms,
@@ -176,6 +265,7 @@ def measure(ctx, rooms: int, sizes, frames: int, cache: Path, method: str) -> li
                         "indirect": indirect,
                         "shared_planes": shared,
                         "frames": rows,
+                        "idle_missed_reads": missed,
                     }
                 )
         finally:
@@ -195,6 +285,7 @@ def summary(run: dict) -> dict:
     return {
         "submit_ms": median("submit_ms"),
         "python_ms": median("python_ms"),
+        "idle_ms": median("idle_ms") if all("idle_ms" in r for r in rows) else float("nan"),
         "wait_ms": median("wait_ms") if all("wait_ms" in r for r in rows) else float("nan"),
         "finished_ms": median("finished_ms"),
         "single_draws": mean("single_draws"),
@@ -216,13 +307,18 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         "GPU's driver only queues it: the CPU cost a GPU does not take away) and in *occlusion wait*, "
         "*occlusion wait*: reading the mirror passes' occlusion test (its queries or its counts), which waits "
         "for the device to finish the test's depth pass (llvmpipe: its rasterising, on the CPU; a GPU: a round "
-        "trip that stalls the CPU), *finished*: until glFinish. "
+        "trip that stalls the CPU), *finished*: until glFinish, *device idle*: `draw_frame` when the same "
+        f"frames are flown again ({IDLE_FLIGHTS} times, each frame's fastest) with the draw, dispatch and "
+        "barrier calls doing nothing and every read-back "
+        "returning what the measured frame read (the same branches, no device work: the Python and state "
+        "calls without llvmpipe's rasterising in between, whose cache traffic slows the Python more the "
+        "bigger the scene; what a GPU leaves of the frame's CPU cost, its driver's queuing aside). "
         f"Medians over the frames; draw calls are means per frame. Whole run {elapsed / 60:.1f} min.",
         "",
-        "| rooms | objects | size | path | submit ms | Python + state ms | occlusion wait ms | finished ms "
-        "| per-object draws | multi-draws | culling passes | mirror passes | objects drawn (camera + mirror) "
-        "| submit vs per-object |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| rooms | objects | size | path | submit ms | Python + state ms | device idle ms | occlusion wait ms "
+        "| finished ms | per-object draws | multi-draws | culling passes | mirror passes "
+        "| objects drawn (camera + mirror) | submit vs per-object |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     base = {}
     for run in runs:
@@ -234,12 +330,12 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
         lines.append(
             f"| {run['rooms']} | {run['objects']} | {run['size'][0]}x{run['size'][1]} "
             f"| {path_label(run['indirect'], run.get('shared_planes', True))} | {s['submit_ms']:.1f} "
-            f"| {s['python_ms']:.1f} | {s['wait_ms']:.1f} | {s['finished_ms']:.1f} "
+            f"| {s['python_ms']:.1f} | {s['idle_ms']:.1f} | {s['wait_ms']:.1f} | {s['finished_ms']:.1f} "
             f"| {s['single_draws']:.0f} | {s['multi_draws']:.0f} | {s['cull_passes']:.0f} | {s['mirror_passes']:.1f} "
             f"| {s['objects_drawn']:.0f} "
             f"| {ratio:.2f} |"
         )
-    for column, label in (("submit_ms", "submit"), ("python_ms", "Python + state")):
+    for column, label in (("submit_ms", "submit"), ("python_ms", "Python + state"), ("idle_ms", "device idle")):
         by_size: dict = {}
         for run in runs:
             if run["indirect"] and run.get("shared_planes", True):
@@ -250,6 +346,12 @@ def markdown(runs: list[dict], device: str, method: str, frames: int, elapsed: f
             first = max(values[0][1], 1e-9)
             growth = ", ".join(f"{rooms} rooms {ms / first:.2f}x ({ms:.1f} ms)" for rooms, ms in values)
             lines.append(f"- {size[0]}x{size[1]}: {growth}")
+    missed = sum(run.get("idle_missed_reads", 0) for run in runs)
+    lines += [
+        "",
+        "Device-idle frames that read back more than the measured frame or drew other calls or mirror passes "
+        f"(0: the same branches): {missed}.",
+    ]
     return "\n".join(lines) + "\n"
 
 
@@ -264,10 +366,16 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--frames", type=int, default=16, help="frames along each path (default 16)")
     p.add_argument("--method", default="lobe-7", help="the frame's method (default lobe-7)")
     p.add_argument("--cache", default=None, help="cache folder (default: lobeview's)")
-    p.add_argument("--out", default=None, help="Markdown report (default bench/results/draw-cost-STAMP.md, + .json)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="Markdown report, or a folder for draw-cost-STAMP.md in it (default bench/results; + .json)",
+    )
     args = p.parse_args(argv)
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    out = Path(args.out) if args.out else Path(__file__).parent / "results" / f"draw-cost-{stamp}.md"
+    out = Path(args.out) if args.out else Path(__file__).parent / "results"
+    if out.is_dir() or not out.suffix:  # a folder: the stamped name in it
+        out = out / f"draw-cost-{stamp}.md"
     sizes = [parse_size(s) for s in args.sizes]
     ctx = create_headless_context()
     device = renderer_description(ctx)

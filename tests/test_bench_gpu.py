@@ -36,6 +36,8 @@ def test_the_gpu_bench_writes_every_table_at_small_sizes(tmp_path):
     # one apartment room: per-object, multi-draw with a pass per reflector, multi-draw (planes shared)
     assert draw_cost.count("| 1 | ") == 3, draw_cost
     assert "| multi-draw, a pass per reflector |" in draw_cost and "| multi-draw |" in draw_cost, draw_cost
+    # the device-idle flights replayed the measured frames' branches (read-backs, draws, passes)
+    assert re.search(r"\(0: the same branches\): 0\.$", draw_cost, re.M), draw_cost
 
 
 def test_the_draw_cost_timer_counts_query_waits_apart_and_restores_moderngl():
@@ -63,3 +65,44 @@ def test_the_draw_cost_timer_counts_query_waits_apart_and_restores_moderngl():
         timer.remove()
         ctx.release()
     assert moderngl.Query.__dict__["samples"] is original and moderngl.Buffer.read is original_read
+
+
+def test_device_idle_replays_the_reads_does_no_device_work_and_restores_moderngl():
+    """bench/draw_cost.py DeviceIdle: draws and dispatches do nothing, a read returns what the
+    measured frame read there (then, past the record, the real contents, counted as a miss), and
+    removing it puts moderngl back."""
+    import moderngl
+    import numpy as np
+
+    from lobeview.bench.draw_cost import DeviceIdle
+    from lobeview.viewer.context import create_headless_context
+
+    originals = {name: getattr(moderngl.VertexArray, name) for name in ("render", "render_indirect")}
+    original_read = moderngl.Buffer.read
+    ctx = create_headless_context()
+    try:
+        fbo = ctx.simple_framebuffer((4, 4), components=4, dtype="f4")
+        fbo.use()
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        program = ctx.program(
+            vertex_shader="#version 450\nin vec2 p; void main() { gl_Position = vec4(p, 0.0, 1.0); }",
+            fragment_shader="#version 450\nout vec4 c; void main() { c = vec4(1.0); }",
+        )
+        triangle = ctx.buffer(np.array([-3, -1, 3, -1, 0, 3], dtype="f4").tobytes())
+        vao = ctx.vertex_array(program, [(triangle, "2f", "p")])
+        buffer = ctx.buffer(b"real")
+        idle = DeviceIdle([[b"kept"]])
+        try:
+            idle.frame(0)
+            vao.render()  # nothing drawn
+            assert buffer.read() == b"kept" and idle.missed == 0
+            assert buffer.read() == b"real" and idle.missed == 1  # past the record
+        finally:
+            idle.remove()
+        assert not np.frombuffer(fbo.read(components=4, dtype="f4"), "f4").any()
+        vao.render()  # drawn again once removed
+        assert np.frombuffer(fbo.read(components=4, dtype="f4"), "f4").min() == 1.0
+    finally:
+        ctx.release()
+    assert all(getattr(moderngl.VertexArray, name) is f for name, f in originals.items())
+    assert moderngl.Buffer.read is original_read
