@@ -271,9 +271,11 @@ class LobeBatches:
         (lobe-N+norm+fit): (the blur stack the object reads, its owner's, or None; whether it
         reads one once built). An object's record is made again only when ``key[0]``, its cube,
         its layer or its stack's changed. ``mirror_shares`` (reflectors shaded from their mirror
-        buffers): object index -> what its draw binds beyond its record (the pass it shares, its
-        plane's side), which splits the groups; no cube map is read (none placed in the arrays,
-        the object may have none), and the batch does not become ``current``."""
+        buffers): the members drawn this pass, object index -> what its draw binds beyond its
+        record (the pass it shares, its plane's side), which splits the groups; the other members
+        keep their records but join no group (a regroup costs the drawn reflectors, not all of
+        them); no cube map is read (none placed in the arrays, the object may have none), and the
+        batch does not become ``current``."""
         shares_key = None if mirror_shares is None else tuple(mirror_shares.items())
         batch = self._methods.pop(method, None)
         if batch is not None and batch.key == key:
@@ -354,11 +356,15 @@ class LobeBatches:
 
     def _group(self, records: dict, objects: list, members: np.ndarray, mirror_shares) -> tuple[list, object, int]:
         """(groups, command buffer, command count) of ``members`` from their ``records``
-        (index -> _ObjectRecord), split further by ``mirror_shares`` where given."""
+        (index -> _ObjectRecord); where ``mirror_shares`` is given, of its objects (the drawn
+        members), split further by their shares."""
         grouped: dict[tuple, list] = {}
-        for index in np.flatnonzero(members).tolist():
-            share = None if mirror_shares is None else mirror_shares[index]  # this frame's
-            grouped.setdefault((*records[index].group_key, share), []).append(objects[index])
+        if mirror_shares is None:
+            for index in np.flatnonzero(members).tolist():
+                grouped.setdefault((*records[index].group_key, None), []).append(objects[index])
+        else:  # this pass's drawn reflectors, by the pass they share and their plane's side
+            for index, share in sorted(mirror_shares.items()):
+                grouped.setdefault((*records[index].group_key, share), []).append(objects[index])
         groups, first = [], 0
         for (parallax, face_size, stack_array, _, one_sided, _), group in grouped.items():
             indices = np.array([obj.index for obj in group], dtype=np.int64)

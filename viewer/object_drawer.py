@@ -594,15 +594,15 @@ class ObjectDrawer:
             return handled
         batchable, _, single_sided = self._batch_masks()
         # Members: every batchable reflector (those without buffers this pass join no drawn group,
-        # so their records outlive a frame in which they are hidden); groups: the pass they share
-        # (named by its first member) and the plane's side.
+        # so their records outlive a frame in which they are hidden); groups: the drawn ones, by the
+        # pass they share (named by its first member) and the plane's side.
         members = np.zeros(len(self.objects), dtype=bool)
         members[list(self.analysis.reflectors)] = True
         members &= batchable
         self._drop_overridden(members, method)
-        shares, first_of_pass = dict.fromkeys(np.flatnonzero(members).tolist()), {}
+        shares, first_of_pass = {}, {}
         for index in sorted(mirrors):
-            if index in shares and index not in excluded:
+            if members[index] and index not in excluded:
                 first = first_of_pass.setdefault(tuple(id(t) for t in mirrors[index].values()), index)
                 shares[index] = (first, mirror_front(self.analysis.objects[index].reflector, eye))
                 handled[index] = True
