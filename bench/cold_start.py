@@ -160,12 +160,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenes", nargs="+", default=list(DEFAULT_SCENES), help="scenes (default builtin:apartment)")
     p.add_argument("--timeout", type=float, default=900.0, help="seconds to wait for the finished state (900)")
     p.add_argument("--size", type=parse_size, default=(1280, 800), help="window size WxH (default 1280x800)")
-    p.add_argument("--out", help="Markdown report (default bench/results/cold-start-STAMP.md, + .json)")
+    p.add_argument("--out", help="Markdown report or a folder for cold-start-STAMP.md (default bench/results; + .json)")
     args = p.parse_args(argv)
     size = args.size
     server, display = x_display(size)
     stamp = time.strftime("%Y%m%d-%H%M%S")
-    out = Path(args.out) if args.out else Path(__file__).parent / "results" / f"cold-start-{stamp}.md"
+    out = Path(args.out) if args.out else Path(__file__).parent / "results"
+    if out.is_dir() or not out.suffix:  # a folder: the stamped name in it
+        out = out / f"cold-start-{stamp}.md"
     results = []
     try:
         with tempfile.TemporaryDirectory() as tmp:
