@@ -36,7 +36,39 @@ DRIVER_WORK_CALLS = (("VertexArray", "render"), ("VertexArray", "render_indirect
                      ("Context", "memory_barrier"))  # fmt: skip
 
 
-class DriverWorkTimer:
+class ModernglPatches:
+    """Replaces moderngl's wrappers of DRIVER_WORK_CALLS, of reading a query's samples and of
+    reading a buffer while installed; ``remove`` puts them back. ``work(original)`` and
+    ``read(original)`` make the replacements."""
+
+    def __init__(self):
+        import moderngl
+
+        self._originals = []
+        for class_name, method in DRIVER_WORK_CALLS:
+            cls = getattr(moderngl, class_name)
+            original = getattr(cls, method)
+            self._originals.append((cls, method, original))
+            setattr(cls, method, self.work(original))
+        samples = moderngl.Query.samples  # a property
+        self._originals.append((moderngl.Query, "samples", samples))
+        moderngl.Query.samples = property(self.read(samples.fget))
+        read = moderngl.Buffer.read  # the counted occlusion test's read-back
+        self._originals.append((moderngl.Buffer, "read", read))
+        moderngl.Buffer.read = self.read(read)
+
+    def work(self, original):
+        raise NotImplementedError
+
+    def read(self, original):
+        raise NotImplementedError
+
+    def remove(self) -> None:
+        for cls, method, original in self._originals:
+            setattr(cls, method, original)
+
+
+class DriverWorkTimer(ModernglPatches):
     """Seconds spent inside DRIVER_WORK_CALLS while installed (moderngl's Python wrappers timed),
     and apart from them (``wait_seconds``) in reading query results and buffers: the mirror
     passes' occlusion test waits there for the device to finish its depth pass and its queries or
@@ -44,23 +76,16 @@ class DriverWorkTimer:
     cores; on a GPU: the round trip, a sync point that keeps CPU and GPU from overlapping)."""
 
     def __init__(self):
-        import moderngl
-
         self.seconds = 0.0
         self.wait_seconds = 0.0
         self.reads: list = []  # results of the reads (query samples, buffers), in order
-        self._originals = []
-        for class_name, method in DRIVER_WORK_CALLS:
-            cls = getattr(moderngl, class_name)
-            original = getattr(cls, method)
-            self._originals.append((cls, method, original))
-            setattr(cls, method, self._timed(original))
-        samples = moderngl.Query.samples  # a property
-        self._originals.append((moderngl.Query, "samples", samples))
-        moderngl.Query.samples = property(self._timed(samples.fget, wait=True))
-        read = moderngl.Buffer.read  # the counted occlusion test's read-back
-        self._originals.append((moderngl.Buffer, "read", read))
-        moderngl.Buffer.read = self._timed(read, wait=True)
+        super().__init__()
+
+    def work(self, original):
+        return self._timed(original)
+
+    def read(self, original):
+        return self._timed(original, wait=True)
 
     def _timed(self, original, wait: bool = False):
         def timed(*args, **kwargs):
@@ -78,12 +103,8 @@ class DriverWorkTimer:
 
         return timed
 
-    def remove(self) -> None:
-        for cls, method, original in self._originals:
-            setattr(cls, method, original)
 
-
-class DeviceIdle:
+class DeviceIdle(ModernglPatches):
     """While installed, the calls of DRIVER_WORK_CALLS do nothing and each read (a query's
     samples, a buffer) returns what the measured flight read at that point of the same frame, so
     a path flown again takes the same branches (the occlusion test's counts decide the mirror
@@ -95,28 +116,19 @@ class DeviceIdle:
     the measured frame's (idle_walk): 0 when the flights took the same branches."""
 
     def __init__(self, frames: list[list]):
-        import moderngl
-
         self.frames = frames
         self.missed = 0
         self._pending: list = []
-        self._originals = []
-        for class_name, method in DRIVER_WORK_CALLS:
-            cls = getattr(moderngl, class_name)
-            self._originals.append((cls, method, getattr(cls, method)))
-            setattr(cls, method, lambda *args, **kwargs: None)
-        samples = moderngl.Query.samples
-        self._originals.append((moderngl.Query, "samples", samples))
-        moderngl.Query.samples = property(self._replayed(samples.fget))
-        read = moderngl.Buffer.read
-        self._originals.append((moderngl.Buffer, "read", read))
-        moderngl.Buffer.read = self._replayed(read)
+        super().__init__()
+
+    def work(self, original):
+        return lambda *args, **kwargs: None
 
     def frame(self, k: int) -> None:
         """The next reads are frame ``k``'s."""
         self._pending = list(self.frames[k])
 
-    def _replayed(self, original):
+    def read(self, original):
         def replayed(*args, **kwargs):
             if self._pending:
                 return self._pending.pop(0)
@@ -124,10 +136,6 @@ class DeviceIdle:
             return original(*args, **kwargs)
 
         return replayed
-
-    def remove(self) -> None:
-        for cls, method, original in self._originals:
-            setattr(cls, method, original)
 
 
 DEFAULT_SIZES = ("64x40", "160x100")

@@ -165,7 +165,7 @@ def reflector_decision(mesh, lobes, scene_diagonal: float, mode="auto") -> tuple
 
 def reflector_arrays(reflectors: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(planes (n, 4), box minima (n, 3), box maxima (n, 3)) of ``reflectors``: what the frame's
-    per-reflector tests (viewer/mirror_pass.py skip_reasons, reflector_max_view_angles,
+    per-reflector tests (viewer/mirror_pass.py ReflectorLayout, reflector_max_view_angles,
     mirror_scissors) take in one numpy pass."""
     planes = np.array([reflector.plane for reflector in reflectors], dtype=np.float64).reshape(-1, 4)
     low = np.array([reflector.box_min for reflector in reflectors], dtype=np.float64).reshape(-1, 3)

@@ -360,11 +360,11 @@ class LobeBatches:
         members), split further by their shares."""
         grouped: dict[tuple, list] = {}
         if mirror_shares is None:
-            for index in np.flatnonzero(members).tolist():
-                grouped.setdefault((*records[index].group_key, None), []).append(objects[index])
+            shared = [(index, None) for index in np.flatnonzero(members).tolist()]
         else:  # this pass's drawn reflectors, by the pass they share and their plane's side
-            for index, share in sorted(mirror_shares.items()):
-                grouped.setdefault((*records[index].group_key, share), []).append(objects[index])
+            shared = sorted(mirror_shares.items())
+        for index, share in shared:
+            grouped.setdefault((*records[index].group_key, share), []).append(objects[index])
         groups, first = [], 0
         for (parallax, face_size, stack_array, _, one_sided, _), group in grouped.items():
             indices = np.array([obj.index for obj in group], dtype=np.int64)

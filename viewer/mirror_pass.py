@@ -80,18 +80,6 @@ class MirrorTargets:
             item.release()
 
 
-def skip_reasons(reflectors: dict, camera: Camera, view_proj: np.ndarray) -> dict:
-    """Why each reflector needs no buffers this frame (index -> reason, None: it needs them): the
-    camera is behind its plane (a reflector that transmits is seen from both sides), or its
-    bounding box lies outside the view frustum. One numpy pass for all of them."""
-    layout = ReflectorLayout(reflectors)
-    behind, outside = layout.tests(camera, view_proj)
-    return {
-        index: "seen from behind" if back else ("outside the view" if out else None)
-        for index, back, out in zip(layout.indices.tolist(), behind, outside, strict=True)
-    }
-
-
 class ReflectorLayout:
     """The reflectors' arrays for the frame's tests in one numpy pass (planes, boxes, which
     transmit), and their plane groups: made when the reflectors change, not every frame (a
@@ -254,10 +242,6 @@ class MirrorPasses:
             self._layout = ReflectorLayout(dict(sorted(reflectors.items())), groups)
             self._layout_key = key
         return self._layout
-
-    def plane_groups(self, reflectors: dict, share_planes: bool = True) -> list[tuple]:
-        """The reflectors that share a pass (:meth:`layout`)."""
-        return self.layout(reflectors, share_planes).groups
 
     def lobe_spread(self, index: int, method: Method) -> tuple[float, float] | None:
         """How far the lobe-N lookups of reflector ``index`` reach (None: not lobe-N, unbounded)."""
