@@ -40,7 +40,7 @@ from .split_sum_levels import (  # noqa: F401  (re-exported: the levels belong t
     split_sum_alpha,
     split_sum_lod,
 )
-from .split_sum_oblique import MIN_OBLIQUE_XY, oblique_alpha_ratio
+from .split_sum_oblique import MIN_OBLIQUE_XY, in_plane_angles, oblique_alpha_ratio, uses_in_plane_line
 
 # The prefilter quadrature's cells (RadialProfile.cells): the centre cap's diameter is the
 # kernel's spread / CELL_CORE_DIVISIONS, rings beyond it grow by CELL_GROWTH of their angle, and
@@ -370,13 +370,16 @@ def split_sum_line_quantiles(kind: str) -> np.ndarray:
     return erfinv(2.0 * u - 1.0)
 
 
-def split_sum_line(wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float) -> tuple[np.ndarray, np.ndarray, float]:
+def split_sum_line(
+    wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float, in_plane: bool = True
+) -> tuple[np.ndarray, np.ndarray, float]:
     """The split-sum lookups of a lobe in its local frame: (mirror directions (k, 3) before the
     lean, weights (k,), the alpha whose map level they read). An anisotropic lobe: the quantile
     line above at min(alpha_x, alpha_y) along its wider axis; an isotropic lobe seen off the
     normal: the line along the plane of incidence at alpha rho(alpha, cos theta_o) with the slope
-    scale sqrt(alpha^2 - alpha'^2) (split_sum_oblique.py); at normal incidence one lookup at
-    sqrt(alpha_x alpha_y). Each node's slope s along the line's axis e is the half vector
+    scale sqrt(alpha^2 - alpha'^2) (split_sum_oblique.py), or for Beckmann (``in_plane``) at the
+    lobe's own in-plane quantiles (split_sum_oblique.py in_plane_angles, not leant afterwards); at
+    normal incidence one lookup at sqrt(alpha_x alpha_y). Each node's slope s along the line's axis e is the half vector
     normalize(-s e, 1), reflected; nodes below the surface are left out (all of them kept if none
     is above)."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
@@ -388,6 +391,11 @@ def split_sum_line(wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float) ->
     elif along_view > MIN_OBLIQUE_XY:
         alpha = float(np.sqrt(alpha_x * alpha_y))
         level_alpha = alpha * oblique_alpha_ratio(kind, alpha, wo[2])
+        if in_plane and uses_in_plane_line(kind, wo):
+            theta = in_plane_angles(kind, alpha, wo[2])
+            plane = np.array([wo[0], wo[1], 0.0]) / along_view
+            r = np.sin(theta)[:, None] * plane + np.cos(theta)[:, None] * np.array([0.0, 0.0, 1.0])
+            return r, split_sum_line_weights(), float(level_alpha)
         spread = np.sqrt(max(alpha * alpha - level_alpha * level_alpha, 0.0))
         major = wo[:2] / along_view
     else:
@@ -412,7 +420,13 @@ def split_sum_direction(normal: np.ndarray, mirror: np.ndarray, t) -> np.ndarray
 
 
 def split_sum_lookups(
-    wo: np.ndarray, frame: np.ndarray, kind: str, alpha_x: float, alpha_y: float, transmission: bool = False
+    wo: np.ndarray,
+    frame: np.ndarray,
+    kind: str,
+    alpha_x: float,
+    alpha_y: float,
+    transmission: bool = False,
+    in_plane: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """The numpy twin of shaders/prefiltered.glsl's split-sum lookups for one pixel: (world
     directions (k, 3), weights (k,), the alpha whose map level they read). :func:`split_sum_line`'s
@@ -421,12 +435,14 @@ def split_sum_lookups(
     normal (the transmission lobe's -normal) by :func:`split_sum_lean`: at alpha_min on an
     anisotropic lobe's line, at the lobe's own sqrt(alpha_x alpha_y) otherwise (the oblique line's
     narrower level alpha lost the rough lobes' off-specular shift, split_sum_oblique.py)."""
-    local, weights, level_alpha = split_sum_line(wo, kind, alpha_x, alpha_y)
+    local, weights, level_alpha = split_sum_line(wo, kind, alpha_x, alpha_y, in_plane)
     lean_alpha = level_alpha if split_sum_is_line(alpha_x, alpha_y) else float(np.sqrt(alpha_x * alpha_y))
+    in_plane = in_plane and not split_sum_is_line(alpha_x, alpha_y) and uses_in_plane_line(kind, np.ravel(wo))
+    lean = 1.0 if in_plane else split_sum_lean(lean_alpha)
     if transmission:
         local = local * np.array([1.0, 1.0, -1.0])
     normal = -frame[:, 2] if transmission else frame[:, 2]
-    world = split_sum_direction(normal, local @ np.asarray(frame).T, split_sum_lean(lean_alpha))
+    world = split_sum_direction(normal, local @ np.asarray(frame).T, lean)
     return world, weights, level_alpha
 
 

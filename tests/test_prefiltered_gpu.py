@@ -177,6 +177,33 @@ def test_split_sum_render_of_wide_lobes_reads_the_dfg_nodes(gl, kind, alpha):
         assert np.allclose(pixel, expected, rtol=0.01, atol=1e-4), (wo[2], pixel, expected)
 
 
+def test_beckmann_split_sum_reads_its_lobes_in_plane_quantiles(gl):
+    """Beckmann 0.3 seen off the normal: the render is the twin's in-plane quantile line
+    (split_sum_oblique.py IN_PLANE_OFFSETS, not leant) within 1 %, where the symmetric line and
+    lean it replaced differ by more on some pixels."""
+    renderer, lookup = gl
+    alpha = 0.3
+    desc = {"model": "microfacet", "distribution": "beckmann", "alpha_u": alpha, "alpha_v": alpha,
+            "fresnel": {"type": "none"}, "scale": 1.0}  # fmt: skip
+    result = renderer.render(CAMERA, build_bsdf(desc), "prefiltered", background=False)
+    assert not result.invalid.any()
+    cube = renderer.cubes.prefiltered_maps().split_sum("beckmann")
+    table = pf.dfg_table("beckmann")
+    lines_differ = 0
+    for y, x in _pixels(result, count=16):
+        frame, wo = _frame(result, y, x)
+        albedo = pf.dfg_lookup(table, wo[2], np.sqrt(alpha)).sum()
+        expected = {}
+        for in_plane in (True, False):
+            dirs, weights, level_alpha = pf.split_sum_lookups(wo, frame, "beckmann", alpha, alpha, in_plane=in_plane)
+            lod = float(pf.split_sum_lod(level_alpha, kind="beckmann"))
+            expected[in_plane] = weights @ lookup(cube, dirs, lod) * albedo
+        pixel = result.radiance[y, x]
+        assert np.allclose(pixel, expected[True], rtol=0.01, atol=1e-4), (wo[2], pixel, expected)
+        lines_differ += not np.allclose(pixel, expected[False], rtol=0.01, atol=1e-4)
+    assert lines_differ >= 4, lines_differ
+
+
 def test_anisotropic_split_sum_render_matches_numpy_twin(gl):
     """An anisotropic GGX conductor under `prefiltered`: the mean of split_sum_line's lookups (the
     narrower alpha's level, slopes along the wider axis, each leant by split_sum_lean), times the
