@@ -64,7 +64,12 @@ MIN_OBLIQUE_XY = 1e-4  # |wo.xy| below this: normal incidence, one lookup (no pl
 def oblique_alpha_ratio(kind: str, alpha: float, cos_theta_o: float) -> float:
     """rho: bilinear in OBLIQUE_RATIO, alpha clamped to [0.1, 1] (below 0.1 the 0.1 row, about
     cos theta_o), cos theta_o to [0.1, 1] (shaders/prefiltered.glsl oblique_ratio)."""
-    table = np.asarray(OBLIQUE_RATIO[kind])
+    return float(_grid_bilinear(np.asarray(OBLIQUE_RATIO[kind]), alpha, cos_theta_o))
+
+
+def _grid_bilinear(table: np.ndarray, alpha: float, cos_theta_o: float) -> np.ndarray:
+    """``table`` (OBLIQUE_ALPHAS, OBLIQUE_COSINES, ...) bilinear at (alpha, cos theta_o), both
+    clamped to the grid (shaders/prefiltered.glsl oblique_cell)."""
     alphas = np.asarray(OBLIQUE_ALPHAS)
     a = float(np.clip(alpha, alphas[0], alphas[-1]))
     i = min(int(np.searchsorted(alphas, a, side="right")) - 1, len(alphas) - 2)
@@ -74,7 +79,7 @@ def oblique_alpha_ratio(kind: str, alpha: float, cos_theta_o: float) -> float:
     tc = c - j
     low = (1.0 - tc) * table[i, j] + tc * table[i, j + 1]
     high = (1.0 - tc) * table[i + 1, j] + tc * table[i + 1, j + 1]
-    return float((1.0 - ta) * low + ta * high)
+    return (1.0 - ta) * low + ta * high
 
 
 def _hemisphere(points: int) -> np.ndarray:
@@ -234,14 +239,5 @@ def in_plane_angles(kind: str, alpha: float, cos_theta_o: float) -> np.ndarray:
     IN_PLANE_OFFSETS, alpha and cos theta_o clamped to the grid as oblique_alpha_ratio's
     (shaders/prefiltered.glsl in_plane_angle)."""
     table = np.asarray(IN_PLANE_OFFSETS[kind]).reshape(len(OBLIQUE_ALPHAS), len(OBLIQUE_COSINES), -1)
-    alphas = np.asarray(OBLIQUE_ALPHAS)
-    a = float(np.clip(alpha, alphas[0], alphas[-1]))
-    i = min(int(np.searchsorted(alphas, a, side="right")) - 1, len(alphas) - 2)
-    ta = (a - alphas[i]) / (alphas[i + 1] - alphas[i])
-    c = float(np.clip(cos_theta_o, 0.1, 1.0)) * 10.0 - 1.0
-    j = min(int(np.floor(c)), len(OBLIQUE_COSINES) - 2)
-    tc = c - j
-    low = (1.0 - tc) * table[i, j] + tc * table[i, j + 1]
-    high = (1.0 - tc) * table[i + 1, j] + tc * table[i + 1, j + 1]
     theta_o = float(np.arccos(np.clip(cos_theta_o, -1.0, 1.0)))
-    return -theta_o + min(float(alpha), float(alphas[-1])) * ((1.0 - ta) * low + ta * high)
+    return -theta_o + min(float(alpha), OBLIQUE_ALPHAS[-1]) * _grid_bilinear(table, alpha, cos_theta_o)
