@@ -2,8 +2,8 @@
 
 No method wins everywhere: against Mitsuba (bench/results/mitsuba-*.md) prefiltered-rsibr is the
 most accurate on rough GGX lobes, lobe-N on near-mirrors, and plain prefiltered reads one map
-level (along a line of 11 lookups off the normal since the twenty-fifth session: the table's
-prefiltered column, measured before, overstates its error; bench/method_table.py remeasures). The
+level (along a line of 11 lookups off the normal, Beckmann's at its lobe's own in-plane quantiles;
+the table's rows were measured again after each change, bench/results/method-table-*.md). The
 rule reads a measured table (``method_errors.json`` beside this file, written by
 bench/method_table.py): the relative RMSE of each candidate method against lobeview's converged
 reference on the preview sphere, per lobe shape (GGX or Beckmann, the narrower roughness
