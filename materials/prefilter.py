@@ -379,9 +379,9 @@ def split_sum_line(
     normal: the line along the plane of incidence at alpha rho(alpha, cos theta_o) with the slope
     scale sqrt(alpha^2 - alpha'^2) (split_sum_oblique.py), or for Beckmann (``in_plane``) at the
     lobe's own in-plane quantiles (split_sum_oblique.py in_plane_angles, not leant afterwards); at
-    normal incidence one lookup at sqrt(alpha_x alpha_y). Each node's slope s along the line's axis e is the half vector
-    normalize(-s e, 1), reflected; nodes below the surface are left out (all of them kept if none
-    is above)."""
+    normal incidence one lookup at sqrt(alpha_x alpha_y). Each node's slope s along the line's
+    axis e is the half vector normalize(-s e, 1), reflected; nodes below the surface are left out
+    (all of them kept if none is above)."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
     a_min, a_max = min(alpha_x, alpha_y), max(alpha_x, alpha_y)
     along_view = float(np.hypot(wo[0], wo[1]))
