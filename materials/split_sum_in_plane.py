@@ -44,7 +44,12 @@ def in_plane_node_angles(kind: str, alpha: float, cos_theta_o: float, points: in
                          kernel_points: int = IN_PLANE_KERNEL_POINTS) -> np.ndarray:  # fmt: skip
     """The line's node angles theta_k from the normal within the plane of incidence (positive
     towards wo = (sin theta_o, 0, cos theta_o)) of an isotropic lobe: the lobe's f cos quantiles
-    shrunk by the level kernel's (alpha rho) own, as the module's comment above says."""
+    shrunk by the level kernel's (alpha rho) own, as split_sum_oblique.py's comment says. At
+    normal incidence all of them at the normal: the lobe is round there and a line would pick a
+    direction (the plane of incidence turns round the centre of a sphere: a pinwheel at Beckmann
+    0.8), so the line closes towards cos theta_o = 1 as the symmetric line's does."""
+    if cos_theta_o >= 1.0:
+        return np.zeros(len(SPLIT_SUM_LINE_EDGES) - 1)
     from .conductor import MicrofacetReflection
     from .fresnel import Fresnel
 
