@@ -40,6 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from lobeview.materials import prefilter as pf
+from lobeview.materials.split_sum_in_plane import LINE_QUANTILES, weighted_quantiles
 from lobeview.materials.split_sum_levels import SPLIT_SUM_LEVELS, split_sum_alpha, split_sum_lod
 from lobeview.materials.split_sum_oblique import oblique_alpha_ratio
 
@@ -48,7 +49,6 @@ CASES = tuple(f"{kind}:{alpha}" for kind in ("beckmann", "ggx") for alpha in (0.
 #: symmetric line and lean (GGX's, and Beckmann's before), `prefiltered` as built (Beckmann: the
 #: in-plane table), the in-plane quantile line from each pixel's own quadrature (untabulated)
 WAYS = ("symmetric line", "prefiltered", "in-plane, exact")
-LINE_QUANTILES = 0.5 * (np.asarray(pf.SPLIT_SUM_LINE_EDGES)[:-1] + np.asarray(pf.SPLIT_SUM_LINE_EDGES)[1:])
 
 
 def light_texels(env: str, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -122,7 +122,8 @@ class SplitSumTwin:
         if key not in self._iqr:
             z = self.directions[:, 2]
             weights = self.profile(kind, alpha).of_cosine(z) * self.omega
-            self._iqr[key] = _iqr(np.arcsin(np.clip(self.directions[:, 1], -1.0, 1.0)), weights)
+            q1, q3 = weighted_quantiles(np.arcsin(np.clip(self.directions[:, 1], -1.0, 1.0)), weights, [0.25, 0.75])
+            self._iqr[key] = float(q3 - q1)
         return self._iqr[key]
 
     def exact_in_plane(self, kind, alpha, wo, frame, lobe_weights, local) -> float:
@@ -131,25 +132,13 @@ class SplitSumTwin:
         plane = np.array([wo[0], wo[1], 0.0]) / along if along > pf.MIN_OBLIQUE_XY else np.array([1.0, 0.0, 0.0])
         level_alpha = alpha * oblique_alpha_ratio(kind, alpha, wo[2])
         angle = np.arctan2(local @ plane, local[:, 2])
-        quantiles = _quantiles(angle, lobe_weights, np.concatenate([LINE_QUANTILES, [0.25, 0.5, 0.75]]))
+        quantiles = weighted_quantiles(angle, lobe_weights, np.concatenate([LINE_QUANTILES, [0.25, 0.5, 0.75]]))
         nodes, (q1, median, q3) = quantiles[:-3], quantiles[-3:]
         shrink = np.sqrt(max(1.0 - (self.kernel_iqr(kind, level_alpha) / max(q3 - q1, 1e-9)) ** 2, 0.0))
         theta = median + shrink * (nodes - median)
         directions = (np.sin(theta)[:, None] * plane + np.cos(theta)[:, None] * np.array([0.0, 0.0, 1.0])) @ frame.T
         weights = pf.split_sum_line_weights()
         return sum(w * self.read(kind, level_alpha, d) for d, w in zip(directions, weights, strict=True))
-
-
-def _quantiles(values, weights, q) -> np.ndarray:
-    keep = weights > 0
-    order = np.argsort(values[keep])
-    cumulative = np.cumsum(weights[keep][order])
-    return np.interp(q, cumulative / cumulative[-1], values[keep][order])
-
-
-def _iqr(values, weights) -> float:
-    q1, q3 = _quantiles(values, weights, [0.25, 0.75])
-    return float(q3 - q1)
 
 
 def case_errors(twin: SplitSumTwin, case: str, pixels: int) -> dict:

@@ -13,6 +13,8 @@ from .split_sum_oblique import OBLIQUE_ALPHAS, OBLIQUE_COSINES, _hemisphere, obl
 
 IN_PLANE_LOBE_POINTS = 200_000
 IN_PLANE_KERNEL_POINTS = 400_000
+#: the probability each of the line's nodes sits at: the middle of its SPLIT_SUM_LINE_EDGES interval
+LINE_QUANTILES = 0.5 * (np.asarray(SPLIT_SUM_LINE_EDGES)[:-1] + np.asarray(SPLIT_SUM_LINE_EDGES)[1:])
 
 
 def _sphere(points: int) -> np.ndarray:
@@ -24,7 +26,8 @@ def _sphere(points: int) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 
-def _weighted_quantiles(values: np.ndarray, weights: np.ndarray, q) -> np.ndarray:
+def weighted_quantiles(values: np.ndarray, weights: np.ndarray, q) -> np.ndarray:
+    """Quantiles ``q`` of ``values`` under ``weights`` (zero weights left out)."""
     keep = weights > 0.0
     order = np.argsort(values[keep])
     cumulative = np.cumsum(weights[keep][order])
@@ -35,9 +38,8 @@ def kernel_line_quantiles(kind: str, alpha: float, points: int = IN_PLANE_KERNEL
     """The split-sum kernel's own offsets at the line's quantiles: the angle out of a great circle
     through its centre, weighted by prefilter.py's kernel at ``alpha``."""
     directions = _sphere(points)
-    edges = np.asarray(SPLIT_SUM_LINE_EDGES)
     weights = split_sum_profile(kind, alpha).of_cosine(directions[:, 2])
-    return _weighted_quantiles(np.arcsin(np.clip(directions[:, 1], -1.0, 1.0)), weights, 0.5 * (edges[:-1] + edges[1:]))
+    return weighted_quantiles(np.arcsin(np.clip(directions[:, 1], -1.0, 1.0)), weights, LINE_QUANTILES)
 
 
 def in_plane_node_angles(kind: str, alpha: float, cos_theta_o: float, points: int = IN_PLANE_LOBE_POINTS,
@@ -57,9 +59,8 @@ def in_plane_node_angles(kind: str, alpha: float, cos_theta_o: float, points: in
     lobe = MicrofacetReflection(MicrofacetDistribution(kind, alpha, alpha), Fresnel("none"))
     wo = np.array([np.sqrt(max(1.0 - cos_theta_o**2, 0.0)), 0.0, cos_theta_o])
     weight = lobe.eval(wi, np.broadcast_to(wo, wi.shape))[:, 0] * wi[:, 2]
-    edges = np.asarray(SPLIT_SUM_LINE_EDGES)
-    quantiles = np.concatenate([0.5 * (edges[:-1] + edges[1:]), [0.5]])
-    angles = _weighted_quantiles(np.arctan2(wi[:, 0], wi[:, 2]), weight, quantiles)
+    quantiles = np.concatenate([LINE_QUANTILES, [0.5]])
+    angles = weighted_quantiles(np.arctan2(wi[:, 0], wi[:, 2]), weight, quantiles)
     nodes, median = angles[:-1], angles[-1]
     level_alpha = alpha * oblique_alpha_ratio(kind, alpha, cos_theta_o)
     kernel = kernel_line_quantiles(kind, level_alpha, kernel_points)
