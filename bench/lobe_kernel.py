@@ -175,29 +175,36 @@ def sky_quadrature(height: int = FLOOR_ENV_HEIGHT) -> tuple[np.ndarray, np.ndarr
     return dirs, solid, radiance.reshape(-1, 3)
 
 
-def sphere_views(pixels: int = FLOOR_PIXELS):
-    """(wo local, frame) of the preview sphere's pixel centres seen by bench/mitsuba.py's camera
-    (at +4 z, fov 40), the frame's tangent horizontal; grazing views (wo.z < 0.02) left out."""
+def sphere_pixel_view(ix: int, iy: int, size: int):
+    """(wo local, frame) of pixel (ix, iy)'s centre of the preview sphere at ``size`` x ``size``
+    pixels seen by bench/mitsuba.py's camera (at +4 z, fov 40), the frame's tangent horizontal;
+    None off the sphere or where the tangent is undefined."""
     half = np.tan(np.radians(20.0))
     eye = np.array([0.0, 0.0, 4.0])
+    ray = np.array([((ix + 0.5) / size * 2 - 1) * half, (1 - (iy + 0.5) / size * 2) * half, -1.0])
+    ray /= np.linalg.norm(ray)
+    b = eye @ ray
+    disc = b * b - (eye @ eye - 1.0)
+    if disc <= 0.0:
+        return None
+    normal = eye - (b + np.sqrt(disc)) * ray
+    normal /= np.linalg.norm(normal)
+    tangent = np.cross([0.0, 1.0, 0.0], normal)
+    if np.linalg.norm(tangent) < 1e-6:
+        return None
+    tangent /= np.linalg.norm(tangent)
+    frame = np.stack([tangent, np.cross(normal, tangent), normal], axis=1)
+    return frame.T @ -ray, frame
+
+
+def sphere_views(pixels: int = FLOOR_PIXELS):
+    """(wo local, frame) of the preview sphere's pixel centres (:func:`sphere_pixel_view`) on a
+    ``pixels`` x ``pixels`` grid; grazing views (wo.z < 0.02) left out."""
     for iy in range(pixels):
         for ix in range(pixels):
-            ray = np.array([((ix + 0.5) / pixels * 2 - 1) * half, (1 - (iy + 0.5) / pixels * 2) * half, -1.0])
-            ray /= np.linalg.norm(ray)
-            b = eye @ ray
-            disc = b * b - (eye @ eye - 1.0)
-            if disc <= 0.0:
-                continue
-            normal = eye - (b + np.sqrt(disc)) * ray
-            normal /= np.linalg.norm(normal)
-            tangent = np.cross([0.0, 1.0, 0.0], normal)
-            if np.linalg.norm(tangent) < 1e-6:
-                continue
-            tangent /= np.linalg.norm(tangent)
-            frame = np.stack([tangent, np.cross(normal, tangent), normal], axis=1)
-            wo = frame.T @ -ray
-            if wo[2] >= 0.02:
-                yield wo, frame
+            view = sphere_pixel_view(ix, iy, pixels)
+            if view is not None and view[0][2] >= 0.02:
+                yield view
 
 
 def ideal_floor(lobe, n: int, pixels: int = FLOOR_PIXELS, sigma_scale: float = 1.0, fitted=None) -> float:

@@ -1,6 +1,7 @@
-"""Split-sum's oblique line against the lobe it stands for, in numpy (issues 45 and 39): the
-symmetric line `prefiltered` reads for GGX (and read for Beckmann before), Beckmann's in-plane
-quantile line as built, and that line computed per pixel without its table.
+"""Split-sum's lines against the lobe they stand for, in numpy (issues 45 and 39): the symmetric
+line `prefiltered` reads for isotropic GGX seen off the normal (and read for Beckmann and for
+anisotropic lobes before), the lobe's own quantile lines as built (Beckmann's in-plane table, an
+anisotropic lobe's reweighted marginal), and those lines computed per pixel by quadrature.
 
 What is measured: for each pixel of the preview sphere (bench/lobe_kernel.py sphere_views, issue
 45's camera), the split-sum estimate of the lobe's normalised integral of the light map, against
@@ -15,7 +16,7 @@ the sky, Beckmann 0.5's sun pixel read 1.028 x the truth here with the symmetric
 against Mitsuba in bench/results/mitsuba-20261130-122434.md.)
 
 The ways of placing the lookups of an isotropic lobe seen off the normal:
-  *symmetric line*: materials/prefilter.py split_sum_lookups(in_plane=False), the symmetric
+  *symmetric line*: materials/prefilter.py split_sum_lookups(own_quantiles=False), the symmetric
     quantile line of the normal-incidence marginal along the plane of incidence (scale
     sqrt(alpha^2 - alpha'^2)), leant towards the normal by split_sum_lean;
   *prefiltered*: split_sum_lookups as `prefiltered` reads it (Beckmann: the in-plane line from
@@ -26,9 +27,19 @@ The ways of placing the lookups of an isotropic lobe seen off the normal:
     sqrt(1 - (IQR_kernel / IQR_lobe)^2) (the level kernel's own in-plane spread, which every
     lookup adds), the level alpha' = alpha rho as today. (The built table shrinks quantile by
     quantile instead, materials/split_sum_in_plane.py: the same on Beckmann, worse on GGX.)
+and of an anisotropic lobe (a case DIST:AXxAY), along its wider axis at level alpha_min:
+  *symmetric line*: the slope marginal's symmetric quantiles at scale sqrt(ax^2 - ay^2), leant at
+    alpha_min (`prefiltered` before the 36th session);
+  *prefiltered*: the marginal's nodes reweighted by the rest of f cos, as built
+    (materials/split_sum_anisotropic.py anisotropic_line_slopes);
+  *own quantiles, exact*: the quantiles of this pixel's lobe f cos over the half-vector slope
+    along the wider axis, by quadrature, shrunk about the median by sqrt(1 - (a_min / a_max)^2).
+On the sky each case also reports the 9 x 9 window around the sun's mirror pixel of
+bench/mitsuba.py's 192 x 192 frame: the sum of the estimates over the sum of the truths (the sun
+itself is a cap light, exact in every method; this is what the map adds there).
 
     .venv/bin/python -m lobeview.bench.split_sum_line [--envs sky interior courtyard]
-        [--cases beckmann:0.3 ggx:0.3 ...] [--pixels 12] [--height 256]
+        [--cases beckmann:0.3 ggx:0.3 ggx:0.05x0.3 ...] [--pixels 12] [--height 256]
 """
 
 from __future__ import annotations
@@ -48,7 +59,17 @@ ENVS = ("sky", "interior", "courtyard")
 CASES = tuple(f"{kind}:{alpha}" for kind in ("beckmann", "ggx") for alpha in (0.15, 0.3, 0.5, 0.8))
 #: symmetric line and lean (GGX's, and Beckmann's before), `prefiltered` as built (Beckmann: the
 #: in-plane table), the in-plane quantile line from each pixel's own quadrature (untabulated)
-WAYS = ("symmetric line", "prefiltered", "in-plane, exact")
+WAYS = ("symmetric line", "prefiltered", "own quantiles, exact")
+ANISOTROPIC_CASES = ("ggx:0.05x0.3", "ggx:0.3x0.05", "ggx:0.1x0.5", "ggx:0.02x0.2", "beckmann:0.05x0.3",
+                     "beckmann:0.1x0.5")  # fmt: skip
+WINDOW_SIZE = 192  # bench/mitsuba.py's frame, whose sun window issue 45 reads
+
+
+def parse_case(case: str) -> tuple[str, float, float]:
+    """DIST:ALPHA or DIST:AXxAY -> (kind, alpha_x, alpha_y)."""
+    kind, alphas = case.split(":")
+    ax, _, ay = alphas.partition("x")
+    return kind, float(ax), float(ay or ax)
 
 
 def light_texels(env: str, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -84,13 +105,13 @@ class SplitSumTwin:
             self._profiles[key] = pf.split_sum_profile(kind, max(alpha, pf.ALPHA_MIN))
         return self._profiles[key]
 
-    def lobe_weights(self, kind, alpha, wo, frame) -> tuple[np.ndarray, np.ndarray]:
+    def lobe_weights(self, kind, ax, ay, wo, frame) -> tuple[np.ndarray, np.ndarray]:
         """The lobe's f cos times the texels' solid angles, and the texels in the pixel's frame."""
         from lobeview.materials.conductor import MicrofacetReflection
         from lobeview.materials.fresnel import Fresnel
         from lobeview.materials.microfacet import MicrofacetDistribution
 
-        lobe = MicrofacetReflection(MicrofacetDistribution(kind, alpha, alpha), Fresnel("none"))
+        lobe = MicrofacetReflection(MicrofacetDistribution(kind, ax, ay), Fresnel("none"))
         local = self.directions @ frame
         f_cos = lobe.eval(local, np.broadcast_to(wo, local.shape))[:, 0] * np.maximum(local[:, 2], 0.0)
         return f_cos * self.omega, local
@@ -111,9 +132,9 @@ class SplitSumTwin:
                 value += blend * float(np.sum(kernel * self.radiance) / np.sum(kernel))
         return value
 
-    def lookups(self, kind, alpha, wo, frame, in_plane: bool) -> float:
-        """`prefiltered`'s lookups (split_sum_lookups): Beckmann's in-plane line or the symmetric one."""
-        world, weights, level_alpha = pf.split_sum_lookups(wo, frame, kind, alpha, alpha, in_plane=in_plane)
+    def lookups(self, kind, ax, ay, wo, frame, own_quantiles: bool) -> float:
+        """`prefiltered`'s lookups (split_sum_lookups): the lobe's own quantile line or the symmetric one."""
+        world, weights, level_alpha = pf.split_sum_lookups(wo, frame, kind, ax, ay, own_quantiles=own_quantiles)
         return sum(w * self.read(kind, level_alpha, d) for d, w in zip(world, weights, strict=True) if w > 0)
 
     def kernel_iqr(self, kind: str, alpha: float) -> float:
@@ -126,7 +147,7 @@ class SplitSumTwin:
             self._iqr[key] = float(q3 - q1)
         return self._iqr[key]
 
-    def exact_in_plane(self, kind, alpha, wo, frame, lobe_weights, local) -> float:
+    def exact_in_plane(self, kind, alpha, _, wo, frame, lobe_weights, local) -> float:
         """The in-plane quantile line from this pixel's own quadrature (no table), for any kind."""
         along = float(np.hypot(wo[0], wo[1]))
         plane = np.array([wo[0], wo[1], 0.0]) / along if along > pf.MIN_OBLIQUE_XY else np.array([1.0, 0.0, 0.0])
@@ -140,31 +161,61 @@ class SplitSumTwin:
         weights = pf.split_sum_line_weights()
         return sum(w * self.read(kind, level_alpha, d) for d, w in zip(directions, weights, strict=True))
 
+    def exact_anisotropic(self, kind, ax, ay, wo, frame, lobe_weights, local) -> float:
+        """An anisotropic lobe's line at the quantiles of its f cos over the half-vector slope
+        along its wider axis, from this pixel's own quadrature, shrunk as anisotropic_line_slopes."""
+        from lobeview.materials.split_sum_anisotropic import line_half_vectors, mirror_directions
 
-def case_errors(twin: SplitSumTwin, case: str, pixels: int) -> dict:
-    """Relative RMSE of each way over the sphere's pixels (and the worst pixel's |ratio - 1|)."""
-    from lobeview.bench import lobe_kernel
+        a_min, a_max = min(ax, ay), max(ax, ay)
+        major = np.array([1.0, 0.0]) if ax >= ay else np.array([0.0, 1.0])
+        keep = lobe_weights > 0.0
+        h = local[keep] + wo
+        h /= np.linalg.norm(h, axis=1, keepdims=True)
+        slope = -(h[:, :2] @ major) / h[:, 2]
+        quantiles = weighted_quantiles(slope, lobe_weights[keep], np.concatenate([LINE_QUANTILES, [0.5]]))
+        nodes, median = quantiles[:-1], quantiles[-1]
+        slopes = median + (nodes - median) * np.sqrt(1.0 - (a_min / a_max) ** 2)
+        directions = mirror_directions(wo, line_half_vectors(slopes, major)) @ frame.T
+        weights = pf.split_sum_line_weights()
+        return sum(w * self.read(kind, a_min, d) for d, w in zip(directions, weights, strict=True))
 
-    kind, alpha = case.split(":")[0], float(case.split(":")[1])
-    values: dict = {way: [] for way in ("truth", *WAYS)}
-    for wo, frame in lobe_kernel.sphere_views(pixels):
-        weights, local = twin.lobe_weights(kind, alpha, wo, frame)
-        values["truth"].append(twin.truth(weights))
-        values[WAYS[0]].append(twin.lookups(kind, alpha, wo, frame, in_plane=False))
-        values[WAYS[1]].append(twin.lookups(kind, alpha, wo, frame, in_plane=True))
-        values[WAYS[2]].append(twin.exact_in_plane(kind, alpha, wo, frame, weights, local))
-    truth = np.asarray(values.pop("truth"))
+
+def case_errors(twin: SplitSumTwin, case: str, pixels: int, window: bool) -> dict:
+    """Relative RMSE of each way over the sphere's pixels (and the worst pixel's |ratio - 1|), and
+    with ``window`` each way's 9 x 9 sun window ratio."""
+    from lobeview.bench import lobe_kernel, mitsuba
+
+    views = list(lobe_kernel.sphere_views(pixels))
+    row, column = mitsuba.sun_pixel(WINDOW_SIZE)
+    pixels_around = [(ix, iy) for iy in range(row - 4, row + 5) for ix in range(column - 4, column + 5)]
+    window_views = [lobe_kernel.sphere_pixel_view(ix, iy, WINDOW_SIZE) for ix, iy in pixels_around] if window else []
+    sphere, sun = (_estimates(twin, case, chosen) for chosen in (views, window_views))
     out = {}
-    for way, estimate in values.items():
-        estimate = np.asarray(estimate)
+    truth = sphere.pop("truth")
+    for way, estimate in sphere.items():
         rmse = float(np.sqrt(np.mean((estimate - truth) ** 2) / np.mean(truth**2)))
-        out[way] = (rmse, float(np.max(np.abs(estimate / truth - 1.0))))
+        sun_ratio = float(sun[way].sum() / sun["truth"].sum()) if window else None
+        out[way] = (rmse, float(np.max(np.abs(estimate / truth - 1.0))), sun_ratio)
     return out
+
+
+def _estimates(twin: SplitSumTwin, case: str, views) -> dict:
+    """Each way's estimate and the truth at ``views`` (arrays)."""
+    kind, ax, ay = parse_case(case)
+    values: dict = {way: [] for way in ("truth", *WAYS)}
+    for wo, frame in views:
+        weights, local = twin.lobe_weights(kind, ax, ay, wo, frame)
+        values["truth"].append(twin.truth(weights))
+        values[WAYS[0]].append(twin.lookups(kind, ax, ay, wo, frame, own_quantiles=False))
+        values[WAYS[1]].append(twin.lookups(kind, ax, ay, wo, frame, own_quantiles=True))
+        exact = twin.exact_in_plane if ax == ay else twin.exact_anisotropic
+        values[WAYS[2]].append(exact(kind, ax, ay, wo, frame, weights, local))
+    return {way: np.asarray(v) for way, v in values.items()}
 
 
 def markdown(results: dict, args, command: str, stamp: str, seconds: float) -> str:
     lines = [
-        f"# Split-sum's oblique line against the lobe, numpy ({stamp})",
+        f"# Split-sum's lines against the lobe, numpy ({stamp})",
         "",
         f"`{command}` ({seconds / 60:.1f} min)",
         "",
@@ -179,6 +230,12 @@ def markdown(results: dict, args, command: str, stamp: str, seconds: float) -> s
     for (env, case), errors in results.items():
         cells = [f"{100 * e[0]:.2f} ({100 * e[1]:.0f})" for e in errors.values()]
         lines.append(f"| {env} | {case} | " + " | ".join(cells) + " |")
+    windows = [(key, errors) for key, errors in results.items() if next(iter(errors.values()))[2] is not None]
+    if windows:
+        lines += ["", "The sun's 9 x 9 window (sky only; estimate / truth summed over its 81 pixels):", "",
+                  "| map | case | " + " | ".join(WAYS) + " |", "|---|---|" + "---|" * len(WAYS)]  # fmt: skip
+        for (env, case), errors in windows:
+            lines.append(f"| {env} | {case} | " + " | ".join(f"{e[2]:.3f}" for e in errors.values()) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -187,7 +244,10 @@ def main(argv=None) -> int:
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--envs", nargs="+", default=list(ENVS), help="sky or capture stems (../shared/assets/env)")
-    parser.add_argument("--cases", nargs="+", default=list(CASES), help="DIST:ALPHA, isotropic")
+    parser.add_argument(
+        "--cases", nargs="+", default=[*CASES, *ANISOTROPIC_CASES],
+        help="DIST:ALPHA or DIST:AXxAY (default: the isotropic cases and ANISOTROPIC_CASES)",
+    )  # fmt: skip
     parser.add_argument("--pixels", type=int, default=12, help="the sphere's pixel grid (default 12)")
     parser.add_argument("--height", type=int, default=256, help="rows of the maps' quadrature (default 256)")
     parser.add_argument("--out", default=str(Path(__file__).resolve().parent / "results"))
@@ -197,7 +257,7 @@ def main(argv=None) -> int:
     for env in args.envs:
         twin = SplitSumTwin(*light_texels(env, args.height))
         for case in args.cases:
-            results[(env, case)] = case_errors(twin, case, args.pixels)
+            results[(env, case)] = case_errors(twin, case, args.pixels, window=env == "sky")
             errors = ", ".join(f"{k} {100 * v[0]:.2f} %" for k, v in results[(env, case)].items())
             print(f"[split-sum line] {env} {case}: {errors}", flush=True)
     path, stamp, command = stamped_report_path(args.out, "split-sum-line", "split_sum_line", argv)

@@ -32,6 +32,17 @@ from .conductor import MicrofacetReflection
 from .fresnel import Fresnel
 from .microfacet import ALPHA_MIN, MicrofacetDistribution
 from .patterns import GOLDEN_LATTICE_STEP  # rotation of successive rings, in turns
+from .split_sum_anisotropic import (  # noqa: F401  (re-exported: the line belongs to the lookups' API)
+    SPLIT_SUM_LINE_EDGES,
+    SPLIT_SUM_LINE_NODES,
+    SPLIT_SUM_LINE_RATIO,
+    anisotropic_line_slopes,
+    line_half_vectors,
+    mirror_directions,
+    split_sum_is_line,
+    split_sum_line_quantiles,
+    split_sum_line_weights,
+)
 from .split_sum_levels import (  # noqa: F401  (re-exported: the levels belong to the maps' API)
     PEAK_MATCHED_FROM,
     SPLIT_SUM_LEVELS,
@@ -322,93 +333,55 @@ def split_sum_lean(alpha):
     return s * (np.sqrt(s) + (1.0 - s))
 
 
-# Anisotropic lobes under split-sum (issue 45: prefiltered was isotropic, 30 % off on GGX
-# 0.05 x 0.3 against Mitsuba). The map is filtered with an isotropic kernel, so an anisotropic
-# lobe reads it at its narrower roughness alpha_min, at SPLIT_SUM_LINE_NODES slopes along its wider
-# axis with scale sqrt(alpha_max^2 - alpha_min^2) (what the narrow kernel does not already spread; 0
-# for an isotropic lobe, so the line collapses onto the single lookup): GGX's slope density
-# (1 + s^2 / alpha^2)^-2 has the marginal (1 + s^2 / alpha^2)^-3/2 (Student t with 2 degrees of
-# freedom, scaled by alpha / sqrt 2; quantile (2u - 1) / (2 sqrt(u (1 - u)))), Beckmann's is normal
-# with variance alpha^2 / 2 (quantile erfinv(2u - 1)). Each node sits at the middle quantile of an
-# interval of the marginal's probability (SPLIT_SUM_LINE_EDGES) and weighs its probability: ninths,
-# the two outer ninths split at 1/36 and 35/36 (GGX's heavy tail: the outer ninth of GGX 0.05 x 0.3
-# reaches from the ground to the sky, and its one node read the ground: a sphere's lower half 20-35 %
-# too dark). Nodes whose mirror direction lies below the surface (the lobe there is cut by the
-# horizon, the albedo table already counts that) are left out and the others' weights renormalised,
-# and the lookups lean towards the normal by split_sum_lean at alpha_min, the roughness of the
-# kernel they read (the lean at sqrt(alpha_x alpha_y) pulled the line's outer nodes in: 20 % too
-# dark near the silhouette). Measured by Monte Carlo at 30 pixels of the Mitsuba sphere (the exact
-# lobe integral against the line over the exactly filtered sky, GGX 0.05 x 0.3 / 0.1 x 0.5 /
-# 0.02 x 0.2): nine equal quantiles, lean at sqrt(ax ay) 9.1 / 12.8 / 6.5 %; these eleven nodes
-# 4.9 / 7.8 / 5.4 (docs/measurements.md "Anisotropic lobes' tails"). Lobes within
-# SPLIT_SUM_LINE_RATIO of isotropic keep one lookup.
-SPLIT_SUM_LINE_EDGES = (0.0, 1.0 / 36.0) + tuple(k / 9.0 for k in range(1, 9)) + (35.0 / 36.0, 1.0)
-SPLIT_SUM_LINE_NODES = len(SPLIT_SUM_LINE_EDGES) - 1
-SPLIT_SUM_LINE_RATIO = 1.05
-
-
-def split_sum_is_line(alpha_x: float, alpha_y: float) -> bool:
-    """Whether split-sum reads a lobe along the quantile line (anisotropic by more than
-    SPLIT_SUM_LINE_RATIO), and, for GGX, takes its albedo from the anisotropic table."""
-    return max(alpha_x, alpha_y) > SPLIT_SUM_LINE_RATIO * min(alpha_x, alpha_y)
-
-
-def split_sum_line_weights() -> np.ndarray:
-    """The probability of the marginal each of the line's nodes stands for (sums to 1)."""
-    return np.diff(np.asarray(SPLIT_SUM_LINE_EDGES))
-
-
-def split_sum_line_quantiles(kind: str) -> np.ndarray:
-    """The slopes (in units of the scale) of the line's nodes for distribution ``kind``: the
-    marginal's quantiles at the middle of each interval of SPLIT_SUM_LINE_EDGES."""
-    from scipy.special import erfinv
-
-    edges = np.asarray(SPLIT_SUM_LINE_EDGES)
-    u = 0.5 * (edges[:-1] + edges[1:])
-    if kind == "ggx":
-        return (2.0 * u - 1.0) / (2.0 * np.sqrt(u * (1.0 - u)))
-    return erfinv(2.0 * u - 1.0)
-
-
 def split_sum_line(
-    wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float, in_plane: bool = True
+    wo: np.ndarray, kind: str, alpha_x: float, alpha_y: float, own_quantiles: bool = True
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """The split-sum lookups of a lobe in its local frame: (mirror directions (k, 3) before the
-    lean, weights (k,), the alpha whose map level they read). An anisotropic lobe: the quantile
-    line above at min(alpha_x, alpha_y) along its wider axis; an isotropic lobe seen off the
-    normal: the line along the plane of incidence at alpha rho(alpha, cos theta_o) with the slope
-    scale sqrt(alpha^2 - alpha'^2) (split_sum_oblique.py), or for Beckmann (``in_plane``) at the
-    lobe's own in-plane quantiles (split_sum_oblique.py in_plane_angles, not leant afterwards); at
-    normal incidence one lookup at sqrt(alpha_x alpha_y). Each node's slope s along the line's
-    axis e is the half vector normalize(-s e, 1), reflected; nodes below the surface are left out
-    (all of them kept if none is above)."""
+    lean, weights (k,), the alpha whose map level they read). An anisotropic lobe: the line at
+    min(alpha_x, alpha_y) along its wider axis, at the quantiles of its own f cos there
+    (split_sum_anisotropic.py anisotropic_line_slopes, not leant afterwards) or, without
+    ``own_quantiles``, at its slope marginal's symmetric quantiles with the scale
+    sqrt(alpha_max^2 - alpha_min^2); an isotropic lobe seen off the normal: the line along the plane
+    of incidence at alpha rho(alpha, cos theta_o) with the slope scale sqrt(alpha^2 - alpha'^2)
+    (split_sum_oblique.py), or for Beckmann (``own_quantiles``) at the lobe's own in-plane
+    quantiles (split_sum_oblique.py in_plane_angles, not leant afterwards); at normal incidence one
+    lookup at sqrt(alpha_x alpha_y). Each node's slope s along the line's axis e is the half vector
+    normalize(-s e, 1), reflected; nodes below the surface are left out (all of them kept if none
+    is above)."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
     a_min, a_max = min(alpha_x, alpha_y), max(alpha_x, alpha_y)
     along_view = float(np.hypot(wo[0], wo[1]))
     if split_sum_is_line(alpha_x, alpha_y):
-        level_alpha, spread = a_min, np.sqrt(a_max * a_max - a_min * a_min)
-        major = np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
+        level_alpha = a_min
+        if own_quantiles:
+            slopes, major = anisotropic_line_slopes(wo, kind, alpha_x, alpha_y)
+        else:
+            major = np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
+            slopes = split_sum_line_quantiles(kind) * np.sqrt(a_max * a_max - a_min * a_min)
     elif along_view > MIN_OBLIQUE_XY:
         alpha = float(np.sqrt(alpha_x * alpha_y))
         level_alpha = alpha * oblique_alpha_ratio(kind, alpha, wo[2])
-        if in_plane and uses_in_plane_line(kind, wo):
+        if own_quantiles and uses_in_plane_line(kind, wo):
             theta = in_plane_angles(kind, alpha, wo[2])
             plane = np.array([wo[0], wo[1], 0.0]) / along_view
             r = np.sin(theta)[:, None] * plane + np.cos(theta)[:, None] * np.array([0.0, 0.0, 1.0])
             return r, split_sum_line_weights(), float(level_alpha)
-        spread = np.sqrt(max(alpha * alpha - level_alpha * level_alpha, 0.0))
         major = wo[:2] / along_view
+        slopes = split_sum_line_quantiles(kind) * np.sqrt(max(alpha * alpha - level_alpha * level_alpha, 0.0))
     else:
         return np.array([[-wo[0], -wo[1], wo[2]]]), np.ones(1), float(np.sqrt(alpha_x * alpha_y))
-    slopes = split_sum_line_quantiles(kind) * spread
-    h = np.concatenate([-slopes[:, None] * major[None], np.ones((len(slopes), 1))], axis=1)
-    h /= np.linalg.norm(h, axis=1, keepdims=True)
-    r = 2.0 * (h @ wo)[:, None] * h - wo
+    r = mirror_directions(wo, line_half_vectors(slopes, major))
     weights = split_sum_line_weights()
     above = r[:, 2] > 0.0
     if above.any():
         weights = np.where(above, weights, 0.0)
     return r, weights / weights.sum(), float(level_alpha)
+
+
+def uses_own_quantiles(kind: str, alpha_x: float, alpha_y: float, wo: np.ndarray) -> bool:
+    """Whether split_sum_line places this lobe's nodes at its own f cos quantiles (then they are
+    not leant): every anisotropic lobe, and Beckmann seen off the normal."""
+    return split_sum_is_line(alpha_x, alpha_y) or uses_in_plane_line(kind, np.ravel(wo))
 
 
 def split_sum_direction(normal: np.ndarray, mirror: np.ndarray, t) -> np.ndarray:
@@ -426,19 +399,21 @@ def split_sum_lookups(
     alpha_x: float,
     alpha_y: float,
     transmission: bool = False,
-    in_plane: bool = True,
+    own_quantiles: bool = True,
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """The numpy twin of shaders/prefiltered.glsl's split-sum lookups for one pixel: (world
     directions (k, 3), weights (k,), the alpha whose map level they read). :func:`split_sum_line`'s
     mirror directions (mirrored below the surface for a thin transmission lobe: straight through),
     taken to world space by ``frame`` (columns tangent, bitangent, normal) and leant towards the
-    normal (the transmission lobe's -normal) by :func:`split_sum_lean`: at alpha_min on an
-    anisotropic lobe's line, at the lobe's own sqrt(alpha_x alpha_y) otherwise (the oblique line's
-    narrower level alpha lost the rough lobes' off-specular shift, split_sum_oblique.py)."""
-    local, weights, level_alpha = split_sum_line(wo, kind, alpha_x, alpha_y, in_plane)
+    normal (the transmission lobe's -normal) by :func:`split_sum_lean` unless they sit at the
+    lobe's own quantiles (:func:`uses_own_quantiles`: those hold its off-specular shift): at
+    alpha_min on an anisotropic lobe's symmetric line, at the lobe's own sqrt(alpha_x alpha_y)
+    otherwise (the oblique line's narrower level alpha lost the rough lobes' off-specular shift,
+    split_sum_oblique.py)."""
+    local, weights, level_alpha = split_sum_line(wo, kind, alpha_x, alpha_y, own_quantiles)
     lean_alpha = level_alpha if split_sum_is_line(alpha_x, alpha_y) else float(np.sqrt(alpha_x * alpha_y))
-    in_plane = in_plane and not split_sum_is_line(alpha_x, alpha_y) and uses_in_plane_line(kind, np.ravel(wo))
-    lean = 1.0 if in_plane else split_sum_lean(lean_alpha)
+    own = own_quantiles and uses_own_quantiles(kind, alpha_x, alpha_y, wo)
+    lean = 1.0 if own else split_sum_lean(lean_alpha)
     if transmission:
         local = local * np.array([1.0, 1.0, -1.0])
     normal = -frame[:, 2] if transmission else frame[:, 2]

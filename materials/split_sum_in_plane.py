@@ -8,13 +8,12 @@ from __future__ import annotations
 import numpy as np
 
 from .microfacet import MicrofacetDistribution
-from .prefilter import SPLIT_SUM_LINE_EDGES, split_sum_profile
+from .prefilter import split_sum_profile
+from .split_sum_anisotropic import LINE_QUANTILES, SPLIT_SUM_LINE_EDGES
 from .split_sum_oblique import OBLIQUE_ALPHAS, OBLIQUE_COSINES, _hemisphere, oblique_alpha_ratio
 
 IN_PLANE_LOBE_POINTS = 200_000
 IN_PLANE_KERNEL_POINTS = 400_000
-#: the probability each of the line's nodes sits at: the middle of its SPLIT_SUM_LINE_EDGES interval
-LINE_QUANTILES = 0.5 * (np.asarray(SPLIT_SUM_LINE_EDGES)[:-1] + np.asarray(SPLIT_SUM_LINE_EDGES)[1:])
 
 
 def _sphere(points: int) -> np.ndarray:

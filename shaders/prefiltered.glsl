@@ -58,6 +58,84 @@ const float SPLIT_SUM_LINE_WEIGHTS[11] = float[11](0.027777778, 0.083333333, 0.1
     0.111111111, 0.111111111, 0.111111111, 0.111111111, 0.111111111, 0.083333333, 0.027777778);
 #define SPLIT_SUM_LINE_NODES 11
 #define SPLIT_SUM_LINE_RATIO 1.05
+const float SPLIT_SUM_LINE_EDGES[12] = float[12](0.0, 0.027777778, 0.111111111, 0.222222222, 0.333333333,
+    0.444444444, 0.555555556, 0.666666667, 0.777777778, 0.888888889, 0.972222222, 1.0);
+
+// erf^-1 (Giles 2010, "Approximating the erfinv function", single precision: relative error
+// below 4e-7 over (-1, 1)): Beckmann's slope marginal's quantile.
+float erfinv_giles(float x) {
+    float w = -log(max((1.0 - x) * (1.0 + x), 1e-30));
+    float p;
+    if (w < 5.0) {
+        w -= 2.5;
+        p = 2.81022636e-08;
+        p = 3.43273939e-07 + p * w;
+        p = -3.5233877e-06 + p * w;
+        p = -4.39150654e-06 + p * w;
+        p = 0.00021858087 + p * w;
+        p = -0.00125372503 + p * w;
+        p = -0.00417768164 + p * w;
+        p = 0.246640727 + p * w;
+        p = 1.50140941 + p * w;
+    } else {
+        w = sqrt(w) - 3.0;
+        p = -0.000200214257;
+        p = 0.000100950558 + p * w;
+        p = 0.00134934322 + p * w;
+        p = -0.00367342844 + p * w;
+        p = 0.00573950773 + p * w;
+        p = -0.0076224613 + p * w;
+        p = 0.00943887047 + p * w;
+        p = 1.00167406 + p * w;
+        p = 2.83297682 + p * w;
+    }
+    return p * x;
+}
+
+// split_sum_anisotropic.py slope_marginal_quantile: the slope marginal's quantile at alpha 1.
+float slope_marginal_quantile(int dist, float u) {
+    u = clamp(u, 1e-6, 1.0 - 1e-6);  // QUANTILE_MARGIN
+    if (dist == DIST_GGX) return (2.0 * u - 1.0) / (2.0 * sqrt(u * (1.0 - u)));
+    return erfinv_giles(2.0 * u - 1.0);
+}
+
+// split_sum_anisotropic.py anisotropic_line_slopes: an anisotropic lobe's line at the quantiles of
+// its own f cos along its wider axis ``major``: the marginal's intervals reweighted by
+// g = G2 (wo.h) / cos theta_h at the marginal's nodes (zero below the surface), the nodes at the
+// reweighted quantiles, their offsets from the median shrunk by sqrt(1 - (a_min / a_max)^2).
+void anisotropic_line_slopes(Lobe l, vec3 wo, vec2 major, float a_min, float a_max,
+                             out float slopes[SPLIT_SUM_LINE_NODES]) {
+    float mass[SPLIT_SUM_LINE_NODES];
+    float total = 0.0;
+    float lambda_o = lambda_smith(l, wo);
+    for (int k = 0; k < SPLIT_SUM_LINE_NODES; ++k) {
+        vec3 h = normalize(vec3(-SPLIT_SUM_LINE_SLOPES[l.dist][k] * a_max * major, 1.0));
+        vec3 wi = 2.0 * dot(h, wo) * h - wo;
+        float g = wi.z > 0.0 ? dot(h, wo) / (h.z * (1.0 + lambda_smith(l, wi) + lambda_o)) : 0.0;
+        mass[k] = SPLIT_SUM_LINE_WEIGHTS[k] * g;
+        total += mass[k];
+    }
+    float shrink = sqrt(max(1.0 - (a_min / a_max) * (a_min / a_max), 0.0));
+    if (!(total > 0.0)) {  // every node below the surface: the marginal's own (all read, as before)
+        for (int k = 0; k < SPLIT_SUM_LINE_NODES; ++k) slopes[k] = SPLIT_SUM_LINE_SLOPES[l.dist][k] * a_max * shrink;
+        return;
+    }
+    // the targets (the middles of the intervals, in increasing order) walk the reweighted CDF once
+    int bin = 0;
+    float before = 0.0;  // the reweighted mass of the intervals before ``bin``
+    for (int j = 0; j < SPLIT_SUM_LINE_NODES; ++j) {
+        float target = 0.5 * (SPLIT_SUM_LINE_EDGES[j] + SPLIT_SUM_LINE_EDGES[j + 1]) * total;
+        while (bin < SPLIT_SUM_LINE_NODES - 1 && before + mass[bin] <= target) {
+            before += mass[bin];
+            ++bin;
+        }
+        float within = mass[bin] > 0.0 ? clamp((target - before) / mass[bin], 0.0, 1.0) : 0.0;
+        float u = mix(SPLIT_SUM_LINE_EDGES[bin], SPLIT_SUM_LINE_EDGES[bin + 1], within);
+        slopes[j] = slope_marginal_quantile(l.dist, u) * a_max;
+    }
+    float median = slopes[SPLIT_SUM_LINE_NODES / 2];  // the middle interval's middle is 1/2
+    for (int k = 0; k < SPLIT_SUM_LINE_NODES; ++k) slopes[k] = median + (slopes[k] - median) * shrink;
+}
 // materials/split_sum_oblique.py: an isotropic lobe seen off the normal narrows across the plane
 // of incidence; it reads the map at alpha rho(alpha, cos theta_o) (OBLIQUE_RATIO: rows
 // OBLIQUE_ALPHAS, columns cos theta_o 0.1 .. 1.0, GGX's rows first, then Beckmann's).
@@ -225,12 +303,12 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // The mirror direction, or for a thin transmission lobe its mirror image (straight
         // through), turned towards the normal (materials/prefilter.py split_sum_lean: a rough lobe
         // at a grazing view leans off the mirror direction, Lagarde & de Rousiers 2014); an
-        // anisotropic lobe reads the map at its narrower alpha at quantiles of its slopes along its
-        // wider axis, each weighted by its probability, the nodes below the surface left out
-        // (split_sum_line), all leant at the alpha of the level they read; an isotropic lobe
-        // seen off the normal reads the same line along the plane of incidence at the narrower
-        // alpha of its spread across that plane, leant at its own alpha, Beckmann's at its lobe's
-        // in-plane quantiles instead and not leant (split_sum_oblique.py).
+        // anisotropic lobe reads the map at its narrower alpha at the quantiles of its own f cos
+        // along its wider axis (split_sum_anisotropic.py; its off-specular shift included, so not
+        // leant), each weighted by its probability, the nodes below the surface left out
+        // (split_sum_line); an isotropic lobe seen off the normal reads a line along the plane of
+        // incidence at the narrower alpha of its spread across that plane, leant at its own alpha,
+        // Beckmann's at its lobe's in-plane quantiles instead and not leant (split_sum_oblique.py).
         bool through = lobe_is_transmission(l);
         float alpha = sqrt(l.ax * l.ay);
         float roughness = sqrt(alpha);
@@ -245,19 +323,19 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         // Beckmann seen off the normal: the nodes at its lobe's in-plane quantiles (the off-specular
         // shift included, so no lean; split_sum_oblique.py IN_PLANE_OFFSETS)
         bool in_plane = oblique && l.dist == DIST_BECKMANN;
-        float lean_alpha = aniso_line ? a_min : alpha;  // the whole lobe's off-specular shift
-        float smooth_part = 1.0 - clamp(lean_alpha, 0.0, 1.0);
-        float lean = in_plane ? 1.0 : smooth_part * (sqrt(smooth_part) + (1.0 - smooth_part));
-        float spread = aniso_line ? sqrt(a_max * a_max - a_min * a_min)
-                                  : sqrt(max(alpha * alpha - level_alpha * level_alpha, 0.0));
+        float smooth_part = 1.0 - clamp(alpha, 0.0, 1.0);  // the whole lobe's off-specular shift
+        float lean = (in_plane || aniso_line) ? 1.0 : smooth_part * (sqrt(smooth_part) + (1.0 - smooth_part));
+        float spread = sqrt(max(alpha * alpha - level_alpha * level_alpha, 0.0));
         vec2 major = oblique ? wo.xy / len_xy : (l.ax >= l.ay ? vec2(1.0, 0.0) : vec2(0.0, 1.0));
+        float aniso_slopes[SPLIT_SUM_LINE_NODES];
+        if (aniso_line) anisotropic_line_slopes(l, wo, major, a_min, a_max, aniso_slopes);
         float lod = split_sum_lod(l.dist, level_alpha, u_split_sum_max_level);
         vec3 radiance = vec3(0.0);
         vec3 radiance_all = vec3(0.0);  // every node, for a view whose whole line lies below the surface
         float weight_sum = 0.0;
         int nodes = line ? SPLIT_SUM_LINE_NODES : 1;
         for (int k = 0; k < nodes; ++k) {
-            float slope = line ? SPLIT_SUM_LINE_SLOPES[l.dist][k] * spread : 0.0;
+            float slope = aniso_line ? aniso_slopes[k] : (line ? SPLIT_SUM_LINE_SLOPES[l.dist][k] * spread : 0.0);
             float weight = line ? SPLIT_SUM_LINE_WEIGHTS[k] : 1.0;
             vec3 h = normalize(vec3(-slope * major, 1.0));
             vec3 local_r = 2.0 * dot(h, wo) * h - wo;

@@ -186,19 +186,28 @@ def test_split_sum_line_quantiles():
     np.testing.assert_allclose(dirs[n // 2], [-0.3, -0.2, wo[2]], atol=1e-12)
     np.testing.assert_allclose(dirs @ np.cross(wo, [0.0, 0.0, 1.0]), 0.0, atol=1e-12)
     assert len(weights) == n and 0.15 < alpha < 0.2 and weights.sum() == pytest.approx(1.0)
+    # An anisotropic lobe: the line along its wider axis (y here: every node mirrors wo about a
+    # half vector in the y-z plane, so keeps -wo.x) at the narrower alpha.
     dirs, weights, alpha = split_sum_line(wo, "ggx", 0.05, 0.3)
-    np.testing.assert_allclose(dirs[n // 2], [-0.3, -0.2, wo[2]], atol=1e-12)
+    np.testing.assert_allclose(dirs[:, 0], -0.3, atol=1e-12)
     assert alpha == 0.05 and weights.sum() == pytest.approx(1.0)
-    # The line runs along the wider axis: the nodes differ in y only at normal incidence.
-    dirs, _, _ = split_sum_line(np.array([0.0, 0.0, 1.0]), "beckmann", 0.05, 0.3)
-    np.testing.assert_allclose(dirs[:, 0], 0.0, atol=1e-12)
-    assert np.ptp(dirs[:, 1]) > 0.5
-    # At a grazing view the nodes that reflect below the surface weigh nothing, the rest renormalised.
+    # At normal incidence the lobe is symmetric about the normal: the nodes are the marginal's own,
+    # symmetric, the middle one the mirror direction.
+    for own_quantiles in (True, False):
+        dirs, _, _ = split_sum_line(np.array([0.0, 0.0, 1.0]), "beckmann", 0.05, 0.3, own_quantiles=own_quantiles)
+        np.testing.assert_allclose(dirs[:, 0], 0.0, atol=1e-12)
+        np.testing.assert_allclose(dirs[:, 1], -dirs[::-1, 1], atol=1e-9)
+        np.testing.assert_allclose(dirs[n // 2], [0.0, 0.0, 1.0], atol=1e-9)
+        assert np.ptp(dirs[:, 1]) > 0.5
+    # The symmetric line at a grazing view: the nodes that reflect below the surface weigh nothing,
+    # the rest renormalised. The lobe's own quantiles keep every node above it.
     wo = np.array([0.0, np.sin(np.radians(80.0)), np.cos(np.radians(80.0))])
-    dirs, weights, _ = split_sum_line(wo, "ggx", 0.05, 0.5)
+    dirs, weights, _ = split_sum_line(wo, "ggx", 0.05, 0.5, own_quantiles=False)
     below = dirs[:, 2] <= 0.0
     assert below.any() and not below.all()
     assert (weights[below] == 0.0).all() and weights.sum() == pytest.approx(1.0)
+    dirs, weights, _ = split_sum_line(wo, "ggx", 0.05, 0.5)
+    assert (dirs[:, 2] > 0.0).all() and np.allclose(weights, split_sum_line_weights())
 
 
 def test_split_sum_line_against_the_lobe_integral():
@@ -207,8 +216,9 @@ def test_split_sum_line_against_the_lobe_integral():
     bench's sphere where the old line (nine equal quantiles, the lean at sqrt(ax ay), nodes below
     the surface counted) was 16-41 % too dark (mean 26 %): the lower half, whose outer ninth of the
     lobe reaches from the ground to the sky, and the silhouette, where the lean pulled the line in.
-    Now 5-21 % (mean 12 %): the lower half's 20 % is what eleven isotropic lookups leave of a
-    lobe reaching from the ground to the sky."""
+    The symmetric line with its lean at alpha_min: 5-21 % (mean 12 %); the line at the lobe's own
+    quantiles (split_sum_anisotropic.py, not leant): 0.6-19 % (mean 8 %): the lower half's
+    16-19 % is what eleven isotropic lookups leave of a lobe reaching from the ground to the sky."""
     from lobeview.materials.prefilter import split_sum_lean, split_sum_line
 
     rng = np.random.default_rng(3)
@@ -261,19 +271,23 @@ def test_split_sum_line_against_the_lobe_integral():
         frame = np.stack([tangent, np.cross(n, tangent), n], axis=1)
         return frame, frame.T @ -d
 
-    errors = []
-    for row, col in [(150, 80), (150, 110), (96, 50), (96, 140), (70, 140)]:
-        frame, wo = frame_at(row, col)
-        truth, albedo = lobe_integral(frame, wo)
-        local, weights, level_alpha = split_sum_line(wo, "ggx", alpha_x, alpha_y)
-        lean = split_sum_lean(level_alpha)
-        estimate = 0.0
-        for direction, weight in zip(local @ frame.T, weights, strict=True):
-            if weight > 0.0:
-                d = (1.0 - lean) * frame[:, 2] + lean * direction
-                estimate += weight * filtered(d / np.linalg.norm(d), level_alpha)
-        errors.append(albedo * estimate / truth - 1.0)
-    assert np.max(np.abs(errors)) < 0.25 and np.mean(np.abs(errors)) < 0.15, errors
+    errors = {}
+    for own_quantiles in (False, True):
+        errors[own_quantiles] = []
+        for row, col in [(150, 80), (150, 110), (96, 50), (96, 140), (70, 140)]:
+            frame, wo = frame_at(row, col)
+            truth, albedo = lobe_integral(frame, wo)
+            local, weights, level_alpha = split_sum_line(wo, "ggx", alpha_x, alpha_y, own_quantiles=own_quantiles)
+            lean = 1.0 if own_quantiles else split_sum_lean(level_alpha)
+            estimate = 0.0
+            for direction, weight in zip(local @ frame.T, weights, strict=True):
+                if weight > 0.0:
+                    d = (1.0 - lean) * frame[:, 2] + lean * direction
+                    estimate += weight * filtered(d / np.linalg.norm(d), level_alpha)
+            errors[own_quantiles].append(albedo * estimate / truth - 1.0)
+    symmetric, own = np.abs(errors[False]), np.abs(errors[True])
+    assert np.max(symmetric) < 0.25 and np.mean(symmetric) < 0.15, errors
+    assert np.max(own) < 0.2 and np.mean(own) < 0.09 and np.mean(own) < 0.75 * np.mean(symmetric), errors
 
 
 def test_split_sum_follows_an_anisotropic_lobe(renderers):

@@ -195,7 +195,9 @@ def test_beckmann_split_sum_reads_its_lobes_in_plane_quantiles(gl):
         albedo = pf.dfg_lookup(table, wo[2], np.sqrt(alpha)).sum()
         expected = {}
         for in_plane in (True, False):
-            dirs, weights, level_alpha = pf.split_sum_lookups(wo, frame, "beckmann", alpha, alpha, in_plane=in_plane)
+            dirs, weights, level_alpha = pf.split_sum_lookups(
+                wo, frame, "beckmann", alpha, alpha, own_quantiles=in_plane
+            )
             lod = float(pf.split_sum_lod(level_alpha, kind="beckmann"))
             expected[in_plane] = weights @ lookup(cube, dirs, lod) * albedo
         pixel = result.radiance[y, x]
@@ -204,24 +206,33 @@ def test_beckmann_split_sum_reads_its_lobes_in_plane_quantiles(gl):
     assert lines_differ >= 4, lines_differ
 
 
-def test_anisotropic_split_sum_render_matches_numpy_twin(gl):
-    """An anisotropic GGX conductor under `prefiltered`: the mean of split_sum_line's lookups (the
-    narrower alpha's level, slopes along the wider axis, each leant by split_sum_lean), times the
-    anisotropic table's albedo (split_sum_dfg)."""
+@pytest.mark.parametrize("kind,alpha_u,alpha_v", [("ggx", 0.06, 0.3), ("beckmann", 0.35, 0.1)])
+def test_anisotropic_split_sum_render_matches_numpy_twin(gl, kind, alpha_u, alpha_v):
+    """An anisotropic conductor under `prefiltered`: the mean of split_sum_line's lookups (the
+    narrower alpha's level, the nodes at the lobe's own f cos quantiles along the wider axis:
+    split_sum_anisotropic.py, whose reweighting, CDF walk and quantile functions, Giles' erfinv
+    for Beckmann, the shader repeats), times the albedo (split_sum_dfg: GGX's anisotropic table)."""
     renderer, lookup = gl
-    desc = {"model": "microfacet", "distribution": "ggx", "alpha_u": 0.06, "alpha_v": 0.3,
+    desc = {"model": "microfacet", "distribution": kind, "alpha_u": alpha_u, "alpha_v": alpha_v,
             "fresnel": {"type": "none"}, "scale": 1.0}  # fmt: skip
     result = renderer.render(CAMERA, build_bsdf(desc), "prefiltered", background=False)
     assert not result.invalid.any()
-    cube = renderer.cubes.prefiltered_maps().split_sum("ggx")
-    tables = {"ggx": pf.dfg_table("ggx"), "anisotropic": anisotropic_dfg_texture_data()}
+    cube = renderer.cubes.prefiltered_maps().split_sum(kind)
+    tables = {kind: pf.dfg_table(kind), "anisotropic": anisotropic_dfg_texture_data()}
+    level_alpha = min(alpha_u, alpha_v)
+    symmetric_differs = 0
     for y, x in _pixels(result, count=16):
         frame, wo = _frame(result, y, x)
-        dirs, weights, level_alpha = pf.split_sum_lookups(wo, frame, "ggx", 0.06, 0.3)
-        assert len(weights) == pf.SPLIT_SUM_LINE_NODES and level_alpha == 0.06
-        radiance = weights @ lookup(cube, dirs, float(pf.split_sum_lod(level_alpha, kind="ggx")))
-        expected = radiance * pf.split_sum_dfg(tables, "ggx", wo, 0.06, 0.3).sum()
-        assert np.allclose(result.radiance[y, x], expected, rtol=0.02, atol=1e-4), (result.radiance[y, x], expected)
+        albedo = pf.split_sum_dfg(tables, kind, wo, alpha_u, alpha_v).sum()
+        expected = {}
+        for own in (True, False):
+            dirs, weights, level = pf.split_sum_lookups(wo, frame, kind, alpha_u, alpha_v, own_quantiles=own)
+            assert len(weights) == pf.SPLIT_SUM_LINE_NODES and level == level_alpha
+            expected[own] = weights @ lookup(cube, dirs, float(pf.split_sum_lod(level_alpha, kind=kind))) * albedo
+        pixel = result.radiance[y, x]
+        assert np.allclose(pixel, expected[True], rtol=0.02, atol=1e-4), (wo, pixel, expected)
+        symmetric_differs += not np.allclose(pixel, expected[False], rtol=0.02, atol=1e-4)
+    assert symmetric_differs >= 3, symmetric_differs  # the test can tell the two lines apart
 
 
 def _white_furnace(gl, alpha_u: float, alpha_v: float):

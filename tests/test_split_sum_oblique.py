@@ -128,9 +128,9 @@ def test_beckmann_in_plane_line_is_closer_to_the_lobe_on_the_sky(alpha, limit, g
     for in_plane in (True, False):
         truth, estimate = [], []
         for wo, frame in lobe_kernel.sphere_views(8):
-            weights, _ = twin.lobe_weights("beckmann", alpha, wo, frame)
+            weights, _ = twin.lobe_weights("beckmann", alpha, alpha, wo, frame)
             truth.append(twin.truth(weights))
-            estimate.append(twin.lookups("beckmann", alpha, wo, frame, in_plane=in_plane))
+            estimate.append(twin.lookups("beckmann", alpha, alpha, wo, frame, own_quantiles=in_plane))
         truth, estimate = np.asarray(truth), np.asarray(estimate)
         errors[in_plane] = float(np.sqrt(np.mean((estimate - truth) ** 2) / np.mean(truth**2)))
     assert errors[True] < min(limit, gain * errors[False]), errors
@@ -142,6 +142,6 @@ def test_beckmann_in_plane_line_is_closer_to_the_lobe_on_the_sky(alpha, limit, g
     frame = np.stack([tangent, np.cross(normal, tangent), normal], axis=1)
     camera = np.asarray(mitsuba.CAMERA[0], dtype=float)
     wo = frame.T @ ((camera - normal) / np.linalg.norm(camera - normal))
-    weights, _ = twin.lobe_weights("beckmann", alpha, wo, frame)
-    ratio = twin.lookups("beckmann", alpha, wo, frame, in_plane=True) / twin.truth(weights)
+    weights, _ = twin.lobe_weights("beckmann", alpha, alpha, wo, frame)
+    ratio = twin.lookups("beckmann", alpha, alpha, wo, frame, own_quantiles=True) / twin.truth(weights)
     assert abs(ratio - 1.0) < sun, ratio
