@@ -164,10 +164,10 @@ class SplitSumTwin:
     def exact_anisotropic(self, kind, ax, ay, wo, frame, lobe_weights, local) -> float:
         """An anisotropic lobe's line at the quantiles of its f cos over the half-vector slope
         along its wider axis, from this pixel's own quadrature, shrunk as anisotropic_line_slopes."""
-        from lobeview.materials.split_sum_anisotropic import line_half_vectors, mirror_directions
+        from lobeview.materials.split_sum_anisotropic import line_half_vectors, mirror_directions, wider_axis
 
         a_min, a_max = min(ax, ay), max(ax, ay)
-        major = np.array([1.0, 0.0]) if ax >= ay else np.array([0.0, 1.0])
+        major = wider_axis(ax, ay)
         keep = lobe_weights > 0.0
         h = local[keep] + wo
         h /= np.linalg.norm(h, axis=1, keepdims=True)

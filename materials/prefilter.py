@@ -42,6 +42,7 @@ from .split_sum_anisotropic import (  # noqa: F401  (re-exported: the line belon
     split_sum_is_line,
     split_sum_line_quantiles,
     split_sum_line_weights,
+    wider_axis,
 )
 from .split_sum_levels import (  # noqa: F401  (re-exported: the levels belong to the maps' API)
     PEAK_MATCHED_FROM,
@@ -356,7 +357,7 @@ def split_sum_line(
         if own_quantiles:
             slopes, major = anisotropic_line_slopes(wo, kind, alpha_x, alpha_y)
         else:
-            major = np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
+            major = wider_axis(alpha_x, alpha_y)
             slopes = split_sum_line_quantiles(kind) * np.sqrt(a_max * a_max - a_min * a_min)
     elif along_view > MIN_OBLIQUE_XY:
         alpha = float(np.sqrt(alpha_x * alpha_y))

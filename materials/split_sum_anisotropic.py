@@ -79,6 +79,11 @@ def split_sum_line_quantiles(kind: str) -> np.ndarray:
     return slope_marginal_quantile(kind, LINE_QUANTILES)
 
 
+def wider_axis(alpha_x: float, alpha_y: float) -> np.ndarray:
+    """The tangent-plane axis (2,) an anisotropic lobe's line runs along: x where alpha_x >= alpha_y."""
+    return np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
+
+
 def line_half_vectors(slopes: np.ndarray, major: np.ndarray) -> np.ndarray:
     """The half vectors normalize(-s major, 1) of slopes ``slopes`` along the 2-vector ``major`` (k, 3)."""
     h = np.concatenate([-np.asarray(slopes)[:, None] * major[None], np.ones((len(slopes), 1))], axis=1)
@@ -98,7 +103,7 @@ def anisotropic_line_slopes(wo: np.ndarray, kind: str, alpha_x: float, alpha_y: 
     marginal's symmetric nodes (the caller then reads them all)."""
     wo = np.asarray(wo, dtype=np.float64).reshape(3)
     a_min, a_max = min(alpha_x, alpha_y), max(alpha_x, alpha_y)
-    major = np.array([1.0, 0.0]) if alpha_x >= alpha_y else np.array([0.0, 1.0])
+    major = wider_axis(alpha_x, alpha_y)
     shrink = np.sqrt(max(1.0 - (a_min / a_max) ** 2, 0.0))
     marginal = split_sum_line_quantiles(kind) * a_max
     h = line_half_vectors(marginal, major)
@@ -110,12 +115,11 @@ def anisotropic_line_slopes(wo: np.ndarray, kind: str, alpha_x: float, alpha_y: 
         return marginal * shrink, major
     edges = np.asarray(SPLIT_SUM_LINE_EDGES)
     cdf = np.concatenate([[0.0], np.cumsum(mass)]) / mass.sum()
-    targets = np.concatenate([LINE_QUANTILES, [0.5]])
     # the interval each target falls in (the first whose CDF end passes it: empty intervals are
     # skipped), then linear in the marginal's probability within it
-    bins = np.minimum(np.searchsorted(cdf[1:], targets, side="right"), len(mass) - 1)
-    within = (targets - cdf[bins]) / np.maximum(mass[bins] / mass.sum(), 1e-30)
+    bins = np.minimum(np.searchsorted(cdf[1:], LINE_QUANTILES, side="right"), len(mass) - 1)
+    within = (LINE_QUANTILES - cdf[bins]) / np.maximum(mass[bins] / mass.sum(), 1e-30)
     u = edges[bins] + np.clip(within, 0.0, 1.0) * (edges[bins + 1] - edges[bins])
     slopes = slope_marginal_quantile(kind, np.clip(u, QUANTILE_MARGIN, 1.0 - QUANTILE_MARGIN)) * a_max
-    median = slopes[-1]
-    return median + (slopes[:-1] - median) * shrink, major
+    median = slopes[SPLIT_SUM_LINE_NODES // 2]  # the middle interval's middle is 1/2
+    return median + (slopes - median) * shrink, major
