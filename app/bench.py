@@ -51,6 +51,13 @@ def add_arguments(p) -> None:
     )
     a("--repeats", type=int, default=3, help="timed frames per cell after one warm-up (default 3)")
     a("--reference-spp", type=int, help="reference samples per lobe (default 1024; --quick 256)")
+    a(
+        "--supersample",
+        type=int,
+        help="light: real-time methods at this many times the size, averaged, so that they and the box-filtered "
+        "reference integrate the same pixels (default 4; 1 shades pixel centres)",
+    )
+    a("--after-only", action="store_true", help="light: only the renders with the bright sources separated")
     a("--sweep-biases", nargs="*", type=float, help=f"LOD biases of the sweep (default {list(SWEEP_BIASES)})")
     a("--sweep-methods", nargs="*", help=f"methods of the LOD-bias sweep (default {' '.join(SWEEP_METHODS)})")
     a("--fps-size", help="fps table resolution (default 1680x1050; --quick 640x400); 'none' skips it")

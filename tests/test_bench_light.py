@@ -49,3 +49,38 @@ def test_environment_choice():
     assert [p.stem for p in light.environment_files(["studio"])] == ["studio"]
     with pytest.raises(SystemExit, match="no environment 'nowhere'"):
         light.environment_files(["nowhere"])
+
+
+def test_after_only_table_and_figure(tmp_path):
+    row = _row("prefiltered", 0.3, 0.08)
+    del row["before"]
+    results = {"rows": [row], "size": 8, "reference_spp": 16, "repeats": 1, "supersample": 4,
+               "device": "test", "stamp": "stamp"}  # fmt: skip
+    text = light.markdown(results)
+    assert "| studio | 4 | gold-ggx | prefiltered | - | 8.0 | - | - | - | 30.0 | - | 150 |" in text
+    assert "4x4 points per pixel" in text and "pixel centres" in light.markdown({**results, "supersample": 1})
+    frame = np.full((8, 8, 3), 0.5, dtype=np.float32)
+    light.write_figure([("studio", "gold-ggx", "after", frame, frame)], tmp_path / "figure.png")
+    from PIL import Image
+
+    assert Image.open(tmp_path / "figure.png").size == (24, 8)  # reference | after | error
+
+
+@pytest.mark.skipif(not SHARED_ASSETS.exists(), reason="shared assets not present")
+def test_supersampled_methods_meet_the_box_filtered_reference_at_the_silhouette(tmp_path, monkeypatch):
+    """A real run, small: shading pixel centres counts the silhouette's partly covered pixels as the
+    method's error (the box-filtered reference averages them with the empty background); at 4 x 4
+    points per pixel the sphere's error comes down to its interior's."""
+    monkeypatch.setattr(light, "SIZE", 48)
+    errors = {}
+    for supersample in (1, 4):
+        results = light.run(["studio"], ["beckmann:0.3"], ["lobe-7+norm+fit"], 256, 1, tmp_path, f"s{supersample}",
+                            progress=lambda *_: None, supersample=supersample, before=False)  # fmt: skip
+        (row,) = results["rows"]
+        assert "before" not in row and results["supersample"] == supersample
+        errors[supersample] = row["after"]
+    assert (tmp_path / "light-s4.md").exists() and (tmp_path / "light-s4.png").exists()
+    # measured: 8.8 % at the pixel centres, 5.1 % supersampled, 5.2 / 4.9 % over the interior (48 px,
+    # the 256-sample reference's noise a good part of it)
+    assert errors[1]["rel_rmse"] > 1.5 * errors[4]["rel_rmse"]
+    assert errors[4]["rel_rmse"] < 1.2 * errors[4]["rel_rmse_interior"]
