@@ -123,7 +123,8 @@ def add_scene_arguments(p) -> None:
         action=argparse.BooleanOptionalAction,
         default=True,
         help="take the bright sources out of every radiance cube (suns, windows, softboxes, lamps: regions at least "
-        "50x the cube's median and 100x their surroundings, at most 10 degrees wide) and integrate them as cap "
+        "50x the cube's median and 100x their surroundings, at most 10 degrees wide, a hard cap's radiance 300x the "
+        "median) and integrate them as cap "
         "lights per pixel in every method but the reference (default: on; --no-bright-sources reads them from "
         "the cube as before)",
     )

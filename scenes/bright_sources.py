@@ -18,7 +18,8 @@ equirectangular environment map):
      energy spreads (its energy-weighted second moment: a sun in its glow gets the sun's size),
      with the uniform radiance that carries the removed power; regions holding less than
      MIN_LIGHT_SHARE of the map's energy, regions whose peak is less than MIN_CONTRAST times
-     their surroundings, and regions whose cap would be wider than
+     their surroundings, regions whose cap's radiance is less than MIN_SOURCE_FACTOR times the
+     map's median (a bright patch of sky between walls), and regions whose cap would be wider than
      MAX_LIGHT_SOLID_ANGLE (their structure matters), and regions wider than 2 degrees and more
      than MAX_ELONGATION times longer than wide (a band of city lights: a cap would be a disc),
      stay in the map; at most MAX_LIGHTS of the strongest are taken;
@@ -55,6 +56,17 @@ MIN_CONTRAST = 100.0
 # A light is a uniform cap: a bright region wider than this (10 degrees of radius) would lose the
 # structure a sharp reflection shows (a sky or a sunlit wall), so it stays in the map.
 MAX_LIGHT_SOLID_ANGLE = 2.0 * np.pi * (1.0 - np.cos(np.radians(10.0)))
+# ... and a hard cap's radiance (the removed power over its solid angle) is at least this many
+# times the map's median luminance: a region only 100x its map's median is a patch of bright sky
+# between dark walls or trees, which the MIP-filtered reads see as they see the rest of the map,
+# while its cap, a uniform disc, loses the patch's shape. Measured on the 11 captures of
+# ../shared/assets/env (`lobeview bench light`, 4 x 4 points per pixel, against the 2048-sample
+# reference): courtyard's two caps (4.0 / 4.7 degrees, 132x / 91x the median) and forest's 7.1-degree
+# cap (143x) cost accuracy or gained nothing (lobe-7+norm+fit on miro5 6.1 -> 3.1 % and 15.7 ->
+# 3.8 % without them, GGX 0.05 under forest 13.5 -> 3.2 %, nothing worse by more than the
+# reference's noise), while every source the caps are for, suns, windows, lamps and soft boxes,
+# is 640x-360 000x (interior's 1.9-degree window the faintest).
+MIN_SOURCE_FACTOR = 300.0
 # A uniform region (6.): builtin:studio's key and fill soft boxes (11 and 16 degrees, a ramp over
 # their outer 1.3 and 2.2 degrees) stayed in the map, the key too wide, the fill's contrast
 # measured against its own ramp; in a glossy floor's GGX tail the four tail lookups read them 2.5x
@@ -339,6 +351,8 @@ def separate(
                 continue
         if float(luminance[region].max()) < MIN_CONTRAST * float(background @ LUMINANCE):
             continue  # bright, but not far above its surroundings: structure, not a source
+        if float(power @ LUMINANCE) / cap_omega < MIN_SOURCE_FACTOR * median:
+            continue  # a bright patch of the map (sky between walls), not a source: its shape stays
         if cap_omega > MAX_LIGHT_SOLID_ANGLE or taken[region].any():
             continue  # a wide bright region keeps its structure in the map
         if cap_omega > ELONGATED_FROM_SOLID_ANGLE and elongation(dirs[region], removed, centre) > MAX_ELONGATION:

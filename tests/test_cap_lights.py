@@ -279,6 +279,36 @@ def test_separation_leaves_wide_or_low_contrast_regions_in_the_map():
     assert not bs.separate_cube(faint).lights
 
 
+def _patch_between_walls(level: float):
+    """A sky of radiance 1 (the map's median), dark walls (0.005) over a 30-degree region and inside
+    them a 5-degree patch of sky at ``level`` with structure (not uniform: no soft-edged cap): what
+    courtyard.exr and forest.exr hold between their buildings and trees."""
+
+    def radiance(d):
+        cos_to_centre = np.sum(d * SUN, -1)
+        walls = cos_to_centre > np.cos(np.radians(30.0))
+        patch = cos_to_centre > np.cos(np.radians(5.0))
+        structure = 1.0 + 0.6 * np.sin(40.0 * d[..., 0]) * np.cos(30.0 * d[..., 1])
+        value = np.where(patch, level * structure, np.where(walls, 0.005, 1.0))
+        return value[..., None] * np.ones(3)
+
+    return _cube_faces(radiance, size=128)
+
+
+def test_a_bright_patch_of_sky_between_walls_stays_in_the_map():
+    """A patch 150x the map's median, 3e4x its dark surroundings (it passes MIN_CONTRAST), keeps its
+    shape in the map (bs.MIN_SOURCE_FACTOR: under courtyard.exr and forest.exr such caps cost lobe-7
+    up to 10 points, docs/measurements.md); ten times brighter it is a source and becomes a light.
+    Energy is conserved either way."""
+    patch, source = _patch_between_walls(150.0), _patch_between_walls(1500.0)
+    kept = bs.separate_cube(patch)
+    assert not kept.lights and np.array_equal(kept.residual, patch)
+    taken = bs.separate_cube(source)
+    assert len(taken.lights) == 1 and np.degrees(taken.lights[0].radius) < 5.5
+    assert taken.lights[0].inner_fraction == 1.0  # a hard cap: the rule it tests applies to those
+    assert np.allclose(_power(taken.residual) + taken.light_power, _power(source), rtol=1e-4)
+
+
 def _band_or_disc(elongated: bool):
     """A dim sky with one bright region of the same solid angle (about 0.012 sr) near the
     horizon: a band 24 x 1.7 degrees (elongated) or a disc of 3.6 degrees radius, with a
@@ -417,6 +447,18 @@ def test_separation_of_real_captures_conserves_energy(name):
     faces = equirect_to_cube_faces(env, 64)
     cube = bs.separate_cube(faces)
     assert np.allclose(_power(cube.residual) + cube.light_power, _power(faces), rtol=1e-4)
+
+
+@pytest.mark.skipif(not SHARED_ASSETS.exists(), reason="shared assets not present")
+def test_bright_sky_between_buildings_and_trees_stays_in_real_captures():
+    """courtyard.exr's two patches of sky (4-5 degrees, 90-130x the map's median) and forest.exr's
+    7-degree one (140x) keep their shape in the map; forest's sun (1.2 degrees, 3000x) is a light."""
+    from lobeview.scenes.builtin_env import load_environment
+
+    folder = SHARED_ASSETS / "env" / "blender_studiolights_1k"
+    assert not bs.separate_equirect(load_environment(str(folder / "courtyard.exr")).image).lights
+    (sun,) = bs.separate_equirect(load_environment(str(folder / "forest.exr")).image).lights
+    assert np.degrees(sun.radius) < 1.5
 
 
 def test_separation_rejects_bad_maps():
