@@ -133,11 +133,13 @@ ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o) {
 #endif
     float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
     float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
+    // GRAZING_AZIMUTH_FACTOR: below MIN_VIEW_COSINE the azimuths double
+    int grazing = cos_theta_o < MIN_VIEW_COSINE ? 2 : 1;
     if (ratio < 0.05) return ivec2(1, 1);  // GAUSS_RULES
-    if (ratio < 0.2) return ivec2(1, 4);
-    if (ratio < 0.35) return ivec2(2, 6);
-    if (ratio < 0.6) return ivec2(3, 6);
-    if (ratio < 1.0) return ivec2(3, 8);
+    if (ratio < 0.2) return ivec2(1, 4 * grazing);
+    if (ratio < 0.35) return ivec2(2, 6 * grazing);
+    if (ratio < 0.6) return ivec2(3, 6 * grazing);
+    if (ratio < 1.0) return ivec2(3, 8 * grazing);
     return ivec2(0);  // NARROW_FROM
 }
 
