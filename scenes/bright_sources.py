@@ -61,11 +61,13 @@ MAX_LIGHT_SOLID_ANGLE = 2.0 * np.pi * (1.0 - np.cos(np.radians(10.0)))
 # between dark walls or trees, which the MIP-filtered reads see as they see the rest of the map,
 # while its cap, a uniform disc, loses the patch's shape. Measured on the 11 captures of
 # ../shared/assets/env (`lobeview bench light`, 4 x 4 points per pixel, against the 2048-sample
-# reference): courtyard's two caps (4.0 / 4.7 degrees, 132x / 91x the median) and forest's 7.1-degree
-# cap (143x) cost accuracy or gained nothing (lobe-7+norm+fit on miro5 6.1 -> 3.1 % and 15.7 ->
-# 3.8 % without them, GGX 0.05 under forest 13.5 -> 3.2 %, nothing worse by more than the
-# reference's noise), while every source the caps are for, suns, windows, lamps and soft boxes,
-# is 640x-360 000x (interior's 1.9-degree window the faintest).
+# reference): without courtyard's two caps (4.0 / 4.7 degrees, 132x / 91x the median) and forest's
+# 7.1-degree cap (143x) the metals gain (lobe-7+norm+fit on miro5 6.0 -> 3.0 % and 15.6 -> 3.8 %,
+# GGX 0.05 under forest 13.5 -> 3.0 %), but the wide lobes under forest lose (frosted glass 4.3 ->
+# 9.8 %, the glTF plastic 7.5 -> 14.2 %: their grazing rim reads the patch from the map, where the
+# cap's integral was exact); lobe-7's summed error over the 14 cells 105 -> 85. Every source the
+# caps are for, suns, windows, lamps and soft boxes, is 640x-360 000x (interior's 1.9-degree
+# window the faintest). Which a lobe wants depends on its width against the light's (not built).
 MIN_SOURCE_FACTOR = 300.0
 # A uniform region (6.): builtin:studio's key and fill soft boxes (11 and 16 degrees, a ramp over
 # their outer 1.3 and 2.2 degrees) stayed in the map, the key too wide, the fill's contrast

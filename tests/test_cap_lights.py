@@ -322,7 +322,7 @@ def _patch_between_walls(level: float):
 def test_a_bright_patch_of_sky_between_walls_stays_in_the_map():
     """A patch 150x the map's median, 3e4x its dark surroundings (it passes MIN_CONTRAST), keeps its
     shape in the map (bs.MIN_SOURCE_FACTOR: under courtyard.exr and forest.exr such caps cost lobe-7
-    up to 10 points, docs/measurements.md); ten times brighter it is a source and becomes a light.
+    on metals up to 12 points, docs/measurements.md); ten times brighter it is a source and becomes a light.
     Energy is conserved either way."""
     patch, source = _patch_between_walls(150.0), _patch_between_walls(1500.0)
     kept = bs.separate_cube(patch)
