@@ -11,8 +11,10 @@ equirectangular environment map):
      the equirectangular seam);
   3. per region, the surroundings' level B: the per-channel median radiance of the texels that
      are below the threshold and within SURROUND_TEXELS texel widths of the region's cap;
-  4. the light is what lies above B: per texel and channel max(L - B, 0), the texel keeps
-     min(L, B). So the map after separation plus the lights' power is the map before, exactly
+  4. the light is what lies above B: per texel and channel max(L - B, 0). The map without
+     sources keeps min(L, B) there; the residual instead loses the light's cap drawn into its
+     texels (:func:`rasterised_cap`), so it keeps, signed, how the source differs from a uniform
+     cap (see :class:`Separation`). Either map plus the lights' power is the map before, exactly
      (nothing twice, nothing lost: tests/test_cap_lights.py checks it to 1e-4);
   5. the region becomes a cap around its energy-weighted mean direction, as wide as the removed
      energy spreads (its energy-weighted second moment: a sun in its glow gets the sun's size),
@@ -69,6 +71,13 @@ MAX_LIGHT_SOLID_ANGLE = 2.0 * np.pi * (1.0 - np.cos(np.radians(10.0)))
 # caps are for, suns, windows, lamps and soft boxes, is 640x-360 000x (interior's 1.9-degree
 # window the faintest). Which a lobe wants depends on its width against the light's (not built).
 MIN_SOURCE_FACTOR = 300.0
+# The residual keeps a hard light's shape beyond its cap (see Separation) where the cap is at least
+# this many texel widths in radius. Below, the shape is the texels' pixelation of a sun (its core
+# in one texel, the drawn cap's ramp over the next): a near-mirror reads that signed detail at one
+# point per pixel while its cap integral is widened by the pixel's footprint (cap_lights.py
+# footprint_alpha2), and the two disagree by up to the cap's radiance: black pixels in a sun's
+# highlight (GGX 0.01 under sunrise.exr, whose 1.03-degree sun is 2.3 texels of a 256^2 cube).
+SHAPE_FROM_TEXELS = 3.0
 # A uniform region (6.): builtin:studio's key and fill soft boxes (11 and 16 degrees, a ramp over
 # their outer 1.3 and 2.2 degrees) stayed in the map, the key too wide, the fill's contrast
 # measured against its own ramp; in a glossy floor's GGX tail the four tail lookups read them 2.5x
@@ -110,12 +119,25 @@ def elongation(directions: np.ndarray, weights: np.ndarray, centre: np.ndarray) 
 
 @dataclass
 class Separation:
-    """Lights taken out of a map, and the map without them (same layout as the input)."""
+    """Lights taken out of a map, and the map without them (same layout as the input), twice:
+    ``residual`` lost each hard light's cap as drawn into its texels (signed: what the map holds
+    beyond the uniform cap, a sun's core brighter than the cap, its glow darker), for the methods
+    that read the map by lobe-sized footprints (lobe-N, fis-N: a footprint wider than the source
+    reads about zero, a narrower one the source's real shape); ``without_sources`` has each
+    source's texels at their surroundings' level (>= 0), for single lookups of prefiltered maps,
+    whose finest levels would show the signed detail as it is. Both plus the lights' power are
+    the map's power (to 1e-4; tests/test_cap_lights.py)."""
 
     lights: list[CapLight]
     residual: np.ndarray
     threshold: float  # luminance above which texels were candidates
     regions: list[np.ndarray] = field(default_factory=list)  # texel indices of each light (flattened)
+    without_sources: np.ndarray | None = None  # None: no lights, the map itself (``residual``)
+    shapes_kept: int = 0  # how many lights' shapes ``residual`` keeps (SHAPE_FROM_TEXELS)
+
+    def __post_init__(self):
+        if self.without_sources is None:
+            self.without_sources = self.residual
 
     @property
     def light_power(self) -> np.ndarray:
@@ -165,6 +187,23 @@ def separate_equirect(image: np.ndarray, **options) -> Separation:
         raise ValueError(f"an equirectangular map has shape (H, 2H, 3), got {image.shape}")
     directions, solid = equirect_texels(image.shape[0])
     return separate(directions, solid, image[..., :3], np.pi / image.shape[0], **options)
+
+
+def rasterised_cap(dirs, omega, centre, cos_radius, power, texel_angle) -> tuple[np.ndarray, np.ndarray]:
+    """The uniform cap of ``power`` (RGB) around ``centre`` drawn into texels (``dirs``,
+    ``omega``): each texel's covered share, a ramp one texel wide across the rim, scaled so that the
+    texels carry exactly ``power``. Returns the texels it touches (indices into ``dirs``) and their
+    radiance."""
+    radius = float(np.arccos(np.clip(cos_radius, -1.0, 1.0)))
+    angle = np.arccos(np.clip(dirs @ centre, -1.0, 1.0))
+    coverage = np.clip((radius - angle) / texel_angle + 0.5, 0.0, 1.0)
+    touched = np.flatnonzero(coverage > 0.0)
+    if len(touched) == 0:  # a cap far below a texel: the nearest texel holds it
+        touched = np.array([int(np.argmin(angle))])
+        coverage[touched] = 1.0
+    weight = coverage[touched] * omega[touched]
+    radiance = np.outer(weight / float(np.sum(weight)) / omega[touched], power)
+    return touched, radiance
 
 
 def excess_variation(excess: np.ndarray, omega: np.ndarray, cos_to_axis: np.ndarray, cos_radius: float) -> float:
@@ -293,6 +332,7 @@ def separate(
     if not np.all(np.isfinite(light_in)) or np.any(light_in < 0.0):
         raise ValueError("bright-source separation needs finite radiance >= 0 (sanitise the map first)")
     residual = light_in.copy()
+    without_sources = light_in.copy()
     luminance = light_in @ LUMINANCE
     order = np.argsort(luminance)
     cumulative = np.cumsum(omega[order])
@@ -313,6 +353,7 @@ def separate(
 
     all_tree = cKDTree(dirs)
     lights, kept = [], []
+    shapes_kept = 0
     taken = np.zeros(len(dirs), bool)  # texels another light already took (soft edges reach out)
     for region in regions:
         if len(lights) == max_lights:
@@ -347,6 +388,7 @@ def separate(
             )
             if soft is not None and not taken[soft.texels].any():
                 residual[soft.texels] = light_in[soft.texels] - soft.excess
+                without_sources[soft.texels] = residual[soft.texels]
                 taken[soft.texels] = True
                 lights.append(soft.light)
                 kept.append(soft.texels)
@@ -359,8 +401,28 @@ def separate(
             continue  # a wide bright region keeps its structure in the map
         if cap_omega > ELONGATED_FROM_SOLID_ANGLE and elongation(dirs[region], removed, centre) > MAX_ELONGATION:
             continue  # a band (a horizon's city lights) is no cap: the map keeps its shape
-        residual[region] = light_in[region] - excess
+        # the map keeps the source's shape beyond its cap: it loses the cap as drawn into its
+        # texels (signed; the methods that read it by lobe-sized footprints see the sun's core in
+        # its glow, a soft box's corners), and, for single lookups, a copy loses the whole excess
+        # (a cap narrower than SHAPE_FROM_TEXELS texels has no shape the map resolves)
+        without_sources[region] = light_in[region] - excess
+        if np.arccos(cos_radius) >= SHAPE_FROM_TEXELS * texel_angle:
+            near_cap = np.asarray(
+                all_tree.query_ball_point(centre, np.sqrt(2.0 * (1.0 - cos_radius)) + texel_angle), dtype=int
+            )
+            drawn, cap_in_map = rasterised_cap(dirs[near_cap], omega[near_cap], centre, cos_radius, power, texel_angle)
+            residual[near_cap[drawn]] -= cap_in_map
+            shapes_kept += 1
+        else:
+            residual[region] = without_sources[region]
         taken[region] = True
         lights.append(CapLight(centre, cos_radius, power / cap_omega))
         kept.append(region)
-    return Separation(lights, residual.reshape(shape).astype(radiance.dtype), threshold, kept)
+    return Separation(
+        lights,
+        residual.reshape(shape).astype(radiance.dtype),
+        threshold,
+        kept,
+        without_sources.reshape(shape).astype(radiance.dtype),
+        shapes_kept,
+    )

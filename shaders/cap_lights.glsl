@@ -10,6 +10,7 @@
 
 #if !defined(OBJECT_LOBE_RECORDS)  // per object in viewer/object_records.py
 uniform int u_cap_light_count;                      // 0: none (and always 0 for the reference)
+uniform int u_signed_residual;  // 1: the residual read keeps a source's shape beyond its cap (signed)
 uniform vec4 u_cap_light_axis[MAX_CAP_LIGHTS];      // xyz: direction (world), w: cos(radius)
 uniform vec4 u_cap_light_radiance[MAX_CAP_LIGHTS];  // rgb: radiance, w: the soft edge's inner fraction
 #endif

@@ -197,7 +197,20 @@ vec3 mirror_incident(vec3 wi, float solid_angle) {
 
 // Incident radiance from world direction `dir` for a sample covering `solid_angle` sr
 // (0: no filtering, the unbiased methods).
+// Where the cube's bright sources are lights, a filtered read covers at least the pixel's
+// reflected footprint (cap_lights.glsl set_light_footprint): the residual holds, signed, what a
+// source has beyond its cap (scenes/bright_sources.py), and the caps are integrated against the
+// lobe widened by the same footprint; a read narrower than the caps' sees that signed detail at a
+// point while the cap is spread over the footprint. |dr_x|^2 + |dr_y|^2 = 2 d^2 for a square
+// footprint d wide.
+float residual_read_solid_angle(float solid_angle) {
+    if (solid_angle > 0.0 && u_signed_residual == 1 && u_point_sampled_lights == 0)
+        return max(solid_angle, 0.5 * g_footprint_dr2);
+    return solid_angle;
+}
+
 vec3 incident(vec3 dir, float solid_angle) {
+    solid_angle = residual_read_solid_angle(solid_angle);
 #if defined(MIRROR)
     return mirror_incident(normalize(dir), solid_angle);
 #else

@@ -362,5 +362,7 @@ vec3 shade(vec3 wo, mat3 tbn) {
         volume_lobe(volume, l, tbn, vec3(0.0), lobe_tbn, through);
         result += through * cap_lights_radiance(l, wo, lobe_tbn);
     }
-    return result;
+    // >= 0: the residual cube is signed (a source's shape beyond its cap; bright_sources.py), and
+    // reads of it that miss the cap's own core can leave a small negative sum
+    return max(result, vec3(0.0));
 }

@@ -265,7 +265,8 @@ void main() {
             l.k = vec3(clearcoat);
             l.ax = coat_alpha;
             l.ay = coat_alpha;
-            radiance += integrate_lobe(l, i, coat_wo, coat_tbn) + scene_cap_lights(l, coat_wo, coat_tbn);
+            // >= 0: the residual cube is signed (a source's shape beyond its cap; bright_sources.py)
+            radiance += max(integrate_lobe(l, i, coat_wo, coat_tbn) + scene_cap_lights(l, coat_wo, coat_tbn), vec3(0.0));
             radiance += lamps_radiance(l, coat_wo, coat_tbn, v_position);
             continue;
         }
@@ -274,8 +275,8 @@ void main() {
         mat3 lobe_tbn = tbn;
         vec3 through = vec3(1.0);
         volume_lobe(volume, l, tbn, v_position, lobe_tbn, through);
-        radiance += through * (integrate_lobe(l, i, wo, lobe_tbn) + scene_cap_lights(l, wo, lobe_tbn)
-                               + lamps_radiance(l, wo, lobe_tbn, v_position));
+        radiance += through * max(integrate_lobe(l, i, wo, lobe_tbn) + scene_cap_lights(l, wo, lobe_tbn)
+                                  + lamps_radiance(l, wo, lobe_tbn, v_position), vec3(0.0));
 #if defined(PARALLAX) || defined(MIRROR)
         g_shading_position = v_position;
 #endif

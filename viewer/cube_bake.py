@@ -30,11 +30,12 @@ from .cubemap import RadianceCube
 from .frame import begin_pass, new_framebuffer
 from .mip_chain import DEFAULT_MIP_FILTER, check_mip_filter, downsample_cube_faces
 
+# 9: the residual cubes keep each bright source's shape beyond its cap (scenes/bright_sources.py);
 # 8: line-pattern footprints held to the lobe's width (materials/patterns.py LINE_MIN_FOOTPRINT_FRACTION);
 # 7: the environment read at the face texel's MIP level (shaders/background.frag), not level 0;
 # 6: the second bounce shades with bright-source lights and residual cubes (issue 39);
 # 5: per-object face sizes (supersampled); 4: glTF textures, alpha modes, culling
-CUBE_CACHE_VERSION = 8
+CUBE_CACHE_VERSION = 9
 CUBE_SUPERSAMPLE = 2
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
 
@@ -458,9 +459,10 @@ class CubeResidency:
 
 def cube_gpu_bytes(cube: RadianceCube) -> int:
     """GPU bytes of a radiance cube with its MIP chain (twice where bright sources were separated:
-    the residual is a second cube), and the prefiltered maps built from it."""
+    the residual is a second cube; three times once prefiltered maps were made from the cube without
+    sources), and the prefiltered maps built from it."""
     from .prefiltered import cube_bytes
 
     maps = cube.built_prefiltered_maps
-    chains = 2 if cube.residual is not cube.radiance else 1
+    chains = cube.texture_chains
     return chains * cube_bytes(cube.face_size, int(np.log2(cube.face_size)) + 1) + (maps.total_memory() if maps else 0)

@@ -77,17 +77,22 @@ class RadianceCube:
         self.face_size = faces.shape[1]
         self.mip_filter = check_mip_filter(mip_filter)
         self.radiance = upload_cube(ctx, faces, mip_filter=mip_filter)
-        # Bright-source separation (issue 39): the lights taken out, and the cube without them,
-        # which every method but the reference reads (the reference keeps the whole radiance:
-        # its environment sampler already converges on suns). No lights: the same texture.
+        # Bright-source separation (issue 39): the lights taken out, and the cube without their
+        # caps (signed: what a source holds beyond its cap stays), which every method but the
+        # reference and the prefiltered maps reads (the reference keeps the whole radiance: its
+        # environment sampler already converges on suns; the prefiltered maps are made from
+        # ``without_sources``). No lights: the same texture.
         self.lights: list = []
         self.residual = self.radiance
+        self.signed_residual = False  # whether ``residual`` keeps a source's shape (signed)
+        self._without_sources = None  # on first use (prefiltered maps only)
         if bright_sources:
             from lobeview.scenes.bright_sources import separate_cube
 
             separation = separate_cube(faces)
             if separation.lights:
                 self.lights = separation.lights
+                self.signed_residual = bool(separation.shapes_kept)
                 self.residual = upload_cube(ctx, separation.residual, mip_filter=mip_filter)
         self.importance_size = min(int(importance_size), self.face_size)
         self._importance: tuple | None = None  # (CubeImportance, env_cdf, env_pdf) once built
@@ -117,10 +122,32 @@ class RadianceCube:
         return self._read_faces(self.radiance)
 
     @property
-    def residual_faces(self) -> np.ndarray:
-        """The faces of ``residual`` (those of ``radiance`` without bright sources): what the
-        prefiltered maps are made from and keyed by."""
-        return self._read_faces(self.residual)
+    def without_sources(self) -> moderngl.TextureCube:
+        """The cube with each bright source at its surroundings' level (>= 0; bright_sources.py
+        Separation.without_sources): what the prefiltered maps are made from, since their finest
+        levels are looked up as they are and would show ``residual``'s signed detail. Separated
+        again from ``faces`` on first use (a few tenths of a second for 256^2 faces; the same
+        lights, since the faces read back are the float32 texels separated at construction), so no
+        cube of a session without prefiltered maps holds it. No lights: ``residual`` itself."""
+        if not self.lights:
+            return self.residual
+        if self._without_sources is None:
+            from lobeview.scenes.bright_sources import separate_cube
+
+            faces = separate_cube(self.faces).without_sources
+            self._without_sources = upload_cube(self.radiance.ctx, faces, mip_filter=self.mip_filter)
+        return self._without_sources
+
+    @property
+    def without_sources_faces(self) -> np.ndarray:
+        """The faces of ``without_sources``: what the prefiltered maps are made from and keyed by."""
+        return self._read_faces(self.without_sources)
+
+    @property
+    def texture_chains(self) -> int:
+        """How many cube textures with MIP chains this cube holds now (radiance, residual,
+        without_sources)."""
+        return 1 + (self.residual is not self.radiance) + (self._without_sources is not None)
 
     def _read_faces(self, texture) -> np.ndarray:
         size = self.face_size
@@ -194,6 +221,8 @@ class RadianceCube:
             self._blur_stack.release()
         if self.residual is not self.radiance:
             self.residual.release()
+        if self._without_sources is not None:
+            self._without_sources.release()
         self.radiance.release()
         if self._importance is not None:
             self._importance[1].release()

@@ -85,6 +85,7 @@ LOBE_RECORD_FIELDS = (
     RecordField("u_stack_layer", "float"),  # lobe-N+norm+fit: its blur stack's first layer in the group's array
     RecordField("u_has_blur_stack", "int"),  # 0: no stack (no fitted lobe, or not built yet): the chain
     RecordField("u_cap_light_count", "int"),
+    RecordField("u_signed_residual", "int"),  # 1: its residual keeps a source's shape (cap_lights.glsl)
     RecordField("u_proxy_kind", "int"),
     RecordField("u_proxy_plane_count", "int"),
     RecordField("u_cube_centre", "vec3"),

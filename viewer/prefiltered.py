@@ -234,8 +234,8 @@ class PrefilteredMaps:
         self.programs = programs or ProgramCache(ctx)
         self.cache_dir = Path(cache_dir) if cache_dir else None
         # level 0, how the levels the prefilters read between were made, and their bias
-        # the cube without its bright sources (viewer/cubemap.py residual): those are added exactly
-        source = np.ascontiguousarray(cube.residual_faces).tobytes()
+        # the cube without its bright sources (viewer/cubemap.py without_sources): those are added exactly
+        source = np.ascontiguousarray(cube.without_sources_faces).tobytes()
         source += f"{cube.mip_filter} {PREFILTER_CELL_LOD_BIAS}".encode()
         self._source_key = hashlib.sha1(source).hexdigest()[:16]
         self._split_sum: dict = {}
@@ -269,7 +269,7 @@ class PrefilteredMaps:
         """Bind the source cube and upload the cells; returns the cells texture to release."""
         cells_texture = self.ctx.texture((nodes.shape[1], nodes.shape[0]), 4, nodes.tobytes(), dtype="f4")
         cells_texture.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.cube.residual.use(0)
+        self.cube.without_sources.use(0)
         cells_texture.use(1)
         shader["u_source"] = 0
         shader["u_cells"] = 1
