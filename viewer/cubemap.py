@@ -128,8 +128,9 @@ class RadianceCube:
         levels are looked up as they are and would show ``residual``'s signed detail. Separated
         again from ``faces`` on first use (a few tenths of a second for 256^2 faces; the same
         lights, since the faces read back are the float32 texels separated at construction), so no
-        cube of a session without prefiltered maps holds it. No lights: ``residual`` itself."""
-        if not self.lights:
+        cube of a session without prefiltered maps holds it. Where no light's shape was kept (most
+        captures: their suns are below SHAPE_FROM_TEXELS) ``residual`` already is that cube."""
+        if not self.signed_residual:
             return self.residual
         if self._without_sources is None:
             from lobeview.scenes.bright_sources import separate_cube
