@@ -74,15 +74,16 @@ def parse_case(case: str) -> tuple[str, float, float]:
 
 def light_texels(env: str, height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(directions (k, 3), solid angles (k,), luminance-like radiance (k,): the mean of RGB) of the
-    map a cube keeps under ``env``: the sunless sky, or a capture's residual after its bright
-    sources became cap lights, averaged down to ``height`` rows."""
+    map a cube keeps under ``env``: the sunless sky, or a capture without its bright sources (what
+    the prefiltered maps are made from: bright_sources.py Separation.without_sources) after they
+    became cap lights, averaged down to ``height`` rows."""
     from lobeview.bench import lobe_kernel, mitsuba
     from lobeview.scenes.bright_sources import equirect_texels, separate_equirect
 
     if env == "sky":
         directions, omega, radiance = lobe_kernel.sky_quadrature(height)
         return directions.reshape(-1, 3), omega.reshape(-1), np.asarray(radiance).reshape(-1, 3).mean(axis=1)
-    residual = separate_equirect(mitsuba.capture_image(env)).residual
+    residual = separate_equirect(mitsuba.capture_image(env)).without_sources
     factor = residual.shape[0] // height
     if factor < 1 or residual.shape[0] % height:
         raise ValueError(f"--height {height} must divide the capture's {residual.shape[0]} rows")

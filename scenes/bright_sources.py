@@ -78,6 +78,23 @@ MIN_SOURCE_FACTOR = 300.0
 # footprint_alpha2), and the two disagree by up to the cap's radiance: black pixels in a sun's
 # highlight (GGX 0.01 under sunrise.exr, whose 1.03-degree sun is 2.3 texels of a 256^2 cube).
 SHAPE_FROM_TEXELS = 3.0
+# ... and only where its cap is drawn over the source itself: a cap whose solid angle lies for more
+# than MAX_UNBACKED_SHARE over texels UNBACKED_CONTRAST times darker than its radiance is not the
+# source's shape, and the residual keeps the source whole (the cube without sources still loses it
+# as that disc, where the single lookups of prefiltered maps want it: the strip kept in both maps
+# took prefiltered gold 1.9 -> 5.4 %). studio.exr's strip light (12 x 1.5 degrees in a glow that
+# makes its elongation 2.99, under MAX_ELONGATION) became a 6-degree disc lying for 0.39-0.44 of
+# its solid angle (128^2-512^2 cubes) over a backdrop 1400x darker, and the residual held that
+# disc negative: where a pixel's cap integral (the lobe widened by its footprint, GGX's long tail)
+# and its MIP-filtered residual reads (compact kernels) do not cancel to a fraction of the
+# backdrop, the lobe's sum is clamped at 0: a near-mirror (GGX 0.01, 160 px, one point per pixel)
+# showed 45 pixels with a channel at 0 along the strip's reflection, kept whole 1. At 4 x 4 points
+# per pixel (`lobeview bench light`, docs/measurements.md) no conductor case moved by more than
+# 0.1 but alanod (3.3 -> 4.0 %); frosted glass 1.4 -> 2.1, the red plastic 1.6 -> 2.3. Every
+# round source of the 11 captures lies at most 0.21 over such texels (night.exr's lamps in their
+# glows at 512^2), studio's round lamps 0.02: the strip is the only source kept whole.
+MAX_UNBACKED_SHARE = 0.3
+UNBACKED_CONTRAST = 100.0
 # A uniform region (6.): builtin:studio's key and fill soft boxes (11 and 16 degrees, a ramp over
 # their outer 1.3 and 2.2 degrees) stayed in the map, the key too wide, the fill's contrast
 # measured against its own ramp; in a glossy floor's GGX tail the four tail lookups read them 2.5x
@@ -125,8 +142,10 @@ class Separation:
     that read the map by lobe-sized footprints (lobe-N, fis-N: a footprint wider than the source
     reads about zero, a narrower one the source's real shape); ``without_sources`` has each
     source's texels at their surroundings' level (>= 0), for single lookups of prefiltered maps,
-    whose finest levels would show the signed detail as it is. Both plus the lights' power are
-    the map's power (to 1e-4; tests/test_cap_lights.py)."""
+    whose finest levels would show the signed detail as it is. A source whose cap is not its
+    shape (a strip light: MAX_UNBACKED_SHARE) stays whole in ``residual`` and is a light of
+    ``without_sources`` only (``kept_whole``). ``without_sources`` plus ``lights`` and ``residual``
+    plus ``residual_lights`` are the map's power (to 1e-4; tests/test_cap_lights.py)."""
 
     lights: list[CapLight]
     residual: np.ndarray
@@ -134,6 +153,9 @@ class Separation:
     regions: list[np.ndarray] = field(default_factory=list)  # texel indices of each light (flattened)
     without_sources: np.ndarray | None = None  # None: no lights, the map itself (``residual``)
     shapes_kept: int = 0  # how many lights' shapes ``residual`` keeps (SHAPE_FROM_TEXELS)
+    # the lights (indices into ``lights``) whose sources ``residual`` keeps whole: their cap is not
+    # their shape (MAX_UNBACKED_SHARE), so only the single lookups of ``without_sources`` use them
+    kept_whole: list[int] = field(default_factory=list)
 
     def __post_init__(self):
         if self.without_sources is None:
@@ -141,8 +163,19 @@ class Separation:
 
     @property
     def light_power(self) -> np.ndarray:
-        """The lights' total power (RGB), what left the map."""
+        """The lights' total power (RGB), what left ``without_sources``."""
         return np.sum([light.power for light in self.lights], axis=0) if self.lights else np.zeros(3)
+
+    @property
+    def residual_lights(self) -> list[CapLight]:
+        """The lights ``residual`` lost: all but those it keeps whole."""
+        return [light for k, light in enumerate(self.lights) if k not in self.kept_whole]
+
+    @property
+    def residual_light_power(self) -> np.ndarray:
+        """The power (RGB) that left ``residual``."""
+        lights = self.residual_lights
+        return np.sum([light.power for light in lights], axis=0) if lights else np.zeros(3)
 
 
 def cube_texels(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -204,6 +237,17 @@ def rasterised_cap(dirs, omega, centre, cos_radius, power, texel_angle) -> tuple
     weight = coverage[touched] * omega[touched]
     radiance = np.outer(weight / float(np.sum(weight)) / omega[touched], power)
     return touched, radiance
+
+
+def unbacked_share(dirs, omega, luminance, centre, cos_radius, radiance) -> float:
+    """The share of a cap's solid angle (texels ``dirs``, ``omega`` near it, their map
+    ``luminance``) over which the map is darker than UNBACKED_CONTRAST times less than the cap's
+    ``radiance`` (RGB): where the cap is drawn over the source's dark surroundings."""
+    inside = dirs @ centre >= cos_radius
+    if not inside.any():
+        return 0.0
+    dark = inside & (luminance * UNBACKED_CONTRAST < float(np.asarray(radiance) @ LUMINANCE))
+    return float(np.sum(omega[dark]) / np.sum(omega[inside]))
 
 
 def excess_variation(excess: np.ndarray, omega: np.ndarray, cos_to_axis: np.ndarray, cos_radius: float) -> float:
@@ -354,6 +398,7 @@ def separate(
     all_tree = cKDTree(dirs)
     lights, kept = [], []
     shapes_kept = 0
+    kept_whole: list[int] = []
     taken = np.zeros(len(dirs), bool)  # texels another light already took (soft edges reach out)
     for region in regions:
         if len(lights) == max_lights:
@@ -405,11 +450,20 @@ def separate(
         # texels (signed; the methods that read it by lobe-sized footprints see the sun's core in
         # its glow, a soft box's corners), and, for single lookups, a copy loses the whole excess
         # (a cap narrower than SHAPE_FROM_TEXELS texels has no shape the map resolves)
-        without_sources[region] = light_in[region] - excess
-        if np.arccos(cos_radius) >= SHAPE_FROM_TEXELS * texel_angle:
+        keeps_shape = np.arccos(cos_radius) >= SHAPE_FROM_TEXELS * texel_angle
+        whole = False  # the residual keeps the source as it is (its cap is not its shape)
+        if keeps_shape:
             near_cap = np.asarray(
                 all_tree.query_ball_point(centre, np.sqrt(2.0 * (1.0 - cos_radius)) + texel_angle), dtype=int
             )
+            share = unbacked_share(
+                dirs[near_cap], omega[near_cap], luminance[near_cap], centre, cos_radius, power / cap_omega
+            )
+            whole = share > MAX_UNBACKED_SHARE
+        without_sources[region] = light_in[region] - excess
+        if whole:
+            kept_whole.append(len(lights))
+        elif keeps_shape:
             drawn, cap_in_map = rasterised_cap(dirs[near_cap], omega[near_cap], centre, cos_radius, power, texel_angle)
             residual[near_cap[drawn]] -= cap_in_map
             shapes_kept += 1
@@ -425,4 +479,5 @@ def separate(
         kept,
         without_sources.reshape(shape).astype(radiance.dtype),
         shapes_kept,
+        kept_whole,
     )

@@ -284,7 +284,7 @@ def test_separation_conserves_energy_and_finds_a_sun_across_cube_faces():
     assert np.allclose(light.power, sun_power, rtol=0.03), (light.power, sun_power)
     assert np.allclose(light.power, 5e3 * 2 * np.pi * (1 - np.cos(np.radians(1.0))), rtol=0.06)  # the disc
     total = _power(faces)
-    assert np.allclose(_power(separation.residual) + separation.light_power, total, rtol=1e-4)
+    assert np.allclose(_power(separation.residual) + separation.residual_light_power, total, rtol=1e-4)
     assert np.allclose(_power(separation.without_sources) + separation.light_power, total, rtol=1e-4)
     assert separation.without_sources.max() < 10.0  # smooth_sky peaks near 8: no sun left in the cube
     # a 1-degree sun in 0.9-degree texels: no shape the cube resolves, the residual is the sky
@@ -334,7 +334,7 @@ def test_a_bright_patch_of_sky_between_walls_stays_in_the_map():
     taken = bs.separate_cube(source)
     assert len(taken.lights) == 1 and np.degrees(taken.lights[0].radius) < 5.5
     assert taken.lights[0].inner_fraction == 1.0  # a hard cap: the rule it tests applies to those
-    assert np.allclose(_power(taken.residual) + taken.light_power, _power(source), rtol=1e-4)
+    assert np.allclose(_power(taken.residual) + taken.residual_light_power, _power(source), rtol=1e-4)
 
 
 def _band_or_disc(elongated: bool):
@@ -363,7 +363,7 @@ def test_an_elongated_region_stays_in_the_map():
     assert not bs.separate_cube(band).lights
     separation = bs.separate_cube(disc)
     assert len(separation.lights) == 1
-    assert np.allclose(_power(separation.residual) + separation.light_power, _power(disc), rtol=1e-4)
+    assert np.allclose(_power(separation.residual) + separation.residual_light_power, _power(disc), rtol=1e-4)
 
 
 def test_soft_cap_shape_inverts_the_profiles_energy_and_moment():
@@ -394,7 +394,7 @@ def test_a_uniform_soft_box_becomes_a_soft_edged_cap(face_size):
 
     faces = _cube_faces(studio, size=face_size)
     separation = bs.separate_cube(faces)
-    assert np.allclose(_power(separation.residual) + separation.light_power, _power(faces), rtol=1e-4)
+    assert np.allclose(_power(separation.residual) + separation.residual_light_power, _power(faces), rtol=1e-4)
     texel = np.degrees(2.0 / face_size)
     boxes = [
         ([0.55, 0.6, 0.58], 11.0, 0.004, 30.0 * np.array([1.0, 0.97, 0.92])),
@@ -468,13 +468,16 @@ def test_separation_of_real_captures_conserves_energy(name):
     _, solid = bs.equirect_texels(env.image.shape[0])
     total = np.sum(env.image.astype(np.float64) * solid[..., None], axis=(0, 1))
     residual = np.sum(separation.residual.astype(np.float64) * solid[..., None], axis=(0, 1))
-    assert np.allclose(residual + separation.light_power, total, rtol=1e-4)
+    assert np.allclose(residual + separation.residual_light_power, total, rtol=1e-4)
+    without = np.sum(separation.without_sources.astype(np.float64) * solid[..., None], axis=(0, 1))
+    assert np.allclose(without + separation.light_power, total, rtol=1e-4)
     assert separation.lights and all(light.radius < np.radians(10.0) for light in separation.lights)
     if "garden" in name:
         assert len(separation.lights) == 1 and np.degrees(separation.lights[0].radius) < 1.0
     faces = equirect_to_cube_faces(env, 64)
     cube = bs.separate_cube(faces)
-    assert np.allclose(_power(cube.residual) + cube.light_power, _power(faces), rtol=1e-4)
+    assert np.allclose(_power(cube.residual) + cube.residual_light_power, _power(faces), rtol=1e-4)
+    assert np.allclose(_power(cube.without_sources) + cube.light_power, _power(faces), rtol=1e-4)
 
 
 @pytest.mark.skipif(not SHARED_ASSETS.exists(), reason="shared assets not present")

@@ -82,9 +82,14 @@ class RadianceCube:
         # reference and the prefiltered maps reads (the reference keeps the whole radiance: its
         # environment sampler already converges on suns; the prefiltered maps are made from
         # ``without_sources``). No lights: the same texture.
+        # ``lights`` are what ``without_sources`` lost, ``residual_lights`` what ``residual`` lost:
+        # the same but for a source whose cap is not its shape (a strip light), which the residual
+        # keeps whole (bright_sources.py Separation.kept_whole).
         self.lights: list = []
+        self._kept_whole: list = []  # those of ``lights`` that ``residual`` keeps whole
         self.residual = self.radiance
         self.signed_residual = False  # whether ``residual`` keeps a source's shape (signed)
+        self._residual_is_without_sources = True  # no shape kept, no source kept whole
         self._without_sources = None  # on first use (prefiltered maps only)
         if bright_sources:
             from lobeview.scenes.bright_sources import separate_cube
@@ -92,13 +97,21 @@ class RadianceCube:
             separation = separate_cube(faces)
             if separation.lights:
                 self.lights = separation.lights
+                self._kept_whole = [separation.lights[k] for k in separation.kept_whole]
                 self.signed_residual = bool(separation.shapes_kept)
-                self.residual = upload_cube(ctx, separation.residual, mip_filter=mip_filter)
+                self._residual_is_without_sources = not (separation.shapes_kept or separation.kept_whole)
+                if self.residual_lights:
+                    self.residual = upload_cube(ctx, separation.residual, mip_filter=mip_filter)
         self.importance_size = min(int(importance_size), self.face_size)
         self._importance: tuple | None = None  # (CubeImportance, env_cdf, env_pdf) once built
         self._prefiltered = None
         self._blur_stack = None  # lobe-N+norm+fit's coarse reads (viewer/blur_stack_gpu.py), on first use
         self.cache_dir = None  # where prefiltered maps are cached (set by the owner)
+
+    @property
+    def residual_lights(self) -> list:
+        """The lights ``residual`` lost: ``lights`` but those it keeps whole."""
+        return [light for light in self.lights if not any(light is whole for whole in self._kept_whole)]
 
     @property
     def has_blur_stack(self) -> bool:
@@ -129,8 +142,9 @@ class RadianceCube:
         again from ``faces`` on first use (a few tenths of a second for 256^2 faces; the same
         lights, since the faces read back are the float32 texels separated at construction), so no
         cube of a session without prefiltered maps holds it. Where no light's shape was kept (most
-        captures: their suns are below SHAPE_FROM_TEXELS) ``residual`` already is that cube."""
-        if not self.signed_residual:
+        captures: their suns are below SHAPE_FROM_TEXELS) and none kept whole ``residual`` already
+        is that cube."""
+        if self._residual_is_without_sources:
             return self.residual
         if self._without_sources is None:
             from lobeview.scenes.bright_sources import separate_cube

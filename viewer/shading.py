@@ -244,12 +244,14 @@ class ShadingBinder:
         # fis-N and mc-N the residual, signed where it keeps a source's shape beyond its cap, the
         # prefiltered modes, whose lobe maps read a narrow lobe in one lookup, the cube without
         # sources their maps are made from (one lookup would show the signed detail as it is:
-        # miro5 under night.exr 29.6 -> 34.2 %, `lobeview bench light`).
-        lights = [] if method.kind == "reference" else cube.lights
+        # miro5 under night.exr 29.6 -> 34.2 %, `lobeview bench light`), each with the lights it
+        # lost (a strip light is one only for the prefiltered modes: bright_sources.py kept_whole).
         if method.kind == "reference":
-            radiance = cube.radiance
+            radiance, lights = cube.radiance, []
+        elif method.kind == "prefiltered":
+            radiance, lights = cube.without_sources, cube.lights
         else:
-            radiance = cube.without_sources if method.kind == "prefiltered" else cube.residual
+            radiance, lights = cube.residual, cube.residual_lights
         bind_sampler(program, "u_radiance", radiance)
         set_uniform(program, "u_signed_residual", int(radiance is cube.residual and cube.signed_residual))
         set_uniform(program, "u_cap_light_count", len(lights))
