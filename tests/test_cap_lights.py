@@ -332,8 +332,9 @@ def test_a_bright_patch_of_sky_between_walls_stays_in_the_map():
     kept = bs.separate_cube(patch)
     assert not kept.lights and np.array_equal(kept.residual, patch)
     taken = bs.separate_cube(source)
-    assert len(taken.lights) == 1 and np.degrees(taken.lights[0].radius) < 5.5
+    assert len(taken.lights) == 2 and np.degrees(taken.lights[0].radius) < 5.5  # its core, and a cone
     assert taken.lights[0].inner_fraction == 1.0  # a hard cap: the rule it tests applies to those
+    assert taken.lights[1].inner_fraction == 0.0  # of what the patch holds beyond the core
     assert np.allclose(_power(taken.residual) + taken.residual_light_power, _power(source), rtol=1e-4)
 
 
@@ -458,8 +459,8 @@ def test_a_glossy_floor_under_the_studio_keeps_its_brightness(glossy_floor, meth
 @pytest.mark.skipif(not SHARED_ASSETS.exists(), reason="shared assets not present")
 @pytest.mark.parametrize("name", ["polyhaven_1k/chinese_garden_1k.hdr", "blender_studiolights_1k/studio.exr"])
 def test_separation_of_real_captures_conserves_energy(name):
-    """A sun of 7.9e4 (one light of about the sun's size) and a studio's softboxes: the residual
-    plus the lights is the map, on the equirectangular map and on its cube."""
+    """A sun of 7.9e4 (a light of about the sun's size and a cone of its glow) and a studio's
+    softboxes: the residual plus the lights is the map, on the equirectangular map and on its cube."""
     from lobeview.scenes.builtin_env import load_environment
     from lobeview.viewer.cubemap import equirect_to_cube_faces
 
@@ -471,9 +472,11 @@ def test_separation_of_real_captures_conserves_energy(name):
     assert np.allclose(residual + separation.residual_light_power, total, rtol=1e-4)
     without = np.sum(separation.without_sources.astype(np.float64) * solid[..., None], axis=(0, 1))
     assert np.allclose(without + separation.light_power, total, rtol=1e-4)
-    assert separation.lights and all(light.radius < np.radians(10.0) for light in separation.lights)
-    if "garden" in name:
-        assert len(separation.lights) == 1 and np.degrees(separation.lights[0].radius) < 1.0
+    assert separation.lights  # hard caps up to 10 degrees, cones (a source's glow) and soft caps up to 25
+    assert all(light.radius < np.radians(10.0 if light.inner_fraction == 1.0 else 25.0) for light in separation.lights)
+    if "garden" in name:  # the sun's core and a cone of its glow
+        assert len(separation.lights) == 2 and np.degrees(separation.lights[0].radius) < 1.0
+        assert separation.lights[1].inner_fraction == 0.0
     faces = equirect_to_cube_faces(env, 64)
     cube = bs.separate_cube(faces)
     assert np.allclose(_power(cube.residual) + cube.residual_light_power, _power(faces), rtol=1e-4)
@@ -483,13 +486,14 @@ def test_separation_of_real_captures_conserves_energy(name):
 @pytest.mark.skipif(not SHARED_ASSETS.exists(), reason="shared assets not present")
 def test_bright_sky_between_buildings_and_trees_stays_in_real_captures():
     """courtyard.exr's two patches of sky (4-5 degrees, 90-130x the map's median) and forest.exr's
-    7-degree one (140x) keep their shape in the map; forest's sun (1.2 degrees, 3000x) is a light."""
+    7-degree one (140x) keep their shape in the map; forest's sun (1.2 degrees, 3000x) is a light
+    (and its glow a cone)."""
     from lobeview.scenes.builtin_env import load_environment
 
     folder = SHARED_ASSETS / "env" / "blender_studiolights_1k"
     assert not bs.separate_equirect(load_environment(str(folder / "courtyard.exr")).image).lights
-    (sun,) = bs.separate_equirect(load_environment(str(folder / "forest.exr")).image).lights
-    assert np.degrees(sun.radius) < 1.5
+    sun, glow = bs.separate_equirect(load_environment(str(folder / "forest.exr")).image).lights
+    assert np.degrees(sun.radius) < 1.5 and glow.inner_fraction == 0.0
 
 
 def test_separation_rejects_bad_maps():

@@ -30,13 +30,14 @@ from .cubemap import RadianceCube
 from .frame import begin_pass, new_framebuffer
 from .mip_chain import DEFAULT_MIP_FILTER, check_mip_filter, downsample_cube_faces
 
+# 11: a hard source is its core's cap (the energy's median spread) and a cone of its glow;
 # 10: a source whose cap is not its shape stays whole in the residual (bright_sources.py kept_whole);
 # 9: the residual cubes keep each bright source's shape beyond its cap (scenes/bright_sources.py);
 # 8: line-pattern footprints held to the lobe's width (materials/patterns.py LINE_MIN_FOOTPRINT_FRACTION);
 # 7: the environment read at the face texel's MIP level (shaders/background.frag), not level 0;
 # 6: the second bounce shades with bright-source lights and residual cubes (issue 39);
 # 5: per-object face sizes (supersampled); 4: glTF textures, alpha modes, culling
-CUBE_CACHE_VERSION = 10
+CUBE_CACHE_VERSION = 11
 CUBE_SUPERSAMPLE = 2
 CUBE_BOUNCE_METHOD = Method("lobe", 7)  # how other objects' lobes are shaded inside cube maps
 
