@@ -149,19 +149,22 @@ class Separation:
     source's texels at their surroundings' level (>= 0), for single lookups of prefiltered maps,
     whose finest levels would show the signed detail as it is. A source whose cap is not its
     shape (a strip light: MAX_UNBACKED_SHARE) stays whole in ``residual`` and is a light of
-    ``without_sources`` only (``kept_whole``), and so is the glow's cone of a source whose shape
-    ``residual`` keeps (it keeps the glow as it is). ``without_sources`` plus ``lights`` and
-    ``residual`` plus ``residual_lights`` are the map's power (to 1e-4; tests/test_cap_lights.py)."""
+    ``without_sources`` only (``kept_whole``), and so is a glow's cone drawn over texels far darker
+    than it (a soft box's corners: ``residual`` keeps them as they are); every other cone
+    ``residual`` loses as drawn, signed. ``without_sources`` plus ``lights`` and ``residual`` plus
+    ``residual_lights`` are the map's power (to 1e-4; tests/test_cap_lights.py)."""
 
     lights: list[CapLight]
     residual: np.ndarray
     threshold: float  # luminance above which texels were candidates
     regions: list[np.ndarray] = field(default_factory=list)  # texel indices of each light (flattened)
     without_sources: np.ndarray | None = None  # None: no lights, the map itself (``residual``)
-    shapes_kept: int = 0  # how many lights' shapes ``residual`` keeps (SHAPE_FROM_TEXELS)
+    # how many lights ``residual`` loses as drawn, keeping their source's shape beyond them, signed:
+    # caps of SHAPE_FROM_TEXELS texels or more and the glows' cones (0: ``residual`` is >= 0)
+    shapes_kept: int = 0
     # the lights (indices into ``lights``) whose texels ``residual`` keeps whole: a source whose cap
-    # is not its shape (MAX_UNBACKED_SHARE), a shape-kept source's glow cone; only the single
-    # lookups of ``without_sources`` use them
+    # is not its shape (MAX_UNBACKED_SHARE) and a cone drawn over texels far darker than it; only
+    # the single lookups of ``without_sources`` use them
     kept_whole: list[int] = field(default_factory=list)
 
     def __post_init__(self):
@@ -516,8 +519,8 @@ def separate(
         source = region if glow is not None else core  # the texels whose excess the lights carry
         # the map keeps the source's shape beyond its cap: it loses the cap as drawn into its
         # texels (signed; the methods that read it by lobe-sized footprints see the sun's core in
-        # its glow, a soft box's corners), and, for single lookups, a copy loses the whole excess
-        # (a cap narrower than SHAPE_FROM_TEXELS texels has no shape the map resolves)
+        # its glow, a soft box's corners), and, for single lookups, a copy loses the excess the
+        # lights carry (a cap narrower than SHAPE_FROM_TEXELS texels has no shape the map resolves)
         keeps_shape = np.arccos(cos_radius) >= SHAPE_FROM_TEXELS * texel_angle
         whole = False  # the residual keeps the source as it is (its cap is not its shape)
         if keeps_shape:
