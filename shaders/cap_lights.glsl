@@ -124,24 +124,48 @@ ivec3 cap_point_counts(Lobe l, float inner_fraction) {
 }
 
 // materials/cap_lights.py gauss_cap_rule: (rings, azimuths) of the product Gauss rule for a cap
-// not much wider than the lobe, (0, 0) where the two-strategy sum integrates it.
-ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o) {
+// not much wider than the lobe or than its distance from the lobe's peak (cap_peak_distance), (0, 0)
+// where the two-strategy sum integrates it.
+ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o, float peak_distance) {
 #if defined(HAS_RATIONAL)
     if (l.type == LOBE_RATIONAL) return ivec2(0);
 #endif
 #if defined(HAS_MEASURED)
     if (l.type == LOBE_MEASURED) return ivec2(0);
 #endif
-    float width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
+    float lobe_width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
+    float width = max(lobe_width, peak_distance);
     float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
     // GRAZING_AZIMUTH_FACTOR: below MIN_VIEW_COSINE the azimuths double
     int grazing = cos_theta_o < MIN_VIEW_COSINE ? 2 : 1;
     if (ratio < 0.05) return ivec2(1, 1);  // GAUSS_RULES
+    if (peak_distance > lobe_width) {  // TAIL_GAUSS_RULES
+        if (ratio < 0.3) return ivec2(1, 4 * grazing);
+        if (ratio < 0.6) return ivec2(2, 6 * grazing);
+        if (ratio < 1.0) return ivec2(3, 8 * grazing);
+        return ivec2(0);
+    }
     if (ratio < 0.2) return ivec2(1, 4 * grazing);
     if (ratio < 0.35) return ivec2(2, 6 * grazing);
     if (ratio < 0.6) return ivec2(3, 6 * grazing);
     if (ratio < 1.0) return ivec2(3, 8 * grazing);
     return ivec2(0);  // NARROW_FROM
+}
+
+// materials/cap_lights.py cap_negligible: a Beckmann lobe's tail below e^-40 of its peak over
+// the whole cap (the half vector at least half the cap's peak distance from the normal).
+#define BECKMANN_NEGLIGIBLE_EXPONENT 40.0
+bool cap_negligible(Lobe l, float peak_distance) {
+#if defined(HAS_RATIONAL)
+    if (l.type == LOBE_RATIONAL) return false;
+#endif
+#if defined(HAS_MEASURED)
+    if (l.type == LOBE_MEASURED) return false;
+#endif
+    if (l.dist != DIST_BECKMANN) return false;
+    float t = tan(min(0.5 * peak_distance, 1.5));
+    float widest = max(l.ax, l.ay);
+    return t * t > BECKMANN_NEGLIGIBLE_EXPONENT * widest * widest;
 }
 
 // materials/bsdf.py gauss_legendre_unit: node i of the n-point rule on [0, 1] (xy: node,
@@ -163,8 +187,19 @@ vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, flo
     vec3 b = cross(axis, t);
     mat3 to_local = transpose(tbn);
     vec3 sum = vec3(0.0);
+    // materials/cap_lights.py cap_below_horizon and cap_peak_distance, in the lobe's reflected frame
+    vec3 axis_reflected = reflected_wi(l, to_local * axis);
+    float sin_radius = sqrt(max(one_minus_cos * (2.0 - one_minus_cos), 0.0));
+    if (axis_reflected.z <= -sin_radius) return sum;  // every lobe is 0 there
+    float to_peak = acos(clamp(dot(axis_reflected, vec3(-wo.xy, wo.z)), -1.0, 1.0));
+    float peak_distance = max(to_peak - acos(clamp(cos_radius, -1.0, 1.0)), 0.0);
+    if (cap_negligible(l, peak_distance)) return sum;
+    // the distance sets a GGX lobe's rule only for a cap wholly above the horizon, and at most
+    // the cap's gap above it (materials/cap_lights.py cap_peak_distance)
+    float above_horizon = asin(clamp(axis_reflected.z, -1.0, 1.0)) - acos(clamp(cos_radius, -1.0, 1.0));
+    float rule_distance = above_horizon > 0.0 && l.dist == DIST_GGX ? min(peak_distance, above_horizon) : 0.0;
     float lit_solid_angle = 2.0 * PI * one_minus_cos * (0.5 * (1.0 + inner_fraction));
-    ivec2 rule = gauss_cap_rule(l, cos_radius, wo.z);
+    ivec2 rule = gauss_cap_rule(l, cos_radius, wo.z, rule_distance);
     if (rule.x > 0) {  // materials/cap_lights.py gauss_cap_integral
         for (int i = 0; i < rule.x; ++i) {
             vec2 node = gauss_node(i, rule.x);
@@ -221,8 +256,10 @@ vec3 cap_lights_radiance(Lobe l, vec3 wo, mat3 tbn) {
     // is seen there instead, which the residual cube's lookups already count. The visible share
     // is the cap's own (its solid angle as the footprint).
     for (int k = 0; k < u_cap_light_count; ++k) {
+        vec3 light = cap_light_radiance(l, wo, tbn, k);
+        if (!any(greaterThan(light, vec3(0.0)))) continue;  // below the horizon: no visibility to look up
         float cap_solid_angle = 2.0 * PI * (1.0 - u_cap_light_axis[k].w);
-        sum += self_visibility(u_cap_light_axis[k].xyz, cap_solid_angle) * cap_light_radiance(l, wo, tbn, k);
+        sum += self_visibility(u_cap_light_axis[k].xyz, cap_solid_angle) * light;
     }
     return sum;
 }

@@ -84,3 +84,27 @@ def test_supersampled_methods_meet_the_box_filtered_reference_at_the_silhouette(
     # the 256-sample reference's noise a good part of it)
     assert errors[1]["rel_rmse"] > 1.5 * errors[4]["rel_rmse"]
     assert errors[4]["rel_rmse"] < 1.2 * errors[4]["rel_rmse_interior"]
+
+
+@pytest.mark.skipif(not SHARED_ASSETS.exists(), reason="shared assets not present")
+def test_light_cost_bench_times_both_frames_of_each_row(tmp_path, capsys):
+    """bench/light_cost.py, small: one row per capture, material and method, with the capture's
+    lights (sunrise.exr: its sun's core and the cone of its glow) and both medians; the table and
+    its JSON written; a bad size is a clear message, not a traceback."""
+    import json
+
+    from lobeview.bench import light_cost
+
+    argv = ["--views", "sunrise", "--materials", "gold-ggx", "--methods", "lobe-7+norm+fit", "prefiltered",
+            "--size", "24", "--repeats", "1", "--out", str(tmp_path)]  # fmt: skip
+    assert light_cost.main(argv) == 0
+    (table,) = tmp_path.glob("light-cost-*.md")
+    rows = json.loads(table.with_suffix(".json").read_text())["rows"]
+    assert [r["method"] for r in rows] == ["lobe-7+norm+fit", "prefiltered"]
+    for row in rows:
+        assert row["view"] == "sunrise" and row["lights"] == 2 and len(row["radii_deg"]) == 2
+        assert row["ms_without"] > 0.0 and row["ms_with"] > 0.0
+        assert row["ratio"] == pytest.approx(row["ms_with"] / row["ms_without"])
+    assert "| sunrise | 2 | gold-ggx | prefiltered |" in table.read_text()
+    assert light_cost.main(argv[:-4] + ["--size", "2", "--out", str(tmp_path)]) == 2
+    assert "--size >= 8" in capsys.readouterr().err
