@@ -73,6 +73,21 @@ def psnr(image: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> float:
     return 10.0 * np.log10(peak * peak / max(mse, 1e-30))
 
 
+def preview_pair(ctx, env, size: int) -> dict:
+    """{False: the preview sphere's renderer with the capture's bright sources left in the cube,
+    True: with them separated into cap lights}, ``size`` pixels square (the capture's sanitising
+    warnings silenced: the benches report its lights instead)."""
+    from lobeview.scenes.meshes import uv_sphere
+    from lobeview.viewer.preview import PreviewRenderer
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return {
+            separate: PreviewRenderer(ctx, env, uv_sphere(1.0), size=(size, size), bright_sources=separate)
+            for separate in (False, True)
+        }
+
+
 def run(
     views,
     materials,
@@ -100,12 +115,9 @@ def run(
     rows, figures = [], []
     for path in environment_files(views):
         env = load_environment(str(path))
+        renderers = preview_pair(ctx, env, SIZE)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            renderers = {
-                separate: PreviewRenderer(ctx, env, uv_sphere(1.0), size=(SIZE, SIZE), bright_sources=separate)
-                for separate in (False, True)
-            }
             fine = SIZE * supersample
             fine_renderers = {
                 separate: renderers[separate]

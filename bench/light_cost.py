@@ -19,7 +19,6 @@ import argparse
 import json
 import sys
 import time
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -32,12 +31,10 @@ DEFAULT_METHODS = ("lobe-7+norm+fit", "prefiltered")
 def measure(views, materials, methods, size: int, repeats: int, progress=print) -> tuple[list[dict], str]:
     """(rows of {view, lights, radii_deg, material, method, ms_without, ms_with, ratio}, the device)."""
     from lobeview.bench.captures import environment_files
-    from lobeview.bench.light import CAMERA, build_material
+    from lobeview.bench.light import CAMERA, build_material, preview_pair
     from lobeview.scenes.builtin_env import load_environment
-    from lobeview.scenes.meshes import uv_sphere
     from lobeview.viewer.camera import Camera
     from lobeview.viewer.context import create_headless_context, renderer_description
-    from lobeview.viewer.preview import PreviewRenderer
 
     if repeats < 1 or size < 8:
         raise ValueError(f"light_cost needs --repeats >= 1 and --size >= 8, got {repeats} and {size}")
@@ -47,13 +44,7 @@ def measure(views, materials, methods, size: int, repeats: int, progress=print) 
     rows = []
     try:
         for path in environment_files(views):
-            env = load_environment(str(path))
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                renderers = {
-                    separate: PreviewRenderer(ctx, env, uv_sphere(1.0), size=(size, size), bright_sources=separate)
-                    for separate in (False, True)
-                }
+            renderers = preview_pair(ctx, load_environment(str(path)), size)
             lights = renderers[True].cubes.lights
             try:
                 for name in materials:
