@@ -41,18 +41,25 @@ void set_light_footprint(vec3 dr_dx, vec3 dr_dy) {
     g_footprint_dr2 = dot(dr_dx, dr_dx) + dot(dr_dy, dr_dy);
 }
 
+// Whether the lobe has a microfacet width (materials/cap_lights.py lobe_width): the tabulated
+// lobes, Rational and measured, have none.
+bool lobe_has_width(Lobe l) {
+#if defined(HAS_RATIONAL)
+    if (l.type == LOBE_RATIONAL) return false;
+#endif
+#if defined(HAS_MEASURED)
+    if (l.type == LOBE_MEASURED) return false;
+#endif
+    return true;
+}
+
 // The lobe as a light of 1 - cos(radius) = one_minus_cos sees it: its alphas widened by the
 // pixel's footprint, less for caps wider than the footprint (materials/cap_lights.py
 // footprint_alpha2); the tabulated lobes, Rational and measured, keep theirs: their shape is
 // not an alpha.
 Lobe footprint_lobe(Lobe l, float one_minus_cos) {
     if (g_footprint_alpha2 <= 0.0) return l;
-#if defined(HAS_RATIONAL)
-    if (l.type == LOBE_RATIONAL) return l;
-#endif
-#if defined(HAS_MEASURED)
-    if (l.type == LOBE_MEASURED) return l;
-#endif
+    if (!lobe_has_width(l)) return l;
     float widening = g_footprint_alpha2 * g_footprint_dr2 / max(g_footprint_dr2 + 2.0 * one_minus_cos, 1e-30);
     l.ax = sqrt(l.ax * l.ax + widening);
     l.ay = sqrt(l.ay * l.ay + widening);
@@ -114,28 +121,18 @@ vec3 cap_light_term(Lobe l, vec3 wi, vec3 wo, float cap_density, int lobe_points
 ivec3 cap_point_counts(Lobe l, float inner_fraction) {
     bool soft = inner_fraction < 1.0;
     ivec3 without_width = soft ? ivec3(SOFT_CAP_POINTS, SOFT_LOBE_POINTS, 0) : ivec3(CAP_POINTS, CAP_LOBE_POINTS, 0);
-#if defined(HAS_RATIONAL)
-    if (l.type == LOBE_RATIONAL) return without_width;
-#endif
-#if defined(HAS_MEASURED)
-    if (l.type == LOBE_MEASURED) return without_width;
-#endif
+    if (!lobe_has_width(l)) return without_width;
     return ivec3(NARROW_CAP_POINTS, NARROW_LOBE_POINTS, 1);
 }
 
 // materials/cap_lights.py gauss_cap_rule: (rings, azimuths) of the product Gauss rule for a cap
 // not much wider than the lobe or than its distance from the lobe's peak (cap_peak_distance), (0, 0)
 // where the two-strategy sum integrates it.
-ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o, float peak_distance) {
-#if defined(HAS_RATIONAL)
-    if (l.type == LOBE_RATIONAL) return ivec2(0);
-#endif
-#if defined(HAS_MEASURED)
-    if (l.type == LOBE_MEASURED) return ivec2(0);
-#endif
+ivec2 gauss_cap_rule(Lobe l, float radius, float cos_theta_o, float peak_distance) {
+    if (!lobe_has_width(l)) return ivec2(0);
     float lobe_width = 2.0 * atan(2.0 * sqrt(l.ax * l.ay));
     float width = max(lobe_width, peak_distance);
-    float ratio = acos(clamp(cos_radius, -1.0, 1.0)) / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
+    float ratio = radius / max(width * max(cos_theta_o, MIN_VIEW_COSINE), 1e-6);
     // GRAZING_AZIMUTH_FACTOR: below MIN_VIEW_COSINE the azimuths double
     int grazing = cos_theta_o < MIN_VIEW_COSINE ? 2 : 1;
     if (ratio < 0.05) return ivec2(1, 1);  // GAUSS_RULES
@@ -156,12 +153,7 @@ ivec2 gauss_cap_rule(Lobe l, float cos_radius, float cos_theta_o, float peak_dis
 // the whole cap (the half vector at least half the cap's peak distance from the normal).
 #define BECKMANN_NEGLIGIBLE_EXPONENT 40.0
 bool cap_negligible(Lobe l, float peak_distance) {
-#if defined(HAS_RATIONAL)
-    if (l.type == LOBE_RATIONAL) return false;
-#endif
-#if defined(HAS_MEASURED)
-    if (l.type == LOBE_MEASURED) return false;
-#endif
+    if (!lobe_has_width(l)) return false;
     if (l.dist != DIST_BECKMANN) return false;
     float t = tan(min(0.5 * peak_distance, 1.5));
     float widest = max(l.ax, l.ay);
@@ -182,24 +174,26 @@ vec2 gauss_node(int i, int n) {
 // lamp's tiny cap needs it without cancellation. The cap points follow the profile.
 vec3 cap_integral(Lobe lobe, vec3 wo, mat3 tbn, vec3 axis, float cos_radius, float one_minus_cos, float inner_fraction) {
     Lobe l = footprint_lobe(lobe, one_minus_cos);
-    vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
-    vec3 t = normalize(cross(helper, axis));
-    vec3 b = cross(axis, t);
     mat3 to_local = transpose(tbn);
     vec3 sum = vec3(0.0);
     // materials/cap_lights.py cap_below_horizon and cap_peak_distance, in the lobe's reflected frame
     vec3 axis_reflected = reflected_wi(l, to_local * axis);
     float sin_radius = sqrt(max(one_minus_cos * (2.0 - one_minus_cos), 0.0));
     if (axis_reflected.z <= -sin_radius) return sum;  // every lobe is 0 there
+    float radius = acos(clamp(cos_radius, -1.0, 1.0));
     float to_peak = acos(clamp(dot(axis_reflected, vec3(-wo.xy, wo.z)), -1.0, 1.0));
-    float peak_distance = max(to_peak - acos(clamp(cos_radius, -1.0, 1.0)), 0.0);
+    float peak_distance = max(to_peak - radius, 0.0);
     if (cap_negligible(l, peak_distance)) return sum;
     // the distance sets a GGX lobe's rule only for a cap wholly above the horizon, and at most
     // the cap's gap above it (materials/cap_lights.py cap_peak_distance)
-    float above_horizon = asin(clamp(axis_reflected.z, -1.0, 1.0)) - acos(clamp(cos_radius, -1.0, 1.0));
+    float above_horizon = asin(clamp(axis_reflected.z, -1.0, 1.0)) - radius;
     float rule_distance = above_horizon > 0.0 && l.dist == DIST_GGX ? min(peak_distance, above_horizon) : 0.0;
+    // the cap's own frame, for its points (after the early returns: half the caps need none)
+    vec3 helper = abs(axis.y) < 0.9 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
+    vec3 t = normalize(cross(helper, axis));
+    vec3 b = cross(axis, t);
     float lit_solid_angle = 2.0 * PI * one_minus_cos * (0.5 * (1.0 + inner_fraction));
-    ivec2 rule = gauss_cap_rule(l, cos_radius, wo.z, rule_distance);
+    ivec2 rule = gauss_cap_rule(l, radius, wo.z, rule_distance);
     if (rule.x > 0) {  // materials/cap_lights.py gauss_cap_integral
         for (int i = 0; i < rule.x; ++i) {
             vec2 node = gauss_node(i, rule.x);
