@@ -176,3 +176,82 @@ class EquirectImportance:
         u2 = np.asarray(u2, dtype=np.float64)
         row, col = index // width, index % width
         return equirect_direction((col + along) / width, (row + u2) / height)
+
+
+CAP_CHOICE_UNIFORM = 0.1  # shaders/env_sampling.glsl: the uniform share of the light choice
+
+
+@dataclass
+class CapLightSampler:
+    """The reference's third strategy (shaders/env_sampling.glsl cap_light_sample / cap_light_pdf):
+    the bright sources separated from the cube (scenes/bright_sources.py) as proposals, light k
+    chosen with probability ``choice[k]`` (u1, rescaled within its share, then places the point),
+    a point uniform in solid angle over its cap. The radiance read there is the whole cube's, so
+    the caps only say where to look. Its density, caps overlapping or not,
+
+        pdf(w) = sum_k choice_k [w in cap k] / (2 pi (1 - cos r_k)),
+
+    with membership by 0.5 |w - axis_k|^2 <= 1 - cos r_k (exact for unit vectors and free of the
+    cancellation of 1 - dot for caps of a fraction of a degree). Any positive choice keeps MIS
+    unbiased; :func:`cap_choice_for_lobe` is the shader's."""
+
+    axes: np.ndarray  # (K, 3) unit directions
+    one_minus_cos: np.ndarray  # (K,) 1 - cos(radius)
+    choice: np.ndarray  # (K,) probabilities, sum 1
+
+    @classmethod
+    def from_lights(cls, lights, choice: np.ndarray | None = None) -> CapLightSampler:
+        axes = np.array([light.direction for light in lights], dtype=np.float64).reshape(-1, 3)
+        count = len(axes)
+        choice = np.full(count, 1.0 / max(count, 1)) if choice is None else np.asarray(choice, dtype=np.float64)
+        return cls(axes, np.array([1.0 - light.cos_radius for light in lights], dtype=np.float64), choice)
+
+    def pdf(self, dirs: np.ndarray) -> np.ndarray:
+        dirs = np.asarray(dirs, dtype=np.float64)
+        if len(self.axes) == 0:
+            return np.zeros(dirs.shape[:-1])
+        half_chord2 = 0.5 * np.sum((dirs[..., None, :] - self.axes) ** 2, axis=-1)  # 1 - cos to each axis
+        inside = half_chord2 <= self.one_minus_cos
+        return np.sum(inside * (self.choice / (2.0 * np.pi * self.one_minus_cos)), axis=-1)
+
+    def sample(self, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
+        u1 = np.asarray(u1, dtype=np.float64)
+        u2 = np.asarray(u2, dtype=np.float64)
+        count = len(self.axes)
+        if count == 0:
+            raise ValueError("CapLightSampler.sample: no lights to sample")
+        upper = np.cumsum(self.choice)
+        k = np.minimum(np.searchsorted(upper, u1, side="right"), count - 1)
+        below = upper[k] - self.choice[k]
+        along = np.clip((u1 - below) / np.maximum(self.choice[k], 1e-300), 0.0, 1.0)
+        # 1 - cos of the point's angle from the axis, and its sine, without cancellation
+        one_minus_cos_t = along * self.one_minus_cos[k]
+        sin_t = np.sqrt(np.maximum(one_minus_cos_t * (2.0 - one_minus_cos_t), 0.0))
+        phi = 2.0 * np.pi * u2
+        axis = self.axes[k]
+        helper = np.where(np.abs(axis[:, 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
+        t = np.cross(helper, axis)
+        t /= np.linalg.norm(t, axis=-1, keepdims=True)
+        b = np.cross(axis, t)
+        cos_phi, sin_phi = np.cos(phi)[:, None], np.sin(phi)[:, None]
+        return sin_t[:, None] * (cos_phi * t + sin_phi * b) + (1.0 - one_minus_cos_t)[:, None] * axis
+
+
+def cap_choice_for_lobe(lobe, wo: np.ndarray, lights, frame: np.ndarray | None = None) -> np.ndarray:
+    """shaders/env_sampling.glsl choose_cap_lights: each light's share of an estimate of what it
+    adds through ``lobe`` at ``wo`` (local; ``frame`` columns t, b, n map local to world), its
+    luminance power times f cos at its axis, mixed with CAP_CHOICE_UNIFORM of the uniform choice
+    (all uniform where every estimate is 0) so that a light the estimate misses (a wide cap whose
+    axis lies outside a narrow lobe) is still proposed."""
+    count = len(lights)
+    frame = np.eye(3) if frame is None else np.asarray(frame, dtype=np.float64)
+    axes_local = np.array([light.direction for light in lights], dtype=np.float64).reshape(-1, 3) @ frame
+    wo = np.broadcast_to(np.asarray(wo, dtype=np.float64), axes_local.shape)
+    f = np.asarray(lobe.eval(axes_local, wo), dtype=np.float64).reshape(count, -1)
+    f = f if f.shape[1] == 3 else np.repeat(f[:, :1], 3, axis=1)
+    power = np.array([light.power for light in lights], dtype=np.float64).reshape(count, 3)
+    estimate = np.maximum((f * power) @ LUMINANCE * np.abs(axes_local[:, 2]), 0.0)
+    total = estimate.sum()
+    if total <= 0.0:
+        return np.full(count, 1.0 / count)
+    return CAP_CHOICE_UNIFORM / count + (1.0 - CAP_CHOICE_UNIFORM) * estimate / total

@@ -8,7 +8,9 @@
 //                Cranley-Patterson rotation, no filtering (unbiased; accumulated over passes).
 //                With ENV_SAMPLING (the reference method) every BSDF sample is paired with a
 //                sample of the environment's importance map, combined by multiple importance
-//                sampling with the power heuristic (Veach 1997), so suns converge.
+//                sampling with the power heuristic (Veach 1997), so suns converge, and, where
+//                the cube's bright sources were separated (cap_lights.glsl's uniforms), with a
+//                point on one of their caps as a third strategy (env_sampling.glsl).
 #include "bsdf.glsl"
 #include "patterns.glsl"
 #include "self_occlusion.glsl"
@@ -240,24 +242,37 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     vec3 sum = vec3(0.0);
     vec2 rotation = pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index);
     vec2 rotation_env = pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index + 2 * MAX_LOBES);
+    vec2 rotation_light = pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index + 4 * MAX_LOBES);
+    choose_cap_lights(l, wo, tbn);
     for (int i = 0; i < u_samples; ++i) {
         vec4 q = sobol_point4(u_sample_offset + i);
-        // BSDF sample, MIS-weighted against the environment sampler.
+        // BSDF sample, MIS-weighted against the environment and light samplers.
         float p_bsdf;
         vec3 wi = lobe_sample_and_pdf(l, fract(q.xy + rotation), wo, p_bsdf);
         if (p_bsdf > 0.0) {
             vec3 world = tbn * wi;
-            float w = power_heuristic(p_bsdf, env_pdf(world));
+            float w = power_heuristic3(p_bsdf, env_pdf(world), cap_light_pdf(world));
             sum += lookup(world, 0.0, 0.0) * lobe_eval(l, wi, wo) * (abs(wi.z) * w / p_bsdf);
         }
-        // Environment sample, MIS-weighted against the BSDF sampler.
+        // Environment sample, MIS-weighted against the BSDF and light samplers.
         vec3 world_e = env_sample(fract(q.zw + rotation_env));
         vec3 wi_e = transpose(tbn) * world_e;
         vec3 f = lobe_eval(l, wi_e, wo);
         if (any(greaterThan(f, vec3(0.0)))) {
             float p_env = env_pdf(world_e);
-            float w = power_heuristic(p_env, lobe_sample_pdf(l, wi_e, wo));
+            float w = power_heuristic3(p_env, lobe_sample_pdf(l, wi_e, wo), cap_light_pdf(world_e));
             sum += lookup(world_e, 0.0, 0.0) * f * (abs(wi_e.z) * w / p_env);
+        }
+        // Bright-source sample (a point on a separated light's cap), MIS-weighted against both.
+        if (u_cap_light_count > 0) {
+            vec3 world_l = cap_light_sample(fract(q.xy + rotation_light));
+            vec3 wi_l = transpose(tbn) * world_l;
+            vec3 f_l = lobe_eval(l, wi_l, wo);
+            if (any(greaterThan(f_l, vec3(0.0)))) {
+                float p_light = cap_light_pdf(world_l);
+                float w = power_heuristic3(p_light, lobe_sample_pdf(l, wi_l, wo), env_pdf(world_l));
+                sum += lookup(world_l, 0.0, 0.0) * f_l * (abs(wi_l.z) * w / max(p_light, 1e-30));
+            }
         }
     }
     return sum / float(u_samples);
@@ -355,6 +370,8 @@ vec3 shade(vec3 wo, mat3 tbn) {
     }
     // The bright sources the cube no longer holds, for every lobe (RSIBR's included: its maps
     // are baked from the same cube).
+    // The reference reads the whole cube: its caps are only proposals (env_sampling.glsl).
+#if !defined(ENV_SAMPLING)
     for (int i = 0; i < u_lobe_count && u_cap_light_count > 0; ++i) {
         Lobe l = get_lobe(i);
         mat3 lobe_tbn;
@@ -362,6 +379,7 @@ vec3 shade(vec3 wo, mat3 tbn) {
         volume_lobe(volume, l, tbn, vec3(0.0), lobe_tbn, through);
         result += through * cap_lights_radiance(l, wo, lobe_tbn);
     }
+#endif
     // >= 0: the residual cube is signed (a source's shape beyond its cap; bright_sources.py), and
     // reads of it that miss the cap's own core can leave a small negative sum
     return max(result, vec3(0.0));

@@ -75,12 +75,13 @@ layout(location = 4) out vec4 out_plane_point[2];
 layout(location = 6) out vec4 out_plane_normal[2];
 
 // The bright sources the object's cube no longer holds (viewer/cubemap.py: its residual is
-// bound, u_cap_light_count > 0 only for the real-time methods), for one lobe as this pixel has it.
+// bound; the reference's whole cube has them as sampling proposals only), for one lobe as this
+// pixel has it.
 // A reflector shaded from its mirror buffer reads the whole scene and sky there: no lights.
 #if defined(SPECULAR)
 vec3 scene_cap_lights(Lobe l, vec3 wo, mat3 tbn) {
-#if defined(MIRROR)
-    return vec3(0.0);
+#if defined(MIRROR) || defined(ENV_SAMPLING)
+    return vec3(0.0);  // the reference reads the whole cube: its caps are only proposals
 #else
     return u_cap_light_count > 0 ? cap_lights_radiance(l, wo, tbn) : vec3(0.0);
 #endif

@@ -20,10 +20,14 @@ def test_table_and_figure(tmp_path):
     results = {"rows": [_row("lobe-7+norm", 0.223, 0.068)], "size": 8, "reference_spp": 16, "repeats": 1,
                "device": "test", "stamp": "stamp"}  # fmt: skip
     text = light.markdown(results)
-    assert "| studio | 4 | gold-ggx | lobe-7+norm | 22.3 | 6.8 | - | - | 20.0 | 30.0 | 100 | 150 |" in text
+    assert "| studio | 4 | gold-ggx | lobe-7+norm | - | 22.3 | 6.8 | - | - | - | - | 20.0 | 30.0 | 100 | 150 |" in text
     results["rows"][0]["before"]["rel_rmse_interior"] = 0.2
     results["rows"][0]["after"]["rel_rmse_interior"] = 0.05
-    assert "| 22.3 | 6.8 | 20.0 | 5.0 | 20.0 |" in light.markdown(results)
+    assert "| 22.3 | 6.8 | - | - | 20.0 | 5.0 | 20.0 |" in light.markdown(results)
+    # the reference's own noise, and the error beyond it: sqrt(0.068^2 - 0.03^2) = 0.061
+    results["rows"][0]["reference_noise"] = 0.03
+    results["rows"][0]["after"]["beyond_noise"] = float(np.sqrt(0.068**2 - 0.03**2))
+    assert "| lobe-7+norm | 3.0 | 22.3 | 6.8 | - | 6.1 | 20.0 | 5.0 |" in light.markdown(results)
     mask = np.zeros((9, 9), bool)
     mask[1:8, 1:8] = True
     assert light.interior(mask).sum() == 9  # 7 x 7 less two rings
@@ -57,7 +61,7 @@ def test_after_only_table_and_figure(tmp_path):
     results = {"rows": [row], "size": 8, "reference_spp": 16, "repeats": 1, "supersample": 4,
                "device": "test", "stamp": "stamp"}  # fmt: skip
     text = light.markdown(results)
-    assert "| studio | 4 | gold-ggx | prefiltered | - | 8.0 | - | - | - | 30.0 | - | 150 |" in text
+    assert "| studio | 4 | gold-ggx | prefiltered | - | - | 8.0 | - | - | - | - | - | 30.0 | - | 150 |" in text
     assert "4x4 points per pixel" in text and "pixel centres" in light.markdown({**results, "supersample": 1})
     frame = np.full((8, 8, 3), 0.5, dtype=np.float32)
     light.write_figure([("studio", "gold-ggx", "after", frame, frame)], tmp_path / "figure.png")

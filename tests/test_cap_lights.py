@@ -573,24 +573,6 @@ def test_a_soft_edged_light_matches_its_numpy_twin(sun_renderer, material):
         assert np.allclose(difference[y, x], expected, rtol=0.02, atol=2e-3), (y, x, difference[y, x], expected)
 
 
-def test_reference_reads_the_whole_cube(sun_renderer):
-    """The reference integrates the cube as it was (its environment sampler converges on suns):
-    with separation on, the same frame bit for bit as without."""
-    from lobeview.viewer.preview import PreviewRenderer
-
-    bsdf = build_bsdf(load_material("gold-ggx"))
-    env = EnvironmentMap.from_function(_sky_with_sun, height=256, name="sky-with-sun")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        plain = PreviewRenderer(sun_renderer.ctx, env, uv_sphere(rings=64, segments=128), size=SIZE, face_size=64)
-    try:
-        expected = plain.render(CAMERA, bsdf, "reference", spp=64, background=False).radiance
-    finally:
-        plain.release()
-    separated = sun_renderer.render(CAMERA, bsdf, "reference", spp=64, background=False).radiance
-    assert np.array_equal(separated, expected)
-
-
 def test_a_separated_cube_counts_both_of_its_textures(sun_renderer):
     """The cube budget (viewer/cube_bake.py cube_gpu_bytes) sees the residual cube too."""
     from lobeview.viewer.cube_bake import cube_gpu_bytes

@@ -239,15 +239,20 @@ class ShadingBinder:
             set_uniform(program, "u_stack_layer", 0.0)  # the cube's own stack (multi-draws: the record's)
         if method.kind == "prefiltered":
             self.bind_prefiltered(program, cube, material, method, per_pixel_lobes)
-        # Bright sources (viewer/cubemap.py): the reference integrates the whole radiance, every
-        # other method the cube without them plus the lights (shaders/cap_lights.glsl): lobe-N,
-        # fis-N and mc-N the residual, signed where it keeps a source's shape beyond its cap, the
+        # Bright sources (viewer/cubemap.py): the reference integrates the whole radiance (the
+        # lights only tell its third sampling strategy where to look), every other method the
+        # cube without them plus the lights (shaders/cap_lights.glsl): lobe-N, fis-N and mc-N the
+        # residual, signed where it keeps a source's shape beyond its cap, the
         # prefiltered modes, whose lobe maps read a narrow lobe in one lookup, the cube without
         # sources their maps are made from (one lookup would show the signed detail as it is:
         # miro5 under night.exr 29.6 -> 34.2 %, `lobeview bench light`), each with the lights it
         # lost (a strip light is one only for the prefiltered modes: bright_sources.py kept_whole).
         if method.kind == "reference":
-            radiance, lights = cube.radiance, []
+            # the lights as proposals of its third strategy (env_sampling.glsl), where it samples
+            # the environment: a reference drawn without (PARALLAX, MIRROR: viewer/object_drawer.py)
+            # would add them to the whole cube (cap_lights.glsl)
+            samples_environment = has_uniform(program, "u_env_cdf")
+            radiance, lights = cube.radiance, (cube.lights if samples_environment else [])
         elif method.kind == "prefiltered":
             radiance, lights = cube.without_sources, cube.lights
         else:
