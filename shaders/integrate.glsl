@@ -238,6 +238,17 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
 #elif defined(METHOD_PREFILTERED)
 #include "prefiltered.glsl"
 #elif defined(ENV_SAMPLING)
+// A sample that a world-space strategy (the environment's importance map, a bright source's cap)
+// drew with density p_own: f cos L / p_own, weighted by the power heuristic against the BSDF
+// sampler and the other world-space strategy's density p_other.
+vec3 world_sample_term(Lobe l, vec3 world, vec3 wo, mat3 tbn, float p_own, float p_other) {
+    vec3 wi = transpose(tbn) * world;
+    vec3 f = lobe_eval(l, wi, wo);
+    if (!any(greaterThan(f, vec3(0.0)))) return vec3(0.0);
+    float w = power_heuristic3(p_own, lobe_sample_pdf(l, wi, wo), p_other);
+    return lookup(world, 0.0, 0.0) * f * (abs(wi.z) * w / max(p_own, 1e-30));
+}
+
 vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
     vec3 sum = vec3(0.0);
     vec2 rotation = pixel_rotation(uvec2(gl_FragCoord.xy), lobe_index);
@@ -256,23 +267,11 @@ vec3 integrate_lobe(Lobe l, int lobe_index, vec3 wo, mat3 tbn) {
         }
         // Environment sample, MIS-weighted against the BSDF and light samplers.
         vec3 world_e = env_sample(fract(q.zw + rotation_env));
-        vec3 wi_e = transpose(tbn) * world_e;
-        vec3 f = lobe_eval(l, wi_e, wo);
-        if (any(greaterThan(f, vec3(0.0)))) {
-            float p_env = env_pdf(world_e);
-            float w = power_heuristic3(p_env, lobe_sample_pdf(l, wi_e, wo), cap_light_pdf(world_e));
-            sum += lookup(world_e, 0.0, 0.0) * f * (abs(wi_e.z) * w / p_env);
-        }
+        sum += world_sample_term(l, world_e, wo, tbn, env_pdf(world_e), cap_light_pdf(world_e));
         // Bright-source sample (a point on a separated light's cap), MIS-weighted against both.
         if (u_cap_light_count > 0) {
             vec3 world_l = cap_light_sample(fract(q.xy + rotation_light));
-            vec3 wi_l = transpose(tbn) * world_l;
-            vec3 f_l = lobe_eval(l, wi_l, wo);
-            if (any(greaterThan(f_l, vec3(0.0)))) {
-                float p_light = cap_light_pdf(world_l);
-                float w = power_heuristic3(p_light, lobe_sample_pdf(l, wi_l, wo), env_pdf(world_l));
-                sum += lookup(world_l, 0.0, 0.0) * f_l * (abs(wi_l.z) * w / max(p_light, 1e-30));
-            }
+            sum += world_sample_term(l, world_l, wo, tbn, cap_light_pdf(world_l), env_pdf(world_l));
         }
     }
     return sum / float(u_samples);

@@ -92,3 +92,16 @@ def run_compute_probe(ctx, program, probe, out_vec4s: int, out_binding: int = 3)
     inputs.release()
     outputs.release()
     return out
+
+
+def sphere_integral(density, m: int) -> float:
+    """The integral of ``density`` (directions (..., 3) -> values) over the sphere by the midpoint
+    rule on an m x m grid per cube face: d omega = dsc dtc / (1 + sc^2 + tc^2)^1.5."""
+    import numpy as np
+
+    from lobeview.core.cube_layout import face_point_directions
+
+    c = (np.arange(m) + 0.5) / m * 2 - 1
+    tc, sc = np.meshgrid(c, c, indexing="ij")
+    jacobian = (2 / m) ** 2 / (1 + sc**2 + tc**2) ** 1.5
+    return float(sum(np.sum(density(face_point_directions(f, sc, tc)) * jacobian) for f in range(6)))
