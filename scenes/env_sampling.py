@@ -195,20 +195,25 @@ class CapLightSampler:
     cancellation of 1 - dot for caps of a fraction of a degree). Any positive choice keeps MIS
     unbiased; :func:`cap_choice_for_lobe` is the shader's."""
 
-    axes: np.ndarray  # (K, 3) unit directions
+    frames: np.ndarray  # (K, 3, 3) each cap's CapLight.frame(): columns t, b, axis
     one_minus_cos: np.ndarray  # (K,) 1 - cos(radius)
     choice: np.ndarray  # (K,) probabilities, sum 1
 
     @classmethod
     def from_lights(cls, lights, choice: np.ndarray | None = None) -> CapLightSampler:
-        axes = np.array([light.direction for light in lights], dtype=np.float64).reshape(-1, 3)
-        count = len(axes)
+        frames = np.array([light.frame() for light in lights], dtype=np.float64).reshape(-1, 3, 3)
+        count = len(frames)
         choice = np.full(count, 1.0 / max(count, 1)) if choice is None else np.asarray(choice, dtype=np.float64)
-        return cls(axes, np.array([1.0 - light.cos_radius for light in lights], dtype=np.float64), choice)
+        return cls(frames, np.array([1.0 - light.cos_radius for light in lights], dtype=np.float64), choice)
+
+    @property
+    def axes(self) -> np.ndarray:
+        """(K, 3) the caps' unit directions."""
+        return self.frames[:, :, 2]
 
     def pdf(self, dirs: np.ndarray) -> np.ndarray:
         dirs = np.asarray(dirs, dtype=np.float64)
-        if len(self.axes) == 0:
+        if len(self.frames) == 0:
             return np.zeros(dirs.shape[:-1])
         half_chord2 = 0.5 * np.sum((dirs[..., None, :] - self.axes) ** 2, axis=-1)  # 1 - cos to each axis
         inside = half_chord2 <= self.one_minus_cos
@@ -217,7 +222,7 @@ class CapLightSampler:
     def sample(self, u1: np.ndarray, u2: np.ndarray) -> np.ndarray:
         u1 = np.asarray(u1, dtype=np.float64)
         u2 = np.asarray(u2, dtype=np.float64)
-        count = len(self.axes)
+        count = len(self.frames)
         if count == 0:
             raise ValueError("CapLightSampler.sample: no lights to sample")
         upper = np.cumsum(self.choice)
@@ -228,13 +233,8 @@ class CapLightSampler:
         one_minus_cos_t = along * self.one_minus_cos[k]
         sin_t = np.sqrt(np.maximum(one_minus_cos_t * (2.0 - one_minus_cos_t), 0.0))
         phi = 2.0 * np.pi * u2
-        axis = self.axes[k]
-        helper = np.where(np.abs(axis[:, 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
-        t = np.cross(helper, axis)
-        t /= np.linalg.norm(t, axis=-1, keepdims=True)
-        b = np.cross(axis, t)
-        cos_phi, sin_phi = np.cos(phi)[:, None], np.sin(phi)[:, None]
-        return sin_t[:, None] * (cos_phi * t + sin_phi * b) + (1.0 - one_minus_cos_t)[:, None] * axis
+        local = np.stack([sin_t * np.cos(phi), sin_t * np.sin(phi), 1.0 - one_minus_cos_t], axis=-1)
+        return np.einsum("nij,nj->ni", self.frames[k], local)
 
 
 def cap_choice_for_lobe(lobe, wo: np.ndarray, lights, frame: np.ndarray | None = None) -> np.ndarray:
