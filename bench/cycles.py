@@ -10,8 +10,9 @@ from the silhouette): the ratio of mean brightness, relative RMSE, and the ratio
 
 Cases: a generated unit sphere of a white roughness-1 glTF dielectric (Cycles renders it at 1.00
 everywhere under a white sky: the grazing test), a chrome sphere (verifies the environment's
-orientation: a turned or mirrored map shows as tens of percent), and every model in
-../shared/assets/gltf; environments: a white sky (constant radiance 1) and the HDR captures named
+orientation: a turned or mirrored map shows as tens of percent), every model in
+../shared/assets/gltf and Khronos' ClearCoatTest (committed in bench/models; SOURCES.md there);
+environments: a white sky (constant radiance 1) and the HDR captures named
 by ``--envs``. Cycles' images are cached in the lobeview cache folder (keyed by the glTF and
 environment files' bytes, the camera, size, samples and Blender's version).
 
@@ -67,9 +68,11 @@ SPHERE_MATERIALS = {
     "sphere-gold": {"model": "gltf", "base_color": [1.0, 0.78, 0.34], "metallic": 1.0, "roughness": 0.4},
 }
 MODELS = {
-    "WaterBottle": "gltf/WaterBottle/WaterBottle.glb",
-    "Suzanne": "gltf/Suzanne/Suzanne.gltf",
-    "CornellBox": "gltf/CornellBox/CornellBox.glb",
+    "WaterBottle": ASSETS / "gltf/WaterBottle/WaterBottle.glb",
+    "Suzanne": ASSETS / "gltf/Suzanne/Suzanne.gltf",
+    "CornellBox": ASSETS / "gltf/CornellBox/CornellBox.glb",
+    # committed with the bench (bench/models/SOURCES.md): Khronos' KHR_materials_clearcoat test
+    "ClearCoatTest": Path(__file__).resolve().parent / "models/ClearCoatTest/ClearCoatTest.gltf",
 }
 # A model's mesh with one untextured material: prefiltered-rsibr bakes maps only for lobes no
 # texture changes, so on the textured models it falls back to the split-sum lookup.
@@ -136,7 +139,7 @@ def plain_model_gltf(name: str, work: Path) -> Path:
     model, material = PLAIN_MODELS[name]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        scene = load_gltf(ASSETS / MODELS[model])
+        scene = load_gltf(MODELS[model])
     scene.materials = [SceneMaterial(name, validate(material))]
     for obj in scene.objects:
         obj.material = 0
@@ -168,7 +171,7 @@ def make_cases(names, envs, work: Path) -> list[Case]:
             gltf = sphere_gltf(name, work)
             camera, target = (0.0, 0.35, 3.2), (0.0, 0.0, 0.0)
         elif name in MODELS:
-            gltf = ASSETS / MODELS[name]
+            gltf = MODELS[name]
             camera, target = framing(gltf)
         elif name in PLAIN_MODELS:
             gltf = plain_model_gltf(name, work)

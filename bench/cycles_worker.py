@@ -19,6 +19,7 @@ Conventions (each verified by :mod:`lobeview.bench.cycles` against lobeview's ow
   node after a texture): at 0.02 the lobe is far narrower than a pixel or an environment texel
   here, so the floor changes nothing else (the same sphere at 0 and at 0.02: equal means).
   ``python -m lobeview.bench.cycles --roughness-sweep`` measures it again.
+- single-sided glTF materials: back faces hidden from camera rays (:func:`cull_back_faces`).
 - job "passes" (``python -m lobeview.bench.cycles --passes``): the view layer's light passes
   (PASSES) go into a multilayer EXR beside the combined image: Combined = DiffCol (DiffDir +
   DiffInd) + GlossCol (GlossDir + GlossInd); under the white sky (radiance 1) GlossDir is the
@@ -75,6 +76,39 @@ def raise_roughness(materials, floor: float) -> int:
     return changed
 
 
+def cull_back_faces(materials) -> int:
+    """glTF's single-sided materials (doubleSided false: back faces culled, spec 3.9.6) as the
+    rasteriser shows them: Blender's importer sets ``use_backface_culling``, which Cycles does
+    not honour, so a camera ray that meets such a back face passes through it (Light Path "Is
+    Camera Ray" x Geometry "Backfacing" mixes in a Transparent BSDF). Other rays are left alone:
+    culling is a rule of what the camera sees, not of light transport (ClearCoatTest's partly
+    transparent coat, seen through, showed the inside of its sample's box in Cycles and the sky
+    behind it in lobeview). Returns how many materials were changed."""
+    changed = 0
+    for material in materials:
+        if not material.use_backface_culling or not material.use_nodes or material.node_tree is None:
+            continue
+        tree = material.node_tree
+        output = next((n for n in tree.nodes if n.type == "OUTPUT_MATERIAL" and n.is_active_output), None)
+        if output is None or not output.inputs["Surface"].is_linked:
+            continue
+        surface = output.inputs["Surface"].links[0].from_socket
+        geometry = tree.nodes.new("ShaderNodeNewGeometry")
+        light_path = tree.nodes.new("ShaderNodeLightPath")
+        culled = tree.nodes.new("ShaderNodeMath")
+        culled.operation = "MULTIPLY"
+        tree.links.new(geometry.outputs["Backfacing"], culled.inputs[0])
+        tree.links.new(light_path.outputs["Is Camera Ray"], culled.inputs[1])
+        transparent = tree.nodes.new("ShaderNodeBsdfTransparent")
+        mix = tree.nodes.new("ShaderNodeMixShader")
+        tree.links.new(culled.outputs[0], mix.inputs["Fac"])
+        tree.links.new(surface, mix.inputs[1])
+        tree.links.new(transparent.outputs["BSDF"], mix.inputs[2])
+        tree.links.new(mix.outputs["Shader"], output.inputs["Surface"])
+        changed += 1
+    return changed
+
+
 def render(job: dict) -> None:
     import bpy
 
@@ -83,6 +117,7 @@ def render(job: dict) -> None:
     floor = float(job.get("roughness_floor", ROUGHNESS_FLOOR))
     if floor > 0:
         print(f"roughness floor {floor}: {raise_roughness(bpy.data.materials, floor)} inputs", flush=True)
+    print(f"single-sided materials: {cull_back_faces(bpy.data.materials)}", flush=True)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
     scene.cycles.device = "CPU"

@@ -9,6 +9,7 @@ and of the per-pixel material in shaders/scene.frag (core specification 3.9 and 
   the tangent-space normal, occlusion and emission of a material at UV coordinates, and the KHR
   extensions' factors times their textures (:func:`extension_texels`).
 - :func:`mapped_normal`: the normal map in the interpolated tangent frame.
+- :func:`lightmap_tilt_share`: how much of a baked irradiance a normal-mapped point receives.
 - :func:`pixel_bsdf`: the glTF BSDF of one pixel's parameters (materials/gltf.py).
 """
 
@@ -143,6 +144,23 @@ def mapped_normal(frame: np.ndarray, normal_texel: np.ndarray, scale: float) -> 
         return frame[:, 2]
     world = frame @ (n / length)
     return world / np.linalg.norm(world)
+
+
+def lightmap_tilt_share(mapped: np.ndarray, lightmap_normal: np.ndarray) -> np.ndarray:
+    """The share of a baked irradiance that reaches a normal-mapped point: (1 + cos tilt) / 2,
+    tilt the angle between the mapped normal and the normal the bake integrated around (the
+    interpolated vertex normal, scenes/baker.py).
+
+    The bake holds E = int_H L(w) (w.n) dw over the hemisphere H above the surface. A mapped
+    normal n' leans part of its cosine lobe below the surface, where a path tracer's rays meet
+    the object itself: under radiance uniform over H, int_H max(0, w.n') dw = pi (1 + n.n') / 2
+    (the view factor of a plane tilted by theta to a half space), so E' = E (1 + cos theta) / 2.
+    Without directional data in the lightmap, that is the whole correction: a tilt towards a
+    brighter part of the sky is first order in theta and cancels over a bump's two slopes, the
+    lost horizon is second order and darkens both (issue 40: ClearCoatTest's ribbed normal map
+    9 % brighter than Cycles with the bake alone). Shapes (..., 3) -> (...)."""
+    cos_tilt = np.sum(np.asarray(mapped, np.float64) * np.asarray(lightmap_normal, np.float64), axis=-1)
+    return 0.5 * (1.0 + np.clip(cos_tilt, -1.0, 1.0))
 
 
 def pixel_bsdf(parameters: dict, k: int, coat_cos: float | None = None):

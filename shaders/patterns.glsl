@@ -99,7 +99,10 @@ uniform sampler2D u_dfg;                // rg: Beckmann (A, B), ba: GGX; x = cos
 // The tables have one level: read at LOD 0 (a multi-draw's helper invocations hold no record
 // values, so implicit derivatives of coordinates made from them are meaningless).
 vec3 lobe_albedo(Lobe l, int lobe_index, vec3 wo) {
-    if (u_albedo_per_pixel == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION)) {
+    // The clearcoat too: its factor and roughness textures change it per pixel (ClearCoatTest's
+    // striped coat rendered as a whole coat, its rough-to-smooth coat at the factor's roughness 1).
+    if (u_albedo_per_pixel == 1 && (l.type == LOBE_GLTF_SPECULAR || l.type == LOBE_GLTF_TRANSMISSION ||
+                                    l.type == LOBE_GLTF_CLEARCOAT)) {
         // scene.frag's glTF lobe: alpha_y = roughness^2, alpha_x = mix(alpha_y, 1, strength^2)
         if (l.dist == DIST_GGX && l.ax != l.ay) return lobe_dfg_albedo(l, anisotropic_ggx_dfg(l, wo), wo.z);
         vec4 dfg = textureLod(u_dfg, dfg_coordinates(wo.z, sqrt(sqrt(l.ax * l.ay)), textureSize(u_dfg, 0)), 0.0);

@@ -151,6 +151,8 @@ void main() {
         vec3 n = mapped_normal(vertex_tbn, normal_texel.rgb, u_normal_scale);
         tbn = shading_frame(n, vec4(vertex_tbn[0], handedness), geometric_normal);
     }
+    // before view_in_frame may turn tbn to the viewer's side (vertex_tbn stays as it is)
+    float normal_map_tilt_cos = dot(tbn[2], vertex_tbn[2]);
     // KHR_materials_anisotropy: the texture's direction (RG in [-1, 1] of the tangent frame)
     // turned by the material's rotation; its strength (B) scales anisotropyStrength.
     float tangent_angle = u_tangent_rotation;
@@ -173,6 +175,10 @@ void main() {
     // irradiance_cube: exact per texel, bilinear between; nothing occludes it).
     vec3 irradiance = textureLod(u_irradiance, tbn[2], 0.0).rgb;
     if (u_lightmap_texcoord >= 0) irradiance = lightmap_texel * u_lightmap_intensity;
+    // The bake integrated around the vertex normal; a mapped normal leans part of its cosine
+    // lobe below the surface: (1 + cos tilt) / 2 of it (scenes/texturing.py lightmap_tilt_share).
+    if (u_lightmap_texcoord >= 0 && u_map_texcoord[MAP_NORMAL] >= 0)
+        irradiance *= 0.5 * (1.0 + clamp(normal_map_tilt_cos, -1.0, 1.0));
     // Occlusion darkens the indirect diffuse only: mix(1, ao, strength) (spec 3.9.3). A baked
     // lightmap already holds the occlusion of the geometry at its texel size (the bake traced
     // it; Cycles, path tracing the same geometry, ignores the texture), so on a lightmapped

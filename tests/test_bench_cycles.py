@@ -230,3 +230,22 @@ def test_traced_mirror_visibility_on_a_floor_before_a_wall():
             continue
         assert values[hidden].max() < 0.1, key
         assert values[clear].min() > 0.9, key
+
+
+def test_committed_clearcoat_model_loads_with_its_coat_textures():
+    """bench/models/ClearCoatTest (Khronos, CC BY 4.0; bench/models/SOURCES.md), a default case:
+    every sample and label, the coat's factor, roughness and normal textures where the model has them."""
+    import warnings
+
+    from lobeview.scenes.gltf_loader import load_gltf
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_gltf(cycles.MODELS["ClearCoatTest"])
+    assert "ClearCoatTest" in cycles.DEFAULT_CASES
+    assert len(scene.objects) == 27
+    materials = {m.name: m for m in scene.materials}
+    assert materials["Partial_Coated"].desc["clearcoat"] == 1.0 and "clearcoat" in materials["Partial_Coated"].textures
+    assert "clearcoat" in materials["RoughVariations_Coated"].textures
+    assert "clearcoat_normal" in materials["CoatNorm_Coated"].textures
+    assert materials["Partial_Coating"].alpha_mode == "BLEND"
