@@ -97,18 +97,9 @@ def test_textured_anisotropy_renders_like_the_same_factor(tmp_path):
     and direction +x renders like the same strength given as anisotropyStrength, in normalised
     lobe-7 (the factor's lobe takes the exact per-material albedo table, the texture's the new
     per-pixel one): within 2 % (47 % before), and plain lobe-7 and the reference agree too."""
-    import warnings
+    from test_textures import _textured_quad_means
 
-    from test_textures import _textured_gltf
-
-    from lobeview.scenes.builtin_env import load_environment
-    from lobeview.scenes.gltf_loader import load_gltf
-    from lobeview.viewer.camera import Camera
-    from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
-
-    camera = Camera(position=(0.6, 1.2, 1.6), target=(0.5, 0.5, 0.0), fov_y=40.0)
+    methods = ("lobe-7+norm", "lobe-7", "reference")
     means = {}
     for textured in (False, True):
         extension = {"anisotropyStrength": 1.0}
@@ -122,20 +113,8 @@ def test_textured_anisotropy_renders_like_the_same_factor(tmp_path):
                                              "roughnessFactor": 0.4},
                     "extensions": {"KHR_materials_anisotropy": extension}}  # fmt: skip
         folder = tmp_path / ("textured" if textured else "factor")
-        folder.mkdir()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            scene = load_gltf(_textured_gltf(folder, material, images))
-            ctx = create_headless_context()
-            renderer = SceneRenderer(ctx, scene, load_environment("builtin:studio"), size=(64, 64), progress=False,
-                                     settings=RenderSettings(cube_face_size=64, mirrors=False))  # fmt: skip
-        try:
-            for method in ("lobe-7+norm", "lobe-7", "reference"):
-                result = renderer.render(camera, method, spp=64)
-                means[textured, method] = float(result.radiance[result.mask].mean())
-        finally:
-            renderer.release()
-            ctx.release()
+        for method, mean in _textured_quad_means(folder, material, images, methods).items():
+            means[textured, method] = mean
     for method in ("lobe-7+norm", "lobe-7", "reference"):
         assert means[True, method] == pytest.approx(means[False, method], rel=0.02), (method, means)
 

@@ -7,8 +7,6 @@ materials/prefilter.py dfg_albedo, tested against quadrature in test_prefilter.p
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
 
@@ -23,37 +21,13 @@ def _coat_texture(factor: float, roughness: float) -> np.ndarray:
 
 
 def _means(tmp_path, name: str, extension: dict, images: list) -> dict:
-    from test_textures import _textured_gltf
-
-    from lobeview.scenes.builtin_env import load_environment
-    from lobeview.scenes.gltf_loader import load_gltf
-    from lobeview.viewer.camera import Camera
-    from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
+    from test_textures import _textured_quad_means
 
     # a black dielectric base (ClearCoatTest's "coating only"): the coat carries most of what is seen
     material = {"pbrMetallicRoughness": {"baseColorFactor": [0.0, 0.0, 0.0, 1.0], "metallicFactor": 0.0,
                                          "roughnessFactor": 0.6},
                 "extensions": {"KHR_materials_clearcoat": extension}}  # fmt: skip
-    folder = tmp_path / name
-    folder.mkdir()
-    camera = Camera(position=(0.6, 1.2, 1.6), target=(0.5, 0.5, 0.0), fov_y=40.0)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        scene = load_gltf(_textured_gltf(folder, material, images))
-        ctx = create_headless_context()
-        renderer = SceneRenderer(ctx, scene, load_environment("builtin:studio"), size=(64, 64), progress=False,
-                                 settings=RenderSettings(cube_face_size=64, mirrors=False))  # fmt: skip
-    try:
-        means = {}
-        for method in METHODS:
-            result = renderer.render(camera, method, spp=64)
-            means[method] = float(result.radiance[result.mask].mean())
-        return means
-    finally:
-        renderer.release()
-        ctx.release()
+    return _textured_quad_means(tmp_path / name, material, images, METHODS)
 
 
 @pytest.mark.parametrize(

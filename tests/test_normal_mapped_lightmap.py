@@ -10,12 +10,9 @@ import numpy as np
 import pytest
 from conftest import sphere_integral
 
-from lobeview.materials.spec import validate
-from lobeview.scenes.meshes import quad
-from lobeview.scenes.scene import LINEAR, Lightmap, Scene, SceneMaterial, SceneObject, TextureSlot
+from lobeview.scenes.scene import LINEAR, TextureSlot
 from lobeview.scenes.texturing import lightmap_tilt_share
 
-LIGHTMAP_SIZE = 8
 SIZE = (64, 64)
 
 
@@ -45,39 +42,12 @@ def _normal_map(tilt_deg: float) -> np.ndarray:
 
 
 def _render(tilt_deg: float | None, baked: bool) -> np.ndarray:
-    import warnings
+    from test_occlusion_texture import quad_scene, render_quad
 
-    from lobeview.scenes.envmap import EnvironmentMap
-    from lobeview.viewer.camera import Camera
-    from lobeview.viewer.context import create_headless_context
-    from lobeview.viewer.scene_renderer import SceneRenderer
-    from lobeview.viewer.settings import RenderSettings
-
-    desc = validate({"model": "thesis", "kd": [0.8, 0.8, 0.8], "lobes": []})  # diffuse only
     textures = {}
     if tilt_deg is not None:
         textures["normal"] = TextureSlot(_normal_map(tilt_deg), mag_filter=LINEAR, min_filter=LINEAR)
-    material = SceneMaterial("floor", desc, textures=textures)
-    if baked:
-        material.lightmap = Lightmap(np.full((LIGHTMAP_SIZE, LIGHTMAP_SIZE, 3), np.pi, np.float32), tex_coord=1)
-    mesh = quad([-1.0, -1.0, 0.0], [2.0, 0.0, 0.0], [0.0, 2.0, 0.0])
-    obj = SceneObject("floor", mesh, 0)
-    obj.uv1 = mesh.uvs.copy()
-    obj.planar_reflector = False
-    ctx = create_headless_context()
-    env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=16, name="white")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # the unbaked scene's "no usable lightmap"
-        renderer = SceneRenderer(ctx, Scene([obj], [material]), env, size=SIZE, progress=False,
-                                 settings=RenderSettings(cube_face_size=16))  # fmt: skip
-    try:
-        fov = float(2 * np.degrees(np.arctan(1 / 2.6)))  # the quad fills the frame
-        result = renderer.render(Camera(position=(0.0, 0.0, 2.6), target=(0.0, 0.0, 0.0), fov_y=fov), "lobe-7")
-        assert result.mask[2:-2, 2:-2].all() and not result.invalid.any()
-        return result.radiance.mean(axis=-1)[2:-2, 2:-2]
-    finally:
-        renderer.release()
-        ctx.release()
+    return render_quad(quad_scene(textures, baked), SIZE)[0]
 
 
 @pytest.fixture(scope="module")

@@ -42,10 +42,16 @@ def _occlusion_image() -> np.ndarray:
 
 
 def _scene(occlusion: bool, baked: bool) -> Scene:
-    desc = validate({"model": "thesis", "kd": [0.8, 0.8, 0.8], "lobes": []})
     textures = {}
     if occlusion:
         textures["occlusion"] = TextureSlot(_occlusion_image(), mag_filter=LINEAR, min_filter=LINEAR_MIPMAP_LINEAR)
+    return quad_scene(textures, baked)
+
+
+def quad_scene(textures: dict, baked: bool) -> Scene:
+    """A 2 m diffuse quad (kd 0.8, no lobes) with ``textures``; ``baked``: a uniform lightmap of pi
+    (irradiance pi, as from a white sky over its hemisphere) on TEXCOORD_1."""
+    desc = validate({"model": "thesis", "kd": [0.8, 0.8, 0.8], "lobes": []})
     material = SceneMaterial("floor", desc, textures=textures)
     if baked:
         material.lightmap = Lightmap(np.full((LIGHTMAP_SIZE, LIGHTMAP_SIZE, 3), np.pi, np.float32), tex_coord=1)
@@ -57,6 +63,12 @@ def _scene(occlusion: bool, baked: bool) -> Scene:
 
 
 def _render(occlusion: bool, baked: bool) -> tuple[np.ndarray, np.ndarray]:
+    return render_quad(_scene(occlusion, baked), SIZE)
+
+
+def render_quad(scene: Scene, size) -> tuple[np.ndarray, np.ndarray]:
+    """lobe-7 of :func:`quad_scene` under a white sky, the quad filling the frame: the mean
+    over channels and the mask, without the two outer pixel rings."""
     import warnings
 
     from lobeview.scenes.envmap import EnvironmentMap
@@ -69,7 +81,7 @@ def _render(occlusion: bool, baked: bool) -> tuple[np.ndarray, np.ndarray]:
     env = EnvironmentMap.from_function(lambda d: np.ones(d.shape[:-1] + (3,)), height=16, name="white")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the unbaked scene's "no usable lightmap"
-        renderer = SceneRenderer(ctx, _scene(occlusion, baked), env, size=SIZE, progress=False,
+        renderer = SceneRenderer(ctx, scene, env, size=size, progress=False,
                                  settings=RenderSettings(cube_face_size=16))  # fmt: skip
     try:
         # 2 m quad, vertical fov 2 atan(1 / 2.6): it fills the frame (the edge pixels are dropped)

@@ -133,6 +133,33 @@ def _textured_gltf(tmp_path, material: dict, images: list, samplers=None) -> str
     return str(path)
 
 
+def _textured_quad_means(folder, material: dict, images: list, methods, spp: int = 64) -> dict:
+    """The mean radiance of :func:`_textured_gltf`'s quad under builtin:studio, seen obliquely,
+    through the loader and the scene renderer, per method (64 x 64 px, 64^2 cube faces)."""
+    from lobeview.scenes.builtin_env import load_environment
+    from lobeview.viewer.context import create_headless_context
+    from lobeview.viewer.scene_renderer import SceneRenderer
+    from lobeview.viewer.settings import RenderSettings
+
+    folder.mkdir()
+    camera = Camera(position=(0.6, 1.2, 1.6), target=(0.5, 0.5, 0.0), fov_y=40.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_gltf(_textured_gltf(folder, material, images))
+        ctx = create_headless_context()
+        renderer = SceneRenderer(ctx, scene, load_environment("builtin:studio"), size=(64, 64), progress=False,
+                                 settings=RenderSettings(cube_face_size=64, mirrors=False))  # fmt: skip
+    try:
+        means = {}
+        for method in methods:
+            result = renderer.render(camera, method, spp=spp)
+            means[method] = float(result.radiance[result.mask].mean())
+        return means
+    finally:
+        renderer.release()
+        ctx.release()
+
+
 def test_loader_reads_every_texture_slot_with_its_sampler_and_transform(tmp_path):
     red = np.zeros((2, 2, 4), np.uint8)
     red[..., 0], red[..., 3] = 255, 128
