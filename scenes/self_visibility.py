@@ -78,6 +78,11 @@ MAX_FOOTPRINT_RADIUS = 3.0  # radians: a footprint cap no wider (pi is the whole
 SPLIT_SUM_RADIUS_PER_ALPHA_GGX = 2.75
 SPLIT_SUM_RADIUS_PER_ALPHA_BECKMANN = 2.25
 SPLIT_SUM_MAX_RADIUS = 1.3
+# A reflection lobe whose normal a normal map tilts more than this (1 - cos) from the surface's
+# takes a lookup's share over the part of its footprint above the lobe's own surface
+# (horizon_visibility's lobe_normals): the part below the surface but above the lobe's horizon
+# points into the object. Below it the surface's own normal (bit for bit as without a map).
+SELF_LOBE_TILT_MIN = 1e-6
 AZIMUTH_TAP = np.sqrt(0.5)  # horizon_visibility's taps across a cap: its centre and -+ this of its span
 AZIMUTH_TAP_OFFSETS = (-AZIMUTH_TAP, 0.0, AZIMUTH_TAP)
 AZIMUTH_TAP_WEIGHTS = (0.25, 0.5, 0.25)
@@ -289,6 +294,7 @@ def horizon_visibility(
     soft_edge: float = HORIZON_SOFT_EDGE,
     footprint=0.0,
     below_hidden=False,
+    lobe_normals=None,
 ) -> np.ndarray:
     """How visible unit ``directions`` (..., 3) are above the horizons of ``cones`` (..., 4 +
     sectors: HORIZON_SECTORS at vertices, MAP_HORIZON_SECTORS in a horizon map) about unit
@@ -298,7 +304,11 @@ def horizon_visibility(
     Points without a cone pass. A direction below the surface passes for a transmission lobe and
     is hidden (0) for a reflection lobe's lookup (``below_hidden``, boolean or per direction): it
     points into the object (a rough lobe's tail, a normal map's tilt), whose own surface is what
-    it sees, as a path tracer finds (DamagedHelmet against Cycles: docs/measurements.md)."""
+    it sees, as a path tracer finds (DamagedHelmet against Cycles: docs/measurements.md).
+    ``lobe_normals`` (..., 3): a reflection lobe's normal where a normal map tilts it; the share is
+    then taken over the part of the footprint above the lobe's surface, the part below the
+    surface but above the lobe's horizon counted hidden (the two hidden parts taken as nested:
+    exact where only one of their edges crosses the footprint, an upper bound where both do)."""
     directions = np.asarray(directions, dtype=np.float64)
     cones = np.asarray(cones, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -328,6 +338,20 @@ def horizon_visibility(
     above_surface = cap_intersection_solid_angle(0.5 * np.pi, radius, from_normal)
     with np.errstate(invalid="ignore", divide="ignore"):
         share = np.clip(above / np.maximum(above_surface, 1e-12), 0.0, 1.0)
+    if lobe_normals is not None:
+        lobe_normals = np.asarray(lobe_normals, dtype=np.float64)
+        # a point lookup (footprint 0: the reference's) is hidden by where it points; its cap is
+        # only the horizon's soft edge, which across the surface would hide half of what clears it
+        tilted = (
+            np.asarray(below_hidden, dtype=bool)
+            & (np.sum(lobe_normals * normals, axis=-1) < 1.0 - SELF_LOBE_TILT_MIN)
+            & (np.asarray(footprint, dtype=np.float64) > 0.0)
+        )
+        from_lobe_normal = np.arccos(np.clip(np.sum(directions * lobe_normals, axis=-1), -1.0, 1.0))
+        above_lobe = cap_intersection_solid_angle(0.5 * np.pi, radius, from_lobe_normal)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            lobe_share = np.clip(np.minimum(above, above_lobe) / np.maximum(above_lobe, 1e-12), 0.0, 1.0)
+        share = np.where(tilted, lobe_share, share)
     no_cone = cones[..., 3] <= NO_OCCLUSION + 1e-3
     below = np.asarray(below_hidden, dtype=bool) & (sin_e <= 0.0)  # a NaN normal is neither: it passes
     return np.where(no_cone, 1.0, np.where(below, 0.0, np.where(sin_e > 0.0, share, 1.0)))

@@ -248,6 +248,7 @@ void main() {
     for (int i = 0; i < u_lobe_count; ++i) {
         Lobe l = get_lobe(i);
         g_self_below_hidden = !lobe_is_transmission(l);  // self_occlusion.glsl
+        set_self_lobe_normal(tbn[2]);  // a normal map's tilt (the coat's and a volume's below)
 #if defined(METHOD_PREFILTERED)
         if (rsibr_lobe(i)) {  // RSIBR's maps are baked from the residual, without lamps
             radiance += scene_cap_lights(l, wo, tbn) + lamps_radiance(l, wo, tbn, v_position);
@@ -272,6 +273,7 @@ void main() {
             l.k = vec3(clearcoat);
             l.ax = coat_alpha;
             l.ay = coat_alpha;
+            set_self_lobe_normal(coat_tbn[2]);
             // >= 0: the residual cube is signed (a source's shape beyond its cap; bright_sources.py)
             radiance += max(integrate_lobe(l, i, coat_wo, coat_tbn) + scene_cap_lights(l, coat_wo, coat_tbn), vec3(0.0));
             radiance += lamps_radiance(l, coat_wo, coat_tbn, v_position);
@@ -282,6 +284,7 @@ void main() {
         mat3 lobe_tbn = tbn;
         vec3 through = vec3(1.0);
         volume_lobe(volume, l, tbn, v_position, lobe_tbn, through);
+        set_self_lobe_normal(lobe_tbn[2]);
         radiance += through * max(integrate_lobe(l, i, wo, lobe_tbn) + scene_cap_lights(l, wo, lobe_tbn)
                                   + lamps_radiance(l, wo, lobe_tbn, v_position), vec3(0.0));
 #if defined(PARALLAX) || defined(MIRROR)

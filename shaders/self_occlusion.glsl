@@ -20,6 +20,11 @@ float g_self_horizon[MAP_HORIZON_SECTORS] = float[](0.0, 0.0, 0.0, 0.0, 0.0, 0.0
                                                    0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
 int g_self_sectors = HORIZON_SECTORS;
 bool g_self_below_hidden = false;  // the lobe looked up reflects (scene.frag, per lobe)
+// The normal of the reflection lobe looked up where a normal map tilts it from g_self_normal
+// (set_self_lobe_normal, per lobe): a read's share is taken over the part of its footprint the
+// lobe covers, above this normal's surface.
+vec3 g_self_lobe_normal = vec3(0.0, 0.0, 1.0);
+bool g_self_lobe_tilted = false;
 
 // The frame the horizon's azimuths are measured in (self_visibility.py horizon_frame).
 void horizon_frame(vec3 n, out vec3 t, out vec3 b) {
@@ -33,6 +38,13 @@ void horizon_frame(vec3 n, out vec3 t, out vec3 b) {
 void set_self_normal(vec3 n) {
     g_self_normal = n;
     horizon_frame(n, g_self_tangent, g_self_bitangent);
+}
+
+// The lobe's normal for the lookups that follow: tilted when a reflection lobe's frame leans away
+// from the surface's normal (a normal map), otherwise the surface's own (nothing changes).
+void set_self_lobe_normal(vec3 lobe_normal) {
+    g_self_lobe_normal = lobe_normal;
+    g_self_lobe_tilted = g_self_below_hidden && dot(lobe_normal, g_self_normal) < 1.0 - SELF_LOBE_TILT_MIN;
 }
 
 // Solid angle of the intersection of two spherical caps of angular radii a and b whose centres
@@ -90,6 +102,15 @@ float self_visibility(vec3 dir, float footprint) {
     // its part above the surface
     float above = cap_intersection_solid_angle(acos(clamp(h, -1.0, 1.0)), radius, from_normal);
     float above_surface = cap_intersection_solid_angle(0.5 * PI, radius, from_normal);
+    if (g_self_lobe_tilted && footprint > 0.0) {
+        // over the part the tilted lobe covers instead: what lies below the surface but above
+        // the lobe's horizon points into the object (the two hidden parts taken as nested). A
+        // point lookup (the reference's) is hidden by where it points: its cap is only the
+        // horizon's soft edge, which across the surface itself would hide half of what clears it.
+        float from_lobe_normal = acos(clamp(dot(d, g_self_lobe_normal), -1.0, 1.0));
+        float above_lobe = cap_intersection_solid_angle(0.5 * PI, radius, from_lobe_normal);
+        return clamp(min(above, above_lobe) / max(above_lobe, 1e-12), 0.0, 1.0);
+    }
     return clamp(above / max(above_surface, 1e-12), 0.0, 1.0);
 }
 

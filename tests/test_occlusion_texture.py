@@ -69,6 +69,12 @@ def _render(occlusion: bool, baked: bool) -> tuple[np.ndarray, np.ndarray]:
 def render_quad(scene: Scene, size) -> tuple[np.ndarray, np.ndarray]:
     """lobe-7 of :func:`quad_scene` under a white sky, the quad filling the frame: the mean
     over channels and the mask, without the two outer pixel rings."""
+    return render_quad_methods(scene, size, ("lobe-7",), images=True)["lobe-7"]
+
+
+def render_quad_methods(scene: Scene, size, methods, images: bool = False) -> dict:
+    """:func:`render_quad` in each of ``methods`` (the reference at 256 samples): per method the
+    mean over the pixels, or with ``images`` the (mean over channels, mask) pair."""
     import warnings
 
     from lobeview.scenes.envmap import EnvironmentMap
@@ -87,9 +93,13 @@ def render_quad(scene: Scene, size) -> tuple[np.ndarray, np.ndarray]:
         # 2 m quad, vertical fov 2 atan(1 / 2.6): it fills the frame (the edge pixels are dropped)
         fov = float(2 * np.degrees(np.arctan(1 / 2.6)))
         camera = Camera(position=(0.0, 0.0, 2.6), target=(0.0, 0.0, 0.0), fov_y=fov)
-        result = renderer.render(camera, "lobe-7")
-        assert result.mask[2:-2, 2:-2].all() and not result.invalid.any()
-        return result.radiance.mean(axis=-1)[2:-2, 2:-2], result.mask[2:-2, 2:-2]
+        out = {}
+        for method in methods:
+            result = renderer.render(camera, method, spp=256)
+            assert result.mask[2:-2, 2:-2].all() and not result.invalid.any()
+            image = result.radiance.mean(axis=-1)[2:-2, 2:-2]
+            out[method] = (image, result.mask[2:-2, 2:-2]) if images else float(image.mean())
+        return out
     finally:
         renderer.release()
         ctx.release()
