@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import argparse
 import base64
-import io
 import json
 from pathlib import Path
 
 import numpy as np
+
+from .khr_textures import _png as png_data_uri
 
 NORMAL_MAP_TEXELS = 8  # a constant map: any size samples the same
 
@@ -32,8 +33,6 @@ def normal_map_texel(tilt_deg: float) -> np.ndarray:
 
 def plane_gltf(tilt_deg: float | None, roughness: float, base: float) -> dict:
     """The glTF document of the floor; ``tilt_deg`` None: no normal map."""
-    from PIL import Image
-
     positions = np.array([[-1, 0, 1], [1, 0, 1], [1, 0, -1], [-1, 0, -1]], np.float32)
     normals = np.tile(np.array([0, 1, 0], np.float32), (4, 1))
     tangents = np.tile(np.array([1, 0, 0, 1], np.float32), (4, 1))
@@ -85,12 +84,10 @@ def plane_gltf(tilt_deg: float | None, roughness: float, base: float) -> dict:
     if tilt_deg is not None:
         image = np.empty((NORMAL_MAP_TEXELS, NORMAL_MAP_TEXELS, 3), np.uint8)
         image[...] = normal_map_texel(tilt_deg)
-        png = io.BytesIO()
-        Image.fromarray(image).save(png, format="PNG")
         material["normalTexture"] = {"index": 0}
         document["textures"] = [{"source": 0, "sampler": 0}]
         document["samplers"] = [{"magFilter": 9729, "minFilter": 9729}]
-        document["images"] = [{"uri": "data:image/png;base64," + base64.b64encode(png.getvalue()).decode()}]
+        document["images"] = [{"uri": png_data_uri(image)}]
     return document
 
 

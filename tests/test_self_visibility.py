@@ -273,7 +273,7 @@ def test_a_tilted_lobes_footprint_counts_what_lies_below_the_surface_as_hidden()
                                     below_hidden=True,
                                     lobe_normals=lobe,
                                 )
-                            )  # fmt: skip
+                            )
                             for lobe in (lobe_normal, None)
                         ]
                         errors.append(abs(shares[0] - exact))
